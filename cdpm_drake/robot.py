@@ -1,0 +1,350 @@
+"""Robot descriptions: reels, platform attachment points, workspace box, limits.
+
+Plain numpy; no Drake import here except for the YAML loader, which is imported lazily so the
+math stays testable alone. All positions are in metres. The base frame is the paper's frame A
+(reels), the platform frame is frame B with its origin at the platform centre; the platform
+only translates, so B is parallel to A.
+
+Cables are numbered 1..m in everything a user sees (files, messages); arrays are 0-based.
+"""
+
+
+import dataclasses
+import logging
+import math
+from pathlib import Path
+
+import numpy as np
+
+_log = logging.getLogger(__name__)
+
+# Two points closer than this are "the same point" (m). Far below any real cable diameter, far
+# above round-off for coordinates of a few metres.
+SAME_POINT_TOL = 1e-9
+
+# Shipped robot descriptions live at the top of the repository (hardware/robots), next to the
+# reel link protocol, so integrators find them; the package is installed in editable mode.
+ROBOTS_DIR = Path(__file__).resolve().parent.parent / "hardware" / "robots"
+
+
+class RobotError(ValueError):
+    """A robot description is invalid. The message names the file, field and value."""
+
+
+# --- YAML schema (mutable dataclasses, as yaml_load_typed requires) -------------------------
+
+
+@dataclasses.dataclass
+class WorkspaceSchema:
+    # Lower corner of the axis-aligned virtual-wall box, base frame, m.
+    lower: list[float] = dataclasses.field(default_factory=list)
+    # Upper corner of the box, base frame, m.
+    upper: list[float] = dataclasses.field(default_factory=list)
+
+
+@dataclasses.dataclass
+class LimitsSchema:
+    # Largest platform speed the controller commands, m/s.
+    max_velocity: float = 0.5
+    # Largest platform acceleration the controller commands, m/s^2.
+    max_acceleration: float = 2.0
+    # Largest reel (cable) speed the drives accept, m/s of cable.
+    max_reel_speed: float = 1.0
+
+
+@dataclasses.dataclass
+class RobotSchema:
+    # A short identifier, e.g. paper_7cable.
+    name: str = ""
+    # a_i: cable exit points at the reels, base frame, m; row i is cable i+1.
+    reels: list[list[float]] = dataclasses.field(default_factory=list)
+    # b_i: attachment points on the platform, platform frame (origin at its centre), m.
+    attachments: list[list[float]] = dataclasses.field(default_factory=list)
+    # The virtual wall: an axis-aligned box for the platform centre p, base frame, m.
+    workspace: WorkspaceSchema = dataclasses.field(default_factory=WorkspaceSchema)
+    # Cable diameter, m (informative: documents the margin that d_l must cover).
+    cable_diameter: float = 0.0
+    # Controller limits; defaults documented in LimitsSchema.
+    limits: LimitsSchema = dataclasses.field(default_factory=LimitsSchema)
+    # Cable pairs [i, j] (1-based) that the interference block must skip, e.g. cables that
+    # leave one reel exit point and so can never separate.
+    ignore_pairs: list[list[int]] = dataclasses.field(default_factory=list)
+
+
+_REQUIRED = ("name", "reels", "attachments", "workspace")
+
+
+# --- The validated robot ---------------------------------------------------------------------
+
+
+@dataclasses.dataclass(frozen=True)
+class Workspace:
+    """Axis-aligned box for the platform centre, base frame, m."""
+
+    lower: np.ndarray
+    upper: np.ndarray
+
+    @property
+    def center(self) -> np.ndarray:
+        return 0.5 * (self.lower + self.upper)
+
+    def contains(self, p, tol: float = 0.0) -> np.ndarray | bool:
+        p = np.asarray(p, dtype=float)
+        inside = np.all((p >= self.lower - tol) & (p <= self.upper + tol), axis=-1)
+        return bool(inside) if inside.ndim == 0 else inside
+
+
+@dataclasses.dataclass(frozen=True)
+class Limits:
+    """Controller limits: platform speed (m/s), acceleration (m/s^2), reel speed (m/s)."""
+
+    max_velocity: float = 0.5
+    max_acceleration: float = 2.0
+    max_reel_speed: float = 1.0
+
+
+@dataclasses.dataclass(frozen=True, eq=False)
+class Robot:
+    """A translational cable robot.
+
+    reels: (m, 3) a_i in the base frame, m. attachments: (m, 3) b_i in the platform frame, m.
+    `source` only serves error messages (the file the robot came from).
+    """
+
+    name: str
+    reels: np.ndarray
+    attachments: np.ndarray
+    workspace: Workspace
+    limits: Limits = Limits()
+    cable_diameter: float = 0.0
+    ignore_pairs: tuple[tuple[int, int], ...] = ()
+    source: str = "<code>"
+
+    def __post_init__(self):
+        reels = _as_points(self.reels, "reels", self.source)
+        attachments = _as_points(self.attachments, "attachments", self.source)
+        lower = _as_vector(self.workspace.lower, "workspace.lower", self.source)
+        upper = _as_vector(self.workspace.upper, "workspace.upper", self.source)
+        object.__setattr__(self, "reels", reels)
+        object.__setattr__(self, "attachments", attachments)
+        object.__setattr__(self, "workspace", Workspace(lower, upper))
+        ignore = tuple(tuple(int(k) for k in pair) for pair in self.ignore_pairs)
+        object.__setattr__(self, "ignore_pairs", ignore)
+        _validate(self)
+        for arr in (reels, attachments, lower, upper):
+            arr.flags.writeable = False
+        excluded, reasons = _never_separating(self)
+        object.__setattr__(self, "excluded_pairs", excluded)
+        object.__setattr__(self, "excluded_reasons", reasons)
+        for pair, why in reasons.items():
+            _log.info("%s: cable pair (%d, %d) skipped by the interference block: %s",
+                      self.name, pair[0], pair[1], why)
+        i, j = np.triu_indices(self.num_cables, k=1)
+        keep = np.array([(a + 1, b + 1) not in excluded for a, b in zip(i, j)], dtype=bool)
+        object.__setattr__(self, "_pair_i", i[keep])
+        object.__setattr__(self, "_pair_j", j[keep])
+
+    @property
+    def num_cables(self) -> int:
+        return int(self.reels.shape[0])
+
+    @property
+    def pair_index(self) -> tuple[np.ndarray, np.ndarray]:
+        """0-based (i, j), i < j, of the pairs the interference block watches, in the order
+        (1,2), (1,3), ..., (m-1,m) with excluded pairs left out."""
+        return self._pair_i, self._pair_j
+
+    @property
+    def pairs(self) -> list[tuple[int, int]]:
+        """1-based cable pairs watched by the interference block, in output order."""
+        return [(int(a) + 1, int(b) + 1) for a, b in zip(self._pair_i, self._pair_j)]
+
+    @property
+    def num_pairs(self) -> int:
+        return int(self._pair_i.size)
+
+    def pair_position(self, i: int, j: int) -> int:
+        """0-based position of the 1-based pair (i, j) in `pairs`; RobotError if not watched."""
+        key = (min(i, j), max(i, j))
+        try:
+            return self.pairs.index(key)
+        except ValueError:
+            raise RobotError(
+                f"{self.source}: cable pair {key!r} is not a watched pair of robot "
+                f"{self.name!r} (cables are numbered 1..{self.num_cables}"
+                + (f"; excluded: {sorted(self.excluded_pairs)}" if self.excluded_pairs else "")
+                + ")") from None
+
+    def with_swapped_attachments(self, i: int, j: int) -> "Robot":
+        """A copy where cables i and j (1-based) trade platform attachment points, as the paper
+        does (cables 1 and 3, 5 and 7) to provoke interference."""
+        for k in (i, j):
+            if not (isinstance(k, (int, np.integer)) and 1 <= k <= self.num_cables):
+                raise RobotError(f"{self.source}: cannot swap cable {k!r}: cables are numbered "
+                                 f"1..{self.num_cables}")
+        b = self.attachments.copy()
+        b[[i - 1, j - 1]] = b[[j - 1, i - 1]]
+        return dataclasses.replace(self, attachments=b,
+                                   name=f"{self.name}_swap{i}{j}")
+
+    def describe_pair(self, k: int) -> str:
+        i, j = self.pairs[k]
+        return f"({i},{j})"
+
+
+def _as_points(value, field: str, source: str) -> np.ndarray:
+    rows = list(value) if not isinstance(value, np.ndarray) else list(value)
+    for k, row in enumerate(rows):
+        try:
+            n = len(row)
+        except TypeError:
+            raise RobotError(f"{source}: {field} of cable {k + 1} must be [x, y, z] in m, "
+                             f"got {row!r}") from None
+        if n != 3:
+            raise RobotError(f"{source}: {field} of cable {k + 1} must have 3 coordinates "
+                             f"[x, y, z] in m, got {n}: {list(row)!r}")
+        for c in row:
+            if not _finite(c):
+                raise RobotError(f"{source}: {field} of cable {k + 1} has a non-finite "
+                                 f"coordinate: {list(row)!r}")
+    arr = np.array(rows, dtype=float).reshape(len(rows), 3)
+    return arr
+
+
+def _as_vector(value, field: str, source: str) -> np.ndarray:
+    row = list(value)
+    if len(row) != 3:
+        raise RobotError(f"{source}: {field} must have 3 coordinates [x, y, z] in m, "
+                         f"got {len(row)}: {row!r}")
+    for c in row:
+        if not _finite(c):
+            raise RobotError(f"{source}: {field} has a non-finite coordinate: {row!r}")
+    return np.array(row, dtype=float)
+
+
+def _finite(c) -> bool:
+    try:
+        return math.isfinite(float(c))
+    except (TypeError, ValueError):
+        return False
+
+
+def _validate(robot: Robot) -> None:
+    src = robot.source
+    m = robot.reels.shape[0]
+    if robot.attachments.shape[0] != m:
+        raise RobotError(f"{src}: reels has {m} rows but attachments has "
+                         f"{robot.attachments.shape[0]}: each cable needs one reel and one "
+                         "attachment point")
+    if m < 3:
+        raise RobotError(f"{src}: reels has {m} cables; a translating platform needs at "
+                         "least 3")
+    if not robot.name or not isinstance(robot.name, str):
+        raise RobotError(f"{src}: name must be a non-empty string, got {robot.name!r}")
+    lo, hi = robot.workspace.lower, robot.workspace.upper
+    for axis, name in enumerate("xyz"):
+        if not lo[axis] < hi[axis]:
+            raise RobotError(
+                f"{src}: workspace is empty or inverted along {name}: lower[{axis}] = "
+                f"{lo[axis]!r} m is not below upper[{axis}] = {hi[axis]!r} m")
+    for field, value in (("cable_diameter", robot.cable_diameter),):
+        if not _finite(value) or value < 0:
+            raise RobotError(f"{src}: {field} must be a finite value >= 0 m, got {value!r}")
+    for field in ("max_velocity", "max_acceleration", "max_reel_speed"):
+        value = getattr(robot.limits, field)
+        if not _finite(value) or value <= 0:
+            raise RobotError(f"{src}: limits.{field} must be a finite value > 0, got {value!r}")
+    for pair in robot.ignore_pairs:
+        if len(pair) != 2 or pair[0] == pair[1] or not all(1 <= k <= m for k in pair):
+            raise RobotError(f"{src}: ignore_pairs entry {list(pair)!r} must name two "
+                             f"different cables in 1..{m}")
+    ignored = {(min(p), max(p)) for p in robot.ignore_pairs}
+    for i in range(m):
+        for j in range(i + 1, m):
+            if (np.linalg.norm(robot.reels[i] - robot.reels[j]) <= SAME_POINT_TOL
+                    and (i + 1, j + 1) not in ignored):
+                raise RobotError(
+                    f"{src}: reels of cables {i + 1} and {j + 1} are at the same point "
+                    f"{robot.reels[i].tolist()!r}; if the robot really leads both cables "
+                    f"through one exit point, add [{i + 1}, {j + 1}] to ignore_pairs")
+
+
+def _never_separating(robot: Robot) -> tuple[frozenset, dict]:
+    """Pairs skipped by the interference block: listed in ignore_pairs, or sharing a platform
+    attachment point (their distance is 0 at the platform whatever the pose)."""
+    reasons = {}
+    for pair in robot.ignore_pairs:
+        reasons[(min(pair), max(pair))] = "listed in ignore_pairs"
+    m = robot.num_cables
+    for i in range(m):
+        for j in range(i + 1, m):
+            key = (i + 1, j + 1)
+            if key in reasons:
+                continue
+            if np.linalg.norm(robot.attachments[i] - robot.attachments[j]) <= SAME_POINT_TOL:
+                reasons[key] = "both cables end at the same platform point, so they always meet"
+    return frozenset(reasons), reasons
+
+
+# --- Loading ---------------------------------------------------------------------------------
+
+
+def robot_names() -> list[str]:
+    """Names of the robots shipped with the package."""
+    return sorted(p.stem for p in ROBOTS_DIR.glob("*.yaml"))
+
+
+def resolve_robot_path(name_or_path: str | Path) -> Path:
+    """A shipped robot's name (e.g. 'paper_7cable') or a path to a YAML file."""
+    path = Path(name_or_path)
+    if path.suffix in (".yaml", ".yml") or path.exists():
+        if not path.is_file():
+            raise RobotError(f"robot file {str(path)!r} does not exist")
+        return path
+    candidate = ROBOTS_DIR / f"{name_or_path}.yaml"
+    if candidate.is_file():
+        return candidate
+    raise RobotError(f"unknown robot {str(name_or_path)!r}; built-in robots: "
+                     f"{robot_names()} (or give a path to a .yaml file)")
+
+
+def load_robot(path: str | Path) -> Robot:
+    """Load and validate a robot description (a path, or a shipped robot's name)."""
+    from pydrake.common.yaml import yaml_load, yaml_load_typed
+
+    path = resolve_robot_path(path)
+    src = str(path)
+    try:
+        raw = yaml_load(filename=src)
+    except Exception as e:
+        raise RobotError(f"{src}: not valid YAML: {e}") from None
+    if not isinstance(raw, dict):
+        raise RobotError(f"{src}: expected a mapping with fields {list(_REQUIRED)}, "
+                         f"got {type(raw).__name__}")
+    missing = [k for k in _REQUIRED if k not in raw]
+    if missing:
+        raise RobotError(f"{src}: missing required field(s) {missing}; a robot file needs "
+                         f"{list(_REQUIRED)}")
+    if isinstance(raw.get("workspace"), dict):
+        for k in ("lower", "upper"):
+            if k not in raw["workspace"]:
+                raise RobotError(f"{src}: missing required field workspace.{k}")
+    try:
+        schema = yaml_load_typed(schema=RobotSchema, filename=src)
+    except Exception as e:  # Drake's messages name the field; add the file.
+        raise RobotError(f"{src}: {e}") from None
+    return robot_from_schema(schema, source=src)
+
+
+def robot_from_schema(schema: RobotSchema, source: str = "<code>") -> Robot:
+    lim = schema.limits
+    return Robot(
+        name=schema.name,
+        reels=schema.reels,
+        attachments=schema.attachments,
+        workspace=Workspace(schema.workspace.lower, schema.workspace.upper),
+        limits=Limits(lim.max_velocity, lim.max_acceleration, lim.max_reel_speed),
+        cable_diameter=schema.cable_diameter,
+        ignore_pairs=tuple(tuple(p) for p in schema.ignore_pairs),
+        source=source,
+    )
