@@ -193,40 +193,70 @@ class Robot:
 
 
 def _as_points(value, field: str, source: str) -> np.ndarray:
-    rows = list(value) if not isinstance(value, np.ndarray) else list(value)
+    if not _is_sequence(value):
+        raise RobotError(f"{source}: {field} must be a list of [x, y, z] rows in m, one per "
+                         f"cable, got {_show(value)!r}")
+    rows = list(value)
     for k, row in enumerate(rows):
-        try:
-            n = len(row)
-        except TypeError:
+        if not _is_sequence(row):
             raise RobotError(f"{source}: {field} of cable {k + 1} must be [x, y, z] in m, "
-                             f"got {row!r}") from None
+                             f"got {_show(row)!r}")
+        n = len(row)
         if n != 3:
             raise RobotError(f"{source}: {field} of cable {k + 1} must have 3 coordinates "
-                             f"[x, y, z] in m, got {n}: {list(row)!r}")
+                             f"[x, y, z] in m, got {n}: {_show(row)!r}")
         for c in row:
             if not _finite(c):
-                raise RobotError(f"{source}: {field} of cable {k + 1} has a non-finite "
-                                 f"coordinate: {list(row)!r}")
+                raise RobotError(f"{source}: {field} of cable {k + 1} has a coordinate "
+                                 f"{_show(c)!r} that is not a finite number: {_show(row)!r}")
     arr = np.array(rows, dtype=float).reshape(len(rows), 3)
     return arr
 
 
 def _as_vector(value, field: str, source: str) -> np.ndarray:
+    if not _is_sequence(value):
+        raise RobotError(f"{source}: {field} must be [x, y, z] in m, got {_show(value)!r}")
     row = list(value)
     if len(row) != 3:
         raise RobotError(f"{source}: {field} must have 3 coordinates [x, y, z] in m, "
-                         f"got {len(row)}: {row!r}")
+                         f"got {len(row)}: {_show(row)!r}")
     for c in row:
         if not _finite(c):
-            raise RobotError(f"{source}: {field} has a non-finite coordinate: {row!r}")
+            raise RobotError(f"{source}: {field} has a coordinate {_show(c)!r} that is not a "
+                             f"finite number: {_show(row)!r}")
     return np.array(row, dtype=float)
 
 
+def _is_sequence(v) -> bool:
+    if isinstance(v, (str, bytes, dict)):
+        return False
+    try:
+        len(v)  # a 0-d numpy array has __len__ but raises here
+    except TypeError:
+        return False
+    return True
+
+
 def _finite(c) -> bool:
+    # YAML 1.1 reads `1e3` as a string, so strings that parse as numbers are numbers (Drake's
+    # typed loader agrees); booleans (`yes`, `true`) are not, even though float() takes them.
+    if isinstance(c, (bool, np.bool_)):
+        return False
     try:
         return math.isfinite(float(c))
     except (TypeError, ValueError):
         return False
+
+
+def _show(v):
+    """v with numpy scalars and arrays turned into plain Python, so `!r` reads like the file."""
+    if isinstance(v, np.ndarray):
+        return v.tolist()
+    if isinstance(v, np.generic):
+        return v.item()
+    if isinstance(v, (list, tuple)):
+        return [_show(c) for c in v]
+    return v
 
 
 def _validate(robot: Robot) -> None:
@@ -246,7 +276,7 @@ def _validate(robot: Robot) -> None:
         if not lo[axis] < hi[axis]:
             raise RobotError(
                 f"{src}: workspace is empty or inverted along {name}: lower[{axis}] = "
-                f"{lo[axis]!r} m is not below upper[{axis}] = {hi[axis]!r} m")
+                f"{float(lo[axis])!r} m is not below upper[{axis}] = {float(hi[axis])!r} m")
     for field, value in (("cable_diameter", robot.cable_diameter),):
         if not _finite(value) or value < 0:
             raise RobotError(f"{src}: {field} must be a finite value >= 0 m, got {value!r}")
@@ -325,15 +355,35 @@ def load_robot(path: str | Path) -> Robot:
     if missing:
         raise RobotError(f"{src}: missing required field(s) {missing}; a robot file needs "
                          f"{list(_REQUIRED)}")
-    if isinstance(raw.get("workspace"), dict):
-        for k in ("lower", "upper"):
-            if k not in raw["workspace"]:
-                raise RobotError(f"{src}: missing required field workspace.{k}")
+    _check_keys(raw, RobotSchema, "", src)
+    if not isinstance(raw["workspace"], dict):
+        raise RobotError(f"{src}: workspace must be a mapping with fields lower and upper, "
+                         f"got {raw['workspace']!r}")
+    for k in ("lower", "upper"):
+        if k not in raw["workspace"]:
+            raise RobotError(f"{src}: missing required field workspace.{k}")
+    _check_keys(raw["workspace"], WorkspaceSchema, "workspace.", src)
+    if isinstance(raw.get("limits"), dict):
+        _check_keys(raw["limits"], LimitsSchema, "limits.", src)
+    # Check the geometry on the raw data first: Drake's messages for a non-number or a scalar
+    # row do not say which field or cable is wrong.
+    _as_points(raw["reels"], "reels", src)
+    _as_points(raw["attachments"], "attachments", src)
+    _as_vector(raw["workspace"]["lower"], "workspace.lower", src)
+    _as_vector(raw["workspace"]["upper"], "workspace.upper", src)
     try:
         schema = yaml_load_typed(schema=RobotSchema, filename=src)
     except Exception as e:  # Drake's messages name the field; add the file.
         raise RobotError(f"{src}: {e}") from None
     return robot_from_schema(schema, source=src)
+
+
+def _check_keys(raw: dict, schema, prefix: str, src: str) -> None:
+    valid = [f.name for f in dataclasses.fields(schema)]
+    unknown = [k for k in raw if k not in valid]
+    if unknown:
+        raise RobotError(f"{src}: unknown field(s) {[prefix + str(k) for k in unknown]!r}; "
+                         f"valid fields: {[prefix + k for k in valid]}")
 
 
 def robot_from_schema(schema: RobotSchema, source: str = "<code>") -> Robot:
