@@ -1,0 +1,61 @@
+"""Shared test helpers: robot files written from Python data, and paths to test data."""
+
+import copy
+import json
+import math
+from pathlib import Path
+
+import pytest
+
+DATA_DIR = Path(__file__).resolve().parent / "data"
+HAND_ROBOT = DATA_DIR / "robots" / "hand_4cable.yaml"
+SHIPPED_ROBOTS = ("paper_7cable", "cube_8cable")
+
+# A small valid robot as Python data; tests break one thing in a copy and write it out.
+_VALID_SPEC = {
+    "name": "tetra_4cable",
+    "reels": [[0.0, 0.0, 3.0], [4.0, 0.0, 3.0], [4.0, 3.0, 3.0], [2.0, 1.5, 0.0]],
+    "attachments": [[-0.1, -0.1, 0.1], [0.1, -0.1, 0.1], [0.1, 0.1, 0.1], [0.0, 0.0, -0.1]],
+    "workspace": {"lower": [1.0, 0.5, 0.5], "upper": [3.0, 2.5, 2.5]},
+}
+
+
+def to_yaml(value, indent: int = 0) -> str:
+    """YAML text for dicts, lists, numbers and strings; NaN and infinities in YAML spelling
+    (.nan, .inf), which json.dumps cannot write."""
+    pad = "  " * indent
+    if isinstance(value, dict):
+        lines = []
+        for k, v in value.items():
+            if isinstance(v, dict):
+                lines.append(f"{pad}{k}:\n{to_yaml(v, indent + 1)}")
+            else:
+                lines.append(f"{pad}{k}: {_flow(v)}")
+        return "\n".join(lines)
+    return pad + _flow(value)
+
+
+def _flow(v) -> str:
+    if isinstance(v, (list, tuple)):
+        return "[" + ", ".join(_flow(c) for c in v) + "]"
+    if isinstance(v, float) and not math.isfinite(v):
+        return ".nan" if math.isnan(v) else (".inf" if v > 0 else "-.inf")
+    return json.dumps(v)
+
+
+@pytest.fixture
+def valid_spec():
+    """A fresh deep copy of a valid 4-cable robot description (Python data)."""
+    return copy.deepcopy(_VALID_SPEC)
+
+
+@pytest.fixture
+def write_robot(tmp_path):
+    """write_robot(spec_or_text, name="robot.yaml") -> Path of a robot file in tmp_path."""
+
+    def write(spec, name: str = "robot.yaml") -> Path:
+        path = tmp_path / name
+        path.write_text(spec if isinstance(spec, str) else to_yaml(spec) + "\n")
+        return path
+
+    return write
