@@ -91,9 +91,11 @@ def forward_kinematics(robot: Robot, lengths, p_guess=None, tol: float = 1e-10,
         if converged.all():
             break
     worst = np.max(np.abs(r), axis=-1)
-    failed = worst > max_residual
+    # Only a converged fit proves the lengths inconsistent; one cut short by max_iterations
+    # is reported as not converging.
+    failed = (worst > max_residual) & converged
     if failed.any():
-        k = int(np.argmax(worst))
+        k = int(np.argmax(np.where(failed, worst, -np.inf)))
         cable = int(np.argmax(np.abs(r[k])))
         raise KinematicsError(
             f"cable lengths are inconsistent with robot {robot.name!r}: the best-fit platform "
