@@ -5,6 +5,7 @@ Run `cdpm <command> --help` for each command's options.
 
 import argparse
 import sys
+from pathlib import Path
 
 import numpy as np
 
@@ -60,8 +61,59 @@ def info(*, robot: str, out=sys.stdout) -> None:
     print(_table(["pair", "distance (mm)"], rows), file=out)
 
 
-def _cmd_info(args) -> None:
+def _cmd_info(args) -> int:
     info(robot=args.robot)
+    return 0
+
+
+# --- simulate --------------------------------------------------------------------------------
+
+
+def _load_scenario_arg(args):
+    from .scenario import load_scenario
+
+    return load_scenario(args.scenario, overlay_text=args.scenario_text)
+
+
+def simulate_main(*, scenario, duration=None, out_dir=None, progress=True, out=sys.stdout,
+                  on_chunk=None) -> int:
+    """Simulate, write DIR/log.npz and DIR/scenario.yaml, print a summary. Returns an exit
+    code: 0, or 1 when the run ended early (the log up to then is written all the same)."""
+    from .simulation import save_log, simulate, summary_rows
+
+    out_dir = Path(out_dir if out_dir is not None else Path("runs") / scenario.name)
+    result = simulate(scenario=scenario, duration=duration, progress=progress,
+                      on_chunk=on_chunk)
+    log = result.log
+    path = save_log(log, out_dir, scenario)
+    T = log["time"].size
+    print(f"scenario {scenario.name!r}: {T} ticks, {log['time'][-1] if T else 0:.3f} s simulated "
+          f"in {result.wall_time:.2f} s wall ({result.realtime_factor:.1f}x real time)", file=out)
+    rows = summary_rows(log)
+    if rows:
+        print(_table(["pair", "min distance (mm)", "ticks active", "crossed"], rows), file=out)
+    else:
+        print("no cable pair came within its d_u", file=out)
+    norms = {k: np.linalg.norm(log[k], axis=1).max() if T else 0.0
+             for k in ("F_H", "F_int", "F_d")}
+    print("peak |F_H| {F_H:.2f} N, |F_int| {F_int:.2f} N, |F_d| {F_d:.2f} N".format(**norms),
+          file=out)
+    crossings = int(np.any(log["crossed"], axis=0).sum()) if T else 0
+    print(f"pairs that crossed: {crossings}", file=out)
+    print(f"log: {path}", file=out)
+    if result.error is not None:
+        print(f"cdpm simulate: error: the run stopped at t = {log['time'][-1] if T else 0:.3f} s: "
+              f"{result.error}", file=sys.stderr)
+        return 1
+    return 0
+
+
+def _cmd_simulate(args) -> int:
+    if args.duration is not None and not (args.duration > 0 and np.isfinite(args.duration)):
+        raise CliError(f"--duration must be a number of seconds > 0, got {args.duration!r}")
+    scenario = _load_scenario_arg(args)
+    return simulate_main(scenario=scenario, duration=args.duration, out_dir=args.out,
+                         progress=not args.no_progress)
 
 
 # --- main ------------------------------------------------------------------------------------
@@ -78,20 +130,41 @@ def _parser() -> argparse.ArgumentParser:
                    help="a built-in robot's name or a path to a robot YAML file "
                         "(default: paper_7cable)")
     p.set_defaults(func=_cmd_info)
+
+    p = sub.add_parser("simulate", help="simulate a scenario and write its log",
+                       description="Simulate a scenario's Fig. 5 diagram with Drake's Simulator "
+                                   "at 500 Hz; write DIR/log.npz and DIR/scenario.yaml.")
+    _scenario_args(p)
+    p.add_argument("--duration", type=float, help="simulated time, s (default: the scenario's)")
+    p.add_argument("--out", type=Path, help="output directory (default: runs/<scenario name>)")
+    p.add_argument("--no-progress", action="store_true", help="no progress bar")
+    p.set_defaults(func=_cmd_simulate)
     return parser
+
+
+def _scenario_args(p):
+    from .scenario import scenario_names
+
+    p.add_argument("scenario", nargs="?", default="exp2_interaction",
+                   help=f"a built-in scenario ({', '.join(scenario_names())}) or a path to a "
+                        "scenario YAML (default: exp2_interaction)")
+    p.add_argument("--scenario-text", default=None, metavar="YAML",
+                   help="YAML overlay for one-off changes, e.g. "
+                        "'{duration: 5, interference: {default: {F_u: 4.0}}}'")
 
 
 def main(argv=None) -> int:
     from .kinematics import KinematicsError
+    from .operators import OperatorError
     from .robot import RobotError
+    from .scenario import ScenarioError
 
     args = _parser().parse_args(argv)
     try:
-        args.func(args)
-    except (CliError, RobotError, KinematicsError) as e:
+        return int(args.func(args) or 0)
+    except (CliError, RobotError, KinematicsError, ScenarioError, OperatorError) as e:
         print(f"cdpm {args.command}: error: {e}", file=sys.stderr)
         return 2
-    return 0
 
 
 if __name__ == "__main__":

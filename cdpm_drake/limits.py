@@ -1,0 +1,56 @@
+"""Safety limits after the admittance (Fig. 5) and the workspace-wall force. Plain numpy.
+
+Base frame, SI units: p in m, velocities in m/s, accelerations in m/s^2, forces in N.
+"""
+
+import numpy as np
+
+
+def limit_velocity(v_desired, v_previous, p, lower, upper, *, max_velocity, max_acceleration,
+                   time_step, virtual_wall=True) -> np.ndarray:
+    """The platform velocity to command this tick.
+
+    In order: the speed is capped at `max_velocity`; near a face of the workspace box the speed
+    towards it is capped by a braking curve sqrt(2 a gap) so the platform can stop within the
+    acceleration limit, and by gap / time_step so one tick never leaves the box; the change from
+    the previous command is capped at max_acceleration * time_step. The wall cap is applied
+    again last: it wins over the acceleration limit (never leave the box).
+    """
+    v = np.array(v_desired, dtype=float)
+    speed = np.linalg.norm(v)
+    if speed > max_velocity:
+        v *= max_velocity / speed
+    if virtual_wall:
+        v = _wall_cap(v, p, lower, upper, max_acceleration, time_step)
+    dv = v - np.asarray(v_previous, dtype=float)
+    step = np.linalg.norm(dv)
+    max_step = max_acceleration * time_step
+    if step > max_step:
+        v = np.asarray(v_previous, dtype=float) + dv * (max_step / step)
+    if virtual_wall:
+        v = _wall_cap(v, p, lower, upper, max_acceleration, time_step)
+    return v
+
+
+def _wall_cap(v, p, lower, upper, a, T):
+    gap_up = np.maximum(np.asarray(upper) - p, 0.0)
+    gap_lo = np.maximum(p - np.asarray(lower), 0.0)
+    # Braking curve (can stop in the gap at deceleration a) and one-tick bound (no overshoot).
+    cap_up = np.minimum(np.sqrt(2.0 * a * gap_up), gap_up / T)
+    cap_lo = np.minimum(np.sqrt(2.0 * a * gap_lo), gap_lo / T)
+    return np.clip(v, -cap_lo, cap_up)
+
+
+def wall_force(p, lower, upper, *, margin, max_force) -> np.ndarray:
+    """Beyond the paper: repulsion from the faces of the workspace box (N).
+
+    Zero farther than `margin` (m) from every face; on each axis it grows as
+    max_force * ((margin - gap) / margin)^2 towards the inside, `max_force` at the face and
+    beyond. Smooth (C1) at the margin, so the operator feels no step.
+    """
+    p = np.asarray(p, dtype=float)
+    gap_lo = p - np.asarray(lower)
+    gap_up = np.asarray(upper) - p
+    push_lo = np.clip((margin - gap_lo) / margin, 0.0, 1.0) ** 2
+    push_up = np.clip((margin - gap_up) / margin, 0.0, 1.0) ** 2
+    return max_force * (push_lo - push_up)

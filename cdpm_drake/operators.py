@@ -1,0 +1,163 @@
+"""Models of the person holding the handle, for simulation and the reel-bridge emulator.
+
+Plain numpy. An operator is a pure function of time and the platform's true motion, so that it
+keeps no hidden state: `force(t, p, v) -> (3,)`, base frame, N; t in s, p in m, v in m/s.
+"""
+
+import csv
+import dataclasses
+from pathlib import Path
+
+import numpy as np
+
+
+class OperatorError(ValueError):
+    """A bad operator description; the message names the field and the value."""
+
+
+class NoForce:
+    """Nobody touches the handle."""
+
+    def force(self, t: float, p, v) -> np.ndarray:
+        return np.zeros(3)
+
+
+class ForceProfile:
+    """A piecewise-linear force table (t_k, F_k); held at the end values outside the table."""
+
+    def __init__(self, times, forces, *, field: str = "operator"):
+        t = np.asarray(times, dtype=float)
+        f = np.asarray(forces, dtype=float)
+        if t.ndim != 1 or t.size == 0:
+            raise OperatorError(f"{field}.times must be a non-empty list of seconds, got "
+                                f"{times!r}")
+        if f.shape != (t.size, 3):
+            raise OperatorError(f"{field}.forces must have one [Fx, Fy, Fz] row (N) per time; "
+                                f"got shape {f.shape} for {t.size} times")
+        if not (np.all(np.isfinite(t)) and np.all(np.isfinite(f))):
+            raise OperatorError(f"{field}: times and forces must be finite numbers")
+        if np.any(np.diff(t) <= 0):
+            k = int(np.argmax(np.diff(t) <= 0))
+            raise OperatorError(f"{field}.times must increase strictly: times[{k + 1}] = "
+                                f"{t[k + 1]!r} s follows {t[k]!r} s")
+        self.times, self.forces = t, f
+
+    def force(self, t: float, p, v) -> np.ndarray:
+        return np.array([np.interp(t, self.times, self.forces[:, k]) for k in range(3)])
+
+
+def load_force_csv(path, *, field: str = "operator.path") -> ForceProfile:
+    """A CSV with a header row `t, fx, fy, fz` (s, N) replayed as a ForceProfile."""
+    path = Path(path)
+    if not path.is_file():
+        raise OperatorError(f"{field}: force file {str(path)!r} does not exist")
+    with open(path, newline="") as fh:
+        rows = list(csv.reader(fh))
+    if not rows:
+        raise OperatorError(f"{field}: force file {str(path)!r} is empty")
+    header = [h.strip().lower() for h in rows[0]]
+    want = ["t", "fx", "fy", "fz"]
+    if header[:4] != want:
+        raise OperatorError(f"{field}: force file {str(path)!r} must start with the header "
+                            f"{','.join(want)}, got {','.join(rows[0])!r}")
+    data = []
+    for n, row in enumerate(rows[1:], start=2):
+        try:
+            data.append([float(x) for x in row[:4]])
+        except ValueError:
+            raise OperatorError(f"{field}: {str(path)!r} line {n}: not four numbers: "
+                                f"{row!r}") from None
+    if not data:
+        raise OperatorError(f"{field}: force file {str(path)!r} has no data rows")
+    arr = np.array(data)
+    return ForceProfile(arr[:, 0], arr[:, 1:], field=field)
+
+
+class SpringHand:
+    """A hand pulling the handle towards a moving target through a spring-damper.
+
+    The target moves piecewise-linearly through `waypoints` (m, base frame), reaching waypoint k
+    at `times[k]` (s) and holding the last one. F = K (target(t) - p) - D v, its norm capped at
+    `max_force` (N): a person does not pull harder than that.
+    """
+
+    def __init__(self, waypoints, times, stiffness, damping, max_force, *,
+                 field: str = "operator"):
+        w = np.asarray(waypoints, dtype=float)
+        self.profile = ForceProfile(times, w, field=field)  # same checks: rows of 3 per time
+        for name, value in (("stiffness", stiffness), ("damping", damping),
+                            ("max_force", max_force)):
+            if not np.isfinite(value) or value < 0:
+                raise OperatorError(f"{field}.{name} must be a finite value >= 0, got {value!r}")
+        self.K, self.D, self.F_max = float(stiffness), float(damping), float(max_force)
+
+    def target(self, t: float) -> np.ndarray:
+        return self.profile.force(t, None, None)
+
+    def force(self, t: float, p, v) -> np.ndarray:
+        f = self.K * (self.target(t) - np.asarray(p)) - self.D * np.asarray(v)
+        n = np.linalg.norm(f)
+        return f * (self.F_max / n) if n > self.F_max else f
+
+
+# --- Typed descriptions (the scenario's `operator:` entry) -----------------------------------
+# Loaded with yaml_load_typed; the YAML tag is the class name, e.g. `operator: !SpringHandOperator`.
+
+@dataclasses.dataclass
+class NoOperator:
+    """Nobody touches the handle (experiment 1)."""
+
+
+@dataclasses.dataclass
+class ScriptedOperator:
+    """A piecewise-linear force table."""
+
+    # Breakpoint times, s, strictly increasing.
+    times: list[float] = dataclasses.field(default_factory=lambda: [0.0])
+    # Force at each breakpoint, [Fx, Fy, Fz] in N, base frame.
+    forces: list[list[float]] = dataclasses.field(default_factory=lambda: [[0.0, 0.0, 0.0]])
+
+
+@dataclasses.dataclass
+class CsvOperator:
+    """Replay of a recorded force: CSV with header t,fx,fy,fz (s, N)."""
+
+    # Path to the CSV file; relative paths are relative to the scenario file.
+    path: str = ""
+
+
+@dataclasses.dataclass
+class SpringHandOperator:
+    """A spring-damper hand pulling the handle through waypoints with a capped force."""
+
+    # Hand target positions, m, base frame.
+    waypoints: list[list[float]] = dataclasses.field(default_factory=list)
+    # Time at which the target reaches each waypoint, s.
+    times: list[float] = dataclasses.field(default_factory=list)
+    # Spring stiffness, N/m.
+    stiffness: float = 60.0
+    # Damping, N s/m.
+    damping: float = 6.0
+    # Largest force the person applies, N.
+    max_force: float = 5.0
+
+
+OPERATOR_TYPES = (NoOperator, ScriptedOperator, CsvOperator, SpringHandOperator)
+
+
+def make_operator(config, base_dir: Path | None = None):
+    """The operator model for a typed description (one of OPERATOR_TYPES)."""
+    if isinstance(config, NoOperator):
+        return NoForce()
+    if isinstance(config, ScriptedOperator):
+        return ForceProfile(config.times, config.forces, field="operator")
+    if isinstance(config, CsvOperator):
+        path = Path(config.path)
+        if base_dir is not None and not path.is_absolute():
+            path = Path(base_dir) / path
+        return load_force_csv(path)
+    if isinstance(config, SpringHandOperator):
+        return SpringHand(config.waypoints, config.times, config.stiffness, config.damping,
+                          config.max_force, field="operator")
+    raise OperatorError(f"unknown operator {type(config).__name__!r}; valid operators: "
+                        f"{[t.__name__ for t in OPERATOR_TYPES]}")

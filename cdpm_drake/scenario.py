@@ -1,0 +1,340 @@
+"""The typed scenario: everything one run needs, loaded from YAML with yaml_load_typed.
+
+A scenario names a robot, the cable swaps, the start, the admittance, the logistic parameters
+per cable pair, the limits, the operator, the force sensor and the plant (simulated reels or the
+real ones). Shipped scenarios live in `cdpm_drake/scenarios/` and resolve by name from any
+directory; `--scenario-text` overlays a YAML snippet for one-off changes.
+"""
+
+import dataclasses
+import math
+import typing
+from pathlib import Path
+
+import numpy as np
+
+from .operators import (CsvOperator, NoOperator, OperatorError, ScriptedOperator,
+                        SpringHandOperator, OPERATOR_TYPES, make_operator)
+from .robot import Robot, RobotError, load_robot, resolve_robot_path
+
+SCENARIOS_DIR = Path(__file__).resolve().parent / "scenarios"
+
+
+class ScenarioError(ValueError):
+    """A bad scenario; the message names the field and the value and lists valid choices."""
+
+
+# --- Controller ------------------------------------------------------------------------------
+
+
+@dataclasses.dataclass
+class Admittance:
+    """F_d = M x'' + C x' per axis (eq. 5), discretised by zero-order hold."""
+
+    # Virtual mass M, kg.
+    mass: float = 6.25
+    # Virtual damping C, N s/m.
+    damping: float = 6.25
+
+
+@dataclasses.dataclass
+class Logistic:
+    """Logistic intensity of the interference force (eqs. 26-28)."""
+
+    # Minimum eligible distance d_l, m: intensity F_u - eps there and below.
+    d_l: float = 0.050
+    # Maximum eligible distance d_u, m: intensity eps there; no force above.
+    d_u: float = 0.061
+    # Maximum intensity F_u, N.
+    F_u: float = 2.0
+    # Allowed variation eps, N.
+    eps: float = 0.1
+
+
+@dataclasses.dataclass
+class PairLogistic:
+    """Logistic parameters for one cable pair, overriding the defaults."""
+
+    # The cable pair, 1-based, e.g. [1, 3].
+    pair: list[int] = dataclasses.field(default_factory=list)
+    # Overrides, m, m, N, N (None keeps the default).
+    d_l: typing.Optional[float] = None
+    d_u: typing.Optional[float] = None
+    F_u: typing.Optional[float] = None
+    eps: typing.Optional[float] = None
+
+
+@dataclasses.dataclass
+class Interference:
+    """The interference-force block (section 4)."""
+
+    # False removes F_int (the controller then is a plain admittance).
+    enabled: bool = True
+    # Parameters for every watched pair.
+    default: Logistic = dataclasses.field(default_factory=Logistic)
+    # Per-pair overrides.
+    pairs: list[PairLogistic] = dataclasses.field(default_factory=list)
+    # Clip of |F_int| (eq. 30), N; None: the largest F_u.
+    F_max: typing.Optional[float] = None
+
+
+@dataclasses.dataclass
+class Limits:
+    """Safety limits after the admittance (Fig. 5); None takes the robot file's value."""
+
+    # Platform speed limit, m/s.
+    max_velocity: typing.Optional[float] = None
+    # Platform acceleration limit, m/s^2.
+    max_acceleration: typing.Optional[float] = None
+    # Stop at the workspace box (virtual wall).
+    virtual_wall: bool = True
+
+
+@dataclasses.dataclass
+class WallForce:
+    """Beyond the paper: a smooth repulsion from the workspace box, added to F_d (section 6)."""
+
+    # Off by default, as in the paper.
+    enabled: bool = False
+    # Distance from a face at which the force starts, m.
+    margin: float = 0.10
+    # Force at the face, N; it rises as ((margin - gap) / margin)^2.
+    max_force: float = 4.0
+
+
+@dataclasses.dataclass
+class Sensor:
+    """The handle's force sensor (Variense FSE103) and the sliding-average filter (section 5)."""
+
+    # Sensing range along the handle axis, N.
+    axial_range: float = 100.0
+    # Sensing range across the handle axis, N.
+    transverse_range: float = 80.0
+    # Handle axis in the base frame (normalised on load).
+    axial_axis: list[float] = dataclasses.field(default_factory=lambda: [0.0, 0.0, 1.0])
+    # Sliding-average window, samples of 2 ms (1: no filter).
+    filter_window: int = 10
+    # Simulated only: standard deviation of the sensor noise per axis, N.
+    noise_std: float = 0.0
+
+
+# --- Plants ----------------------------------------------------------------------------------
+
+
+@dataclasses.dataclass
+class SimulatedReels:
+    """Simulated reels: integrate the reel velocity commands to cable lengths at 500 Hz."""
+
+    # First-order lag of the reel drives, s (0: ideal).
+    time_constant: float = 0.0
+    # Reel speed limit, m/s of cable; None takes the robot file's max_reel_speed.
+    max_reel_speed: typing.Optional[float] = None
+
+
+def _plant_types():
+    try:
+        from .hardware.config import HardwareReels
+    except ImportError:  # the hardware package is optional for pure simulation
+        return (SimulatedReels,)
+    return (SimulatedReels, HardwareReels)
+
+
+_PLANTS = _plant_types()
+PlantConfig = typing.Union[_PLANTS] if len(_PLANTS) > 1 else SimulatedReels
+OperatorConfig = typing.Union[NoOperator, ScriptedOperator, CsvOperator, SpringHandOperator]
+
+
+# --- The scenario ----------------------------------------------------------------------------
+
+
+@dataclasses.dataclass
+class Scenario:
+    # A short identifier, used in logs and file names.
+    name: str = "unnamed"
+    # What the run shows.
+    description: str = ""
+    # A built-in robot's name or a path to a robot YAML (relative to the scenario file).
+    robot: str = "paper_7cable"
+    # Cable pairs whose platform attachment points are swapped, 1-based (the paper swaps
+    # [1, 3] and [5, 7] to provoke interference).
+    swaps: list[list[int]] = dataclasses.field(default_factory=list)
+    # Platform start p, base frame, m.
+    initial_position: list[float] = dataclasses.field(default_factory=lambda: [1.77, 3.65, 1.22])
+    # Simulated time, s.
+    duration: float = 10.0
+    # Control period, s (500 Hz in the paper).
+    time_step: float = 0.002
+    admittance: Admittance = dataclasses.field(default_factory=Admittance)
+    interference: Interference = dataclasses.field(default_factory=Interference)
+    limits: Limits = dataclasses.field(default_factory=Limits)
+    wall_force: WallForce = dataclasses.field(default_factory=WallForce)
+    # The person at the handle (simulation and the emulator; on the robot, a real person).
+    operator: OperatorConfig = dataclasses.field(default_factory=NoOperator)
+    sensor: Sensor = dataclasses.field(default_factory=Sensor)
+    # The reel plant: `!SimulatedReels {...}` or `!HardwareReels {...}`.
+    plant: PlantConfig = dataclasses.field(default_factory=SimulatedReels)
+    # Seed of every random number generator (sensor noise), for repeatable runs.
+    random_seed: int = 0
+    # Set by the loader: the directory relative paths resolve against (not a YAML field).
+    base_dir: str = ""
+
+
+def scenario_names() -> list[str]:
+    return sorted(p.stem for p in SCENARIOS_DIR.glob("*.yaml"))
+
+
+def resolve_scenario_path(name_or_path) -> Path:
+    path = Path(name_or_path)
+    if path.suffix in (".yaml", ".yml") or path.exists():
+        if not path.is_file():
+            raise ScenarioError(f"scenario file {str(path)!r} does not exist")
+        return path
+    candidate = SCENARIOS_DIR / f"{name_or_path}.yaml"
+    if candidate.is_file():
+        return candidate
+    raise ScenarioError(f"unknown scenario {str(name_or_path)!r}; built-in scenarios: "
+                        f"{scenario_names()} (or give a path to a .yaml file)")
+
+
+def load_scenario(name_or_path="exp2_interaction", overlay_text: str | None = None) -> Scenario:
+    """Load a scenario by name or path, apply a YAML overlay, and check it."""
+    from pydrake.common.yaml import yaml_load_typed
+
+    path = resolve_scenario_path(name_or_path)
+    try:
+        scenario = yaml_load_typed(schema=Scenario, filename=str(path))
+    except Exception as e:
+        raise ScenarioError(f"{path}: {_explain(e)}") from None
+    if overlay_text:
+        try:
+            scenario = yaml_load_typed(schema=Scenario, data=overlay_text, defaults=scenario)
+        except Exception as e:
+            raise ScenarioError(f"--scenario-text {overlay_text!r}: {_explain(e)}") from None
+    scenario.base_dir = str(path.parent)
+    check_scenario(scenario, source=str(path))
+    return scenario
+
+
+def _explain(e: Exception) -> str:
+    msg = str(e)
+    if "did not match any of the allowed type options" in msg:
+        if "'operator'" in msg:
+            msg += f"; valid operators: {['!' + t.__name__ for t in OPERATOR_TYPES]}"
+        if "'plant'" in msg:
+            msg += f"; valid plants: {['!' + t.__name__ for t in _PLANTS]}"
+    return msg
+
+
+def scenario_robot(scenario: Scenario) -> Robot:
+    """The scenario's robot with its cable swaps applied."""
+    ref = scenario.robot
+    base = Path(scenario.base_dir) if scenario.base_dir else None
+    if base is not None and (ref.endswith((".yaml", ".yml"))) and not Path(ref).is_absolute():
+        candidate = base / ref
+        if candidate.exists():
+            ref = str(candidate)
+    try:
+        robot = load_robot(ref)
+    except RobotError as e:
+        raise ScenarioError(f"robot: {e}") from None
+    for k, swap in enumerate(scenario.swaps):
+        if len(swap) != 2:
+            raise ScenarioError(f"swaps[{k}] must be two cable numbers [i, j], got {swap!r}")
+        try:
+            robot = robot.with_swapped_attachments(int(swap[0]), int(swap[1]))
+        except RobotError as e:
+            raise ScenarioError(f"swaps[{k}] = {swap!r}: {e}") from None
+    return robot
+
+
+def scenario_operator(scenario: Scenario):
+    try:
+        return make_operator(scenario.operator,
+                             Path(scenario.base_dir) if scenario.base_dir else None)
+    except OperatorError as e:
+        raise ScenarioError(str(e)) from None
+
+
+def _positive(value, field):
+    if not (isinstance(value, (int, float)) and math.isfinite(value) and value > 0):
+        raise ScenarioError(f"{field} must be a finite number > 0, got {value!r}")
+
+
+def interference_params(scenario: Scenario, robot: Robot):
+    """Per-pair logistic parameters in the robot's pair order (InterferenceParams)."""
+    from .interference import InterferenceParams
+
+    P = robot.num_pairs
+    cfg = scenario.interference
+    arrays = {k: np.full(P, float(getattr(cfg.default, k))) for k in ("d_l", "d_u", "F_u", "eps")}
+    for n, override in enumerate(cfg.pairs):
+        if len(override.pair) != 2:
+            raise ScenarioError(f"interference.pairs[{n}].pair must be two cable numbers "
+                                f"[i, j], got {override.pair!r}")
+        i, j = override.pair
+        try:
+            k = robot.pair_position(int(i), int(j))
+        except RobotError:
+            raise ScenarioError(
+                f"interference.pairs[{n}].pair = {override.pair!r} is not a cable pair of "
+                f"robot {robot.name!r}; valid pairs: {robot.pairs}") from None
+        for key in arrays:
+            value = getattr(override, key)
+            if value is not None:
+                arrays[key][k] = float(value)
+    F_max = float(cfg.F_max) if cfg.F_max is not None else (float(arrays["F_u"].max()) if P else 0.0)
+    try:
+        return InterferenceParams(F_max=F_max, **arrays)
+    except ValueError as e:
+        raise ScenarioError(f"interference: {e}") from None
+
+
+def check_scenario(scenario: Scenario, source: str = "<scenario>") -> Robot:
+    """Check every field a run depends on; returns the robot (swaps applied)."""
+    robot = scenario_robot(scenario)
+    _positive(scenario.duration, "duration")
+    _positive(scenario.time_step, "time_step")
+    _positive(scenario.admittance.mass, "admittance.mass")
+    _positive(scenario.admittance.damping, "admittance.damping")
+    p0 = scenario.initial_position
+    if len(p0) != 3 or not all(math.isfinite(x) for x in p0):
+        raise ScenarioError(f"initial_position must be [x, y, z] in m, got {p0!r}")
+    if not robot.workspace.contains(p0):
+        raise ScenarioError(
+            f"initial_position {p0!r} m is outside the workspace box of robot {robot.name!r} "
+            f"(lower {robot.workspace.lower.tolist()}, upper {robot.workspace.upper.tolist()})")
+    for name in ("max_velocity", "max_acceleration"):
+        v = getattr(scenario.limits, name)
+        if v is not None:
+            _positive(v, f"limits.{name}")
+    s = scenario.sensor
+    _positive(s.axial_range, "sensor.axial_range")
+    _positive(s.transverse_range, "sensor.transverse_range")
+    if not (isinstance(s.filter_window, int) and s.filter_window >= 1):
+        raise ScenarioError(f"sensor.filter_window must be an integer >= 1 sample, got "
+                            f"{s.filter_window!r}")
+    if len(s.axial_axis) != 3 or not np.linalg.norm(s.axial_axis) > 0:
+        raise ScenarioError(f"sensor.axial_axis must be a non-zero [x, y, z], got "
+                            f"{s.axial_axis!r}")
+    if not (math.isfinite(s.noise_std) and s.noise_std >= 0):
+        raise ScenarioError(f"sensor.noise_std must be >= 0 N, got {s.noise_std!r}")
+    if scenario.wall_force.enabled:
+        _positive(scenario.wall_force.margin, "wall_force.margin")
+        _positive(scenario.wall_force.max_force, "wall_force.max_force")
+    if isinstance(scenario.plant, SimulatedReels):
+        if not (math.isfinite(scenario.plant.time_constant) and scenario.plant.time_constant >= 0):
+            raise ScenarioError(f"plant.time_constant must be >= 0 s, got "
+                                f"{scenario.plant.time_constant!r}")
+        if scenario.plant.max_reel_speed is not None:
+            _positive(scenario.plant.max_reel_speed, "plant.max_reel_speed")
+    scenario_operator(scenario)
+    if scenario.interference.enabled:
+        interference_params(scenario, robot)
+    return robot
+
+
+def scenario_to_yaml(scenario: Scenario) -> str:
+    """The resolved scenario as YAML (written beside every log)."""
+    from pydrake.common.yaml import yaml_dump_typed
+
+    return yaml_dump_typed(scenario)

@@ -1,0 +1,148 @@
+"""Running a scenario's diagram with Drake's Simulator, and its log.
+
+`simulate(scenario=...)` is what `cdpm simulate` calls; it returns the log as a dict of arrays
+(see docs/LOG_FORMAT.md). A run that fails part-way still returns (and the CLI still writes)
+everything logged up to the failure.
+"""
+
+import dataclasses
+import time
+from pathlib import Path
+
+import numpy as np
+from pydrake.systems.analysis import Simulator
+
+from .diagram import LOGGED, build_diagram
+from .scenario import Scenario, check_scenario, interference_params, scenario_to_yaml
+
+
+@dataclasses.dataclass
+class SimulationResult:
+    log: dict
+    # Wall-clock seconds spent in Simulator.AdvanceTo.
+    wall_time: float
+    # The exception that ended the run early, or None.
+    error: Exception | None = None
+
+    @property
+    def realtime_factor(self) -> float:
+        t = self.log["time"]
+        return float(t[-1] - t[0]) / self.wall_time if t.size > 1 and self.wall_time > 0 else 0.0
+
+
+def simulate(*, scenario: Scenario, duration: float | None = None, progress: bool = False,
+             on_chunk=None, chunk: float = 0.5, diagram=None) -> SimulationResult:
+    """Simulate the scenario's diagram for `duration` s (default: the scenario's).
+
+    `on_chunk(diagram, context)` is called every `chunk` s of simulated time (views hang off
+    it). Exceptions raised by the diagram end the run; the result carries them in `error`
+    with the log up to that point.
+    """
+    robot = check_scenario(scenario)
+    duration = scenario.duration if duration is None else float(duration)
+    if not (duration > 0 and np.isfinite(duration)):
+        raise ValueError(f"duration must be a finite number > 0 s, got {duration!r}")
+    diagram = build_diagram(scenario) if diagram is None else diagram
+    simulator = Simulator(diagram)
+    context = simulator.get_mutable_context()
+    _seed(diagram, context, scenario.random_seed)
+    simulator.Initialize()
+    bar = None
+    if progress:
+        from tqdm import tqdm
+        bar = tqdm(total=round(duration, 6), unit="s sim", desc=scenario.name,
+                   bar_format="{l_bar}{bar}| {n:.1f}/{total:.1f} s [{elapsed}<{remaining}]")
+    error = None
+    start = time.perf_counter()
+    t = 0.0
+    try:
+        # Step to the last whole tick inside the duration: one log row per tick.
+        end = np.floor(duration / scenario.time_step + 1e-9) * scenario.time_step
+        while t < end - 1e-12:
+            t_next = min(t + chunk, end)
+            simulator.AdvanceTo(t_next)
+            if bar is not None:
+                bar.update(round(t_next - t, 6))
+            t = t_next
+            if on_chunk is not None:
+                on_chunk(diagram, context)
+    except Exception as e:  # keep what was logged; the caller decides how to report
+        error = e
+    finally:
+        wall = time.perf_counter() - start
+        if bar is not None:
+            bar.close()
+    log = collect_log(diagram, context, scenario, robot)
+    return SimulationResult(log=log, wall_time=wall, error=error)
+
+
+def _seed(diagram, context, seed):
+    from pydrake.common import RandomGenerator
+
+    # Only the sensor-noise source is random; a fixed seed makes runs repeatable.
+    diagram.SetRandomContext(context, RandomGenerator(int(seed)))
+
+
+def collect_log(diagram, context, scenario: Scenario, robot) -> dict:
+    """The loggers' contents as named arrays, one row per tick (docs/LOG_FORMAT.md)."""
+    log = {}
+    time_column = None
+    for key, _, _ in LOGGED:
+        name = f"log_{key}"
+        if not diagram.HasSubsystemNamed(name):
+            continue
+        data = diagram.GetSubsystemByName(name).FindLog(context)
+        log[key] = data.data().T.copy()
+        if time_column is None:
+            time_column = data.sample_times().copy()
+    T = len(time_column)
+    m, P = robot.num_cables, robot.num_pairs
+    log["time"] = time_column
+    if "pair_distances" not in log and P:
+        # No interference block (disabled): the distances are still worth a look.
+        from .interference import pair_distances
+        log["pair_distances"] = pair_distances(robot, log["p"]).reshape(T, P)
+    for key, width in (("F_int", 3), ("F_wall", 3), ("pair_distances", P), ("active", P),
+                       ("crossed", P)):
+        log.setdefault(key, np.zeros((T, width)))
+    for key in ("active", "crossed"):
+        log[key] = log[key] > 0.5
+    log["pairs"] = np.array(robot.pairs, dtype=int).reshape(P, 2)
+    if scenario.interference.enabled and P:
+        params = interference_params(scenario, robot)
+        for key in ("d_l", "d_u", "F_u", "eps"):
+            log[key] = np.asarray(getattr(params, key), dtype=float)
+        log["F_max"] = np.array(params.F_max)
+    else:
+        for key in ("d_l", "d_u", "F_u", "eps"):
+            log[key] = np.full(P, np.nan)
+        log["F_max"] = np.array(0.0)
+    log["reels"] = robot.reels.copy()
+    log["attachments"] = robot.attachments.copy()
+    log["workspace_lower"] = robot.workspace.lower.copy()
+    log["workspace_upper"] = robot.workspace.upper.copy()
+    log["robot_name"] = np.array(robot.name)
+    log["scenario_name"] = np.array(scenario.name)
+    return log
+
+
+def save_log(log: dict, out_dir, scenario: Scenario) -> Path:
+    """Write DIR/log.npz and the resolved scenario DIR/scenario.yaml; returns the npz path."""
+    out = Path(out_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    path = out / "log.npz"
+    np.savez_compressed(path, **log)
+    (out / "scenario.yaml").write_text(scenario_to_yaml(scenario))
+    return path
+
+
+def summary_rows(log: dict):
+    """Per watched pair that was ever active: (pair, min distance mm, ticks active, crossed)."""
+    rows = []
+    for k, (i, j) in enumerate(log["pairs"]):
+        active = log["active"][:, k]
+        crossed = log["crossed"][:, k]
+        if active.any() or crossed.any():
+            rows.append((f"({i},{j})", 1000 * float(log["pair_distances"][:, k].min()),
+                         int(active.sum()), int(crossed.any())))
+    return rows

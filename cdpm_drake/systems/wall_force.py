@@ -1,0 +1,31 @@
+"""Beyond the paper: a smooth repulsion from the workspace box, added to F_d."""
+
+from pydrake.systems.framework import LeafSystem
+
+from ..limits import wall_force
+
+
+class WorkspaceWallForce(LeafSystem):
+    """F_wall (see `limits.wall_force`), so F_int cannot quietly park the platform on the
+    virtual wall (the problem the paper's section 5.4 names).
+
+    .. pydrake_system::
+
+        name: wall_force
+        input_ports:
+        - p_WP (m, base frame)
+        output_ports:
+        - F_wall (N, base frame)
+    """
+
+    def __init__(self, *, lower, upper, margin, max_force):
+        super().__init__()
+        self._args = dict(lower=lower, upper=upper)
+        self._margin, self._max_force = float(margin), float(max_force)
+        self._p = self.DeclareVectorInputPort("p_WP", 3)
+        self.DeclareVectorOutputPort("F_wall", 3, self._calc_F_wall,
+                                     prerequisites_of_calc={self._p.ticket()})
+
+    def _calc_F_wall(self, context, output):
+        output.SetFromVector(wall_force(self._p.Eval(context), margin=self._margin,
+                                        max_force=self._max_force, **self._args))
