@@ -53,6 +53,14 @@ def forward_kinematics(robot: Robot, lengths, p_guess=None, tol: float = 1e-10,
         row, cable = np.argwhere(bad)[0]
         raise KinematicsError(f"cable {cable + 1} length is {L[row, cable]!r} m, "
                               "not a finite number")
+    if single and p_guess is not None:
+        # The control loop's case: one position, warm-started a tick away. Plain Gauss-Newton
+        # converges in two or three steps; anything harder falls through to the damped solver.
+        p = _gauss_newton_warm(robot.attachments - robot.reels, lengths,
+                               np.asarray(p_guess, dtype=float), tol, max_residual,
+                               min(8, max_iterations))
+        if p is not None:
+            return p
     if p_guess is None:
         p = np.broadcast_to(robot.workspace.center, (L.shape[0], 3)).copy()
     else:
@@ -107,6 +115,25 @@ def forward_kinematics(robot: Robot, lengths, p_guess=None, tol: float = 1e-10,
             f"forward kinematics did not converge in {max_iterations} iterations "
             f"(residual {worst[k]:.3g} m, last position {p[k].tolist()} m)")
     return p[0] if single else p
+
+
+def _gauss_newton_warm(offsets, L, p, tol, max_residual, max_iterations=8):
+    """Undamped Gauss-Newton from a close guess; None when it does not settle quickly."""
+    for _ in range(max_iterations):
+        rho = p + offsets
+        n = np.sqrt(np.einsum("ij,ij->i", rho, rho))
+        r = n - L
+        J = rho / n[:, None]
+        try:
+            step = np.linalg.solve(J.T @ J, J.T @ r)
+        except np.linalg.LinAlgError:
+            return None
+        p = p - step
+        if step @ step < tol * tol:
+            rho = p + offsets
+            worst = np.max(np.abs(np.sqrt(np.einsum("ij,ij->i", rho, rho)) - L))
+            return p if worst <= max_residual else None
+    return None
 
 
 def condition_number(robot: Robot, p) -> float:
