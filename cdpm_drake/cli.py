@@ -29,8 +29,9 @@ def _fmt(v, digits=3) -> str:
 # --- info ------------------------------------------------------------------------------------
 
 
-def info(*, robot: str, out=sys.stdout) -> None:
+def info(*, robot: str, out=None) -> None:
     """Print a robot description: cables, Jacobian conditioning, workspace."""
+    out = sys.stdout if out is None else out
     from .kinematics import cable_lengths, condition_number
     from .robot import load_robot
 
@@ -75,12 +76,13 @@ def _load_scenario_arg(args):
     return load_scenario(args.scenario, overlay_text=args.scenario_text)
 
 
-def simulate_main(*, scenario, duration=None, out_dir=None, progress=True, out=sys.stdout,
+def simulate_main(*, scenario, duration=None, out_dir=None, progress=True, out=None,
                   on_chunk=None) -> int:
     """Simulate, write DIR/log.npz and DIR/scenario.yaml, print a summary. Returns an exit
     code: 0, or 1 when the run ended early (the log up to then is written all the same)."""
     from .simulation import save_log, simulate, summary_rows
 
+    out = sys.stdout if out is None else out
     out_dir = Path(out_dir if out_dir is not None else Path("runs") / scenario.name)
     result = simulate(scenario=scenario, duration=duration, progress=progress,
                       on_chunk=on_chunk)
