@@ -118,6 +118,38 @@ def _cmd_simulate(args) -> int:
                          progress=not args.no_progress)
 
 
+# --- diagram ---------------------------------------------------------------------------------
+
+
+def diagram_main(*, scenario, out_dir, depth=1, svg=True, out=None) -> int:
+    """Write the controller diagram, with the simulated and with the hardware plant."""
+    import dataclasses
+
+    from .diagram import BuildOptions, build_diagram
+    from .hardware.config import HardwareReels
+    from .scenario import SimulatedReels
+    from .views.diagram_graph import write_diagrams
+
+    out = sys.stdout if out is None else out
+    options = BuildOptions(loggers=False)  # loggers only clutter the picture
+    diagrams = {
+        "controller_simulated": build_diagram(
+            dataclasses.replace(scenario, plant=SimulatedReels()), options),
+        "controller_hardware": build_diagram(
+            dataclasses.replace(scenario, plant=HardwareReels()), options),
+    }
+    for path in write_diagrams(diagrams, out_dir, svg=svg, max_depth=depth):
+        print(f"wrote {path}", file=out)
+    return 0
+
+
+def _cmd_diagram(args) -> int:
+    if args.depth < 1:
+        raise CliError(f"--depth must be an integer >= 1, got {args.depth!r}")
+    return diagram_main(scenario=_load_scenario_arg(args), out_dir=args.out, depth=args.depth,
+                        svg=not args.no_svg)
+
+
 # --- main ------------------------------------------------------------------------------------
 
 
@@ -141,6 +173,17 @@ def _parser() -> argparse.ArgumentParser:
     p.add_argument("--out", type=Path, help="output directory (default: runs/<scenario name>)")
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
     p.set_defaults(func=_cmd_simulate)
+
+    p = sub.add_parser("diagram", help="write the controller diagram as graphviz (.dot, .svg)",
+                       description="Write the Fig. 5 diagram of a scenario, with the simulated "
+                                   "and with the hardware plant, as .dot and .svg files.")
+    _scenario_args(p)
+    p.add_argument("--out", type=Path, default=Path("diagrams"),
+                   help="output directory (default: diagrams)")
+    p.add_argument("--depth", type=int, default=1,
+                   help="how many levels of sub-diagrams to expand (default: 1)")
+    p.add_argument("--no-svg", action="store_true", help="write only the .dot files")
+    p.set_defaults(func=_cmd_diagram)
     return parser
 
 

@@ -321,7 +321,13 @@ def check_scenario(scenario: Scenario, source: str = "<scenario>") -> Robot:
     if scenario.wall_force.enabled:
         _positive(scenario.wall_force.margin, "wall_force.margin")
         _positive(scenario.wall_force.max_force, "wall_force.max_force")
-    if isinstance(scenario.plant, SimulatedReels):
+    if not isinstance(scenario.plant, SimulatedReels):
+        from .hardware.config import check_hardware_reels
+        try:
+            check_hardware_reels(scenario.plant)
+        except ValueError as e:
+            raise ScenarioError(str(e)) from None
+    else:
         if not (math.isfinite(scenario.plant.time_constant) and scenario.plant.time_constant >= 0):
             raise ScenarioError(f"plant.time_constant must be >= 0 s, got "
                                 f"{scenario.plant.time_constant!r}")
