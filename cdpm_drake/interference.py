@@ -1,0 +1,475 @@
+"""Cable-cable interference: exact segment distance, its gradient, the repulsive force.
+
+Plain numpy, no Drake import (the Drake `InterferenceForce` system is a thin wrapper). Paper
+sections 3.3 and 4, eqs. 8-30. All positions are in the base frame A, in m; forces in N.
+
+Cable i is the segment from its platform point B_i = p + b_i (parameter 0) to its reel exit
+A_i = a_i (parameter 1); the paper's d_i* is `s` here and d_j* is `t`. The closest points are
+C_i = B_i + s (A_i - B_i) and C_j = B_j + t (A_j - B_j).
+
+Gradient (all nine KKT cases). Only the B points move with the platform: dC_i/dp = (1 - s) I.
+The constraint box [0, 1]^2 does not depend on p, so by the envelope (Danskin) theorem, wherever
+the minimiser is unique and the distance d > 0,
+
+    grad_p d = ((1 - s) - (1 - t)) (C_i - C_j) / d = (t - s) n_hat,   n_hat = (C_i - C_j) / d.
+
+In case 1 this equals the paper's eqs. 24-25 (tested). It is zero when s == t (cases 8, 9 and
+any s = t): a translation moves both closest points alike. Where it is undefined we return:
+d == 0 (cables touch; d is a cone there): the zero vector; non-unique minimiser (parallel
+overlapping cables): (t - s) n_hat at the returned minimiser, one element of the generalised
+gradient (the one-sided derivative along directions that keep that minimiser).
+
+Crossing side (beyond the paper). The unsigned distance cannot tell which side of each other
+two cables are on, so once they pass through each other its gradient holds them crossed. Let
+m_hat = (u_i x u_j)/|u_i x u_j| (u = A - B, the cable directions) and sigma = (B_i - B_j) . m_hat
+the signed distance between the two cable LINES; its sign `line_side` in {-1, 0, +1} changes
+only when the lines meet, and is 0 where undefined (parallel cables, sin angle <= 1e-6, or lines
+that touch). A real crossing is a sign change of sigma while the segments straddle each other
+(both closest points strictly inside their cables, 0 < s < 1 and 0 < t < 1, so d == |sigma|);
+a sign change anywhere else (the lines meet beyond a cable's end, or far away) is geometry, not
+a crossing. The memory is one int8 per pair, a pure function of the previous memory and the
+current geometry (`update_side`), so it fits a Drake discrete state:
+
+    0        unknown: adopt line_side (the start assumes the cables are not crossed).
+    +1 / -1  on the remembered side o.  line_side == -o: if the segments straddle and
+             d <= d_u, the cables have crossed (memory becomes 2 o); otherwise (beyond an end,
+             or farther than d_u) the memory is refreshed to line_side.
+    +2 / -2  crossed, remembered side o = sign.  Released (back to o) only when line_side == o
+             again. We prefer a spurious push back to forgetting a real tangle.
+    line_side == 0 never changes the memory.
+
+A crossed pair is active at full intensity F_u, pushed along o (t_L - s_L) m_hat, the gradient
+of o sigma (t_L, s_L: the closest-point parameters of the two lines; equal to t, s while the
+segments straddle), which points back to the remembered side. A pair that is not crossed
+follows the paper (direction grad d / |grad d|); at d == 0 with a known side it uses the same
+side-aware direction o (t - s) m_hat, which is the limit of grad d from the remembered side.
+"""
+
+import dataclasses
+import math
+import weakref
+
+import numpy as np
+
+# A cable direction is "parallel" to another when sin(angle) <= this: the side is undefined.
+PARALLEL_SIN = 1e-6
+# |t - s| (the gradient norm, m/m) below which a pair has no direction to push along.
+MIN_GRADIENT = 1e-12
+
+
+@dataclasses.dataclass(frozen=True)
+class SegmentDistance:
+    """Minimum distance (m) between two cables and its parameters s = d_i*, t = d_j*
+    (0 at the platform point B, 1 at the reel A)."""
+
+    distance: float
+    s: float
+    t: float
+
+
+# --- the vectorised kernel ------------------------------------------------------------------
+
+# Index rows for cross products of stacked (k, 3, ...) arrays: (x × y)_r = x_{r+1} y_{r+2} - ...
+_R1 = np.array([1, 2, 0])
+_R2 = np.array([2, 0, 1])
+
+
+def _kernel(u, v, w):
+    """Closest points of cable i, B_i + s u, and cable j, B_j + t v (s, t in [0, 1]), with
+    u = A_i - B_i, v = A_j - B_j, w = B_i - B_j; arrays of shape (3, ...), m.
+
+    Ericson's clamped solution (Real-Time Collision Detection, 5.1.9): s = clamp of the line
+    optimum, t = the optimum for that s, and if t leaves [0, 1], clamp t and re-optimise s. It
+    returns a global minimiser of the convex problem (10): when t*(s0) < 0, the chord from the
+    strip minimiser (s0, t*(s0)) to any box minimiser crosses t = 0 at a point no worse, so some
+    minimiser has t = 0 (likewise t = 1). The nine KKT cases of eqs. 13-21 are the nine
+    outcomes. The line optimum uses cross products, s_L = ((v x w) . n) / |n|^2 with n = u x v
+    (equal to (b e - c d) / (a c - b^2) by the Binet-Cauchy identity, but accurate for nearly
+    parallel cables, where the Gram form loses half the digits). Parallel cables (n == 0) get
+    s = 0, a valid choice; a zero-length cable j takes the point-segment branch; no 0/0 occurs.
+
+    Returns (dist, s, t, diff = C_i - C_j, n = u x v, D = |n|^2, a = |u|^2, b = u.v, c = |v|^2,
+    e = v.w, s_L) with diff, n of shape (3, ...) and the rest of shape (...).
+    """
+    Z = np.stack(np.broadcast_arrays(u, v, w))  # (3 vectors, 3 components, ...)
+    Z1, Z2 = Z[:, _R1], Z[:, _R2]
+    nm = Z1[:2] * Z2[1:] - Z2[:2] * Z1[1:]  # (2, 3, ...): u x v, v x w
+    n = nm[0]
+    Dn = (nm * n).sum(axis=1)  # |n|^2, (v x w) . n
+    D, num = Dn[0], Dn[1]
+    G = (Z[:, None] * Z[None, :2]).sum(axis=2)  # G[k, l] = Z_k . Z_l for l in (u, v)
+    a, b, c, d, e = G[0, 0], G[0, 1], G[1, 1], G[2, 0], G[2, 1]
+    inv_a = 1.0 / np.where(a > 0.0, a, 1.0)
+    c_pos = c > 0.0
+    inv_c = 1.0 / np.where(c_pos, c, 1.0)
+    # D == 0: n == 0 (parallel: any s is optimal, s_L = num = 0) or |n| so small that its
+    # square underflows (then num is as negligible and s_L stays finite).
+    s_L = num / np.where(D > 0.0, D, 1.0)
+    s = np.minimum(np.maximum(s_L, 0.0), 1.0)
+    t = (b * s + e) * inv_c
+    # t outside [0, 1] (or cable j a point, c == 0): clamp t, then s = argmin on that edge.
+    edge = (t < 0.0) | (t > 1.0) | ~c_pos
+    t = np.minimum(np.maximum(t, 0.0), 1.0)
+    s = np.where(edge, np.minimum(np.maximum((b * t - d) * inv_a, 0.0), 1.0), s)
+    diff = w + s * u - t * v
+    dist = np.sqrt((diff * diff).sum(axis=0))
+    return dist, s, t, diff, n, D, a, b, c, e, s_L
+
+
+def _gradient(dist, s, t, diff):
+    """(t - s) (C_i - C_j) / d, zero where d == 0; (3, ...)."""
+    pos = dist > 0.0
+    return diff * np.where(pos, (t - s) / np.where(pos, dist, 1.0), 0.0)
+
+
+def _line_side(s, t, diff, n, D, a, c):
+    """Sign of the line signed distance sigma = (C_i - C_j) . n / |n| (any points of the two
+    lines give the same value as u, v are normal to n), 0 where the cables are parallel
+    (sin angle <= PARALLEL_SIN) or the lines touch; and whether the segments straddle (both
+    closest points strictly inside their cables)."""
+    sigma = (diff * n).sum(axis=0)
+    defined = D > (PARALLEL_SIN * PARALLEL_SIN) * a * c
+    side = np.sign(sigma * defined).astype(np.int8)
+    straddle = (s * (1.0 - s) > 0.0) & (t * (1.0 - t) > 0.0)
+    return side, straddle
+
+
+# --- scalar reference API --------------------------------------------------------------------
+
+
+def _point(value, name: str) -> np.ndarray:
+    try:
+        arr = np.asarray(value, dtype=float)
+    except (TypeError, ValueError):
+        raise ValueError(f"{name} must be a point [x, y, z] in m, got {value!r}") from None
+    if arr.shape != (3,):
+        raise ValueError(f"{name} must be a point [x, y, z] in m (shape (3,)), got shape "
+                         f"{arr.shape}: {value!r}")
+    if not np.all(np.isfinite(arr)):
+        raise ValueError(f"{name} must have finite coordinates, got {value!r}")
+    return arr
+
+
+def _segments(b_i, a_i, b_j, a_j):
+    Bi, Ai, Bj, Aj = (_point(x, nm) for x, nm in
+                      ((b_i, "b_i"), (a_i, "a_i"), (b_j, "b_j"), (a_j, "a_j")))
+    return _kernel(Ai - Bi, Aj - Bj, Bi - Bj)
+
+
+def segment_distance(b_i, a_i, b_j, a_j) -> SegmentDistance:
+    """Minimum distance (m) between cable i, from B_i to A_i, and cable j, from B_j to A_j.
+
+    All four are WORLD points here (B_i = p + b_i), m. s = d_i*, t = d_j* in [0, 1]. Parallel or
+    collinear cables have no unique minimiser: any valid one is returned.
+    """
+    dist, s, t, *_ = _segments(b_i, a_i, b_j, a_j)
+    return SegmentDistance(float(dist), float(s), float(t))
+
+
+def distance_gradient(b_i, a_i, b_j, a_j) -> np.ndarray:
+    """d(distance)/dp (3,), m/m, when the platform translates by p (both B points move).
+
+    (t - s) (C_i - C_j) / d; zero where d == 0 and where s == t. See the module docstring for
+    the value returned where the gradient is undefined.
+    """
+    dist, s, t, diff, *_ = _segments(b_i, a_i, b_j, a_j)
+    return _gradient(dist, s, t, diff)
+
+
+# --- robot-level, vectorised over pairs (and positions) -------------------------------------
+
+
+def _position(p) -> np.ndarray:
+    try:
+        p = np.asarray(p, dtype=float)
+    except (TypeError, ValueError):
+        raise ValueError(f"platform position p must be [x, y, z] in m, got {p!r}") from None
+    if p.ndim not in (1, 2) or p.shape[-1] != 3:
+        raise ValueError(f"platform position p must have shape (3,) or (N, 3) in m, got shape "
+                         f"{p.shape}")
+    if not np.isfinite(p).all():
+        raise ValueError(f"platform position p must be finite, got {p.tolist()!r}")
+    return p
+
+
+_GEOMETRY = weakref.WeakKeyDictionary()
+
+
+def _geometry(robot):
+    """Per-pair constants (3, P): a_i - b_i, a_j - b_j, b_i - b_j. Only p changes per tick:
+    u = A_i - B_i = (a_i - b_i) - p, v likewise, w = B_i - B_j = b_i - b_j."""
+    g = _GEOMETRY.get(robot)
+    if g is None:
+        i, j = robot.pair_index
+        ab = (robot.reels - robot.attachments).T
+        g = (np.ascontiguousarray(ab[:, i]), np.ascontiguousarray(ab[:, j]),
+             np.ascontiguousarray((robot.attachments[i] - robot.attachments[j]).T),
+             tuple(robot.pairs))
+        _GEOMETRY[robot] = g
+    return g
+
+
+def _robot_kernel(robot, p):
+    U, V, W, _ = _geometry(robot)
+    if p.ndim == 1:
+        pc = p[:, None]
+        return _kernel(U - pc, V - pc, W)
+    pc = p.T[:, :, None]  # (3, N, 1)
+    return _kernel(U[:, None, :] - pc, V[:, None, :] - pc, W[:, None, :])
+
+
+def pair_distances(robot, p) -> np.ndarray:
+    """Minimum distance (m) of every watched cable pair, in `robot.pairs` order.
+
+    p: platform centre (3,) or a batch (N, 3), base frame, m. Returns (P,) or (N, P) with
+    P = robot.num_pairs (pairs excluded by the robot description are left out).
+    """
+    return _robot_kernel(robot, _position(p))[0]
+
+
+def initial_side(robot, p) -> np.ndarray:
+    """The crossing-side memory at start (P,) int8 in {-1, 0, +1}: the sign of each pair's
+    line signed distance at p (0 where undefined). Assumes no pair starts crossed."""
+    p = _position(p)
+    if p.ndim != 1:
+        raise ValueError(f"initial_side takes one position (3,), got shape {p.shape}")
+    dist, s, t, diff, n, D, a, b, c, e, s_L = _robot_kernel(robot, p)
+    return _line_side(s, t, diff, n, D, a, c)[0]
+
+
+def _side_rule(q: int, line_side: int, straddle: bool, near: bool) -> int:
+    """One pair's memory transition (the table in the module docstring)."""
+    o = (q > 0) - (q < 0)
+    if line_side == 0:
+        return q
+    if o == 0:
+        return line_side
+    if abs(q) == 2:  # crossed: released only by the return to the remembered side
+        return o if line_side == o else q
+    if line_side == o:
+        return q
+    return 2 * o if (straddle and near) else line_side
+
+
+# The rule tabulated over (q + 2, line_side + 1, straddle, near): one gather per tick.
+_SIDE_TABLE = np.array([_side_rule(q, g, bool(st), bool(nr))
+                        for q in range(-2, 3) for g in (-1, 0, 1)
+                        for st in (0, 1) for nr in (0, 1)], dtype=np.int8)
+
+
+def update_side(side, line_side, straddle, near):
+    """The side memory after one tick (pure function; see the module docstring).
+
+    side: previous memory (P,) int8 in {-2, -1, 0, 1, 2}; line_side: (P,) in {-1, 0, 1};
+    straddle: (P,) bool, both closest points strictly inside their cables; near: (P,) bool,
+    d <= d_u. Returns (new memory (P,) int8, crossed (P,) bool).
+    """
+    q = np.asarray(side).astype(np.intp)
+    if q.size and np.abs(q).max() > 2:
+        raise ValueError(f"side memory entries must lie in -2..2, got {np.asarray(side)!r}")
+    idx = q * 12 + np.asarray(line_side, dtype=np.intp) * 4
+    idx += 28 + 2 * np.asarray(straddle, dtype=np.intp) + np.asarray(near, dtype=np.intp)
+    new = _SIDE_TABLE[idx]
+    return new, (new == 2) | (new == -2)
+
+
+# --- intensity and force ----------------------------------------------------------------------
+
+
+def _steepness(d_l, d_u, F_u, eps):
+    """Eq. 28: b (1/m, negative) and the band centre (d_u + d_l)/2 (m)."""
+    return 2.0 * np.log((F_u - eps) / eps) / (d_l - d_u), 0.5 * (d_u + d_l)
+
+
+def _logistic(d, F_u, b, mid):
+    # Eq. 26: F_u / (1 + exp(-b (d - mid))); the exponent is capped so exp cannot overflow
+    # far above the band (the value there is F_u e^-700, zero for every purpose).
+    return F_u / (1.0 + np.exp(np.minimum(b * (mid - d), 700.0)))
+
+
+def logistic_intensity(d, d_l, d_u, F_u, eps):
+    """Interference force intensity alpha_ij (N) at distance d (m), eqs. 26-28, vectorised.
+
+    F_u - eps at d = d_l, eps at d = d_u, decreasing, tending to F_u as d -> -inf and 0 as
+    d -> inf. Requires 0 <= d_l < d_u (m) and 0 < eps < F_u / 2 (N); ValueError otherwise.
+    """
+    d_l, d_u, F_u, eps = (np.asarray(x, dtype=float) for x in (d_l, d_u, F_u, eps))
+    _check_logistic(d_l, d_u, F_u, eps, names=None)
+    return _logistic(np.asarray(d, dtype=float), F_u, *_steepness(d_l, d_u, F_u, eps))
+
+
+def _check_logistic(d_l, d_u, F_u, eps, names):
+    d_l, d_u, F_u, eps = np.broadcast_arrays(d_l, d_u, F_u, eps)
+
+    def where(k):
+        if names is None:
+            return "" if d_l.ndim == 0 else f" at index {k}"
+        return f" of pair {names[k]}"
+
+    for field, arr in (("d_l", d_l), ("d_u", d_u), ("F_u", F_u), ("eps", eps)):
+        bad = ~np.isfinite(arr)
+        if bad.any():
+            k = int(np.flatnonzero(bad.ravel())[0])
+            raise ValueError(f"{field}{where(k)} must be finite, got {arr.ravel()[k]!r}")
+    checks = (
+        (d_l < 0, lambda k: f"d_l{where(k)} must be >= 0 m, got {d_l.ravel()[k]!r}"),
+        (d_u <= d_l, lambda k: f"d_u{where(k)} must be above d_l: got d_l = "
+                               f"{d_l.ravel()[k]!r} m, d_u = {d_u.ravel()[k]!r} m"),
+        (F_u <= 0, lambda k: f"F_u{where(k)} must be > 0 N, got {F_u.ravel()[k]!r}"),
+        ((eps <= 0) | (eps >= F_u / 2),
+         lambda k: f"eps{where(k)} must lie in (0, F_u/2) = (0, {F_u.ravel()[k] / 2!r}) N, "
+                   f"got {eps.ravel()[k]!r}"),
+    )
+    for bad, message in checks:
+        bad = np.asarray(bad)
+        if bad.any():
+            raise ValueError(message(int(np.flatnonzero(bad.ravel())[0])))
+
+
+@dataclasses.dataclass(frozen=True)
+class InterferenceParams:
+    """Logistic parameters per watched pair (arrays of length robot.num_pairs, in
+    `robot.pairs` order): d_l, d_u (m), F_u, eps (N); F_max (N) clips |F_int| (eq. 30).
+
+    `pairs` (1-based (i, j) per entry) names pairs in error messages and lets
+    `interference_force` check that the parameters belong to its robot; `uniform` fills it.
+    """
+
+    d_l: np.ndarray
+    d_u: np.ndarray
+    F_u: np.ndarray
+    eps: np.ndarray
+    F_max: float
+    pairs: tuple | None = None
+
+    def __post_init__(self):
+        arrays = {}
+        for field in ("d_l", "d_u", "F_u", "eps"):
+            value = getattr(self, field)
+            try:
+                arr = np.array(value, dtype=float)
+            except (TypeError, ValueError):
+                raise ValueError(f"{field} must be numbers, one per cable pair, got "
+                                 f"{value!r}") from None
+            if arr.ndim != 1:
+                raise ValueError(f"{field} must be a 1-D array, one value per cable pair, got "
+                                 f"{value!r}")
+            arrays[field] = arr
+        sizes = {f: a.size for f, a in arrays.items()}
+        if len(set(sizes.values())) != 1:
+            raise ValueError(f"d_l, d_u, F_u, eps must have one value per cable pair; got "
+                             f"lengths {sizes}")
+        size = sizes["d_l"]
+        pairs = None if self.pairs is None else tuple(tuple(int(k) for k in pr)
+                                                      for pr in self.pairs)
+        if pairs is not None and len(pairs) != size:
+            raise ValueError(f"pairs lists {len(pairs)} cable pairs but d_l, d_u, F_u, eps "
+                             f"have {size} values")
+        names = ([f"({i},{j})" for i, j in pairs] if pairs is not None
+                 else [f"at index {k}" for k in range(size)])
+        _check_logistic(arrays["d_l"], arrays["d_u"], arrays["F_u"], arrays["eps"], names)
+        if not (_finite(self.F_max) and float(self.F_max) > 0):
+            raise ValueError(f"F_max must be a finite value > 0 N, got {self.F_max!r}")
+        for field, arr in arrays.items():
+            arr.flags.writeable = False
+            object.__setattr__(self, field, arr)
+        object.__setattr__(self, "F_max", float(self.F_max))
+        object.__setattr__(self, "pairs", pairs)
+        b, mid = _steepness(arrays["d_l"], arrays["d_u"], arrays["F_u"], arrays["eps"])
+        object.__setattr__(self, "_b", b)
+        object.__setattr__(self, "_mid", mid)
+
+    @classmethod
+    def uniform(cls, robot, d_l, d_u, F_u, eps=0.1, F_max=None) -> "InterferenceParams":
+        """The same d_l, d_u (m), F_u, eps (N) for every watched pair of `robot`;
+        F_max (N) defaults to max(F_u), as in the paper."""
+        P = robot.num_pairs
+        arrays = []
+        for field, x in (("d_l", d_l), ("d_u", d_u), ("F_u", F_u), ("eps", eps)):
+            try:
+                arrays.append(np.broadcast_to(np.asarray(x, dtype=float), (P,)).copy())
+            except (TypeError, ValueError):
+                raise ValueError(f"{field} must be a number or one value per cable pair "
+                                 f"({P} for robot {robot.name!r}), got {x!r}") from None
+        if F_max is None:
+            F_max = float(np.max(arrays[2])) if P else 1.0
+        return cls(*arrays, F_max=F_max, pairs=tuple(robot.pairs))
+
+
+def _finite(x) -> bool:
+    try:
+        return math.isfinite(float(x))
+    except (TypeError, ValueError):
+        return False
+
+
+@dataclasses.dataclass(frozen=True)
+class InterferenceResult:
+    """One tick of the interference block. Per pair arrays follow `robot.pairs`."""
+
+    force: np.ndarray       # (3,) N, total F_int after the norm clip (eqs. 29-30)
+    distance: np.ndarray    # (P,) m
+    s: np.ndarray           # (P,) closest-point parameter on cable i (0 at B_i, 1 at A_i)
+    t: np.ndarray           # (P,) closest-point parameter on cable j
+    gradient: np.ndarray    # (P, 3) m/m, d distance / dp
+    intensity: np.ndarray   # (P,) N, alpha_ij; 0 for inactive pairs
+    active: np.ndarray      # (P,) bool, d <= d_u or crossed
+    side: np.ndarray        # (P,) int8, updated side memory, to store for the next tick
+    crossed: np.ndarray     # (P,) bool, cables crossed relative to their remembered side
+    direction: np.ndarray   # (P, 3) unit push direction per pair (zero row: none)
+
+
+def interference_force(robot, p, params: InterferenceParams, side=None) -> InterferenceResult:
+    """The interference force F_int (N) at platform position p (3,), base frame, m.
+
+    Active pairs (d <= d_u) push with the logistic intensity (eq. 26) along the normalised
+    distance gradient (eq. 29); crossed pairs push back to their remembered side at F_u. The
+    sum (eq. 30) is clipped to norm F_max. `side` is the memory returned by the previous tick
+    (None: `initial_side(robot, p)`).
+    """
+    U, V, W, pairs = _geometry(robot)
+    P = len(pairs)
+    if params.d_l.size != P or (params.pairs is not None and params.pairs != pairs):
+        raise ValueError(f"interference parameters are for pairs "
+                         f"{params.pairs if params.pairs is not None else params.d_l.size} "
+                         f"but robot {robot.name!r} watches {list(pairs)}")
+    p = _position(p)
+    if p.ndim != 1:
+        raise ValueError(f"interference_force takes one position (3,), got shape {p.shape}")
+    pc = p[:, None]
+    dist, s, t, diff, n, D, a, b, c, e, s_L = _kernel(U - pc, V - pc, W)
+    line_side, straddle = _line_side(s, t, diff, n, D, a, c)
+    if side is None:
+        side = line_side
+    elif np.shape(side) != (P,):
+        raise ValueError(f"side memory must have shape ({P},), one entry per watched pair, "
+                         f"got shape {np.shape(side)}")
+    near = dist <= params.d_u
+    new_side, crossed = update_side(side, line_side, straddle, near)
+
+    pos = dist > 0.0
+    inv_d = np.divide(1.0, dist, out=np.zeros_like(dist), where=pos)
+    ts = t - s
+    grad = diff * (ts * inv_d)
+    # |grad| = |t - s| where d > 0, so the unit direction is sign(t - s) (C_i - C_j) / d.
+    direction = diff * (np.sign(ts) * (np.abs(ts) > MIN_GRADIENT) * inv_d)
+    use_side = crossed | (~pos & straddle)
+    if use_side.any():
+        # Gradient of o sigma: o (t_L - s_L) n / |n| (t_L, s_L: the two lines' closest points).
+        has_n = D > 0.0
+        t_L = (b * s_L + e) / np.where(c > 0.0, c, 1.0)
+        inv_n = np.divide(1.0, np.sqrt(D), out=np.zeros_like(D), where=has_n)
+        g = np.sign(new_side) * (t_L - s_L)
+        toward = n * (np.sign(g) * (np.abs(g) > MIN_GRADIENT) * inv_n)
+        direction = np.where(use_side, toward, direction)
+
+    intensity = np.where(crossed, params.F_u,
+                         np.where(near, _logistic(dist, params.F_u, params._b, params._mid),
+                                  0.0))
+    force = direction @ intensity
+    fn = math.sqrt(force[0] * force[0] + force[1] * force[1] + force[2] * force[2])
+    if fn > params.F_max:
+        force *= params.F_max / fn
+    return InterferenceResult(force=force, distance=dist, s=s, t=t, gradient=grad.T,
+                              intensity=intensity, active=near | crossed, side=new_side,
+                              crossed=crossed, direction=direction.T)
