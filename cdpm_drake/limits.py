@@ -11,8 +11,9 @@ def limit_velocity(v_desired, v_previous, p, lower, upper, *, max_velocity, max_
     """The platform velocity to command this tick.
 
     In order: the speed is capped at `max_velocity`; near a face of the workspace box the speed
-    towards it is capped by a braking curve sqrt(2 a gap) so the platform can stop within the
-    acceleration limit, and by gap / time_step so one tick never leaves the box; the change from
+    towards it is capped by the discrete braking curve sqrt(2 a gap) - a T / 2, from which
+    braking by a T per tick stops within the gap (so following it never needs more than the
+    acceleration limit), and by gap / time_step so one tick never leaves the box; the change from
     the previous command is capped at max_acceleration * time_step. The wall cap is applied
     again last: it wins over the acceleration limit (never leave the box).
     """
@@ -35,9 +36,12 @@ def limit_velocity(v_desired, v_previous, p, lower, upper, *, max_velocity, max_
 def _wall_cap(v, p, lower, upper, a, T):
     gap_up = np.maximum(np.asarray(upper) - p, 0.0)
     gap_lo = np.maximum(p - np.asarray(lower), 0.0)
-    # Braking curve (can stop in the gap at deceleration a) and one-tick bound (no overshoot).
-    cap_up = np.minimum(np.sqrt(2.0 * a * gap_up), gap_up / T)
-    cap_lo = np.minimum(np.sqrt(2.0 * a * gap_lo), gap_lo / T)
+    # Braking curve and one-tick bound (no overshoot). The continuous curve sqrt(2 a gap) is
+    # not enough at 500 Hz: braking by a T per tick from v covers T (v + (v - aT) + ...), at
+    # most (v + aT/2)^2 / (2a), so the cap is sqrt(2 a gap) - aT/2; on it, the next tick's cap
+    # is exactly v - aT.
+    cap_up = np.clip(np.minimum(np.sqrt(2.0 * a * gap_up) - 0.5 * a * T, gap_up / T), 0.0, None)
+    cap_lo = np.clip(np.minimum(np.sqrt(2.0 * a * gap_lo) - 0.5 * a * T, gap_lo / T), 0.0, None)
     return np.clip(v, -cap_lo, cap_up)
 
 
