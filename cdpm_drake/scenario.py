@@ -201,11 +201,13 @@ def load_scenario(name_or_path="exp2_interaction", overlay_text: str | None = No
     from pydrake.common.yaml import yaml_load_typed
 
     path = resolve_scenario_path(name_or_path)
+    _check_yaml_text(f"{path}", filename=str(path))
     try:
         scenario = yaml_load_typed(schema=Scenario, filename=str(path))
     except Exception as e:
         raise ScenarioError(f"{path}: {_explain(e)}") from None
     if overlay_text:
+        _check_yaml_text(f"--scenario-text {overlay_text!r}", data=overlay_text)
         try:
             scenario = yaml_load_typed(schema=Scenario, data=overlay_text, defaults=scenario)
         except Exception as e:
@@ -213,6 +215,91 @@ def load_scenario(name_or_path="exp2_interaction", overlay_text: str | None = No
     scenario.base_dir = str(path.parent)
     check_scenario(scenario, source=str(path))
     return scenario
+
+
+def _check_yaml_text(source: str, **where) -> None:
+    """Check raw YAML against the Scenario schema before yaml_load_typed, whose messages do not
+    say which nested field is wrong (`The fields ['mas'] were unknown to the schema`,
+    `could not convert string to float: 'a'`) nor list the valid fields."""
+    from pydrake.common.yaml import yaml_load
+
+    try:
+        raw = yaml_load(**where)
+    except Exception as e:
+        raise ScenarioError(f"{source}: not valid YAML: {e}") from None
+    if raw is None:
+        return
+    try:
+        _check_yaml(raw, Scenario, "")
+    except ScenarioError as e:
+        raise ScenarioError(f"{source}: {e}") from None
+
+
+def _is_number(v) -> bool:
+    if isinstance(v, bool):
+        return False
+    if isinstance(v, (int, float)):
+        return True
+    try:  # YAML 1.1 reads `1e3` as a string; Drake's loader takes it as a number
+        float(v)
+        return isinstance(v, str)
+    except (TypeError, ValueError):
+        return False
+
+
+def _check_yaml(value, schema, field: str) -> None:
+    """Raise ScenarioError naming the field, the value and the valid choices where raw YAML
+    data `value` does not fit the type `schema`."""
+    name = field or "the scenario"
+    if dataclasses.is_dataclass(schema):
+        if not isinstance(value, dict):
+            raise ScenarioError(f"{name} must be a mapping, got {value!r}")
+        valid = [f.name for f in dataclasses.fields(schema)]
+        for key, item in value.items():
+            if key == "_tag":
+                continue
+            if key not in valid:
+                where = f"{field}.{key}" if field else str(key)
+                raise ScenarioError(f"unknown field {where!r}; valid fields"
+                                    f"{' of ' + field if field else ''}: {valid}")
+        types = typing.get_type_hints(schema)
+        for key, item in value.items():
+            if key != "_tag":
+                _check_yaml(item, types[key], f"{field}.{key}" if field else key)
+        return
+    origin, args = typing.get_origin(schema), typing.get_args(schema)
+    if origin is typing.Union:
+        if type(None) in args:
+            if value is None:
+                return
+            rest = [a for a in args if a is not type(None)]
+            return _check_yaml(value, rest[0] if len(rest) == 1 else typing.Union[tuple(rest)],
+                               field)
+        tags = ["!" + a.__name__ for a in args]
+        tag = value.get("_tag") if isinstance(value, dict) else None
+        if tag is None:
+            try:  # an untagged entry is the first member, as yaml_load_typed reads it
+                return _check_yaml(value, args[0], field)
+            except ScenarioError as e:
+                raise ScenarioError(f"{e} (an untagged {field} is {tags[0]}; valid {field} "
+                                    f"types: {tags})") from None
+        if tag not in tags:
+            raise ScenarioError(f"{field}: unknown type {tag!r}; valid {field} types: {tags}")
+        return _check_yaml(value, args[tags.index(tag)], field)
+    if origin is list:
+        if not isinstance(value, list):
+            raise ScenarioError(f"{name} must be a list, got {value!r}")
+        for k, item in enumerate(value):
+            _check_yaml(item, args[0], f"{field}[{k}]")
+        return
+    if schema is float and not _is_number(value):
+        raise ScenarioError(f"{name} must be a number, got {value!r}")
+    if schema is int and not (isinstance(value, int) and not isinstance(value, bool)):
+        raise ScenarioError(f"{name} must be an integer, got {value!r}")
+    if schema is bool and not isinstance(value, bool):
+        raise ScenarioError(f"{name} must be true or false, got {value!r}")
+    if schema is str and not isinstance(value, str):
+        raise ScenarioError(f"{name} must be a string, got {value!r}")
 
 
 def _explain(e: Exception) -> str:
