@@ -1,0 +1,12 @@
+"""The hardware side: the reel link to the reel bridge and everything a real-time run needs.
+
+  protocol.py       datagram layout, encode/decode, sequence numbers (hardware/PROTOCOL.md)
+  link.py           the controller's non-blocking UDP endpoint, with counters
+  config.py         `HardwareReels`, the scenario's `!HardwareReels` plant entry
+  reels.py          HardwareReelsSystem, the Drake plant talking to the bridge (imports Drake)
+  emulator.py       cdpm-reel-emulator: the bridge on loopback, with fault injection
+  tick_log.py       the streaming per-tick log; tick_log_sink.py its Drake wrapper
+
+Only reels.py and tick_log_sink.py import Drake; the rest runs in the emulator process and
+in plain tests.
+"""
