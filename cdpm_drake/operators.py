@@ -6,6 +6,7 @@ keeps no hidden state: `force(t, p, v) -> (3,)`, base frame, N; t in s, p in m, 
 
 import csv
 import dataclasses
+import typing
 from pathlib import Path
 
 import numpy as np
@@ -81,7 +82,7 @@ class SpringHand:
     `max_force` (N): a person does not pull harder than that.
     """
 
-    def __init__(self, waypoints, times, stiffness, damping, max_force, *,
+    def __init__(self, waypoints, times, stiffness, damping, max_force, release_time=None, *,
                  field: str = "operator"):
         w = np.asarray(waypoints, dtype=float)
         self.profile = ForceProfile(times, w, field=field)  # same checks: rows of 3 per time
@@ -90,11 +91,17 @@ class SpringHand:
             if not np.isfinite(value) or value < 0:
                 raise OperatorError(f"{field}.{name} must be a finite value >= 0, got {value!r}")
         self.K, self.D, self.F_max = float(stiffness), float(damping), float(max_force)
+        if release_time is not None and not np.isfinite(release_time):
+            raise OperatorError(f"{field}.release_time must be a time in s or null, got "
+                                f"{release_time!r}")
+        self.release_time = None if release_time is None else float(release_time)
 
     def target(self, t: float) -> np.ndarray:
         return self.profile.force(t, None, None)
 
     def force(self, t: float, p, v) -> np.ndarray:
+        if self.release_time is not None and t >= self.release_time:
+            return np.zeros(3)
         f = self.K * (self.target(t) - np.asarray(p)) - self.D * np.asarray(v)
         n = np.linalg.norm(f)
         return f * (self.F_max / n) if n > self.F_max else f
@@ -140,6 +147,8 @@ class SpringHandOperator:
     damping: float = 6.0
     # Largest force the person applies, N.
     max_force: float = 5.0
+    # Time at which the person lets go of the handle, s (null: never).
+    release_time: typing.Optional[float] = None
 
 
 OPERATOR_TYPES = (NoOperator, ScriptedOperator, CsvOperator, SpringHandOperator)
@@ -158,6 +167,6 @@ def make_operator(config, base_dir: Path | None = None):
         return load_force_csv(path)
     if isinstance(config, SpringHandOperator):
         return SpringHand(config.waypoints, config.times, config.stiffness, config.damping,
-                          config.max_force, field="operator")
+                          config.max_force, config.release_time, field="operator")
     raise OperatorError(f"unknown operator {type(config).__name__!r}; valid operators: "
                         f"{[t.__name__ for t in OPERATOR_TYPES]}")
