@@ -1,0 +1,67 @@
+"""`!HardwareReels`: the scenario's plant entry for the real reels (or the emulator).
+
+No `from __future__ import annotations` here: pydrake's yaml_load_typed reads these
+annotations as types, not strings.
+"""
+
+import dataclasses
+import math
+
+from .link import resolve_ipv4
+
+# The bridge's UDP port when nothing else is configured (unassigned by IANA).
+DEFAULT_BRIDGE_PORT = 47100
+
+
+@dataclasses.dataclass
+class HardwareReels:
+    """The reel bridge on the network, and the controller's safety settings for it."""
+
+    # IPv4 address of the reel bridge (or cdpm-reel-emulator).
+    address: str = "127.0.0.1"
+    # UDP port of the reel bridge.
+    port: int = DEFAULT_BRIDGE_PORT
+    # IPv4 address the controller's socket binds to; loopback unless the bridge is remote.
+    local_address: str = "127.0.0.1"
+    # UDP port the controller binds to; 0 picks a free one (the bridge answers the sender
+    # of the latest valid command).
+    local_port: int = 0
+    # Control ticks without a valid status after which the watchdog latches a fault.
+    watchdog_ticks: int = 3
+    # Longest wait for the bridge's first status at startup, s (wall clock).
+    startup_timeout: float = 2.0
+    # Time for the commanded reel velocity to ramp from 0 to full after enabling, s.
+    ramp_time: float = 0.5
+    # Largest forward-kinematics residual accepted for the first measured lengths, m: above
+    # it the lengths do not fit the robot file and the reels are not enabled.
+    max_length_residual: float = 0.005
+    # Copies of the final zero-velocity, enable-off command sent by shutdown() (UDP may
+    # drop one; the bridge ignores the repeats' identical content).
+    shutdown_repeats: int = 3
+
+
+def check_hardware_reels(config: HardwareReels, field: str = "plant") -> None:
+    """Raise ValueError naming the field and the value for any unusable setting."""
+    if not isinstance(config, HardwareReels):
+        raise ValueError(f"{field} must be a HardwareReels, got {type(config).__name__}")
+    resolve_ipv4(config.address, f"{field}.address")
+    resolve_ipv4(config.local_address, f"{field}.local_address")
+    _int_in(config.port, 1, 65535, f"{field}.port", "a UDP port")
+    _int_in(config.local_port, 0, 65535, f"{field}.local_port", "a UDP port (0: any free one)")
+    _int_in(config.watchdog_ticks, 1, 1000, f"{field}.watchdog_ticks", "control ticks")
+    _int_in(config.shutdown_repeats, 1, 100, f"{field}.shutdown_repeats", "datagrams")
+    _number(config.startup_timeout, f"{field}.startup_timeout", "s", positive=True)
+    _number(config.ramp_time, f"{field}.ramp_time", "s", positive=False)
+    _number(config.max_length_residual, f"{field}.max_length_residual", "m", positive=True)
+
+
+def _int_in(value, lo, hi, field, what):
+    if isinstance(value, bool) or not isinstance(value, int) or not lo <= value <= hi:
+        raise ValueError(f"{field} must be an integer in {lo}..{hi} ({what}), got {value!r}")
+
+
+def _number(value, field, unit, positive):
+    ok = isinstance(value, (int, float)) and not isinstance(value, bool) and math.isfinite(value)
+    if not ok or (value <= 0 if positive else value < 0):
+        bound = "> 0" if positive else ">= 0"
+        raise ValueError(f"{field} must be a finite number {bound} {unit}, got {value!r}")
