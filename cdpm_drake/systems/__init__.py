@@ -6,11 +6,11 @@ from .forward_kinematics import ForwardKinematicsEstimator
 from .interference_force import InterferenceForce
 from .jacobian_mapping import JacobianVelocityMapping
 from .safety_limits import SafetyLimits
-from .simulated_reels import SimulatedOperator, SimulatedReels
+from .simulated_reels import SensorNoise, SimulatedOperator, SimulatedReels
 from .wall_force import WorkspaceWallForce
 
 __all__ = [
     "ForceSensorSource", "ForwardKinematicsEstimator", "InterferenceForce",
-    "JacobianVelocityMapping", "SafetyLimits", "SimulatedOperator", "SimulatedReels",
-    "WorkspaceWallForce", "make_admittance",
+    "JacobianVelocityMapping", "SafetyLimits", "SensorNoise", "SimulatedOperator",
+    "SimulatedReels", "WorkspaceWallForce", "make_admittance",
 ]

@@ -94,3 +94,33 @@ class SimulatedOperator(LeafSystem):
     def _calc_hand_force(self, context, output):
         output.SetFromVector(self._operator.force(context.get_time(), self._p.Eval(context),
                                                   self._v.Eval(context)))
+
+
+class SensorNoise(LeafSystem):
+    """Gaussian force-sensor noise: std `std` (N) per axis, a new sample every tick, held in
+    between. Part of the simulated plant.
+
+    The sample of tick k is a pure function of (`seed`, k), so every block reads the same
+    sample at tick k. Drake's RandomSource draws in an unrestricted update, which runs before
+    the discrete updates of the same tick: the sensor filter and the admittance then
+    integrate tick k+1's sample while tick k's is logged.
+
+    .. pydrake_system::
+
+        name: sensor_noise
+        output_ports:
+        - noise (N, base frame)
+    """
+
+    def __init__(self, *, std, seed=0, time_step=0.002):
+        super().__init__()
+        self._std = float(std)
+        self._seed = int(seed)
+        self._T = float(time_step)
+        self.DeclareVectorOutputPort("noise", 3, self._calc_noise,
+                                     prerequisites_of_calc={self.time_ticket()})
+
+    def _calc_noise(self, context, output):
+        k = int(np.floor(context.get_time() / self._T + 1e-9))
+        rng = np.random.default_rng([self._seed, k])
+        output.SetFromVector(self._std * rng.standard_normal(3))
