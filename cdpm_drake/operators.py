@@ -40,7 +40,7 @@ class ForceProfile:
         if np.any(np.diff(t) <= 0):
             k = int(np.argmax(np.diff(t) <= 0))
             raise OperatorError(f"{field}.times must increase strictly: times[{k + 1}] = "
-                                f"{t[k + 1]!r} s follows {t[k]!r} s")
+                                f"{float(t[k + 1])!r} s follows {float(t[k])!r} s")
         self.times, self.forces = t, f
 
     def force(self, t: float, p, v) -> np.ndarray:
@@ -64,6 +64,8 @@ def load_force_csv(path, *, field: str = "operator.path") -> ForceProfile:
     data = []
     for n, row in enumerate(rows[1:], start=2):
         try:
+            if len(row) < 4:  # a short row would otherwise surface as a shape error
+                raise ValueError
             data.append([float(x) for x in row[:4]])
         except ValueError:
             raise OperatorError(f"{field}: {str(path)!r} line {n}: not four numbers: "
