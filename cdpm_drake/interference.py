@@ -299,31 +299,36 @@ def logistic_intensity(d, d_l, d_u, F_u, eps):
 
 
 def _check_logistic(d_l, d_u, F_u, eps, names):
-    d_l, d_u, F_u, eps = np.broadcast_arrays(d_l, d_u, F_u, eps)
+    """Raise ValueError naming the first offending parameter, its pair and its value."""
+    d_l, d_u, F_u, eps = (np.ravel(x) for x in np.broadcast_arrays(d_l, d_u, F_u, eps))
+    scalar = d_l.size == 1
 
     def where(k):
-        if names is None:
-            return "" if d_l.ndim == 0 else f" at index {k}"
-        return f" of pair {names[k]}"
+        if names is not None:
+            return f" of pair {names[k]}"
+        return "" if scalar else f" at index {k}"
+
+    def value(arr, k):
+        return arr[k].item()  # a Python float, so the message reads 0.05, not np.float64(0.05)
 
     for field, arr in (("d_l", d_l), ("d_u", d_u), ("F_u", F_u), ("eps", eps)):
-        bad = ~np.isfinite(arr)
-        if bad.any():
-            k = int(np.flatnonzero(bad.ravel())[0])
-            raise ValueError(f"{field}{where(k)} must be finite, got {arr.ravel()[k]!r}")
+        bad = np.flatnonzero(~np.isfinite(arr))
+        if bad.size:
+            k = int(bad[0])
+            raise ValueError(f"{field}{where(k)} must be finite, got {value(arr, k)!r}")
     checks = (
-        (d_l < 0, lambda k: f"d_l{where(k)} must be >= 0 m, got {d_l.ravel()[k]!r}"),
+        (d_l < 0, lambda k: f"d_l{where(k)} must be >= 0 m, got {value(d_l, k)!r}"),
         (d_u <= d_l, lambda k: f"d_u{where(k)} must be above d_l: got d_l = "
-                               f"{d_l.ravel()[k]!r} m, d_u = {d_u.ravel()[k]!r} m"),
-        (F_u <= 0, lambda k: f"F_u{where(k)} must be > 0 N, got {F_u.ravel()[k]!r}"),
+                               f"{value(d_l, k)!r} m, d_u = {value(d_u, k)!r} m"),
+        (F_u <= 0, lambda k: f"F_u{where(k)} must be > 0 N, got {value(F_u, k)!r}"),
         ((eps <= 0) | (eps >= F_u / 2),
-         lambda k: f"eps{where(k)} must lie in (0, F_u/2) = (0, {F_u.ravel()[k] / 2!r}) N, "
-                   f"got {eps.ravel()[k]!r}"),
+         lambda k: f"eps{where(k)} must lie in (0, F_u/2) = (0, {value(F_u, k) / 2!r}) N, "
+                   f"got {value(eps, k)!r}"),
     )
     for bad, message in checks:
-        bad = np.asarray(bad)
-        if bad.any():
-            raise ValueError(message(int(np.flatnonzero(bad.ravel())[0])))
+        bad = np.flatnonzero(bad)
+        if bad.size:
+            raise ValueError(message(int(bad[0])))
 
 
 @dataclasses.dataclass(frozen=True)
