@@ -175,7 +175,8 @@ class Scenario:
     plant: PlantConfig = dataclasses.field(default_factory=SimulatedReels)
     # Seed of every random number generator (sensor noise), for repeatable runs.
     random_seed: int = 0
-    # Set by the loader: the directory relative paths resolve against (not a YAML field).
+    # The directory relative paths resolve against; the loader sets it to the scenario
+    # file's directory unless the file names one (as a resolved scenario does).
     base_dir: str = ""
 
 
@@ -212,7 +213,9 @@ def load_scenario(name_or_path="exp2_interaction", overlay_text: str | None = No
             scenario = yaml_load_typed(schema=Scenario, data=overlay_text, defaults=scenario)
         except Exception as e:
             raise ScenarioError(f"--scenario-text {overlay_text!r}: {_explain(e)}") from None
-    scenario.base_dir = str(path.parent)
+    # Absolute, so the resolved scenario written beside a log (which records base_dir) finds
+    # the same robot and CSV files when loaded back from elsewhere.
+    scenario.base_dir = str((path.parent / scenario.base_dir).resolve())
     check_scenario(scenario, source=str(path))
     return scenario
 
