@@ -1,0 +1,250 @@
+"""Typed scenarios: the shipped ones load and build; overlays change one field; every bad
+field fails with a ScenarioError naming the field, the value and the valid choices."""
+
+import re
+
+import numpy as np
+import pytest
+
+from cdpm_drake.diagram import build_diagram
+from cdpm_drake.operators import ScriptedOperator, SpringHandOperator
+from cdpm_drake.scenario import (Scenario, ScenarioError, SimulatedReels, load_scenario,
+                                 scenario_names, scenario_robot, scenario_to_yaml)
+
+SHIPPED = ("exp1_no_interaction", "exp2_interaction", "exp3_two_pairs")
+
+
+def test_the_three_experiments_ship():
+    assert set(SHIPPED) <= set(scenario_names())
+
+
+@pytest.mark.parametrize("name", scenario_names())
+def test_every_shipped_scenario_loads_and_builds(name):
+    scenario = load_scenario(name)
+    assert scenario.name == name
+    assert isinstance(scenario.plant, SimulatedReels)
+    robot = scenario_robot(scenario)
+    assert robot.workspace.contains(scenario.initial_position)
+    diagram = build_diagram(scenario)
+    names = {s.get_name() for s in diagram.GetSystems()}
+    assert {"reels", "force_sensor", "admittance", "safety_limits"} <= names
+
+
+def test_paper_numbers_of_the_experiments():
+    # Section 5 of the paper: M = C = 6.25, 500 Hz; per experiment d_l, d_u, F_u and swaps.
+    expected = {"exp1_no_interaction": (0.050, 0.061, 2.0, [[1, 3]]),
+                "exp2_interaction": (0.060, 0.062, 3.0, [[1, 3]]),
+                "exp3_two_pairs": (0.057, 0.062, 2.0, [[1, 3], [5, 7]])}
+    for name, (d_l, d_u, F_u, swaps) in expected.items():
+        s = load_scenario(name)
+        assert (s.admittance.mass, s.admittance.damping, s.time_step) == (6.25, 6.25, 0.002)
+        d = s.interference.default
+        assert (d.d_l, d.d_u, d.F_u) == (d_l, d_u, F_u), name
+        assert s.swaps == swaps, name
+
+
+def test_scenarios_resolve_by_name_from_any_directory(tmp_path, monkeypatch):
+    monkeypatch.chdir(tmp_path)
+    assert load_scenario("exp1_no_interaction").name == "exp1_no_interaction"
+
+
+def test_overlay_changes_only_the_fields_it_names():
+    base = load_scenario("exp2_interaction")
+    s = load_scenario("exp2_interaction", overlay_text=(
+        "{duration: 0.5, admittance: {mass: 2.0}, interference: {default: {F_u: 4.0}}}"))
+    assert (s.duration, s.admittance.mass, s.interference.default.F_u) == (0.5, 2.0, 4.0)
+    # Siblings of the overlaid fields keep the file's values.
+    assert s.admittance.damping == base.admittance.damping == 6.25
+    assert s.interference.default.d_l == base.interference.default.d_l == 0.060
+    assert s.swaps == base.swaps and s.initial_position == base.initial_position
+    assert isinstance(s.operator, SpringHandOperator)
+
+
+def test_overlay_can_switch_the_operator_type():
+    s = load_scenario("exp2_interaction", overlay_text=(
+        "operator: !ScriptedOperator {times: [0, 1], forces: [[0, 0, 0], [1, 2, 3]]}"))
+    assert isinstance(s.operator, ScriptedOperator)
+    assert s.operator.forces == [[0, 0, 0], [1, 2, 3]]
+
+
+def test_resolved_scenario_yaml_loads_back_equal(tmp_path):
+    s = load_scenario("exp3_two_pairs", overlay_text="{duration: 1.5, random_seed: 3}")
+    path = tmp_path / "scenario.yaml"
+    path.write_text(scenario_to_yaml(s))
+    back = load_scenario(path)
+    assert back == s  # base_dir included: the dump records where relative paths resolve
+
+
+def test_resolved_scenario_with_relative_files_loads_back_from_elsewhere(tmp_path,
+                                                                         write_robot,
+                                                                         valid_spec):
+    """The scenario.yaml written beside a log keeps working when the robot file and the
+    force CSV were given relative to the original scenario file."""
+    write_robot(valid_spec, "my_robot.yaml")
+    (tmp_path / "push.csv").write_text("t,fx,fy,fz\n0,1,2,3\n")
+    (tmp_path / "run.yaml").write_text(
+        "robot: my_robot.yaml\ninitial_position: [2.0, 1.5, 1.5]\n"
+        "operator: !CsvOperator {path: push.csv}\n")
+    s = load_scenario(tmp_path / "run.yaml")
+    out = tmp_path / "runs" / "a"
+    out.mkdir(parents=True)
+    (out / "scenario.yaml").write_text(scenario_to_yaml(s))
+    back = load_scenario(out / "scenario.yaml")
+    assert back == s
+    assert scenario_robot(back).name == "tetra_4cable"
+
+
+def test_robot_path_in_a_scenario_file_is_relative_to_that_file(tmp_path, monkeypatch,
+                                                                write_robot, valid_spec):
+    write_robot(valid_spec, "my_robot.yaml")
+    (tmp_path / "run.yaml").write_text(
+        "robot: my_robot.yaml\ninitial_position: [2.0, 1.5, 1.5]\n"
+        "interference: {enabled: false}\n")
+    elsewhere = tmp_path / "elsewhere"
+    elsewhere.mkdir()
+    monkeypatch.chdir(elsewhere)
+    s = load_scenario("../run.yaml")
+    assert scenario_robot(s).name == "tetra_4cable"
+
+
+# --- errors -----------------------------------------------------------------------------------
+
+
+def error_of(overlay, name="exp1_no_interaction") -> str:
+    with pytest.raises(ScenarioError) as info:
+        load_scenario(name, overlay_text=overlay)
+    return str(info.value)
+
+
+def test_unknown_scenario_lists_the_built_in_ones():
+    with pytest.raises(ScenarioError) as info:
+        load_scenario("exp9")
+    msg = str(info.value)
+    assert "unknown scenario 'exp9'" in msg
+    for name in SHIPPED:
+        assert name in msg
+
+
+def test_missing_scenario_file_names_the_path(tmp_path):
+    with pytest.raises(ScenarioError, match=r"scenario file '.*nothere\.yaml' does not exist"):
+        load_scenario(tmp_path / "nothere.yaml")
+
+
+def test_unknown_robot_lists_the_built_in_robots():
+    msg = error_of("robot: paper_9cable")
+    assert "unknown robot 'paper_9cable'" in msg
+    assert "'cube_8cable'" in msg and "'paper_7cable'" in msg
+
+
+def test_unknown_pair_lists_the_valid_pairs():
+    msg = error_of("interference: {pairs: [{pair: [1, 9], F_u: 3.0}]}")
+    assert "interference.pairs[0].pair = [1, 9]" in msg
+    assert "valid pairs: [(1, 2), (1, 3)," in msg and "(6, 7)]" in msg
+
+
+def test_pair_override_must_be_two_cables():
+    msg = error_of("interference: {pairs: [{pair: [1, 3]}, {pair: [2]}]}")
+    assert "interference.pairs[1].pair must be two cable numbers [i, j], got [2]" in msg
+
+
+def test_unknown_operator_tag_lists_the_valid_operators():
+    msg = error_of("operator: !Teleport {}")
+    assert "'!Teleport'" in msg
+    assert ("['!NoOperator', '!ScriptedOperator', '!CsvOperator', '!SpringHandOperator']"
+            in msg)
+
+
+def test_unknown_plant_tag_lists_the_valid_plants():
+    msg = error_of("plant: !MagicReels {}")
+    assert "'!MagicReels'" in msg and "'!SimulatedReels'" in msg
+
+
+def test_untagged_operator_fields_hint_at_the_tags():
+    # An untagged map is the first member of the union (!NoOperator), which has no fields.
+    msg = error_of("operator: {times: [0.0], forces: [[1, 0, 0]]}")
+    assert "unknown field 'operator.times'" in msg and "'!ScriptedOperator'" in msg
+
+
+@pytest.mark.parametrize("overlay,field,valid", [
+    ("{dt: 0.01}", "dt", "'time_step'"),
+    ("{admittance: {mas: 1.0}}", "admittance.mas", "['mass', 'damping']"),
+    ("{sensor: {window: 3}}", "sensor.window", "'filter_window'"),
+    ("operator: !SpringHandOperator {stiffnes: 3}", "operator.stiffnes", "'stiffness'"),
+    ("{interference: {pairs: [{pair: [1, 3], du: 0.1}]}}", "interference.pairs[0].du",
+     "'d_u'"),
+])
+def test_unknown_fields_are_named_with_the_valid_ones(overlay, field, valid):
+    msg = error_of(overlay)
+    assert f"unknown field {field!r}" in msg
+    assert valid in msg
+    assert "--scenario-text" in msg  # says where the bad text came from
+
+
+def test_unknown_field_in_a_scenario_file_names_the_file(tmp_path):
+    path = tmp_path / "bad.yaml"
+    path.write_text("name: bad\nlimits: {max_speed: 1.0}\n")
+    with pytest.raises(ScenarioError) as info:
+        load_scenario(path)
+    assert str(path) in str(info.value)
+    assert "unknown field 'limits.max_speed'" in str(info.value)
+
+
+@pytest.mark.parametrize("overlay,message", [
+    # Types, checked on the raw YAML.
+    ("{duration: abc}", "duration must be a number, got 'abc'"),
+    ("{initial_position: abc}", "initial_position must be a list, got 'abc'"),
+    ("{initial_position: [1.0, x, 1.0]}", "initial_position[1] must be a number, got 'x'"),
+    ("{sensor: {filter_window: 2.5}}", "sensor.filter_window must be an integer, got 2.5"),
+    ("{interference: {enabled: maybe}}", "interference.enabled must be true or false, "
+                                         "got 'maybe'"),
+    ("{admittance: 5}", "admittance must be a mapping, got 5"),
+    ("{swaps: 3}", "swaps must be a list, got 3"),
+    # Values, checked on the typed scenario.
+    ("{duration: -1.0}", "duration must be a finite number > 0, got -1.0"),
+    ("{time_step: 0.0}", "time_step must be a finite number > 0, got 0.0"),
+    ("{admittance: {mass: -6.25}}", "admittance.mass must be a finite number > 0, got -6.25"),
+    ("{admittance: {damping: .nan}}", "admittance.damping must be a finite number > 0, "
+                                      "got nan"),
+    ("{limits: {max_velocity: 0.0}}", "limits.max_velocity must be a finite number > 0, "
+                                      "got 0.0"),
+    ("{sensor: {filter_window: 0}}", "sensor.filter_window must be an integer >= 1 sample, "
+                                     "got 0"),
+    ("{sensor: {noise_std: -1.0}}", "sensor.noise_std must be >= 0 N, got -1.0"),
+    ("{sensor: {axial_axis: [0, 0, 0]}}", "sensor.axial_axis must be a non-zero [x, y, z], "
+                                          "got [0.0, 0.0, 0.0]"),
+    ("{initial_position: [1.0, 2.0]}", "initial_position must be [x, y, z] in m, "
+                                       "got [1.0, 2.0]"),
+    ("{initial_position: [0.0, 0.0, 0.0]}", "initial_position [0.0, 0.0, 0.0] m is outside "
+                                            "the workspace box"),
+    ("{swaps: [[1, 9]]}", "swaps[0] = [1, 9]"),
+    ("{swaps: [[1, 2, 3]]}", "swaps[0] must be two cable numbers [i, j], got [1, 2, 3]"),
+    ("{wall_force: {enabled: true, margin: 0.0}}", "wall_force.margin must be a finite "
+                                                   "number > 0, got 0.0"),
+    ("plant: !SimulatedReels {time_constant: -0.1}", "plant.time_constant must be >= 0 s, "
+                                                     "got -0.1"),
+    ("plant: !SimulatedReels {max_reel_speed: 0.0}", "plant.max_reel_speed must be a finite "
+                                                     "number > 0, got 0.0"),
+    ("{interference: {default: {d_l: 0.07}}}", "d_u"),  # d_l above d_u = 0.061
+    ("operator: !ScriptedOperator {times: [0, 0], forces: [[0, 0, 0], [1, 1, 1]]}",
+     "operator.times must increase strictly"),
+    ("operator: !CsvOperator {path: no_such.csv}", "no_such.csv' does not exist"),
+])
+def test_bad_values_are_rejected_naming_field_and_value(overlay, message):
+    assert message in error_of(overlay)
+
+
+def test_initial_position_outside_names_the_box():
+    msg = error_of("{initial_position: [0.0, 0.0, 0.0]}")
+    assert re.search(r"lower \[0\.5, 0\.8, 0\.3\], upper \[3\.0, 4\.0, 2\.4\]", msg), msg
+
+
+def test_invalid_yaml_is_a_scenario_error():
+    assert "not valid YAML" in error_of("{duration: [}")
+
+
+def test_default_scenario_is_valid():
+    # The dataclass defaults alone describe a runnable scenario (STYLE: defaults that work).
+    from cdpm_drake.scenario import check_scenario
+    robot = check_scenario(Scenario())
+    assert robot.num_cables == 7
+    assert np.all(robot.workspace.contains(Scenario().initial_position))
