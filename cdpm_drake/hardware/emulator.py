@@ -1,0 +1,517 @@
+"""cdpm-reel-emulator: play the reel bridge on loopback, to rehearse a run before the robot.
+
+The emulated reels follow the commanded velocities with a first-order lag; the encoders report
+what each reel paid out, the force sensor reports the operator's force at the best-fit
+platform pose, and fault-injection flags impair the link (drop, delay, duplicate, reorder,
+corrupt) or break the bridge (freeze, NaN, stop, fault bits) from `--fault-after` seconds
+after the controller first enables the reels. The protocol is hardware/PROTOCOL.md.
+
+Examples:
+  cdpm-reel-emulator --robot paper_7cable --start 1.77 3.65 1.22
+  cdpm-reel-emulator --scenario exp2_interaction --drop 0.01 --seed 3
+  cdpm-reel-emulator --stop --fault-after 2.0
+"""
+
+import argparse
+import collections
+import dataclasses
+import math
+import socket
+import sys
+import threading
+import time
+
+import numpy as np
+
+from ..kinematics import KinematicsError, cable_lengths, forward_kinematics, jacobian
+from .config import DEFAULT_BRIDGE_PORT
+from .link import resolve_ipv4
+from .protocol import (FAULT_COMMAND_TIMEOUT, FAULT_OVERSPEED, MAX_FORCE, REASONS,
+                       ProtocolError, SequenceTracker, Status, decode_command, encode_status,
+                       next_sequence)
+
+
+@dataclasses.dataclass(frozen=True)
+class FaultPlan:
+    """What the emulator breaks, from `after` seconds after the first enabling command."""
+
+    # Share of datagrams dropped, in each direction, 0..1.
+    drop: float = 0.0
+    # Extra latency of every status, s.
+    delay: float = 0.0
+    # Share of statuses sent twice, 0..1.
+    duplicate: float = 0.0
+    # Share of statuses held back and sent after the next one, 0..1.
+    reorder: float = 0.0
+    # Share of statuses with one byte flipped after the CRC was computed, 0..1.
+    corrupt: float = 0.0
+    # Resend the last status unchanged, forever (a hung bridge task).
+    freeze: bool = False
+    # Report cable 1's length as NaN, in otherwise valid datagrams.
+    nan: bool = False
+    # Send nothing more (a crashed bridge); commands are still read and recorded.
+    stop: bool = False
+    # Fault bits to raise (protocol.FAULT_*); the reels stop.
+    fault_bits: int = 0
+    # Delay from the first command with enable set to the start of the faults above, s.
+    after: float = 0.0
+
+    def __post_init__(self):
+        for name in ("drop", "duplicate", "reorder", "corrupt"):
+            value = getattr(self, name)
+            if not (isinstance(value, (int, float)) and 0.0 <= value <= 1.0):
+                raise ValueError(f"{name} must be a share in [0, 1], got {value!r}")
+        for name in ("delay", "after"):
+            value = getattr(self, name)
+            if not (isinstance(value, (int, float)) and math.isfinite(value) and value >= 0):
+                raise ValueError(f"{name} must be a finite number >= 0 s, got {value!r}")
+        if not (isinstance(self.fault_bits, int) and 0 <= self.fault_bits < 1 << 32):
+            raise ValueError(f"fault_bits must be a 32-bit unsigned integer, got "
+                             f"{self.fault_bits!r}")
+
+    @property
+    def any(self) -> bool:
+        return self != FaultPlan(after=self.after)
+
+
+class ReelBridge:
+    """The bridge's physics, without sockets: reels with a first-order velocity lag and the
+    operator's force.
+
+    robot: the Robot. initial_lengths: (m,) m, as the encoders read at power-up (they need not
+    fit the robot: that is what the controller's startup check is for). force: callable
+    (t s, p (3,) m, v (3,) m/s) -> (3,) N in the base frame, or None for no force; t counts
+    from the first enabling command. time_constant: reel lag, s (0: ideal drives).
+    """
+
+    def __init__(self, robot, initial_lengths, force=None, time_constant: float = 0.02,
+                 max_reel_speed: float | None = None):
+        self.robot = robot
+        self.lengths = np.array(initial_lengths, dtype=float)
+        if self.lengths.shape != (robot.num_cables,):
+            raise ValueError(f"initial_lengths must have {robot.num_cables} entries (one per "
+                             f"cable), got shape {self.lengths.shape!r}")
+        if not (math.isfinite(time_constant) and time_constant >= 0):
+            raise ValueError(f"time_constant must be >= 0 s, got {time_constant!r}")
+        self.force_fn = force
+        self.time_constant = float(time_constant)
+        self.max_reel_speed = float(max_reel_speed if max_reel_speed is not None
+                                    else robot.limits.max_reel_speed)
+        self.speed = np.zeros(robot.num_cables)     # actual reel velocities, m/s
+        self.command = np.zeros(robot.num_cables)   # velocities being followed, m/s
+        self.enabled = False
+        self.faults = 0
+        self.time = 0.0                             # s stepped so far
+        self.operator_start = None                  # `time` of the first enabling command, s
+        self.p = self._best_fit(robot.workspace.center)
+        self.v = np.zeros(3)
+
+    def _best_fit(self, guess):
+        try:
+            return forward_kinematics(self.robot, self.lengths, p_guess=guess,
+                                      max_residual=np.inf)
+        except KinematicsError:
+            return np.asarray(guess, dtype=float)
+
+    def set_command(self, velocity, enable: bool) -> None:
+        """Follow `velocity` (m/s) from now on if `enable` and no fault is set; hold at rest
+        otherwise. A command above the reel speed limit raises FAULT_OVERSPEED."""
+        velocity = np.asarray(velocity, dtype=float)
+        if enable and np.max(np.abs(velocity)) > self.max_reel_speed * (1 + 1e-9):
+            self.raise_fault(FAULT_OVERSPEED)
+        self.enabled = bool(enable) and self.faults == 0
+        self.command = velocity.copy() if self.enabled else np.zeros_like(self.command)
+        if self.enabled and self.operator_start is None:
+            self.operator_start = self.time
+
+    def raise_fault(self, bits: int) -> None:
+        """Set fault bits; the reels stop following commands (the lag still decays)."""
+        self.faults |= int(bits)
+        self.enabled = False
+        self.command = np.zeros_like(self.command)
+
+    def step(self, dt: float) -> None:
+        """Advance dt s under the current command. Exact for a constant command: with
+        a = exp(-dt/tau), speed -> c + (s - c) a and length += c dt + (s - c) tau (1 - a)."""
+        if dt <= 0:
+            return
+        c, s, tau = self.command, self.speed, self.time_constant
+        if tau > 0:
+            a = math.exp(-dt / tau)
+            self.lengths += c * dt + (s - c) * tau * (1.0 - a)
+            self.speed = c + (s - c) * a
+        else:
+            self.lengths += c * dt
+            self.speed = c.copy()
+        self.time += dt
+        if self.force_fn is not None:
+            self.p = self._best_fit(self.p)
+            self.v = np.linalg.lstsq(jacobian(self.robot, self.p), self.speed, rcond=None)[0]
+
+    def force(self) -> np.ndarray:
+        """The force sample, N, saturated at the link's range like a real ADC."""
+        if self.force_fn is None:
+            return np.zeros(3)
+        t = 0.0 if self.operator_start is None else self.time - self.operator_start
+        f = np.asarray(self.force_fn(t, self.p.copy(), self.v.copy()), dtype=float)
+        return np.clip(f, -MAX_FORCE, MAX_FORCE)
+
+
+@dataclasses.dataclass(frozen=True)
+class ReceivedCommand:
+    """A command as the emulator read it; `time` is the bridge clock, s."""
+
+    time: float
+    tick: int
+    sequence: int
+    enable: bool
+    velocity: np.ndarray
+    fault_active: bool
+
+
+class ReelBridgeServer:
+    """The bridge on a UDP socket, run in this thread (`run`) or a background one (`start`).
+
+    Every `period` s it reads the waiting commands (the newest valid one takes effect),
+    advances the reels, and sends one status to the sender of the latest valid command (or to
+    `controller` if given; then commands from anyone else are ignored). If the reels are
+    enabled and no valid command came for `command_timeout` s, it raises FAULT_COMMAND_TIMEOUT.
+    """
+
+    def __init__(self, bridge: ReelBridge, address: tuple[str, int] = ("127.0.0.1", 0),
+                 faults: FaultPlan = FaultPlan(), period: float = 0.002, seed: int = 0,
+                 controller: tuple[str, int] | None = None, command_timeout: float = 0.05,
+                 record: int = 100_000):
+        if not (math.isfinite(period) and period > 0):
+            raise ValueError(f"period must be a finite number > 0 s, got {period!r}")
+        self.bridge = bridge
+        self.period = float(period)
+        self.command_timeout = float(command_timeout)
+        self._faults = faults
+        self._rng = np.random.default_rng(seed)
+        self._m = bridge.robot.num_cables
+        self._fixed_controller = (None if controller is None
+                                  else (resolve_ipv4(controller[0], "controller"),
+                                        int(controller[1])))
+        self._controller = self._fixed_controller
+        self._sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+        self._sock.setblocking(False)
+        self._sock.bind((resolve_ipv4(address[0], "address"), int(address[1])))
+        self._tracker = SequenceTracker()
+        self._last_command = None
+        self._last_command_wall = None
+        self._sequence = 0
+        self._frozen = None              # the datagram a frozen bridge repeats
+        self._held = None                # a status held back for reordering
+        self._delayed = collections.deque()  # (due time, datagram)
+        self._stop = threading.Event()
+        self._thread = None
+        self._lock = threading.Lock()
+        self.start_wall = None
+        self.first_enable_time = None    # bridge time of the first enabling command, s
+        self.fault_onset = None          # bridge time the FaultPlan took effect, s
+        self.fault_onset_tick = None
+        self.tick = 0
+        self.commands = collections.deque(maxlen=record)
+        self.counters = {"statuses_sent": 0, "statuses_dropped": 0, "commands_received": 0,
+                         "commands_dropped": 0, "commands_foreign": 0, "late_ticks": 0,
+                         "rejected": {r: 0 for r in REASONS}}
+
+    @property
+    def address(self) -> tuple[str, int]:
+        """(address, port) the bridge listens on."""
+        return self._sock.getsockname()
+
+    @property
+    def faults(self) -> FaultPlan:
+        return self._faults
+
+    def inject(self, faults: FaultPlan) -> None:
+        """Replace the fault plan while running; its `after` counts from now."""
+        with self._lock:
+            self._faults = faults
+            self.fault_onset = None
+            self.fault_onset_tick = None
+            if self.start_wall is not None:
+                self.first_enable_time = time.monotonic() - self.start_wall
+
+    # --- the loop ----------------------------------------------------------------------------
+
+    def run(self, duration: float | None = None) -> None:
+        """Serve until `duration` s have passed, stop() is called, or forever."""
+        self.start_wall = time.monotonic()
+        last = 0.0
+        deadline = self.start_wall
+        while not self._stop.is_set():
+            now = time.monotonic() - self.start_wall
+            if duration is not None and now >= duration:
+                break
+            with self._lock:
+                command = self._drain(now)
+                self.bridge.step(now - last)
+                last = now
+                if command is not None:
+                    self.bridge.set_command(command.velocity, command.enable)
+                    if command.enable and self.first_enable_time is None:
+                        self.first_enable_time = now
+                if (self.bridge.enabled and self._last_command_wall is not None
+                        and now - self._last_command_wall > self.command_timeout):
+                    self.bridge.raise_fault(FAULT_COMMAND_TIMEOUT)
+                active = self._fault_active(now)
+                self._send_status(now, active)
+            self.tick += 1
+            deadline += self.period
+            pause = deadline - time.monotonic()
+            if pause > 0:
+                time.sleep(pause)
+            elif pause < -10 * self.period:
+                # Far behind (the host stalled): restart the schedule rather than burst.
+                self.counters["late_ticks"] += 1
+                deadline = time.monotonic()
+
+    def _fault_active(self, now: float) -> bool:
+        plan = self._faults
+        if not plan.any or self.first_enable_time is None:
+            return False
+        if self.fault_onset is None:
+            if now < self.first_enable_time + plan.after:
+                return False
+            self.fault_onset, self.fault_onset_tick = now, self.tick
+            if plan.fault_bits:
+                self.bridge.raise_fault(plan.fault_bits)
+        return True
+
+    def _drain(self, now: float):
+        newest = None
+        active = self.fault_onset is not None
+        for _ in range(256):
+            try:
+                data, sender = self._sock.recvfrom(4096)
+            except (BlockingIOError, ConnectionRefusedError):
+                break
+            if self._fixed_controller is not None and sender != self._fixed_controller:
+                self.counters["commands_foreign"] += 1
+                continue
+            if active and self._faults.drop and self._rng.random() < self._faults.drop:
+                self.counters["commands_dropped"] += 1
+                continue
+            try:
+                command = decode_command(data, self._m)
+                self._tracker.accept(command.sequence)
+            except ProtocolError as e:
+                self.counters["rejected"][e.reason] += 1
+                continue
+            self.counters["commands_received"] += 1
+            self._controller = sender
+            self._last_command = command
+            self._last_command_wall = now
+            newest = command
+            self.commands.append(ReceivedCommand(now, self.tick, command.sequence,
+                                                 command.enable, command.velocity, active))
+        return newest
+
+    def _send_status(self, now: float, active: bool) -> None:
+        plan = self._faults if active else FaultPlan()
+        if plan.stop:
+            return
+        if plan.freeze and self._frozen is not None:
+            self._emit(self._frozen)
+            return
+        b = self.bridge
+        self._sequence = next_sequence(self._sequence)
+        c = self._last_command
+        lengths = b.lengths.copy()
+        if plan.nan:
+            lengths[0] = np.nan
+        data = encode_status(Status(
+            sequence=self._sequence, time=now, lengths=lengths, force=b.force(),
+            faults=b.faults, enabled=b.enabled,
+            echo_sequence=None if c is None else c.sequence,
+            echo_time=0.0 if c is None else c.time,
+            commands_lost=self._tracker.lost % (1 << 32)), check=not plan.nan)
+        self._frozen = data  # what a hung bridge task would keep resending
+        rng = self._rng
+        if plan.drop and rng.random() < plan.drop:
+            self.counters["statuses_dropped"] += 1
+            return
+        if plan.corrupt and rng.random() < plan.corrupt:
+            buf = bytearray(data)
+            buf[int(rng.integers(len(buf)))] ^= int(rng.integers(1, 256))
+            data = bytes(buf)
+        copies = [data, data] if plan.duplicate and rng.random() < plan.duplicate else [data]
+        if plan.reorder and self._held is None and rng.random() < plan.reorder:
+            self._held = copies
+            return
+        if self._held is not None:
+            copies, self._held = copies + self._held, None
+        for d in copies:
+            if plan.delay > 0:
+                self._delayed.append((now + plan.delay, d))
+            else:
+                self._emit(d)
+        while self._delayed and self._delayed[0][0] <= now:
+            self._emit(self._delayed.popleft()[1])
+
+    def _emit(self, data: bytes) -> None:
+        if self._controller is None:
+            return
+        try:
+            self._sock.sendto(data, self._controller)
+            self.counters["statuses_sent"] += 1
+        except OSError:
+            pass  # the controller is gone; it is the one that must notice
+
+    # --- in-process mode ---------------------------------------------------------------------
+
+    def start(self) -> "ReelBridgeServer":
+        """Serve from a daemon thread (tests, benchmarks)."""
+        self._thread = threading.Thread(target=self.run, name="reel-bridge-emulator",
+                                        daemon=True)
+        self._thread.start()
+        return self
+
+    def stop(self) -> None:
+        """Stop serving and release the socket."""
+        self._stop.set()
+        if self._thread is not None:
+            self._thread.join(timeout=5.0)
+        self._sock.close()
+
+    def __enter__(self):
+        return self.start()
+
+    def __exit__(self, *exc):
+        self.stop()
+
+
+# --- command line ----------------------------------------------------------------------------
+
+
+def _parser() -> argparse.ArgumentParser:
+    p = argparse.ArgumentParser(prog="cdpm-reel-emulator", description=__doc__,
+                                formatter_class=argparse.RawDescriptionHelpFormatter)
+    g = p.add_argument_group("robot and operator")
+    g.add_argument("--scenario", help="take robot, cable swaps, start position, operator and "
+                   "bridge address/port from this scenario (name or path)")
+    g.add_argument("--scenario-text", help="YAML overlay applied to --scenario")
+    g.add_argument("--robot", help="built-in robot name or robot YAML path "
+                   "(default: paper_7cable, or the scenario's)")
+    g.add_argument("--start", nargs=3, type=float, metavar=("X", "Y", "Z"),
+                   help="platform start position, base frame, m (default: workspace centre, "
+                   "or the scenario's); the reels' initial lengths follow by inverse kinematics")
+    g.add_argument("--length-offset", nargs=2, action="append", default=[],
+                   metavar=("CABLE", "METRES"),
+                   help="add METRES to cable CABLE's (1-based) initial length, to rehearse the "
+                   "controller's refusal to enable on lengths that do not fit the robot")
+    g.add_argument("--force", nargs=3, type=float, metavar=("FX", "FY", "FZ"),
+                   help="constant operator force, base frame, N (overrides the scenario's)")
+    g.add_argument("--time-constant", type=float, default=0.02,
+                   help="reel velocity lag, s (default: 0.02)")
+    n = p.add_argument_group("network")
+    n.add_argument("--address", default=None,
+                   help="address to listen on (default: 127.0.0.1, or the scenario's)")
+    n.add_argument("--port", type=int, default=None,
+                   help=f"UDP port to listen on (default: {DEFAULT_BRIDGE_PORT}, or the "
+                   "scenario's)")
+    n.add_argument("--controller", metavar="ADDRESS:PORT",
+                   help="send statuses only there and ignore commands from anyone else "
+                   "(default: answer the sender of the latest valid command)")
+    n.add_argument("--period", type=float, default=0.002, help="status period, s (default 0.002)")
+    n.add_argument("--command-timeout", type=float, default=0.05,
+                   help="raise COMMAND_TIMEOUT when enabled and no command came for this "
+                   "long, s (default 0.05)")
+    n.add_argument("--duration", type=float, default=None, help="stop after this long, s")
+    f = p.add_argument_group("fault injection (from --fault-after s after the first enable)")
+    f.add_argument("--seed", type=int, default=0, help="random seed of the impairments")
+    f.add_argument("--drop", type=float, default=0.0, help="share of datagrams dropped")
+    f.add_argument("--delay", type=float, default=0.0, help="extra status latency, s")
+    f.add_argument("--duplicate", type=float, default=0.0, help="share of statuses sent twice")
+    f.add_argument("--reorder", type=float, default=0.0, help="share of statuses reordered")
+    f.add_argument("--corrupt", type=float, default=0.0, help="share of statuses corrupted")
+    f.add_argument("--freeze", action="store_true", help="repeat the last status forever")
+    f.add_argument("--nan", action="store_true", help="report cable 1's length as NaN")
+    f.add_argument("--stop", action="store_true", help="stop sending statuses")
+    f.add_argument("--fault-bits", type=lambda s: int(s, 0), default=0,
+                   help="raise these fault bits, e.g. 0x1 for ESTOP (see PROTOCOL.md)")
+    f.add_argument("--fault-after", type=float, default=0.0,
+                   help="seconds after the first enabling command before faults start")
+    return p
+
+
+def build_server(args) -> ReelBridgeServer:
+    """The server described by parsed command-line arguments."""
+    from ..robot import load_robot
+
+    force = None
+    address, port = "127.0.0.1", DEFAULT_BRIDGE_PORT
+    if args.scenario:
+        from ..scenario import load_scenario, scenario_operator, scenario_robot
+
+        scenario = load_scenario(args.scenario, args.scenario_text)
+        robot = scenario_robot(scenario)
+        start = scenario.initial_position
+        force = scenario_operator(scenario).force
+        address = getattr(scenario.plant, "address", address)
+        port = getattr(scenario.plant, "port", port)
+    else:
+        robot = load_robot(args.robot or "paper_7cable")
+        start = robot.workspace.center
+    if args.scenario and args.robot:
+        raise ValueError("give either --scenario or --robot, not both (the scenario names "
+                         "its robot)")
+    if args.start is not None:
+        start = args.start
+    lengths = cable_lengths(robot, np.asarray(start, dtype=float))
+    for cable, metres in args.length_offset:
+        k = int(cable)
+        if not 1 <= k <= robot.num_cables:
+            raise ValueError(f"--length-offset cable {cable!r}: cables are numbered "
+                             f"1..{robot.num_cables}")
+        lengths[k - 1] += float(metres)
+    if args.force is not None:
+        constant = np.asarray(args.force, dtype=float)
+        force = lambda t, p, v: constant  # noqa: E731
+    controller = None
+    if args.controller:
+        host, _, cport = args.controller.rpartition(":")
+        if not host or not cport.isdigit():
+            raise ValueError(f"--controller must be ADDRESS:PORT, got {args.controller!r}")
+        controller = (host, int(cport))
+    faults = FaultPlan(drop=args.drop, delay=args.delay, duplicate=args.duplicate,
+                       reorder=args.reorder, corrupt=args.corrupt, freeze=args.freeze,
+                       nan=args.nan, stop=args.stop, fault_bits=args.fault_bits,
+                       after=args.fault_after)
+    bridge = ReelBridge(robot, lengths, force=force, time_constant=args.time_constant)
+    return ReelBridgeServer(bridge, address=(args.address or address,
+                                             args.port if args.port is not None else port),
+                            faults=faults, period=args.period, seed=args.seed,
+                            controller=controller, command_timeout=args.command_timeout)
+
+
+def main(argv=None) -> int:
+    args = _parser().parse_args(argv)
+    try:
+        server = build_server(args)
+    except (ValueError, OSError) as e:  # RobotError, ScenarioError are ValueErrors
+        print(f"cdpm-reel-emulator: error: {e}", file=sys.stderr)
+        return 2
+    host, port = server.address
+    robot = server.bridge.robot
+    print(f"cdpm-reel-emulator: robot {robot.name!r} ({robot.num_cables} cables) on "
+          f"{host}:{port}, period {server.period * 1e3:g} ms"
+          + (f", faults {server.faults}" if server.faults.any else ""), flush=True)
+    try:
+        server.run(duration=args.duration)
+    except KeyboardInterrupt:
+        pass
+    finally:
+        server.stop()
+        c = server.counters
+        print(f"cdpm-reel-emulator: {c['commands_received']} commands received, "
+              f"{c['statuses_sent']} statuses sent, commands lost {server._tracker.lost}, "
+              f"faults {server.bridge.faults:#06x}", flush=True)
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

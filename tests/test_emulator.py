@@ -1,0 +1,346 @@
+"""The reel-bridge emulator: its reel physics in closed form, and its server on loopback with
+every fault it can inject. A raw UDP socket plays the controller here; the Drake system
+against the emulator is tested in test_hardware_reels.py."""
+
+import math
+import socket
+import subprocess
+import sys
+import time
+
+import numpy as np
+import pytest
+
+from cdpm_drake.hardware import emulator as E
+from cdpm_drake.hardware.emulator import FaultPlan, ReelBridge, ReelBridgeServer
+from cdpm_drake.hardware.protocol import (FAULT_COMMAND_TIMEOUT, FAULT_DRIVE, FAULT_OVERSPEED,
+                                          Command, ProtocolError, decode_status,
+                                          encode_command)
+from cdpm_drake.kinematics import cable_lengths, jacobian
+from cdpm_drake.robot import load_robot
+
+
+@pytest.fixture(scope="module")
+def robot():
+    return load_robot("paper_7cable")
+
+
+@pytest.fixture(scope="module")
+def p0(robot):
+    return robot.workspace.center + np.array([0.1, -0.2, 0.05])
+
+
+# --- physics ---------------------------------------------------------------------------------
+
+
+def test_lag_matches_the_closed_form_from_rest(robot, p0):
+    # A first-order lag from rest under a constant command c: speed c (1 - e^{-t/tau}),
+    # length l0 + c t - c tau (1 - e^{-t/tau}).
+    l0 = cable_lengths(robot, p0)
+    c = np.linspace(-0.3, 0.3, 7)
+    tau, t = 0.05, 0.137
+    bridge = ReelBridge(robot, l0, time_constant=tau)
+    bridge.set_command(c, enable=True)
+    for _ in range(137):
+        bridge.step(0.001)
+    a = math.exp(-t / tau)
+    np.testing.assert_allclose(bridge.speed, c * (1 - a), rtol=1e-12, atol=1e-15)
+    np.testing.assert_allclose(bridge.lengths, l0 + c * t - c * tau * (1 - a),
+                               rtol=0, atol=1e-12)
+    # The update is exact, so one big step lands on the same point.
+    one = ReelBridge(robot, l0, time_constant=tau)
+    one.set_command(c, enable=True)
+    one.step(t)
+    np.testing.assert_allclose(one.lengths, bridge.lengths, rtol=0, atol=1e-12)
+
+
+def test_ideal_drives_integrate_the_command(robot, p0):
+    l0 = cable_lengths(robot, p0)
+    bridge = ReelBridge(robot, l0, time_constant=0.0)
+    bridge.set_command(np.full(7, 0.2), enable=True)
+    bridge.step(0.5)
+    np.testing.assert_allclose(bridge.lengths, l0 + 0.1, rtol=0, atol=1e-14)
+
+
+def test_disabled_or_faulted_reels_hold_still(robot, p0):
+    l0 = cable_lengths(robot, p0)
+    bridge = ReelBridge(robot, l0, time_constant=0.0)
+    bridge.set_command(np.full(7, 0.2), enable=False)
+    bridge.step(0.5)
+    np.testing.assert_array_equal(bridge.lengths, l0)
+    bridge.raise_fault(FAULT_DRIVE)
+    bridge.set_command(np.full(7, 0.2), enable=True)  # a fault refuses enabling
+    bridge.step(0.5)
+    assert not bridge.enabled and bridge.faults == FAULT_DRIVE
+    np.testing.assert_array_equal(bridge.lengths, l0)
+
+
+def test_a_command_above_the_reel_speed_limit_raises_overspeed(robot, p0):
+    bridge = ReelBridge(robot, cable_lengths(robot, p0))
+    v = np.zeros(7)
+    v[3] = robot.limits.max_reel_speed * 1.01
+    bridge.set_command(v, enable=True)
+    assert bridge.faults == FAULT_OVERSPEED and not bridge.enabled
+
+
+def test_the_operator_sees_time_from_enable_and_the_platform_motion(robot, p0):
+    # Cable speeds J v0 move the platform at v0 (eq. 3); the emulator recovers v0 and the
+    # pose from the lengths alone.
+    seen = []
+    v0 = np.array([0.05, -0.02, 0.01])
+    bridge = ReelBridge(robot, cable_lengths(robot, p0), time_constant=0.0,
+                        force=lambda t, p, v: seen.append((t, p, v)) or np.array([1.0, 2, 3]))
+    np.testing.assert_allclose(bridge.force(), [1, 2, 3])
+    bridge.step(0.25)  # before any enabling command, operator time stays 0
+    bridge.set_command(jacobian(robot, p0) @ v0, enable=True)
+    bridge.step(1e-4)
+    assert seen[0][0] == 0.0
+    np.testing.assert_allclose(seen[0][1], p0, atol=1e-9)
+    bridge.force()
+    t, p, v = seen[-1]
+    assert t == pytest.approx(1e-4, abs=1e-15)
+    # Over 0.1 mm of travel the Jacobian barely changes: v matches to O(|dp|).
+    np.testing.assert_allclose(v, v0, atol=1e-5)
+    np.testing.assert_allclose(p, p0 + v0 * 1e-4, atol=1e-8)
+
+
+def test_bad_inputs_are_named(robot):
+    with pytest.raises(ValueError, match=r"initial_lengths must have 7 entries"):
+        ReelBridge(robot, np.ones(6))
+    with pytest.raises(ValueError, match=r"drop must be a share in \[0, 1\], got 1.5"):
+        FaultPlan(drop=1.5)
+    with pytest.raises(ValueError, match=r"after must be a finite number >= 0 s, got -1"):
+        FaultPlan(after=-1)
+
+
+# --- the server on loopback ------------------------------------------------------------------
+
+
+class Controller:
+    """A raw UDP socket speaking the protocol, as the controller would."""
+
+    def __init__(self, server):
+        self.sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+        self.sock.bind(("127.0.0.1", 0))
+        self.sock.settimeout(0.5)
+        self.server = server
+        self.seq = 0
+
+    def send(self, velocity, enable=True):
+        self.seq += 1
+        self.sock.sendto(encode_command(Command(self.seq, 0.0, np.asarray(velocity, float),
+                                                enable, None)), self.server.address)
+
+    def receive(self, n):
+        return [self.sock.recvfrom(4096)[0] for _ in range(n)]
+
+    def latest(self):
+        """The newest status waiting (the socket queues every one since the first command)."""
+        time.sleep(0.005)
+        self.sock.setblocking(False)
+        data = None
+        try:
+            while True:
+                data = self.sock.recvfrom(4096)[0]
+        except BlockingIOError:
+            pass
+        self.sock.settimeout(0.5)
+        return data
+
+    def close(self):
+        self.sock.close()
+
+
+@pytest.fixture
+def serve(robot, p0):
+    started = []
+
+    def start(faults=FaultPlan(), **kw):
+        server = ReelBridgeServer(ReelBridge(robot, cable_lengths(robot, p0), time_constant=0),
+                                  faults=faults, **kw).start()
+        client = Controller(server)
+        started.append((server, client))
+        return server, client
+
+    yield start
+    for server, client in started:
+        client.close()
+        server.stop()
+
+
+def test_streams_one_status_per_period_to_the_latest_commander(serve, robot, p0):
+    server, ctl = serve()
+    ctl.send(np.zeros(7), enable=False)  # tells the bridge where to send
+    data = ctl.receive(20)
+    statuses = [decode_status(d, 7) for d in data]
+    seqs = [s.sequence for s in statuses]
+    assert seqs == list(range(seqs[0], seqs[0] + 20))  # no gap, no repeat
+    np.testing.assert_allclose(statuses[-1].lengths, cable_lengths(robot, p0), atol=1e-12)
+    assert statuses[-1].echo_sequence == 1 and not statuses[-1].enabled
+    # 20 statuses at 2 ms: their bridge timestamps span 19 periods (within scheduling jitter).
+    span = statuses[-1].time - statuses[0].time
+    assert 0.8 * 19 * 0.002 < span < 3 * 19 * 0.002
+
+
+def test_commands_move_the_reels_and_are_recorded(serve, robot, p0):
+    server, ctl = serve()
+    v = np.zeros(7)
+    v[0], v[6] = 0.1, -0.1
+    for _ in range(25):
+        ctl.send(v)
+        time.sleep(0.002)
+    last = decode_status(ctl.latest(), 7)
+    moved = last.lengths - cable_lengths(robot, p0)
+    # Ideal drives: cable 1 pays out what cable 7 reels in; the others do not move.
+    assert moved[0] > 0.001 and moved[0] == pytest.approx(-moved[6], rel=1e-9)
+    np.testing.assert_array_equal(moved[1:6], 0.0)
+    assert last.enabled
+    assert [c.sequence for c in server.commands] == list(range(1, 26))
+
+
+def _run_until_fault(serve, plan):
+    """Enable, stream commands until the fault takes effect, drop the statuses sent before
+    it (the server marks the onset before sending that tick's status), then collect ~30 ms
+    worth."""
+    server, ctl = serve(plan)
+    deadline = time.monotonic() + 2.0
+    while server.fault_onset is None and time.monotonic() < deadline:
+        ctl.send(np.zeros(7))
+        time.sleep(0.002)
+    assert server.fault_onset is not None
+    ctl.latest()
+    time.sleep(0.03)
+    got = []
+    ctl.sock.setblocking(False)
+    try:
+        while True:
+            got.append(ctl.sock.recvfrom(4096)[0])
+    except BlockingIOError:
+        pass
+    return server, got
+
+
+def test_stop_sends_nothing_more(serve):
+    server, got = _run_until_fault(serve, FaultPlan(stop=True, after=0.02))
+    assert got == []
+    sent = server.counters["statuses_sent"]
+    assert sent > 0  # statuses flowed until the onset
+    time.sleep(0.01)
+    assert server.counters["statuses_sent"] == sent
+
+
+def test_freeze_repeats_one_datagram(serve):
+    _, got = _run_until_fault(serve, FaultPlan(freeze=True))
+    # ~15 periods in 30 ms, all the same bytes (same sequence number).
+    assert len(got) >= 5 and len(set(got)) == 1
+
+
+def test_nan_datagrams_have_a_valid_crc_but_are_refused(serve):
+    _, got = _run_until_fault(serve, FaultPlan(nan=True))
+    with pytest.raises(ProtocolError, match=r"lengths of cable 1 is nan m") as info:
+        decode_status(got[-1], 7)
+    assert info.value.reason == "value"
+
+
+def test_corrupted_datagrams_are_refused(serve):
+    _, got = _run_until_fault(serve, FaultPlan(corrupt=1.0))
+    assert len(got) >= 5
+    for d in got:
+        with pytest.raises(ProtocolError):
+            decode_status(d, 7)
+
+
+def test_fault_bits_are_reported_and_stop_the_reels(serve):
+    _, got = _run_until_fault(serve, FaultPlan(fault_bits=FAULT_DRIVE))
+    s = decode_status(got[-1], 7)
+    assert s.faults == FAULT_DRIVE and not s.enabled
+
+
+def test_duplicates_and_drops_follow_the_plan(serve):
+    _, got = _run_until_fault(serve, FaultPlan(duplicate=1.0))
+    seqs = [decode_status(d, 7).sequence for d in got]
+    # Every status twice, back to back.
+    assert len(seqs) >= 10 and seqs[0::2] == seqs[1::2]
+    assert len(set(seqs)) == len(seqs) // 2
+    server, got = _run_until_fault(serve, FaultPlan(drop=1.0))
+    assert got == [] and server.counters["statuses_dropped"] >= 5
+
+
+def test_reordering_swaps_neighbours(serve):
+    _, got = _run_until_fault(serve, FaultPlan(reorder=1.0))
+    seqs = np.array([decode_status(d, 7).sequence for d in got])
+    assert np.any(np.diff(seqs) < 0)  # some arrive after a newer one
+    assert len(set(seqs.tolist())) == len(seqs)  # but none twice
+
+
+def test_the_bridge_watchdog_raises_command_timeout(serve):
+    server, ctl = serve(command_timeout=0.02)
+    ctl.send(np.zeros(7))
+    time.sleep(0.06)  # 3 timeouts' worth of silence while enabled
+    s = decode_status(ctl.latest(), 7)
+    assert s.faults & FAULT_COMMAND_TIMEOUT and not s.enabled
+
+
+def test_a_fixed_controller_address_ignores_other_commanders(serve, robot):
+    other = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+    other.bind(("127.0.0.1", 0))
+    try:
+        server, ctl = serve(controller=other.getsockname())
+        ctl.send(np.zeros(7))
+        deadline = time.monotonic() + 1.0
+        while server.counters["commands_foreign"] == 0 and time.monotonic() < deadline:
+            time.sleep(0.002)
+        assert server.counters["commands_foreign"] == 1
+        assert server.counters["commands_received"] == 0
+    finally:
+        other.close()
+
+
+# --- command line ----------------------------------------------------------------------------
+
+
+def test_cli_builds_the_bridge_from_its_flags(robot):
+    args = E._parser().parse_args(["--robot", "paper_7cable", "--start", "1.5", "3.0", "1.0",
+                                   "--length-offset", "2", "0.25", "--port", "0",
+                                   "--drop", "0.1", "--fault-after", "2", "--seed", "7"])
+    server = E.build_server(args)
+    try:
+        expected = cable_lengths(robot, np.array([1.5, 3.0, 1.0]))
+        expected[1] += 0.25  # cable 2 is index 1
+        np.testing.assert_allclose(server.bridge.lengths, expected, atol=1e-12)
+        assert server.faults == FaultPlan(drop=0.1, after=2.0)
+        assert server.address[0] == "127.0.0.1"
+    finally:
+        server.stop()
+
+
+def test_cli_takes_robot_start_and_operator_from_a_scenario():
+    from cdpm_drake.scenario import load_scenario, scenario_robot
+
+    args = E._parser().parse_args(["--scenario", "exp2_interaction", "--port", "0"])
+    server = E.build_server(args)
+    try:
+        scenario = load_scenario("exp2_interaction")
+        r = scenario_robot(scenario)  # with the scenario's cable swaps
+        assert server.bridge.robot.name == r.name
+        np.testing.assert_allclose(server.bridge.lengths,
+                                   cable_lengths(r, np.array(scenario.initial_position)),
+                                   atol=1e-12)
+        assert server.bridge.force_fn is not None
+    finally:
+        server.stop()
+
+
+def test_cli_errors_name_the_flag(capsys):
+    assert E.main(["--robot", "paper_7cable", "--length-offset", "9", "0.1", "--port", "0"]) == 2
+    assert "--length-offset cable '9': cables are numbered 1..7" in capsys.readouterr().err
+    assert E.main(["--robot", "no_such_robot", "--port", "0"]) == 2
+    assert "unknown robot 'no_such_robot'" in capsys.readouterr().err
+
+
+def test_cli_runs_as_a_process_for_a_bounded_time():
+    out = subprocess.run([sys.executable, "-m", "cdpm_drake.hardware.emulator", "--port", "0",
+                          "--duration", "0.1"], capture_output=True, text=True, timeout=60)
+    assert out.returncode == 0, out.stderr
+    assert "robot 'paper_7cable' (7 cables) on 127.0.0.1:" in out.stdout
+    assert "0 commands received" in out.stdout
