@@ -137,12 +137,13 @@ def save_log(log: dict, out_dir, scenario: Scenario) -> Path:
 
 
 def summary_rows(log: dict):
-    """Per watched pair that was ever active: (pair, min distance mm, ticks active, crossed)."""
+    """Per watched pair that was ever active: (pair, min distance in mm to 0.01 mm as text,
+    ticks active, crossed)."""
     rows = []
     for k, (i, j) in enumerate(log["pairs"]):
         active = log["active"][:, k]
         crossed = log["crossed"][:, k]
         if active.any() or crossed.any():
-            rows.append((f"({i},{j})", 1000 * float(log["pair_distances"][:, k].min()),
-                         int(active.sum()), int(crossed.any())))
+            d_min = 1000 * float(log["pair_distances"][:, k].min())
+            rows.append((f"({i},{j})", f"{d_min:.2f}", int(active.sum()), int(crossed.any())))
     return rows
