@@ -1,0 +1,170 @@
+"""`cdpm simulate`: the log.npz contract of docs/LOG_FORMAT.md, the resolved scenario beside
+it, the summary, every shipped scenario through the CLI, and exit code 2 on bad arguments."""
+
+import re
+import subprocess
+import sys
+from contextlib import redirect_stdout
+from io import StringIO
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from cdpm_drake import cli
+from cdpm_drake.scenario import load_scenario, scenario_names
+
+LOG_FORMAT = Path(__file__).resolve().parent.parent / "docs" / "LOG_FORMAT.md"
+T = 0.002
+
+
+def log_contract():
+    """{key: shape string} from the table in docs/LOG_FORMAT.md, e.g. 'p': '(T, 3)'."""
+    contract = {}
+    for line in LOG_FORMAT.read_text().splitlines():
+        cells = [c.strip() for c in line.strip().strip("|").split("|")]
+        if len(cells) < 2 or not cells[0].startswith("`"):
+            continue
+        for key in re.findall(r"`([^`]+)`", cells[0]):
+            contract[key] = cells[1]
+    return contract
+
+
+def expected_shape(text, T_, m, P):
+    names = {"T": T_, "m": m, "P": P}
+    inner = text.strip("()").strip()
+    if not inner:
+        return ()
+    return tuple(names[x] if x in names else int(x)
+                 for x in (s.strip() for s in inner.split(",")) if x)
+
+
+def simulate_cli(capsys, *args):
+    code = cli.main(["simulate", *args])
+    out, err = capsys.readouterr()
+    return code, out, err
+
+
+@pytest.fixture(scope="module")
+def exp1_run(tmp_path_factory):
+    """One 0.2 s run of experiment 1 through the CLI, shared by the contract tests."""
+    out_dir = tmp_path_factory.mktemp("exp1")
+    buffer = StringIO()
+    with redirect_stdout(buffer):
+        code = cli.main(["simulate", "exp1_no_interaction", "--duration", "0.2", "--out",
+                         str(out_dir), "--no-progress"])
+    return code, buffer.getvalue(), out_dir
+
+
+def test_contract_table_parses():
+    contract = log_contract()
+    assert {"time", "p", "F_H", "pair_distances", "pairs", "d_l", "robot_name"} <= set(contract)
+    assert contract["pair_distances"] == "(T, P)"
+
+
+def test_simulate_writes_every_key_of_the_log_format_with_its_shape(exp1_run):
+    code, _, out_dir = exp1_run
+    assert code == 0
+    with np.load(out_dir / "log.npz") as data:
+        log = {k: data[k] for k in data.files}
+    m, P = 7, 21  # paper_7cable, no excluded pairs
+    T_ = 101  # 0.2 s / 2 ms + the row at t = 0
+    for key, shape in log_contract().items():
+        assert key in log, f"log.npz lacks {key!r} of docs/LOG_FORMAT.md"
+        assert log[key].shape == expected_shape(shape, T_, m, P), key
+    np.testing.assert_allclose(log["time"], T * np.arange(T_), rtol=0, atol=1e-12)
+    assert log["active"].dtype == bool and log["crossed"].dtype == bool
+    assert str(log["scenario_name"]) == "exp1_no_interaction"
+    assert [tuple(r) for r in log["pairs"][:3]] == [(1, 2), (1, 3), (1, 4)]
+    # exp1 swaps cables 1 and 3 on the platform: the logged attachments say so.
+    from cdpm_drake.robot import load_robot
+    b = load_robot("paper_7cable").attachments
+    np.testing.assert_array_equal(log["attachments"][[0, 2]], b[[2, 0]])
+
+
+def test_resolved_scenario_is_written_beside_the_log_and_loads_back(exp1_run):
+    _, _, out_dir = exp1_run
+    back = load_scenario(out_dir / "scenario.yaml")
+    assert back == load_scenario("exp1_no_interaction")
+
+
+def test_summary_reports_ticks_and_the_logged_minimum_distances(exp1_run):
+    _, out, out_dir = exp1_run
+    assert re.search(r"scenario 'exp1_no_interaction': 101 ticks, 0\.200 s simulated", out), out
+    assert f"log: {out_dir / 'log.npz'}" in out
+    with np.load(out_dir / "log.npz") as log:
+        pairs = [f"({i},{j})" for i, j in log["pairs"]]
+        d_min = 1000 * log["pair_distances"].min(axis=0)
+        active = log["active"].any(axis=0)
+    rows = re.findall(r"^\s*(\(\d+,\d+\))\s+([0-9.]+)\s+(\d+)\s+([01])\s*$", out, re.MULTILINE)
+    assert rows  # exp1 starts with cables 1 and 3 at 57 mm, inside d_u = 61 mm
+    assert {r[0] for r in rows} == {p for p, a in zip(pairs, active) if a}
+    for pair, dist, _, _ in rows:
+        assert float(dist) == pytest.approx(d_min[pairs.index(pair)], abs=0.005)  # 0.01 mm
+
+
+@pytest.mark.parametrize("name", scenario_names())
+def test_every_shipped_scenario_runs_through_the_cli(capsys, tmp_path, name):
+    code, out, err = simulate_cli(capsys, name, "--duration", "0.1", "--out", str(tmp_path),
+                                  "--no-progress")
+    assert code == 0, err
+    assert (tmp_path / "log.npz").is_file() and (tmp_path / "scenario.yaml").is_file()
+    assert f"scenario {name!r}: 51 ticks" in out
+
+
+def test_scenario_text_overlay_reaches_the_run(capsys, tmp_path):
+    code, _, err = simulate_cli(capsys, "exp2_interaction", "--duration", "0.1", "--out",
+                                str(tmp_path), "--no-progress", "--scenario-text",
+                                "{interference: {enabled: false}, random_seed: 9}")
+    assert code == 0, err
+    s = load_scenario(tmp_path / "scenario.yaml")
+    assert s.interference.enabled is False and s.random_seed == 9
+    with np.load(tmp_path / "log.npz") as log:
+        assert not log["F_int"].any()  # no interference block: F_int is zero
+        assert np.isnan(log["d_u"]).all()
+
+
+def test_default_output_directory_is_runs_slash_the_scenario_name(capsys, tmp_path,
+                                                                  monkeypatch):
+    monkeypatch.chdir(tmp_path)
+    code, _, err = simulate_cli(capsys, "exp1_no_interaction", "--duration", "0.05",
+                                "--no-progress")
+    assert code == 0, err
+    assert (tmp_path / "runs" / "exp1_no_interaction" / "log.npz").is_file()
+
+
+@pytest.mark.parametrize("duration", ["-1", "0", "nan", "inf"])
+def test_bad_duration_exits_2_with_a_clear_message(capsys, tmp_path, duration):
+    code, out, err = simulate_cli(capsys, "exp1_no_interaction", "--duration", duration,
+                                  "--out", str(tmp_path), "--no-progress")
+    assert code == 2
+    assert "cdpm simulate: error: --duration must be a number of seconds > 0, got" in err
+    assert not (tmp_path / "log.npz").exists()
+
+
+def test_unknown_scenario_exits_2_listing_the_built_in_ones(capsys, tmp_path):
+    code, out, err = simulate_cli(capsys, "exp7_teleport", "--out", str(tmp_path),
+                                  "--no-progress")
+    assert code == 2
+    assert "unknown scenario 'exp7_teleport'" in err
+    for name in ("exp1_no_interaction", "exp2_interaction", "exp3_two_pairs"):
+        assert name in err
+    assert "Traceback" not in err
+
+
+def test_bad_overlay_exits_2_naming_the_field(capsys, tmp_path):
+    code, _, err = simulate_cli(capsys, "exp1_no_interaction", "--out", str(tmp_path),
+                                "--no-progress", "--scenario-text", "{admittance: {mas: 1}}")
+    assert code == 2
+    assert "unknown field 'admittance.mas'" in err
+
+
+def test_simulate_help_through_the_installed_entry_point():
+    cdpm = Path(sys.executable).parent / "cdpm"
+    result = subprocess.run([str(cdpm), "simulate", "--help"], capture_output=True,
+                            text=True, timeout=120)
+    assert result.returncode == 0, result.stderr
+    for option in ("--duration", "--out", "--no-progress", "--scenario-text"):
+        assert option in result.stdout
+    for name in ("exp1_no_interaction", "exp2_interaction", "exp3_two_pairs"):
+        assert name in result.stdout
