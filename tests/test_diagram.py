@@ -142,6 +142,20 @@ def test_logged_desired_force_is_what_the_admittance_integrates_with_noise():
     np.testing.assert_allclose(v[1:], A * v[:-1] + B * F[:-1], rtol=0, atol=1e-12)
 
 
+def test_desired_force_is_the_sum_of_hand_interference_and_wall_forces():
+    """Eq. 22 (plus the optional wall force): F_d = F_H + F_int + F_wall at every tick, with all
+    three non-zero: a 1 N push, 5 cm from the lower x face (box 0.5..3.0 m, wall force 1 N
+    there), cables 1 and 3 (swapped) about 60 mm apart, inside d_u = 61 mm."""
+    scenario = load_scenario("exp1_no_interaction", overlay_text=(
+        "{wall_force: {enabled: true, margin: 0.1}, initial_position: [0.55, 3.65, 1.22], "
+        "operator: !ScriptedOperator {times: [0], forces: [[0.0, 1.0, 0.0]]}}"))
+    log = run(scenario, 0.1)
+    for key in ("F_H", "F_int", "F_wall"):
+        assert np.abs(log[key]).max() > 0.01, key
+    np.testing.assert_allclose(log["F_d"], log["F_H"] + log["F_int"] + log["F_wall"],
+                               rtol=0, atol=1e-12)
+
+
 # --- Safety limits in scripted runs -----------------------------------------------------------
 
 
