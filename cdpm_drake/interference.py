@@ -94,26 +94,33 @@ def _kernel(u, v, w):
     Z = np.stack(np.broadcast_arrays(u, v, w))  # (3 vectors, 3 components, ...)
     Z1, Z2 = Z[:, _R1], Z[:, _R2]
     nm = Z1[:2] * Z2[1:] - Z2[:2] * Z1[1:]  # (2, 3, ...): u x v, v x w
+    G = (Z[:, None] * Z[None, :2]).sum(axis=2)  # G[k, l] = Z_k . Z_l for l in (u, v)
+    return _solve(G[0, 0], G[0, 1], G[1, 1], G[2, 0], G[2, 1], nm, Z[0], Z[1], Z[2])
+
+
+def _solve(a, b, c, d, e, nm, u, v, w):
+    """The clamped solution from the products a = u.u, b = u.v, c = v.v, d = u.w, e = v.w and
+    nm = (u x v, v x w) stacked (2, 3, ...); see `_kernel`."""
     n = nm[0]
     Dn = (nm * n).sum(axis=1)  # |n|^2, (v x w) . n
     D, num = Dn[0], Dn[1]
-    G = (Z[:, None] * Z[None, :2]).sum(axis=2)  # G[k, l] = Z_k . Z_l for l in (u, v)
-    a, b, c, d, e = G[0, 0], G[0, 1], G[1, 1], G[2, 0], G[2, 1]
-    inv_a = 1.0 / np.where(a > 0.0, a, 1.0)
-    c_pos = c > 0.0
-    inv_c = 1.0 / np.where(c_pos, c, 1.0)
+    # Guarded reciprocals: x + (x == 0) is x, or 1 where x == 0 (cheaper than np.where).
+    c0 = c == 0.0
+    inv_a = 1.0 / (a + (a == 0.0))
+    inv_c = 1.0 / (c + c0)
     # D == 0: n == 0 (parallel: any s is optimal, s_L = num = 0) or |n| so small that its
     # square underflows (then num is as negligible and s_L stays finite).
-    s_L = num / np.where(D > 0.0, D, 1.0)
+    s_L = num / (D + (D == 0.0))
     s = np.minimum(np.maximum(s_L, 0.0), 1.0)
-    t = (b * s + e) * inv_c
-    # t outside [0, 1] (or cable j a point, c == 0): clamp t, then s = argmin on that edge.
-    edge = (t < 0.0) | (t > 1.0) | ~c_pos
-    t = np.minimum(np.maximum(t, 0.0), 1.0)
-    s = np.where(edge, np.minimum(np.maximum((b * t - d) * inv_a, 0.0), 1.0), s)
-    diff = w + s * u - t * v
+    # Cable j a point (c == 0): t = -1 sends it to the edge branch, which clamps t to 0 and
+    # takes the point-segment optimum for s.
+    t = (b * s + e) * inv_c - c0
+    tc = np.minimum(np.maximum(t, 0.0), 1.0)
+    # t outside [0, 1]: clamp t, then s = argmin on that edge.
+    s = np.where(tc != t, np.minimum(np.maximum((b * tc - d) * inv_a, 0.0), 1.0), s)
+    diff = w + s * u - tc * v
     dist = np.sqrt((diff * diff).sum(axis=0))
-    return dist, s, t, diff, n, D, a, b, c, e, s_L
+    return dist, s, tc, diff, n, D, a, b, c, e, s_L
 
 
 def _gradient(dist, s, t, diff):
@@ -130,7 +137,7 @@ def _line_side(s, t, diff, n, D, a, c):
     sigma = (diff * n).sum(axis=0)
     defined = D > (PARALLEL_SIN * PARALLEL_SIN) * a * c
     side = np.sign(sigma * defined).astype(np.int8)
-    straddle = (s * (1.0 - s) > 0.0) & (t * (1.0 - t) > 0.0)
+    straddle = (np.minimum(s, t) > 0.0) & (np.maximum(s, t) < 1.0)
     return side, straddle
 
 
@@ -195,27 +202,65 @@ def _position(p) -> np.ndarray:
 _GEOMETRY = weakref.WeakKeyDictionary()
 
 
-def _geometry(robot):
-    """Per-pair constants (3, P): a_i - b_i, a_j - b_j, b_i - b_j. Only p changes per tick:
-    u = A_i - B_i = (a_i - b_i) - p, v likewise, w = B_i - B_j = b_i - b_j."""
+class _PairGeometry:
+    """Per-pair constants of a robot. Only p changes per tick: u = A_i - B_i = U - p with
+    U = a_i - b_i, v = V - p with V = a_j - b_j, and w = B_i - B_j = W = b_i - b_j. The
+    products the kernel needs are then polynomials in p, evaluated by two matrix products:
+        (a, b, c, d, e) = K0 + K1 p + |p|^2 (1, 1, 1, 0, 0),
+        u x v = U x V + (V - U) x p,   v x w = V x W + W x p.
+    The cancellation is no worse than in the direct products (errors ~ eps |U| |V|)."""
+
+    def __init__(self, robot):
+        i, j = robot.pair_index
+        ab = robot.reels - robot.attachments
+        U, V = ab[i], ab[j]  # (P, 3)
+        W = robot.attachments[i] - robot.attachments[j]
+        self.P = P = len(i)
+        self.pairs = tuple(robot.pairs)
+        self.U, self.V, self.W = (np.ascontiguousarray(x.T) for x in (U, V, W))  # (3, P)
+
+        def dot(x, y):
+            return (x * y).sum(axis=1)
+
+        self.K0 = np.stack([dot(U, U), dot(U, V), dot(V, V), dot(U, W), dot(V, W)])  # (5, P)
+        self.K1 = np.ascontiguousarray(
+            np.stack([-2 * U, -(U + V), -2 * V, -W, -W]).reshape(5 * P, 3))
+        self.C0 = np.stack([np.cross(U, V).T, np.cross(V, W).T])  # (2, 3, P)
+        self.C1 = np.ascontiguousarray(
+            np.stack([_skew(V - U), _skew(W)]).transpose(0, 2, 1, 3).reshape(6 * P, 3))
+
+
+def _skew(x):
+    """(P, 3) -> (P, 3, 3) matrices with S[k] @ p = x[k] x p."""
+    S = np.zeros(x.shape[:-1] + (3, 3))
+    S[..., 0, 1], S[..., 0, 2] = -x[..., 2], x[..., 1]
+    S[..., 1, 0], S[..., 1, 2] = x[..., 2], -x[..., 0]
+    S[..., 2, 0], S[..., 2, 1] = -x[..., 1], x[..., 0]
+    return S
+
+
+def _geometry(robot) -> _PairGeometry:
     g = _GEOMETRY.get(robot)
     if g is None:
-        i, j = robot.pair_index
-        ab = (robot.reels - robot.attachments).T
-        g = (np.ascontiguousarray(ab[:, i]), np.ascontiguousarray(ab[:, j]),
-             np.ascontiguousarray((robot.attachments[i] - robot.attachments[j]).T),
-             tuple(robot.pairs))
-        _GEOMETRY[robot] = g
+        g = _GEOMETRY[robot] = _PairGeometry(robot)
     return g
 
 
-def _robot_kernel(robot, p):
-    U, V, W, _ = _geometry(robot)
+def _robot_kernel(geo, p):
+    """`_kernel` for every watched pair at p (3,) or (N, 3); outputs (...) = (P,) or (N, P)."""
+    P = geo.P
     if p.ndim == 1:
+        G = (geo.K1 @ p).reshape(5, P) + geo.K0
+        G[:3] += p @ p
+        nm = (geo.C1 @ p).reshape(2, 3, P) + geo.C0
         pc = p[:, None]
-        return _kernel(U - pc, V - pc, W)
+        return _solve(*G, nm, geo.U - pc, geo.V - pc, geo.W)
+    N = p.shape[0]
+    G = (p @ geo.K1.T).reshape(N, 5, P).transpose(1, 0, 2) + geo.K0[:, None, :]
+    G[:3] += (p * p).sum(axis=1)[:, None]
+    nm = (p @ geo.C1.T).reshape(N, 2, 3, P).transpose(1, 2, 0, 3) + geo.C0[:, :, None, :]
     pc = p.T[:, :, None]  # (3, N, 1)
-    return _kernel(U[:, None, :] - pc, V[:, None, :] - pc, W[:, None, :])
+    return _solve(*G, nm, geo.U[:, None, :] - pc, geo.V[:, None, :] - pc, geo.W[:, None, :])
 
 
 def pair_distances(robot, p) -> np.ndarray:
@@ -224,7 +269,7 @@ def pair_distances(robot, p) -> np.ndarray:
     p: platform centre (3,) or a batch (N, 3), base frame, m. Returns (P,) or (N, P) with
     P = robot.num_pairs (pairs excluded by the robot description are left out).
     """
-    return _robot_kernel(robot, _position(p))[0]
+    return _robot_kernel(_geometry(robot), _position(p))[0]
 
 
 def initial_side(robot, p) -> np.ndarray:
@@ -233,12 +278,13 @@ def initial_side(robot, p) -> np.ndarray:
     p = _position(p)
     if p.ndim != 1:
         raise ValueError(f"initial_side takes one position (3,), got shape {p.shape}")
-    dist, s, t, diff, n, D, a, b, c, e, s_L = _robot_kernel(robot, p)
+    dist, s, t, diff, n, D, a, b, c, e, s_L = _robot_kernel(_geometry(robot), p)
     return _line_side(s, t, diff, n, D, a, c)[0]
 
 
-def _side_rule(q: int, line_side: int, straddle: bool, near: bool) -> int:
-    """One pair's memory transition (the table in the module docstring)."""
+def _side_rule(q: int, line_side: int, can_cross: bool) -> int:
+    """One pair's memory transition (the table in the module docstring); can_cross: the
+    segments straddle each other and d <= d_u."""
     o = (q > 0) - (q < 0)
     if line_side == 0:
         return q
@@ -248,13 +294,18 @@ def _side_rule(q: int, line_side: int, straddle: bool, near: bool) -> int:
         return o if line_side == o else q
     if line_side == o:
         return q
-    return 2 * o if (straddle and near) else line_side
+    return 2 * o if can_cross else line_side
 
 
-# The rule tabulated over (q + 2, line_side + 1, straddle, near): one gather per tick.
-_SIDE_TABLE = np.array([_side_rule(q, g, bool(st), bool(nr))
-                        for q in range(-2, 3) for g in (-1, 0, 1)
-                        for st in (0, 1) for nr in (0, 1)], dtype=np.int8)
+# The rule tabulated at index 6 q + 2 line_side + can_cross + 14 (0..29): one gather per tick.
+_SIDE_TABLE = np.array([_side_rule(q, g, bool(x)) for q in range(-2, 3) for g in (-1, 0, 1)
+                        for x in (0, 1)], dtype=np.int8)
+
+
+def _update_side(q, line_side, can_cross):
+    # q, line_side int8 (P,), can_cross bool (P,); the index fits int8 (max 29).
+    new = _SIDE_TABLE[q * 6 + line_side * 2 + can_cross + 14]
+    return new, new * new == 4
 
 
 def update_side(side, line_side, straddle, near):
@@ -264,13 +315,29 @@ def update_side(side, line_side, straddle, near):
     straddle: (P,) bool, both closest points strictly inside their cables; near: (P,) bool,
     d <= d_u. Returns (new memory (P,) int8, crossed (P,) bool).
     """
-    q = np.asarray(side).astype(np.intp)
-    if q.size and np.abs(q).max() > 2:
-        raise ValueError(f"side memory entries must lie in -2..2, got {np.asarray(side)!r}")
-    idx = q * 12 + np.asarray(line_side, dtype=np.intp) * 4
-    idx += 28 + 2 * np.asarray(straddle, dtype=np.intp) + np.asarray(near, dtype=np.intp)
-    new = _SIDE_TABLE[idx]
-    return new, (new == 2) | (new == -2)
+    q = _side_memory(side, np.shape(side))
+    g = np.asarray(line_side)
+    if g.size and not np.isin(g, (-1, 0, 1)).all():
+        raise ValueError(f"line_side entries must be -1, 0 or 1, got {g!r}")
+    return _update_side(q, g.astype(np.int8),
+                        np.asarray(straddle, dtype=bool) & np.asarray(near, dtype=bool))
+
+
+def _side_memory(side, shape) -> np.ndarray:
+    """A side memory as int8 of the given shape; ValueError unless its entries are integers
+    in -2..2."""
+    q = np.asarray(side)
+    if q.shape != shape:
+        raise ValueError(f"side memory must have shape {shape}, one entry per watched pair, "
+                         f"got shape {q.shape}")
+    if q.dtype != np.int8:
+        wide = q.astype(float)
+        if q.size and (not np.all(wide == np.round(wide)) or np.abs(wide).max() > 2):
+            raise ValueError(f"side memory entries must be integers in -2..2, got {q!r}")
+        q = q.astype(np.int8)
+    elif q.size and (q.min() < -2 or q.max() > 2):
+        raise ValueError(f"side memory entries must be integers in -2..2, got {q!r}")
+    return q
 
 
 # --- intensity and force ----------------------------------------------------------------------
@@ -432,8 +499,8 @@ def interference_force(robot, p, params: InterferenceParams, side=None) -> Inter
     sum (eq. 30) is clipped to norm F_max. `side` is the memory returned by the previous tick
     (None: `initial_side(robot, p)`).
     """
-    U, V, W, pairs = _geometry(robot)
-    P = len(pairs)
+    geo = _geometry(robot)
+    P, pairs = geo.P, geo.pairs
     if params.d_l.size != P or (params.pairs is not None and params.pairs != pairs):
         raise ValueError(f"interference parameters are for pairs "
                          f"{params.pairs if params.pairs is not None else params.d_l.size} "
@@ -441,24 +508,20 @@ def interference_force(robot, p, params: InterferenceParams, side=None) -> Inter
     p = _position(p)
     if p.ndim != 1:
         raise ValueError(f"interference_force takes one position (3,), got shape {p.shape}")
-    pc = p[:, None]
-    dist, s, t, diff, n, D, a, b, c, e, s_L = _kernel(U - pc, V - pc, W)
+    dist, s, t, diff, n, D, a, b, c, e, s_L = _robot_kernel(geo, p)
     line_side, straddle = _line_side(s, t, diff, n, D, a, c)
-    if side is None:
-        side = line_side
-    elif np.shape(side) != (P,):
-        raise ValueError(f"side memory must have shape ({P},), one entry per watched pair, "
-                         f"got shape {np.shape(side)}")
     near = dist <= params.d_u
-    new_side, crossed = update_side(side, line_side, straddle, near)
+    q = line_side if side is None else _side_memory(side, (P,))
+    new_side, crossed = _update_side(q, line_side, straddle & near)
 
-    pos = dist > 0.0
-    inv_d = np.divide(1.0, dist, out=np.zeros_like(dist), where=pos)
     ts = t - s
-    grad = diff * (ts * inv_d)
-    # |grad| = |t - s| where d > 0, so the unit direction is sign(t - s) (C_i - C_j) / d.
-    direction = diff * (np.sign(ts) * (np.abs(ts) > MIN_GRADIENT) * inv_d)
-    use_side = crossed | (~pos & straddle)
+    pos = dist > 0.0
+    grad = diff * np.divide(ts, dist, out=np.zeros_like(dist), where=pos)
+    # |grad| = |t - s| where d > 0, so the unit direction is grad / |t - s|.
+    ats = np.abs(ts)
+    direction = grad * np.divide(1.0, ats, out=np.zeros_like(ats), where=ats > MIN_GRADIENT)
+    intensity = _logistic(dist, params.F_u, params._b, params._mid) * near
+    use_side = crossed | (straddle & ~pos)
     if use_side.any():
         # Gradient of o sigma: o (t_L - s_L) n / |n| (t_L, s_L: the two lines' closest points).
         has_n = D > 0.0
@@ -467,10 +530,7 @@ def interference_force(robot, p, params: InterferenceParams, side=None) -> Inter
         g = np.sign(new_side) * (t_L - s_L)
         toward = n * (np.sign(g) * (np.abs(g) > MIN_GRADIENT) * inv_n)
         direction = np.where(use_side, toward, direction)
-
-    intensity = np.where(crossed, params.F_u,
-                         np.where(near, _logistic(dist, params.F_u, params._b, params._mid),
-                                  0.0))
+        intensity = np.where(crossed, params.F_u, intensity)
     force = direction @ intensity
     fn = math.sqrt(force[0] * force[0] + force[1] * force[1] + force[2] * force[2])
     if fn > params.F_max:

@@ -619,8 +619,14 @@ def test_side_rule_transitions():
                                    np.array([near]))
         assert new.tolist() == [expected], (q, g, straddle, near)
         assert crossed.tolist() == [abs(expected) == 2]
-    with pytest.raises(ValueError, match="side memory entries must lie in -2..2"):
+    with pytest.raises(ValueError, match="side memory entries must be integers in -2..2"):
         update_side(np.array([3]), np.array([1]), np.array([True]), np.array([True]))
+    with pytest.raises(ValueError, match="side memory entries must be integers in -2..2"):
+        update_side(np.array([-3], np.int8), np.array([1]), np.array([True]), np.array([True]))
+    with pytest.raises(ValueError, match=r"side memory must have shape \(21,\)"):
+        paper = load_robot("paper_7cable")
+        interference_force(paper, paper.workspace.center,
+                            InterferenceParams.uniform(paper, 0.05, 0.06, 2.0), np.zeros(7))
 
 
 def crossing_robot():
