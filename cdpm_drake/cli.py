@@ -77,7 +77,7 @@ def _load_scenario_arg(args):
 
 
 def simulate_main(*, scenario, duration=None, out_dir=None, progress=True, out=None,
-                  on_chunk=None) -> int:
+                  on_chunk=None, html=None, plots=False) -> int:
     """Simulate, write DIR/log.npz and DIR/scenario.yaml, print a summary. Returns an exit
     code: 0, or 1 when the run ended early (the log up to then is written all the same)."""
     from .simulation import save_log, simulate, summary_rows
@@ -103,6 +103,13 @@ def simulate_main(*, scenario, duration=None, out_dir=None, progress=True, out=N
     crossings = int(np.any(log["crossed"], axis=0).sum()) if T else 0
     print(f"pairs that crossed: {crossings}", file=out)
     print(f"log: {path}", file=out)
+    if plots:
+        from .views.plots import plot_log
+        for png in plot_log(log, out_dir):
+            print(f"plot: {png}", file=out)
+    if html is not None:
+        from .views.meshcat_view import save_replay_html
+        print(f"3D replay: {save_replay_html(log, html)} (open it in a browser)", file=out)
     if result.error is not None:
         print(f"cdpm simulate: error: the run stopped at t = {log['time'][-1] if T else 0:.3f} s: "
               f"{result.error}", file=sys.stderr)
@@ -111,11 +118,59 @@ def simulate_main(*, scenario, duration=None, out_dir=None, progress=True, out=N
 
 
 def _cmd_simulate(args) -> int:
-    if args.duration is not None and not (args.duration > 0 and np.isfinite(args.duration)):
-        raise CliError(f"--duration must be a number of seconds > 0, got {args.duration!r}")
+    _check_duration(args.duration)
     scenario = _load_scenario_arg(args)
-    return simulate_main(scenario=scenario, duration=args.duration, out_dir=args.out,
-                         progress=not args.no_progress)
+    on_chunk = None
+    if args.meshcat:
+        on_chunk = _live_meshcat(scenario)
+    code = simulate_main(scenario=scenario, duration=args.duration, out_dir=args.out,
+                         progress=not args.no_progress, on_chunk=on_chunk,
+                         html=args.html, plots=args.plot)
+    if args.meshcat and not args.no_wait:
+        input("Meshcat is still serving the last frame; press Enter to quit. ")
+    return code
+
+
+def _check_duration(duration):
+    if duration is not None and not (duration > 0 and np.isfinite(duration)):
+        raise CliError(f"--duration must be a number of seconds > 0, got {duration!r}")
+
+
+def _live_meshcat(scenario):
+    """A Meshcat window that follows the simulation (views hang off the CLI, not the blocks)."""
+    from .scenario import interference_params, scenario_robot
+    from .views.meshcat_view import CdpmMeshcatView, live_view_callback, make_meshcat
+
+    robot = scenario_robot(scenario)
+    meshcat = make_meshcat()
+    kwargs = {}
+    if scenario.interference.enabled and robot.num_pairs:
+        params = interference_params(scenario, robot)
+        kwargs = dict(d_l=params.d_l, d_u=params.d_u)
+    view = CdpmMeshcatView(meshcat, robot.reels, robot.attachments, robot.workspace.lower,
+                           robot.workspace.upper, robot.pairs, **kwargs)
+    print(f"Meshcat: open {meshcat.web_url()} in a browser", file=sys.stderr)
+    return live_view_callback(view)
+
+
+# --- plot ------------------------------------------------------------------------------------
+
+
+def _cmd_plot(args) -> int:
+    from .views.plots import LogError, load_log, plot_log
+
+    try:
+        log = load_log(args.log)
+    except LogError as e:
+        raise CliError(str(e)) from None
+    out_dir = args.out if args.out is not None else (
+        args.log if args.log.is_dir() else args.log.parent)
+    for png in plot_log(log, out_dir):
+        print(f"plot: {png}")
+    if args.html is not None:
+        from .views.meshcat_view import save_replay_html
+        print(f"3D replay: {save_replay_html(log, args.html)}")
+    return 0
 
 
 # --- diagram ---------------------------------------------------------------------------------
@@ -172,7 +227,26 @@ def _parser() -> argparse.ArgumentParser:
     p.add_argument("--duration", type=float, help="simulated time, s (default: the scenario's)")
     p.add_argument("--out", type=Path, help="output directory (default: runs/<scenario name>)")
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
+    p.add_argument("--meshcat", action="store_true",
+                   help="show the robot live in Meshcat (prints the URL to open)")
+    p.add_argument("--no-wait", action="store_true",
+                   help="with --meshcat: quit at the end instead of waiting for Enter")
+    p.add_argument("--html", type=Path, metavar="FILE",
+                   help="also save a self-contained 3D replay (opens in a browser, no server)")
+    p.add_argument("--plot", action="store_true",
+                   help="also write the paper's figures as PNGs next to the log")
     p.set_defaults(func=_cmd_simulate)
+
+    p = sub.add_parser("plot", help="plot a log: the paper's Figs. 8-16 as PNGs",
+                       description="Plot a log.npz: pair distances with d_l and d_u (Fig. 10), "
+                                   "forces (Figs. 11, 13, 16), the 3D trajectory with "
+                                   "interference events (Figs. 9, 15), the logistic curve "
+                                   "(Fig. 8).")
+    p.add_argument("log", type=Path, help="a log.npz or the directory holding it")
+    p.add_argument("--out", type=Path, help="output directory (default: the log's directory)")
+    p.add_argument("--html", type=Path, metavar="FILE",
+                   help="also save a self-contained 3D replay of the log")
+    p.set_defaults(func=_cmd_plot)
 
     p = sub.add_parser("diagram", help="write the controller diagram as graphviz (.dot, .svg)",
                        description="Write the Fig. 5 diagram of a scenario, with the simulated "
