@@ -8,14 +8,14 @@ the same port names (`reel_velocity_command` in; `cable_lengths`, `measured_forc
 import dataclasses
 
 import numpy as np
-from pydrake.common import RandomDistribution
 from pydrake.systems.framework import Diagram, DiagramBuilder
-from pydrake.systems.primitives import Adder, Gain, RandomSource, VectorLogSink
+from pydrake.systems.primitives import Adder, VectorLogSink
 
 from .scenario import Scenario, SimulatedReels as SimulatedReelsConfig, check_scenario, \
     interference_params, scenario_operator
 from .systems import (ForceSensorSource, ForwardKinematicsEstimator, InterferenceForce,
-                      JacobianVelocityMapping, SafetyLimits, SimulatedOperator, SimulatedReels,
+                      JacobianVelocityMapping, SafetyLimits, SensorNoise, SimulatedOperator,
+                      SimulatedReels,
                       WorkspaceWallForce, make_admittance)
 
 # Logged signals: (logger name suffix, system name, output port name). Every signal of the
@@ -144,13 +144,11 @@ def build_simulated_plant(scenario: Scenario, robot) -> Diagram:
     builder.ExportOutput(reels.GetOutputPort("cable_lengths"), "cable_lengths")
     force = operator.GetOutputPort("hand_force")
     if scenario.sensor.noise_std > 0:
-        noise = builder.AddNamedSystem("sensor_noise", RandomSource(
-            RandomDistribution.kGaussian, 3, T))
-        gain = builder.AddNamedSystem("noise_std", Gain(scenario.sensor.noise_std, 3))
+        noise = builder.AddNamedSystem("sensor_noise", SensorNoise(
+            std=scenario.sensor.noise_std, seed=scenario.random_seed, time_step=T))
         noisy = builder.AddNamedSystem("noisy_force", Adder(2, 3))
-        builder.Connect(noise.get_output_port(), gain.get_input_port())
         builder.Connect(force, noisy.get_input_port(0))
-        builder.Connect(gain.get_output_port(), noisy.get_input_port(1))
+        builder.Connect(noise.GetOutputPort("noise"), noisy.get_input_port(1))
         force = noisy.get_output_port()
     builder.ExportOutput(force, "measured_force")
     plant = builder.Build()

@@ -45,7 +45,6 @@ def simulate(*, scenario: Scenario, duration: float | None = None, progress: boo
     diagram = build_diagram(scenario) if diagram is None else diagram
     simulator = Simulator(diagram)
     context = simulator.get_mutable_context()
-    _seed(diagram, context, scenario.random_seed)
     simulator.Initialize()
     bar = None
     if progress:
@@ -74,13 +73,6 @@ def simulate(*, scenario: Scenario, duration: float | None = None, progress: boo
             bar.close()
     log = collect_log(diagram, context, scenario, robot)
     return SimulationResult(log=log, wall_time=wall, error=error)
-
-
-def _seed(diagram, context, seed):
-    from pydrake.common import RandomGenerator
-
-    # Only the sensor-noise source is random; a fixed seed makes runs repeatable.
-    diagram.SetRandomContext(context, RandomGenerator(int(seed)))
 
 
 def collect_log(diagram, context, scenario: Scenario, robot) -> dict:

@@ -129,10 +129,6 @@ def test_sliding_average_feeds_the_admittance_a_ramp():
     np.testing.assert_allclose(log["velocity_admittance"], v, rtol=0, atol=1e-12)
 
 
-@pytest.mark.xfail(strict=True, reason=(
-    "build_simulated_plant uses Drake's RandomSource, which draws in an unrestricted update "
-    "that runs before the discrete updates of the same tick: the admittance integrates tick "
-    "k+1's noise while tick k's is logged. Wiring systems.SensorNoise instead fixes it."))
 def test_logged_desired_force_is_what_the_admittance_integrates_with_noise():
     scenario = load_scenario("exp1_no_interaction", overlay_text=(
         "{interference: {enabled: false}, sensor: {noise_std: 2.0, filter_window: 5}, "
