@@ -21,14 +21,15 @@ gradient (the one-sided derivative along directions that keep that minimiser).
 
 Crossing side (beyond the paper). The unsigned distance cannot tell which side of each other
 two cables are on, so once they pass through each other its gradient holds them crossed. Let
-m_hat = (u_i x u_j)/|u_i x u_j| (u = A - B, the cable directions) and sigma = (B_i - B_j) . m_hat
-the signed distance between the two cable LINES; its sign `line_side` in {-1, 0, +1} changes
-only when the lines meet, and is 0 where undefined (parallel cables, sin angle <= 1e-6, or lines
-that touch). A real crossing is a sign change of sigma while the segments straddle each other
-(both closest points strictly inside their cables, 0 < s < 1 and 0 < t < 1, so d == |sigma|);
-a sign change anywhere else (the lines meet beyond a cable's end, or far away) is geometry, not
-a crossing. The memory is one int8 per pair, a pure function of the previous memory and the
-current geometry (`update_side`), so it fits a Drake discrete state:
+m_hat = (u_i x u_j) / |u_i x u_j| (u = A - B, the cable directions) and sigma =
+(B_i - B_j) . m_hat, the signed distance between the two cable LINES. Its sign `line_side` in
+{-1, 0, +1} changes only when the lines meet or pass through parallel, and is 0 where undefined
+(parallel cables, sin angle <= 1e-6, or lines that touch). A real crossing is a sign change of
+sigma while the segments straddle each other (both closest points strictly inside their
+cables, 0 < s < 1 and 0 < t < 1, so d == |sigma|); a sign change anywhere else (the lines meet
+beyond a cable's end, or far away) is geometry, not a crossing. The memory is one int8 per
+pair, a pure function of the previous memory and the current geometry (`update_side`), so it
+fits a Drake discrete state:
 
     0        unknown: adopt line_side (the start assumes the cables are not crossed).
     +1 / -1  on the remembered side o.  line_side == -o: if the segments straddle and
@@ -38,11 +39,13 @@ current geometry (`update_side`), so it fits a Drake discrete state:
              again. We prefer a spurious push back to forgetting a real tangle.
     line_side == 0 never changes the memory.
 
-A crossed pair is active at full intensity F_u, pushed along o (t_L - s_L) m_hat, the gradient
-of o sigma (t_L, s_L: the closest-point parameters of the two lines; equal to t, s while the
-segments straddle), which points back to the remembered side. A pair that is not crossed
-follows the paper (direction grad d / |grad d|); at d == 0 with a known side it uses the same
-side-aware direction o (t - s) m_hat, which is the limit of grad d from the remembered side.
+`InterferenceResult.side` is that memory (values -2..2, not only -1..1): store it and pass it
+back as `side` on the next tick. A crossed pair is active at full intensity F_u, pushed along
+o (t_L - s_L) m_hat, the gradient of o sigma, which points back to the remembered side (t_L,
+s_L: the closest-point parameters of the two lines, equal to t, s while the segments
+straddle). A pair that is not crossed follows the paper (direction grad d / |grad d|); at
+d == 0 with a known side it uses the same side-aware direction o (t - s) m_hat, the limit of
+grad d from the remembered side.
 """
 
 import dataclasses
@@ -55,6 +58,8 @@ import numpy as np
 PARALLEL_SIN = 1e-6
 # |t - s| (the gradient norm, m/m) below which a pair has no direction to push along.
 MIN_GRADIENT = 1e-12
+# Smallest normal float: squared lengths at or below it are treated as zero.
+_TINY = np.finfo(float).tiny
 
 
 @dataclasses.dataclass(frozen=True)
@@ -69,7 +74,7 @@ class SegmentDistance:
 
 # --- the vectorised kernel ------------------------------------------------------------------
 
-# Index rows for cross products of stacked (k, 3, ...) arrays: (x × y)_r = x_{r+1} y_{r+2} - ...
+# Index rows for cross products of stacked (k, 3, ...) arrays: (x cross y)_r uses rows r+1, r+2.
 _R1 = np.array([1, 2, 0])
 _R2 = np.array([2, 0, 1])
 
@@ -78,18 +83,19 @@ def _kernel(u, v, w):
     """Closest points of cable i, B_i + s u, and cable j, B_j + t v (s, t in [0, 1]), with
     u = A_i - B_i, v = A_j - B_j, w = B_i - B_j; arrays of shape (3, ...), m.
 
-    Ericson's clamped solution (Real-Time Collision Detection, 5.1.9): s = clamp of the line
-    optimum, t = the optimum for that s, and if t leaves [0, 1], clamp t and re-optimise s. It
-    returns a global minimiser of the convex problem (10): when t*(s0) < 0, the chord from the
-    strip minimiser (s0, t*(s0)) to any box minimiser crosses t = 0 at a point no worse, so some
-    minimiser has t = 0 (likewise t = 1). The nine KKT cases of eqs. 13-21 are the nine
-    outcomes. The line optimum uses cross products, s_L = ((v x w) . n) / |n|^2 with n = u x v
-    (equal to (b e - c d) / (a c - b^2) by the Binet-Cauchy identity, but accurate for nearly
-    parallel cables, where the Gram form loses half the digits). Parallel cables (n == 0) get
-    s = 0, a valid choice; a zero-length cable j takes the point-segment branch; no 0/0 occurs.
+    Ericson's clamped solution (Real-Time Collision Detection, 5.1.9): s0 = clamp of the line
+    optimum, t = the optimum for s0, clamped, then s = the optimum for that t, clamped. It
+    returns a global minimiser of the convex problem (10): (s0, t*(s0)) minimises f over the
+    strip [0, 1] x R; if t*(s0) < 0, the chord from it to any box minimiser crosses t = 0 at a
+    point no worse (convexity), so some minimiser has t = 0 (likewise t = 1). The nine KKT
+    cases of eqs. 13-21 are the nine outcomes (interior, four edges, four corners). The line
+    optimum uses cross products, s_L = ((v x w) . n) / |n|^2 with n = u x v, equal to
+    (b e - c d) / (a c - b^2) by the Binet-Cauchy identity but accurate for nearly parallel
+    cables, where the Gram form loses half the digits. Parallel cables (n == 0) get s0 = 0, a
+    valid choice; a cable of zero length is a point; no 0/0 or overflow occurs.
 
-    Returns (dist, s, t, diff = C_i - C_j, n = u x v, D = |n|^2, a = |u|^2, b = u.v, c = |v|^2,
-    e = v.w, s_L) with diff, n of shape (3, ...) and the rest of shape (...).
+    Returns (dist, s, t, diff = C_i - C_j, n = u x v, D = |n|^2, a = |u|^2, c = |v|^2) with
+    diff, n of shape (3, ...) and the rest of shape (...).
     """
     Z = np.stack(np.broadcast_arrays(u, v, w))  # (3 vectors, 3 components, ...)
     Z1, Z2 = Z[:, _R1], Z[:, _R2]
@@ -104,29 +110,33 @@ def _solve(a, b, c, d, e, nm, u, v, w):
     n = nm[0]
     Dn = (nm * n).sum(axis=1)  # |n|^2, (v x w) . n
     D, num = Dn[0], Dn[1]
-    # Guarded reciprocals: x + (x == 0) is x, or 1 where x == 0 (cheaper than np.where).
-    c0 = c == 0.0
-    inv_a = 1.0 / (a + (a == 0.0))
+    # Guarded reciprocals: x + (x <= TINY) is x, or ~1 where x is zero or subnormal (whose
+    # reciprocal would overflow); cheaper than np.where. A cable with |u|^2 <= TINY is a point.
+    c0 = c <= _TINY
+    inv_a = 1.0 / (a + (a <= _TINY))
     inv_c = 1.0 / (c + c0)
-    # D == 0: n == 0 (parallel: any s is optimal, s_L = num = 0) or |n| so small that its
-    # square underflows (then num is as negligible and s_L stays finite).
-    s_L = num / (D + (D == 0.0))
+    # D <= TINY: n == 0 (parallel: any s is optimal, s_L = num = 0) or |n| so small that num is
+    # as negligible; s_L stays finite. Otherwise s_L may be +-inf (clamped below), never NaN.
+    s_L = num / (D + (D <= _TINY))
     s = np.minimum(np.maximum(s_L, 0.0), 1.0)
     # Cable j a point (c == 0): t = -1 sends it to the edge branch, which clamps t to 0 and
     # takes the point-segment optimum for s.
     t = (b * s + e) * inv_c - c0
     tc = np.minimum(np.maximum(t, 0.0), 1.0)
-    # t outside [0, 1]: clamp t, then s = argmin on that edge.
-    s = np.where(tc != t, np.minimum(np.maximum((b * tc - d) * inv_a, 0.0), 1.0), s)
+    # Then s = argmin of f(., t): Ericson's edge step where t was clamped. Where it was not,
+    # (s, t) is already optimal and this returns the same s in exact arithmetic, but it also
+    # repairs s where the line optimum is round-off: a cable j of (nearly) zero length, whose
+    # tiny n and v leave s_L and t meaningless while (b t - d) / a ~ -d / a stays exact.
+    s = np.minimum(np.maximum((b * tc - d) * inv_a, 0.0), 1.0)
     diff = w + s * u - tc * v
     dist = np.sqrt((diff * diff).sum(axis=0))
-    return dist, s, tc, diff, n, D, a, b, c, e, s_L
+    return dist, s, tc, diff, n, D, a, c
 
 
 def _gradient(dist, s, t, diff):
-    """(t - s) (C_i - C_j) / d, zero where d == 0; (3, ...)."""
-    pos = dist > 0.0
-    return diff * np.where(pos, (t - s) / np.where(pos, dist, 1.0), 0.0)
+    """(t - s) (C_i - C_j) / d, zero where d == 0; (3, ...). Dividing diff by d (never
+    multiplying by 1 / d) keeps it finite for subnormal d."""
+    return diff / (dist + (dist == 0.0)) * (t - s)
 
 
 def _line_side(s, t, diff, n, D, a, c):
@@ -226,6 +236,7 @@ class _PairGeometry:
         self.K1 = np.ascontiguousarray(
             np.stack([-2 * U, -(U + V), -2 * V, -W, -W]).reshape(5 * P, 3))
         self.C0 = np.stack([np.cross(U, V).T, np.cross(V, W).T])  # (2, 3, P)
+        self.UVxW = np.ascontiguousarray(np.cross(U - V, W).T)  # (u - v) x w, (3, P)
         self.C1 = np.ascontiguousarray(
             np.stack([_skew(V - U), _skew(W)]).transpose(0, 2, 1, 3).reshape(6 * P, 3))
 
@@ -278,7 +289,7 @@ def initial_side(robot, p) -> np.ndarray:
     p = _position(p)
     if p.ndim != 1:
         raise ValueError(f"initial_side takes one position (3,), got shape {p.shape}")
-    dist, s, t, diff, n, D, a, b, c, e, s_L = _robot_kernel(_geometry(robot), p)
+    dist, s, t, diff, n, D, a, c = _robot_kernel(_geometry(robot), p)
     return _line_side(s, t, diff, n, D, a, c)[0]
 
 
@@ -508,7 +519,7 @@ def interference_force(robot, p, params: InterferenceParams, side=None) -> Inter
     p = _position(p)
     if p.ndim != 1:
         raise ValueError(f"interference_force takes one position (3,), got shape {p.shape}")
-    dist, s, t, diff, n, D, a, b, c, e, s_L = _robot_kernel(geo, p)
+    dist, s, t, diff, n, D, a, c = _robot_kernel(geo, p)
     line_side, straddle = _line_side(s, t, diff, n, D, a, c)
     near = dist <= params.d_u
     q = line_side if side is None else _side_memory(side, (P,))
@@ -516,19 +527,22 @@ def interference_force(robot, p, params: InterferenceParams, side=None) -> Inter
 
     ts = t - s
     pos = dist > 0.0
-    grad = diff * np.divide(ts, dist, out=np.zeros_like(dist), where=pos)
-    # |grad| = |t - s| where d > 0, so the unit direction is grad / |t - s|.
-    ats = np.abs(ts)
-    direction = grad * np.divide(1.0, ats, out=np.zeros_like(ats), where=ats > MIN_GRADIENT)
+    # n_hat = (C_i - C_j) / d: |diff_k| <= d, so this cannot overflow even for subnormal d
+    # (a reciprocal 1 / d could); at d == 0 it is diff itself, i.e. zero.
+    n_hat = diff / (dist + ~pos)
+    grad = n_hat * ts
+    # |grad| = |t - s|, so the unit push direction is sign(t - s) n_hat.
+    direction = n_hat * (np.sign(ts) * (np.abs(ts) > MIN_GRADIENT))
     intensity = _logistic(dist, params.F_u, params._b, params._mid) * near
     use_side = crossed | (straddle & ~pos)
     if use_side.any():
-        # Gradient of o sigma: o (t_L - s_L) n / |n| (t_L, s_L: the two lines' closest points).
+        # Gradient of o sigma: o (t_L - s_L) m_hat, with t_L - s_L = ((u - v) x w) . n / |n|^2
+        # (t_L, s_L: the two lines' closest points); u - v = U - V and w = W do not depend on
+        # p, so (u - v) x w is a per-pair constant and only its sign against n matters here.
+        g = np.sign(new_side) * (geo.UVxW * n).sum(axis=0)
         has_n = D > 0.0
-        t_L = (b * s_L + e) / np.where(c > 0.0, c, 1.0)
-        inv_n = np.divide(1.0, np.sqrt(D), out=np.zeros_like(D), where=has_n)
-        g = np.sign(new_side) * (t_L - s_L)
-        toward = n * (np.sign(g) * (np.abs(g) > MIN_GRADIENT) * inv_n)
+        m_hat = n / (np.sqrt(D) + ~has_n)
+        toward = m_hat * (np.sign(g) * (np.abs(g) > MIN_GRADIENT * D))
         direction = np.where(use_side, toward, direction)
         intensity = np.where(crossed, params.F_u, intensity)
     force = direction @ intensity

@@ -311,13 +311,27 @@ def test_nearly_parallel_segments_match_exact_rationals(xs, scale, digits, along
 
 
 @settings(max_examples=60, deadline=None)
+@given(st.lists(coords, min_size=12, max_size=12), st.sampled_from(SCALES),
+       st.integers(4, 300), st.booleans())
+def test_very_short_cable_matches_exact_rationals(xs, scale, digits, which):
+    # One cable 10^-digits times shorter than the scene (down to below the smallest normal
+    # length squared): the point-segment limit must come out, not round-off.
+    pts = np.array(xs).reshape(4, 3) * scale
+    k = 1 if which else 3
+    pts[k] = pts[k - 1] + (pts[k] - pts[k - 1]) * 10.0**-digits
+    check_against_exact(pts, scale)
+
+
+@settings(max_examples=60, deadline=None)
 @given(st.lists(coords, min_size=9, max_size=9), st.sampled_from(SCALES),
-       st.floats(0.0, 1.0), st.floats(0.0, 1.0), st.sampled_from([0.0, 1.0, -1.0]))
+       st.one_of(st.sampled_from([0.0, 1.0]), st.floats(0.0, 1.0)),
+       st.one_of(st.sampled_from([0.0, 1.0]), st.floats(0.0, 1.0)),
+       st.sampled_from([0.0, 1.0, -1.0]))
 def test_touching_and_shared_point_segments_match_exact_rationals(xs, scale, s0, t0, gap):
-    # Both cables pass through (or end at) a common point X, then cable j is lifted by gap
-    # ulps along a random direction: distance 0 or tiny, closest points at s0, t0.
+    # Both cables pass through (or end at) a common point X (s0, t0 = 0 or 1: a shared end
+    # point), then cable j is moved by gap * 1e-12 of the scale: distance 0 or tiny.
     X, u, v = (np.array(xs[3 * k:3 * k + 3]) * scale for k in range(3))
-    Bi, Bj = X - s0 * u, X - t0 * v
+    Bi, Bj = X - s0 * u, X - t0 * v + gap * 1e-12 * scale * np.array([0.36, -0.48, 0.8])
     pts = np.array([Bi, Bi + u, Bj, Bj + v])
     check_against_exact(pts, scale)
 
@@ -420,6 +434,21 @@ def test_pair_distances_follow_pair_order_and_batch(paper):
             B = P[n] + paper.attachments
             ref = segment_distance(B[i - 1], paper.reels[i - 1], B[j - 1], paper.reels[j - 1])
             assert D[n, k] == pytest.approx(ref.distance, abs=1e-15)
+
+
+@pytest.mark.parametrize("cable", range(1, 8))
+def test_platform_at_a_reel_gives_finite_exact_values(paper, cable):
+    # p + b_k = a_k: cable k has zero length (the robot path expands its products in p, so
+    # its length comes out as round-off, not 0). Outputs stay finite and match the scalar API.
+    p = paper.reels[cable - 1] - paper.attachments[cable - 1]
+    params = InterferenceParams.uniform(paper, 0.05, 0.061, 2.0)
+    res = interference_force(paper, p, params)
+    for field in ("force", "distance", "s", "t", "gradient", "intensity", "direction"):
+        assert np.all(np.isfinite(getattr(res, field))), field
+    B = p + paper.attachments
+    for k, (i, j) in enumerate(paper.pairs):
+        ref = segment_distance(B[i - 1], paper.reels[i - 1], B[j - 1], paper.reels[j - 1])
+        assert res.distance[k] == pytest.approx(ref.distance, abs=1e-12)
 
 
 def test_pair_distances_rejects_bad_positions(paper):
