@@ -409,7 +409,8 @@ def _check_logistic(d_l, d_u, F_u, eps, names):
             raise ValueError(message(int(bad[0])))
 
 
-@dataclasses.dataclass(frozen=True)
+# eq=False: the fields are arrays, whose == is elementwise (identity comparison instead).
+@dataclasses.dataclass(frozen=True, eq=False)
 class InterferenceParams:
     """Logistic parameters per watched pair (arrays of length robot.num_pairs, in
     `robot.pairs` order): d_l, d_u (m), F_u, eps (N); F_max (N) clips |F_int| (eq. 30).
@@ -486,7 +487,7 @@ def _finite(x) -> bool:
         return False
 
 
-@dataclasses.dataclass(frozen=True)
+@dataclasses.dataclass(frozen=True, eq=False)
 class InterferenceResult:
     """One tick of the interference block. Per pair arrays follow `robot.pairs`."""
 
