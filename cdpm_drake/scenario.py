@@ -374,7 +374,7 @@ def interference_params(scenario: Scenario, robot: Robot):
                 arrays[key][k] = float(value)
     F_max = float(cfg.F_max) if cfg.F_max is not None else (float(arrays["F_u"].max()) if P else 0.0)
     try:
-        return InterferenceParams(F_max=F_max, **arrays)
+        return InterferenceParams(F_max=F_max, pairs=tuple(robot.pairs), **arrays)
     except ValueError as e:
         raise ScenarioError(f"interference: {e}") from None
 

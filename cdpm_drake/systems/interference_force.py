@@ -11,9 +11,10 @@ class InterferenceForce(LeafSystem):
     """F_int from the platform position: distances of all watched cable pairs, the repulsive
     force along each distance gradient with logistic intensity, summed and clipped.
 
-    The crossing-side memory (one entry per pair: -1, 0, +1) lives in discrete state, updated
-    every tick, so that a crossing is remembered and the force pushes back towards the side the
-    cables started on. Its initial value comes from the default start position; call
+    The crossing-side memory (one entry per pair, see `interference.update_side`: its sign is
+    the side the cables started on, 0 while unknown, magnitude 2 while crossed) lives in
+    discrete state, updated every tick, so that a crossing is remembered and the force pushes
+    back towards the side the cables started on. Its initial value comes from the default start position; call
     `SetSideFromPosition` to start elsewhere.
 
     .. pydrake_system::
