@@ -159,11 +159,13 @@ class ReelBridge:
 
 @dataclasses.dataclass(frozen=True)
 class ReceivedCommand:
-    """A command as the emulator read it; `time` is the bridge clock, s."""
+    """A command as the emulator read it: `time` is the bridge clock when it was read, s;
+    `command_time` the controller's `time` field, s."""
 
     time: float
     tick: int
     sequence: int
+    command_time: float
     enable: bool
     velocity: np.ndarray
     fault_active: bool
@@ -306,7 +308,7 @@ class ReelBridgeServer:
             self._last_command = command
             self._last_command_wall = now
             newest = command
-            self.commands.append(ReceivedCommand(now, self.tick, command.sequence,
+            self.commands.append(ReceivedCommand(now, self.tick, command.sequence, command.time,
                                                  command.enable, command.velocity, active))
         return newest
 

@@ -1,0 +1,295 @@
+"""HardwareReelsSystem: the real reels (through the reel bridge) as a Drake plant.
+
+It has the simulated plant's ports, so the controller diagram does not change. Events at the
+control rate (period `time_step`):
+
+* initialisation (inside Simulator.Initialize): waits up to `startup_timeout` for the bridge's
+  first status, checks the measured lengths against the robot file, then enables with the
+  velocity ramp at 0. The state starts from those lengths, so the controller's forward
+  kinematics starts from the measured pose, not from the scenario's start.
+* publish at t_k: sends ramp x reel_velocity_command(t_k) (zero while disabled).
+* unrestricted update at t_k: drains the link, keeps the newest valid status, runs the
+  watchdog and advances the ramp. (Drake handles a step's publishes before the next step's
+  updates, so the command sent at t_k uses the lengths read at t_{k-1}.)
+
+A fault (no valid status for `watchdog_ticks` ticks, a bridge fault bit, a non-finite command)
+sends zero velocity with enable off at once, latches in the state, and the next publish raises
+ReelFault, which ends Simulator.AdvanceTo. (pydrake 1.51 crashes the process when a Python
+LeafSystem's event returns EventStatus.Failed(self, ...); a raised exception propagates out of
+AdvanceTo unchanged.)
+
+The socket is a resource, not state: it is held as an attribute because it cannot be copied
+into or restored from a Context. Everything that changes what the system outputs or sends
+(lengths, force, sequence numbers, watchdog counter, fault latch, enable flag, ramp) lives in
+the Context.
+"""
+
+import time
+
+import numpy as np
+from pydrake.systems.framework import LeafSystem
+
+from ..kinematics import KinematicsError, cable_lengths, forward_kinematics
+from .config import HardwareReels, check_hardware_reels
+from .link import ReelLink
+from .protocol import fault_names
+
+# Book-keeping state vector (float64; 32-bit sequence numbers are exact in a double).
+STATUS_SEQ = 0        # sequence of the last accepted status
+HAVE_STATUS = 1       # 1 once a status was accepted
+COMMAND_ECHO = 2      # last command sequence the bridge echoed (-1: none)
+MISSED = 3            # consecutive ticks without a valid status
+ENABLED = 4           # 1: commands carry enable and the ramped velocity
+RAMP = 5              # velocity scale, 0..1
+LAST_STATUS_WALL = 6  # time.monotonic() when the last valid status was read, s
+FAULT = 7             # fault latch: one of the FAULT_* reasons below (0: none)
+FAULT_BITS = 8        # the bridge's fault bits when FAULT == FAULT_BRIDGE
+FAULT_TIME = 9        # context time at which the fault latched, s
+STATUS_TIME = 10      # the last status's `time` field (echoed in commands), s
+COMMANDS_LOST = 11    # the bridge's count of commands it never received
+BOOK_SIZE = 12
+
+FAULT_NONE, FAULT_WATCHDOG, FAULT_BRIDGE = 0, 1, 2
+
+
+class ReelFault(RuntimeError):
+    """The hardware plant ended the run. Zero reel velocity with enable off was sent first.
+    `time` is the context time of the fault, s."""
+
+    def __init__(self, message: str, time: float | None = None):
+        super().__init__(message)
+        self.time = time
+
+
+class HardwareReelsSystem(LeafSystem):
+    """The reels and force sensor behind a reel bridge, over UDP (hardware/PROTOCOL.md).
+
+    .. pydrake_system::
+
+        name: reels
+        input_ports:
+        - reel_velocity_command (m/s of cable, one per cable, + pays out)
+        output_ports:
+        - cable_lengths (m, one per cable, as measured)
+        - measured_force (N, base frame, raw sensor sample)
+
+    `robot`: the robot (after cable swaps); its reel speed limit scales down any command
+    above it (the direction of motion is kept). `config`: a HardwareReels. `time_step`: the
+    control period, s.
+    """
+
+    def __init__(self, robot, config: HardwareReels, time_step: float = 0.002):
+        super().__init__()
+        check_hardware_reels(config)
+        if not (isinstance(time_step, (int, float)) and np.isfinite(time_step)
+                and time_step > 0):
+            raise ValueError(f"time_step must be a finite number > 0 s, got {time_step!r}")
+        self._robot = robot
+        self._config = config
+        self._T = float(time_step)
+        self._m = m = robot.num_cables
+        self._vmax = float(robot.limits.max_reel_speed)
+        self._ramp_step = 1.0 if config.ramp_time == 0 else self._T / config.ramp_time
+        # A catch-up burst of ticks after a stall of this process runs faster than the bridge
+        # sends; the watchdog also waits this much wall-clock time so such a burst cannot
+        # trip it, while a silent bridge still trips it on the N-th tick.
+        self._silence = (config.watchdog_ticks - 1) * self._T
+        self._link: ReelLink | None = None
+
+        self._command = self.DeclareVectorInputPort("reel_velocity_command", m)
+        # Placeholders until the initialisation event reads the bridge.
+        self._lengths = self.DeclareDiscreteState(cable_lengths(robot, robot.workspace.center))
+        self._force = self.DeclareDiscreteState(3)
+        book = np.zeros(BOOK_SIZE)
+        book[COMMAND_ECHO] = -1.0
+        self._book = self.DeclareDiscreteState(book)
+        self.DeclareStateOutputPort("cable_lengths", self._lengths)
+        self.DeclareStateOutputPort("measured_force", self._force)
+        self.DeclareInitializationUnrestrictedUpdateEvent(self._initialize_from_bridge)
+        self.DeclarePeriodicUnrestrictedUpdateEvent(self._T, 0.0, self._update_from_bridge)
+        self.DeclarePeriodicPublishEvent(self._T, 0.0, self._publish_command)
+
+    # --- resources ---------------------------------------------------------------------------
+
+    @property
+    def link(self) -> ReelLink | None:
+        """The open link (None before initialisation); its `counters` are the run's packet
+        statistics."""
+        return self._link
+
+    def _open_link(self) -> ReelLink:
+        if self._link is None or self._link.closed:
+            c = self._config
+            self._link = ReelLink(self._m, bridge=(c.address, c.port),
+                                  local=(c.local_address, c.local_port))
+        return self._link
+
+    def shutdown(self) -> None:
+        """Send zero velocity with enable off (`shutdown_repeats` copies). Safe to call at any
+        time and more than once, e.g. from the CLI's Ctrl-C / SIGTERM handling."""
+        link = self._link
+        if link is None or link.closed:
+            return
+        for _ in range(self._config.shutdown_repeats):
+            link.send_command(np.zeros(self._m), enable=False, echo_sequence=None)
+
+    def close(self) -> None:
+        """shutdown(), then release the socket."""
+        self.shutdown()
+        if self._link is not None:
+            self._link.close()
+
+    def book(self, context) -> dict:
+        """The book-keeping state as a dict (diagnostics: sequence numbers, watchdog, ramp)."""
+        b = context.get_discrete_state(self._book).get_value()
+        names = ("status_sequence", "have_status", "command_echo", "missed_ticks", "enabled",
+                 "ramp", "last_status_wall", "fault", "fault_bits", "fault_time",
+                 "status_time", "commands_lost")
+        return {k: float(b[i]) for i, k in enumerate(names)}
+
+    # --- events ------------------------------------------------------------------------------
+
+    def _initialize_from_bridge(self, context, state):
+        c = self._config
+        link = self._open_link()
+        zero = np.zeros(self._m)
+        deadline = time.monotonic() + c.startup_timeout
+        status = None
+        while status is None:
+            # Zero-velocity, enable-off greetings tell the bridge where to send its statuses.
+            link.send_command(zero, enable=False, echo_sequence=None, time=context.get_time())
+            link.wait(min(self._T, max(0.0, deadline - time.monotonic())))
+            status = link.receive(None)
+            if status is None and time.monotonic() >= deadline:
+                raise ReelFault(
+                    f"no valid status from the reel bridge at {c.address}:{c.port} within "
+                    f"startup_timeout = {c.startup_timeout:g} s; is the bridge (or "
+                    f"cdpm-reel-emulator) running and configured with this robot's "
+                    f"{self._m} cables? {self._link_summary()}", context.get_time())
+        if status.faults:
+            self.shutdown()
+            raise ReelFault(
+                f"refusing to enable the reels: the reel bridge reports fault bits "
+                f"{status.faults:#06x} ({', '.join(fault_names(status.faults))}) at startup",
+                context.get_time())
+        try:
+            forward_kinematics(self._robot, status.lengths,
+                                   max_residual=c.max_length_residual)
+        except KinematicsError as e:
+            self.shutdown()
+            raise ReelFault(
+                f"refusing to enable the reels: the measured cable lengths "
+                f"{np.round(status.lengths, 4).tolist()} m do not fit robot "
+                f"{self._robot.name!r} ({self._robot.source}) within max_length_residual = "
+                f"{c.max_length_residual:g} m: {e}. Check the robot file, the cable numbering "
+                f"and the encoders' zero offsets.", context.get_time()) from None
+        state.get_mutable_discrete_state(self._lengths).SetFromVector(status.lengths)
+        state.get_mutable_discrete_state(self._force).SetFromVector(status.force)
+        book = np.zeros(BOOK_SIZE)
+        book[STATUS_SEQ] = status.sequence
+        book[HAVE_STATUS] = 1.0
+        book[COMMAND_ECHO] = -1.0 if status.echo_sequence is None else status.echo_sequence
+        book[ENABLED] = 1.0
+        book[RAMP] = 0.0
+        book[LAST_STATUS_WALL] = time.monotonic()
+        book[STATUS_TIME] = status.time
+        book[COMMANDS_LOST] = status.commands_lost
+        state.get_mutable_discrete_state(self._book).SetFromVector(book)
+
+    def _update_from_bridge(self, context, state):
+        book = context.get_discrete_state(self._book).get_value().copy()
+        if book[FAULT] != FAULT_NONE:
+            return  # latched; the next publish ends the run
+        link = self._open_link()
+        last = int(book[STATUS_SEQ]) if book[HAVE_STATUS] else None
+        status = link.receive(last)
+        now = time.monotonic()
+        if status is not None:
+            state.get_mutable_discrete_state(self._lengths).SetFromVector(status.lengths)
+            state.get_mutable_discrete_state(self._force).SetFromVector(status.force)
+            book[STATUS_SEQ] = status.sequence
+            book[HAVE_STATUS] = 1.0
+            if status.echo_sequence is not None:
+                book[COMMAND_ECHO] = status.echo_sequence
+            book[MISSED] = 0.0
+            book[LAST_STATUS_WALL] = now
+            book[STATUS_TIME] = status.time
+            book[COMMANDS_LOST] = status.commands_lost
+            if status.faults:
+                book[FAULT], book[FAULT_BITS] = FAULT_BRIDGE, status.faults
+        else:
+            book[MISSED] += 1.0
+            if (book[MISSED] >= self._config.watchdog_ticks
+                    and now - book[LAST_STATUS_WALL] >= self._silence):
+                book[FAULT] = FAULT_WATCHDOG
+        if book[FAULT] != FAULT_NONE:
+            book[FAULT_TIME] = context.get_time()
+            book[ENABLED] = 0.0
+            book[RAMP] = 0.0
+            # Stop now rather than at the next publish, one tick later.
+            self.shutdown()
+        elif book[ENABLED]:
+            book[RAMP] = min(1.0, book[RAMP] + self._ramp_step)
+        state.get_mutable_discrete_state(self._book).SetFromVector(book)
+
+    def _publish_command(self, context):
+        book = context.get_discrete_state(self._book).get_value()
+        link = self._open_link()
+        if book[FAULT] != FAULT_NONE:
+            self.shutdown()
+            raise ReelFault(self._fault_message(book), float(book[FAULT_TIME]))
+        u = self._command.Eval(context)
+        bad = ~np.isfinite(u)
+        if bad.any():
+            self.shutdown()
+            k = int(np.argmax(bad))
+            raise ReelFault(
+                f"reel fault at t = {context.get_time():.3f} s: reel_velocity_command of cable "
+                f"{k + 1} is {float(u[k])!r} m/s; zero reel velocity sent", context.get_time())
+        if book[ENABLED]:
+            v = book[RAMP] * u
+            peak = float(np.max(np.abs(v)))
+            if peak > self._vmax:
+                v = v * (self._vmax / peak)
+        else:
+            v = np.zeros(self._m)
+        echo = int(book[STATUS_SEQ]) if book[HAVE_STATUS] else None
+        link.send_command(v, enable=bool(book[ENABLED]), echo_sequence=echo,
+                          echo_time=float(book[STATUS_TIME]), time=context.get_time())
+
+    # --- messages ----------------------------------------------------------------------------
+
+    def _link_summary(self) -> str:
+        if self._link is None:
+            return "link: not open"
+        k = self._link.counters
+        rejected = {r: n for r, n in k.rejected.items() if n}
+        text = (f"link: sent {k.sent}, received {k.received}, accepted {k.accepted}, "
+                f"rejected {rejected or 0}, foreign {k.foreign}")
+        if self._link.last_error:
+            text += f"; last rejected datagram: {self._link.last_error}"
+        return text
+
+    def _fault_message(self, book) -> str:
+        c = self._config
+        t = float(book[FAULT_TIME])
+        if book[FAULT] == FAULT_BRIDGE:
+            bits = int(book[FAULT_BITS])
+            why = (f"the reel bridge reports fault bits {bits:#06x} "
+                   f"({', '.join(fault_names(bits))})")
+        else:
+            n = int(book[MISSED])
+            why = (f"no valid status from the reel bridge at {c.address}:{c.port} for {n} ticks "
+                   f"({n * self._T * 1e3:.0f} ms; watchdog_ticks = {c.watchdog_ticks})")
+        return (f"reel fault at t = {t:.3f} s: {why}; zero reel velocity sent. "
+                f"{self._link_summary()}")
+
+
+def start_realtime(simulator, rate: float = 1.0) -> None:
+    """Initialise a simulator holding a HardwareReelsSystem for a real-time run.
+
+    Initialize() blocks while the reels wait for the bridge; Drake starts its real-time clock
+    before that, so without ResetStatistics() the first ticks would race to catch up."""
+    simulator.set_target_realtime_rate(rate)
+    simulator.Initialize()
+    simulator.ResetStatistics()

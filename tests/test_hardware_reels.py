@@ -1,0 +1,398 @@
+"""HardwareReelsSystem against the emulator thread on loopback, in real time.
+
+Each real-time test is bounded (at most ~1 s of simulated time) and checks, from the
+emulator's record of the commands it read, what actually went over the wire.
+"""
+
+import dataclasses
+import math
+import re
+import time
+import typing
+
+import numpy as np
+import pytest
+from pydrake.systems.analysis import Simulator
+from pydrake.systems.framework import DiagramBuilder, LeafSystem
+from pydrake.systems.primitives import ConstantVectorSource
+
+from cdpm_drake.hardware.config import HardwareReels, check_hardware_reels
+from cdpm_drake.hardware.emulator import FaultPlan, ReelBridge, ReelBridgeServer
+from cdpm_drake.hardware.protocol import FAULT_DRIVE, FAULT_ESTOP
+from cdpm_drake.hardware.reels import HardwareReelsSystem, ReelFault, start_realtime
+from cdpm_drake.kinematics import cable_lengths
+from cdpm_drake.robot import load_robot
+
+T = 0.002
+TAU = 0.01
+# Real-time tests share a 2-core host with everything else: a busy host can hold a thread
+# off the CPU for several ms (measured: sleep(2 ms) overshooting by 4.5 ms with one busy
+# core), long enough to trip a 3-tick watchdog on a healthy link. Tests that are not about
+# the watchdog give it 50 ms.
+RELAXED = dict(watchdog_ticks=25)
+
+
+@pytest.fixture(scope="module")
+def robot():
+    return load_robot("paper_7cable")
+
+
+@pytest.fixture(scope="module")
+def p0(robot):
+    # Away from the workspace centre, where the system's placeholder state sits.
+    return robot.workspace.center + np.array([0.2, -0.3, 0.1])
+
+
+@pytest.fixture
+def emulator(robot, p0):
+    servers = []
+
+    def start(faults=FaultPlan(), lengths=None, **options):
+        lengths = cable_lengths(robot, p0) if lengths is None else lengths
+        server = ReelBridgeServer(ReelBridge(robot, lengths, time_constant=TAU),
+                                  faults=faults, **options).start()
+        servers.append(server)
+        return server
+
+    yield start
+    for server in servers:
+        server.stop()
+
+
+def _diagram(robot, server, command, extra=None, **config):
+    cfg = HardwareReels(port=server.address[1], **config)
+    builder = DiagramBuilder()
+    source = builder.AddSystem(ConstantVectorSource(np.asarray(command, dtype=float)))
+    reels = builder.AddNamedSystem("reels", HardwareReelsSystem(robot, cfg, time_step=T))
+    builder.Connect(source.get_output_port(), reels.GetInputPort("reel_velocity_command"))
+    if extra is not None:
+        builder.AddSystem(extra)
+    return builder.Build(), reels
+
+
+def _command(m=7):
+    u = np.zeros(m)
+    u[0], u[2], u[5] = 0.06, -0.03, 0.09
+    return u
+
+
+# --- configuration ---------------------------------------------------------------------------
+
+
+def test_default_config_is_valid_and_loopback():
+    cfg = HardwareReels()
+    check_hardware_reels(cfg)
+    assert cfg.local_address == "127.0.0.1" and cfg.address == "127.0.0.1"
+    assert cfg.watchdog_ticks == 3
+
+
+@pytest.mark.parametrize("change,match", [
+    (dict(port=0), r"plant.port must be an integer in 1..65535 \(a UDP port\), got 0"),
+    (dict(address="10.0.0.300"), r"plant.address must be an IPv4 address .* got '10.0.0.300'"),
+    (dict(watchdog_ticks=0), r"plant.watchdog_ticks must be an integer in 1..1000"),
+    (dict(watchdog_ticks=2.5), r"plant.watchdog_ticks .* got 2.5"),
+    (dict(ramp_time=-0.1), r"plant.ramp_time must be a finite number >= 0 s, got -0.1"),
+    (dict(startup_timeout=0.0), r"plant.startup_timeout must be a finite number > 0 s"),
+    (dict(max_length_residual=float("nan")), r"plant.max_length_residual .* got nan"),
+])
+def test_bad_config_names_the_field_and_value(change, match, robot):
+    with pytest.raises(ValueError, match=match):
+        HardwareReelsSystem(robot, HardwareReels(**change))
+
+
+@dataclasses.dataclass
+class _OtherPlant:
+    gain: float = 1.0
+
+
+@dataclasses.dataclass
+class _Holder:
+    plant: typing.Union[_OtherPlant, HardwareReels] = dataclasses.field(
+        default_factory=_OtherPlant)
+
+
+def test_yaml_tag_is_the_class_name():
+    from pydrake.common.yaml import yaml_load_typed
+
+    holder = yaml_load_typed(schema=_Holder, data="plant: !HardwareReels {port: 47200, "
+                                                  "watchdog_ticks: 5}")
+    assert holder.plant == HardwareReels(port=47200, watchdog_ticks=5)
+
+
+def test_ports_match_the_simulated_plant_contract(robot):
+    from cdpm_drake.diagram import PLANT_PORTS
+
+    reels = HardwareReelsSystem(robot, HardwareReels())
+    inputs = {reels.get_input_port(k).get_name(): reels.get_input_port(k).size()
+              for k in range(reels.num_input_ports())}
+    outputs = {reels.get_output_port(k).get_name(): reels.get_output_port(k).size()
+               for k in range(reels.num_output_ports())}
+    assert inputs == {"reel_velocity_command": 7}
+    assert outputs == {"cable_lengths": 7, "measured_force": 3}
+    assert set(inputs) | set(outputs) == set(PLANT_PORTS)
+
+
+# --- start-up --------------------------------------------------------------------------------
+
+
+def test_state_starts_from_the_measured_lengths(robot, p0, emulator):
+    server = emulator()
+    diagram, reels = _diagram(robot, server, np.zeros(7))
+    simulator = Simulator(diagram)
+    try:
+        simulator.Initialize()
+        ctx = reels.GetMyContextFromRoot(simulator.get_context())
+        # The emulator's encoders read the lengths of the platform at p0, not at the workspace
+        # centre where the placeholder state was.
+        np.testing.assert_allclose(reels.GetOutputPort("cable_lengths").Eval(ctx),
+                                   cable_lengths(robot, p0), atol=1e-12)
+        book = reels.book(ctx)
+        assert book["enabled"] == 1.0 and book["ramp"] == 0.0 and book["fault"] == 0.0
+    finally:
+        reels.close()
+
+
+def test_refuses_to_enable_when_lengths_do_not_fit_the_robot(robot, p0, emulator):
+    lengths = cable_lengths(robot, p0)
+    lengths[2] += 0.05  # cable 3 miscalibrated by 5 cm
+    server = emulator(lengths=lengths)
+    diagram, reels = _diagram(robot, server, _command())
+    simulator = Simulator(diagram)
+    try:
+        with pytest.raises(ReelFault, match=r"refusing to enable the reels: the measured cable "
+                                            r"lengths .* do not fit robot 'paper_7cable' .* "
+                                            r"max_length_residual = 0.005 m"):
+            simulator.Initialize()
+    finally:
+        reels.close()
+    time.sleep(0.01)
+    commands = list(server.commands)
+    assert commands and not any(c.enable for c in commands)
+    assert all(np.all(c.velocity == 0) for c in commands)
+
+
+def test_refuses_to_enable_when_the_bridge_reports_a_fault(robot, emulator):
+    server = emulator(faults=FaultPlan(fault_bits=FAULT_ESTOP))
+    server.inject(FaultPlan(fault_bits=FAULT_ESTOP))  # from now, before any enabling command
+    time.sleep(0.01)
+    diagram, reels = _diagram(robot, server, _command())
+    try:
+        with pytest.raises(ReelFault, match=r"bridge reports fault bits 0x0001 \(ESTOP\) at "
+                                            r"startup"):
+            Simulator(diagram).Initialize()
+    finally:
+        reels.close()
+
+
+def test_startup_times_out_without_a_bridge(robot):
+    import socket
+
+    probe = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+    probe.bind(("127.0.0.1", 0))
+    port = probe.getsockname()[1]
+    probe.close()  # nothing listens there
+    cfg = HardwareReels(port=port, startup_timeout=0.1)
+    reels = HardwareReelsSystem(robot, cfg)
+    builder = DiagramBuilder()
+    source = builder.AddSystem(ConstantVectorSource(np.zeros(7)))
+    builder.AddSystem(reels)
+    builder.Connect(source.get_output_port(), reels.GetInputPort("reel_velocity_command"))
+    start = time.monotonic()
+    try:
+        with pytest.raises(ReelFault, match=rf"no valid status from the reel bridge at "
+                                            rf"127.0.0.1:{port} within startup_timeout = 0.1 s"):
+            Simulator(builder.Build()).Initialize()
+    finally:
+        reels.close()
+    assert time.monotonic() - start < 1.0
+
+
+# --- real-time runs --------------------------------------------------------------------------
+
+
+def test_lengths_follow_the_ramped_command(robot, p0, emulator):
+    server = emulator()
+    u = _command()
+    ramp = 0.1
+    diagram, reels = _diagram(robot, server, u, ramp_time=ramp, **RELAXED)
+    simulator = Simulator(diagram)
+    duration = 1.0
+    try:
+        start_realtime(simulator)
+        simulator.AdvanceTo(duration)
+        ctx = reels.GetMyContextFromRoot(simulator.get_context())
+        measured = reels.GetOutputPort("cable_lengths").Eval(ctx)
+        counters = reels.link.counters
+    finally:
+        reels.close()
+    time.sleep(0.01)  # the emulator reads its socket every 2 ms
+    commands = [c for c in server.commands if c.enable]
+    # Every tick's command is the ramp times the input: min(1, t / ramp_time) u, where
+    # t = k T is the command's own time field (the ramp steps by T / ramp_time per tick).
+    for c in commands:
+        np.testing.assert_allclose(c.velocity, min(1.0, c.command_time / ramp) * u,
+                                   rtol=1e-9, atol=1e-15)
+    times = np.array([c.command_time for c in commands])
+    assert times[0] == 0.0 and np.allclose(np.diff(times), T)  # one command per tick, no gap
+    assert len(commands) == round(duration / T) + 1
+    # The lag is linear and every command is proportional to u, so each cable moved by the
+    # same multiple of its command, in the controller's last reading (b) and in the reels
+    # (a, read after the run); cables with u = 0 did not move at all.
+    l0 = cable_lengths(robot, p0)
+    moving = u != 0
+    for lengths in (measured, server.bridge.lengths):
+        np.testing.assert_array_equal(lengths[~moving], l0[~moving])
+        ratio = (lengths - l0)[moving] / u[moving]
+        np.testing.assert_allclose(ratio, ratio[0], rtol=1e-9)
+    b = (measured - l0)[0] / u[0]
+    a = (server.bridge.lengths - l0)[0] / u[0]
+    # b is the run's effective duration: the run minus half the ramp, minus the lag, minus the
+    # link latency of a tick or two: 1 - 0.05 - 0.01 - ~0.004 s. Allow 3 % for scheduling.
+    assert b == pytest.approx(duration - ramp / 2 - TAU - 2 * T, rel=0.03)
+    # After the controller's last reading the reels ran on for a few ticks until the shutdown
+    # command, then coasted down the lag (tau of travel at full speed).
+    assert 0 < a - b < TAU + 6 * T
+    assert counters.lost == 0 and counters.foreign == 0
+
+
+class _Stall(LeafSystem):
+    """Blocks the simulator for `pause` s at time `at`, like a GC pause or a busy host."""
+
+    def __init__(self, at, pause):
+        super().__init__()
+        self._pause = pause
+        self.DeclarePeriodicPublishEvent(1.0, at, lambda context: time.sleep(self._pause))
+
+
+def test_a_catch_up_burst_after_a_stall_does_not_trip_the_watchdog(robot, emulator):
+    # After a 60 ms stall the simulator runs the missed ~30 ticks back to back, far faster
+    # than the bridge sends; counting ticks alone would trip a 10-tick watchdog in that burst
+    # (and does, with the wall-clock condition removed). 10 ticks = 20 ms rides out host
+    # hiccups; the bridge's own command watchdog is widened past the stall.
+    server = emulator(command_timeout=0.2)
+    diagram, reels = _diagram(robot, server, _command(), extra=_Stall(at=0.1, pause=0.06),
+                              watchdog_ticks=10)
+    simulator = Simulator(diagram)
+    try:
+        start_realtime(simulator)
+        simulator.AdvanceTo(0.25)
+        book = reels.book(reels.GetMyContextFromRoot(simulator.get_context()))
+    finally:
+        reels.close()
+    assert book["fault"] == 0.0
+
+
+FAULTS = {
+    "stop": (FaultPlan(stop=True), r"no valid status from the reel bridge at 127.0.0.1:\d+ for "
+                                   r"3 ticks \(6 ms; watchdog_ticks = 3\)"),
+    "freeze": (FaultPlan(freeze=True), r"for 3 ticks .* last rejected datagram: sequence \d+ "
+                                       r"repeats the last accepted one"),
+    "nan": (FaultPlan(nan=True), r"for 3 ticks .* last rejected datagram: lengths of cable 1 "
+                                 r"is nan m"),
+    "corrupt": (FaultPlan(corrupt=1.0), r"for 3 ticks .* rejected \{'(crc|magic|version|"
+                                        r"cable_count|flags)': 3"),
+    "fault_bit": (FaultPlan(fault_bits=FAULT_DRIVE), r"the reel bridge reports fault bits "
+                                                     r"0x0002 \(DRIVE\)"),
+}
+
+
+def _run_into_fault(robot, emulator, plan, attempts=3):
+    """Run until the reels stop the run, with the fault injected 0.1 s after enabling; retry
+    when a loaded host tripped the watchdog before the injection (detected exactly: the
+    controller disabled the reels before the emulator's onset)."""
+    early = []
+    for _ in range(attempts):
+        server = emulator(faults=dataclasses.replace(plan, after=0.1))
+        diagram, reels = _diagram(robot, server, _command(), ramp_time=0.0)
+        simulator = Simulator(diagram)
+        try:
+            start_realtime(simulator)
+            with pytest.raises(ReelFault) as info:
+                simulator.AdvanceTo(1.0)
+        finally:
+            reels.close()
+        time.sleep(0.01)
+        commands = list(server.commands)
+        enabled_at = next(k for k, c in enumerate(commands) if c.enable)
+        if not any(not c.enable and not c.fault_active for c in commands[enabled_at:]):
+            return server, commands, info.value
+        early.append(str(info.value))
+    pytest.skip(f"host too busy for 500 Hz on loopback: the watchdog tripped before the "
+                f"injected fault in {attempts} attempts; last: {early[-1]}")
+
+
+@pytest.mark.parametrize("name", list(FAULTS))
+def test_each_fault_ends_in_zero_velocity_within_three_ticks(name, robot, emulator):
+    plan, message = FAULTS[name]
+    server, commands, error = _run_into_fault(robot, emulator, plan)
+    assert re.search(r"reel fault at t = [\d.]+ s: .*" + message, str(error)), str(error)
+    assert "zero reel velocity sent" in str(error)
+    after = [c for c in commands if c.fault_active]
+    moving = [c for c in after if c.enable and np.any(c.velocity != 0)]
+    # The emulator marks the onset on its tick before sending that tick's status; commands it
+    # reads later were sent after it. A fault bit is seen by the first controller update
+    # after that status arrives (+1 command when the onset falls between a publish and its
+    # update, +1 for the bridge reading a command sent just before its onset a tick late).
+    # A bad or missing status needs watchdog_ticks = 3 silent updates by definition, plus the
+    # same two. (Typical on an idle host: 0 and 2.)
+    bound = 3 if name == "fault_bit" else 3 + 2
+    assert len(moving) <= bound, [(c.tick, c.sequence) for c in after]
+    # It ends with zero velocity, enable off, and nothing moving after it.
+    first_stop = next(k for k, c in enumerate(after) if not c.enable)
+    assert all(not c.enable and np.all(c.velocity == 0) for c in after[first_stop:])
+    # The stop was read within that many bridge ticks of the onset (+1: reading lags a tick).
+    assert after[first_stop].tick - server.fault_onset_tick <= bound + 1
+
+
+def test_a_non_finite_command_is_never_sent(robot, emulator):
+    server = emulator()
+    u = np.zeros(7)
+    u[3] = np.nan
+    diagram, reels = _diagram(robot, server, u)
+    simulator = Simulator(diagram)
+    try:
+        with pytest.raises(ReelFault, match=r"reel_velocity_command of cable 4 is nan m/s; "
+                                            r"zero reel velocity sent"):
+            start_realtime(simulator)
+    finally:
+        reels.close()
+    time.sleep(0.01)
+    assert not any(c.enable for c in server.commands)
+
+
+def test_shutdown_sends_zero_with_enable_off(robot, emulator):
+    server = emulator()
+    diagram, reels = _diagram(robot, server, _command(), ramp_time=0.0, **RELAXED)
+    simulator = Simulator(diagram)
+    try:
+        start_realtime(simulator)
+        simulator.AdvanceTo(0.05)
+        reels.shutdown()
+        time.sleep(0.01)
+        tail = list(server.commands)[-3:]
+        # shutdown_repeats = 3 copies, each with its own, newer sequence number.
+        assert [c.enable for c in tail] == [False] * 3
+        assert all(np.all(c.velocity == 0) for c in tail)
+        assert np.all(np.diff([c.sequence for c in tail]) == 1)
+        assert not server.bridge.enabled
+        # The last enabled command carried the full input (ramp_time 0).
+        last_on = [c for c in server.commands if c.enable][-1]
+        np.testing.assert_allclose(last_on.velocity, _command())
+    finally:
+        reels.close()
+
+
+def test_commands_above_the_reel_speed_limit_are_scaled_not_clipped(robot, emulator):
+    server = emulator()
+    u = _command() * 20.0  # peak 1.8 m/s against the robot's 1.0 m/s
+    diagram, reels = _diagram(robot, server, u, ramp_time=0.0, **RELAXED)
+    simulator = Simulator(diagram)
+    try:
+        start_realtime(simulator)
+        simulator.AdvanceTo(0.02)
+    finally:
+        reels.close()
+    last_on = [c for c in server.commands if c.enable][-1]
+    # Scaled as a whole to the limit: the direction of the motion is kept.
+    np.testing.assert_allclose(last_on.velocity, u * (1.0 / 1.8), rtol=1e-12)
+    assert math.isclose(np.max(np.abs(last_on.velocity)), robot.limits.max_reel_speed)
