@@ -34,6 +34,9 @@ def limit_velocity(v_desired, v_previous, p, lower, upper, *, max_velocity, max_
 
 
 def _wall_cap(v, p, lower, upper, a, T):
+    # Each axis brakes on its own curve; at a/sqrt(3) per axis the vector deceleration stays
+    # within a even where three faces meet (a corner), at the price of braking earlier at a face.
+    a = a / np.sqrt(3.0)
     gap_up = np.maximum(np.asarray(upper) - p, 0.0)
     gap_lo = np.maximum(p - np.asarray(lower), 0.0)
     # Braking curve and one-tick bound (no overshoot). The continuous curve sqrt(2 a gap) is

@@ -182,9 +182,6 @@ def test_pushing_into_a_face_stops_at_it_within_every_limit(start, force, axis, 
     assert abs(log["velocity_admittance"][-1, axis]) > 5.0  # the admittance still pushes
 
 
-@pytest.mark.xfail(strict=True, reason=(
-    "limit_velocity brakes each axis on its own curve at a: towards an edge the norm of the "
-    "deceleration reaches sqrt(2) a (sqrt(3) a at a corner)."))
 def test_pushing_into_an_edge_keeps_the_acceleration_limit():
     scenario = scripted([0.0], [[40.0, 30.0, 0.0]], NO_INTERFERENCE
                         + "initial_position: [2.8, 3.85, 1.22], sensor: {filter_window: 1},")

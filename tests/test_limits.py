@@ -47,12 +47,15 @@ def test_acceleration_is_capped_along_the_change():
 
 def test_braking_curve_near_a_face():
     # 10 mm from the upper x face, moving towards it at 0.5 m/s with a speed limit of 1 m/s:
-    # the discrete braking curve allows sqrt(2 a gap) - a T / 2 = sqrt(0.04) - 0.002 = 0.198 m/s
-    # (derivation in limits._wall_cap). The wall wins over the acceleration limit.
+    # the discrete braking curve allows sqrt(2 a' gap) - a' T / 2 with a' = a / sqrt(3) per
+    # axis (derivation in limits._wall_cap): with a = 2, sqrt(0.04 / sqrt(3)) - 0.002 / sqrt(3)
+    # = 0.150812 m/s. The wall wins over the acceleration limit.
     p = CENTER.copy()
     p[0] = UPPER[0] - 0.01
     v = limit([0.5, 0.0, 0.0], [0.5, 0.0, 0.0], p, max_velocity=1.0)
-    np.testing.assert_allclose(v, [0.198, 0.0, 0.0], rtol=0, atol=1e-12)
+    cap = np.sqrt(0.04 / np.sqrt(3.0)) - 0.002 / np.sqrt(3.0)
+    np.testing.assert_allclose(v, [cap, 0.0, 0.0], rtol=0, atol=1e-12)
+    assert abs(cap - 0.150812) < 1e-6
     # The same speed away from the face is not touched; nor are the other axes.
     v = limit([-0.5, 0.3, -0.2], [-0.5, 0.3, -0.2], p, max_velocity=1.0)
     np.testing.assert_array_equal(v, [-0.5, 0.3, -0.2])
@@ -145,9 +148,9 @@ def test_far_from_the_faces_the_wall_changes_nothing(v_desired, v_previous, u):
     n = np.linalg.norm(v_previous)
     if n > V_MAX:
         v_previous = v_previous * (V_MAX / n)
-    # Farther than the braking distance of the top speed (v^2 / 2a + v T = 0.0635 m) plus a
-    # step, the wall cap is inactive.
-    margin = 0.1
+    # Farther than the braking distance of the top speed at the per-axis deceleration
+    # a' = a / sqrt(3) (v^2 / 2a' + v T = 0.1093 m) plus a step, the wall cap is inactive.
+    margin = 0.15
     p = LOWER + margin + np.array(u) * (UPPER - LOWER - 2 * margin)
     np.testing.assert_array_equal(limit(v_desired, v_previous, p),
                                   limit(v_desired, v_previous, p, virtual_wall=False))

@@ -270,10 +270,11 @@ def test_safety_limits_block_wraps_limit_velocity_and_remembers_its_command():
         np.testing.assert_array_equal(out, expected)
         context.SetDiscreteState(limits.EvalUniquePeriodicDiscreteUpdate(context))
         v_previous = expected
-    # The wall clips the x component of the desired (0.4, 0.3) to sqrt(2 a 0.01) - a T / 2 =
-    # 0.198 m/s; from rest, five ticks of a T = 0.004 m/s each along (0.198, 0.3) make
-    # 0.02 m/s in that direction.
-    direction = np.array([0.198, 0.3, 0.0]) / np.hypot(0.198, 0.3)
+    # The wall clips the x component of the desired (0.4, 0.3) to sqrt(2 a' 0.01) - a' T / 2
+    # with a' = a / sqrt(3) (per-axis braking, limits._wall_cap) = 0.150812 m/s; from rest,
+    # five ticks of a T = 0.004 m/s each along (0.150812, 0.3) make 0.02 m/s that way.
+    cap = np.sqrt(0.04 / np.sqrt(3.0)) - 0.002 / np.sqrt(3.0)
+    direction = np.array([cap, 0.3, 0.0]) / np.hypot(cap, 0.3)
     np.testing.assert_allclose(v_previous, 0.02 * direction, atol=1e-15)
 
 
