@@ -46,6 +46,9 @@ class BuildOptions:
     loggers: bool = True
     # Overrides scenario.interference.enabled when False (benchmark without the block).
     interference: bool = True
+    # Also stream every logged signal to this file as the run goes (hardware/tick_log.py):
+    # a real-time run must not lose its log if the process dies.
+    tick_log: str | None = None
 
 
 def build_diagram(scenario: Scenario, options: BuildOptions = BuildOptions()) -> Diagram:
@@ -110,6 +113,8 @@ def build_diagram(scenario: Scenario, options: BuildOptions = BuildOptions()) ->
 
     if options.loggers:
         _add_loggers(builder, T)
+    if options.tick_log is not None:
+        _add_tick_log(builder, T, options.tick_log, robot, scenario)
     diagram = builder.Build()
     diagram.set_name("cdpm_controller")
     return diagram
@@ -157,14 +162,26 @@ def build_simulated_plant(scenario: Scenario, robot) -> Diagram:
 
 
 def _add_loggers(builder, T):
-    systems = {builder.GetSubsystemByName(n).get_name()
-               for n in {s for _, s, _ in LOGGED} if builder.HasSubsystemNamed(n)}
-    for key, system_name, port_name in LOGGED:
-        if system_name not in systems:
-            continue
-        port = builder.GetSubsystemByName(system_name).GetOutputPort(port_name)
+    for key, port in list(_logged_ports(builder)):
         logger = builder.AddNamedSystem(f"log_{key}", VectorLogSink(port.size(), T))
         builder.Connect(port, logger.get_input_port())
+
+
+def _logged_ports(builder):
+    for key, system_name, port_name in LOGGED:
+        if builder.HasSubsystemNamed(system_name):
+            yield key, builder.GetSubsystemByName(system_name).GetOutputPort(port_name)
+
+
+def _add_tick_log(builder, T, path, robot, scenario):
+    from .hardware.tick_log_sink import TickLogSink
+
+    ports = dict(_logged_ports(builder))
+    sink = builder.AddNamedSystem("tick_log", TickLogSink(
+        path, {key: port.size() for key, port in ports.items()}, time_step=T,
+        metadata={"robot": robot.name, "scenario": scenario.name, "time_step": T}))
+    for key, port in ports.items():
+        builder.Connect(port, sink.GetInputPort(key))
 
 
 def _or(value, default):

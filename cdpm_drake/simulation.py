@@ -77,20 +77,26 @@ def simulate(*, scenario: Scenario, duration: float | None = None, progress: boo
 
 def collect_log(diagram, context, scenario: Scenario, robot) -> dict:
     """The loggers' contents as named arrays, one row per tick (docs/LOG_FORMAT.md)."""
-    log = {}
-    time_column = None
+    signals = {}
+    time_column = np.zeros(0)
     for key, _, _ in LOGGED:
         name = f"log_{key}"
         if not diagram.HasSubsystemNamed(name):
             continue
         data = diagram.GetSubsystemByName(name).FindLog(context)
-        log[key] = data.data().T.copy()
-        if time_column is None:
-            time_column = data.sample_times().copy()
+        signals[key] = data.data().T.copy()
+        time_column = data.sample_times().copy()
+    return assemble_log(time_column, signals, scenario, robot)
+
+
+def assemble_log(time_column, signals: dict, scenario: Scenario, robot) -> dict:
+    """docs/LOG_FORMAT.md from the logged signals ({LOGGED key: (T, width)}): fills the
+    signals of blocks the diagram did not have, and adds the robot and parameters."""
+    log = dict(signals)
     T = len(time_column)
-    m, P = robot.num_cables, robot.num_pairs
-    log["time"] = time_column
-    if "pair_distances" not in log and P:
+    P = robot.num_pairs
+    log["time"] = np.asarray(time_column, dtype=float)
+    if "pair_distances" not in log and P and "p" in log:
         # No interference block (disabled): the distances are still worth a look.
         from .interference import pair_distances
         log["pair_distances"] = pair_distances(robot, log["p"]).reshape(T, P)
@@ -98,7 +104,7 @@ def collect_log(diagram, context, scenario: Scenario, robot) -> dict:
                        ("crossed", P)):
         log.setdefault(key, np.zeros((T, width)))
     for key in ("active", "crossed"):
-        log[key] = log[key] > 0.5
+        log[key] = np.asarray(log[key]) > 0.5
     log["pairs"] = np.array(robot.pairs, dtype=int).reshape(P, 2)
     if scenario.interference.enabled and P:
         params = interference_params(scenario, robot)
