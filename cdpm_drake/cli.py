@@ -153,6 +153,40 @@ def _live_meshcat(scenario):
     return live_view_callback(view)
 
 
+# --- run -------------------------------------------------------------------------------------
+
+
+def run_main(*, scenario, duration=None, out_dir=None, out=None, on_status=None) -> int:
+    """Run on the reels in real time; print live status and the end report. Exit code 0 when
+    the run completed or was stopped by Ctrl-C/SIGTERM, 1 on a fault."""
+    from .realtime import report_lines, run
+
+    out = sys.stdout if out is None else out
+    out_dir = Path(out_dir if out_dir is not None else Path("runs") / f"{scenario.name}_robot")
+    tty = sys.stderr.isatty()
+
+    def status(line):
+        if on_status is not None:
+            on_status(line)
+        print(("\r" + line) if tty else line, end="" if tty else "\n", file=sys.stderr,
+              flush=True)
+
+    result = run(scenario=scenario, out_dir=out_dir, duration=duration, status=status)
+    if tty:
+        print(file=sys.stderr)
+    for line in report_lines(result):
+        print(line, file=out)
+    if result.ending == "fault":
+        print(f"cdpm run: error: {result.error}", file=sys.stderr)
+        return 1
+    return 0
+
+
+def _cmd_run(args) -> int:
+    _check_duration(args.duration)
+    return run_main(scenario=_load_scenario_arg(args), duration=args.duration, out_dir=args.out)
+
+
 # --- plot ------------------------------------------------------------------------------------
 
 
@@ -237,6 +271,24 @@ def _parser() -> argparse.ArgumentParser:
                    help="also write the paper's figures as PNGs next to the log")
     p.set_defaults(func=_cmd_simulate)
 
+    p = sub.add_parser("run", help="run a scenario in real time against the reels",
+                       description="Build the same diagram with the scenario's !HardwareReels "
+                                   "plant and run it at 500 Hz in real time against the reel "
+                                   "bridge (or cdpm-reel-emulator). Ctrl-C or SIGTERM stop it "
+                                   "cleanly (zero reel velocity is sent first); every tick is "
+                                   "logged to disk as it goes.")
+    _scenario_args(p, default=None)
+    p.add_argument("--duration", type=float, help="run time, s (default: the scenario's)")
+    p.add_argument("--out", type=Path,
+                   help="output directory (default: runs/<scenario name>_robot)")
+    p.set_defaults(func=_cmd_run)
+
+    p = sub.add_parser("emulate", help="play the reel bridge on loopback (cdpm-reel-emulator)",
+                       description="Same as cdpm-reel-emulator; `cdpm emulate --help` lists "
+                                   "its options.", add_help=False)
+    p.add_argument("emulator_args", nargs="*",
+                   help="options of cdpm-reel-emulator, e.g. --scenario exp2_interaction")
+
     p = sub.add_parser("plot", help="plot a log: the paper's Figs. 8-16 as PNGs",
                        description="Plot a log.npz: pair distances with d_l and d_u (Fig. 10), "
                                    "forces (Figs. 11, 13, 16), the 3D trajectory with "
@@ -261,12 +313,17 @@ def _parser() -> argparse.ArgumentParser:
     return parser
 
 
-def _scenario_args(p):
+def _scenario_args(p, default="exp2_interaction"):
     from .scenario import scenario_names
 
-    p.add_argument("scenario", nargs="?", default="exp2_interaction",
-                   help=f"a built-in scenario ({', '.join(scenario_names())}) or a path to a "
-                        "scenario YAML (default: exp2_interaction)")
+    names = ", ".join(scenario_names())
+    if default is None:
+        p.add_argument("scenario", help=f"a built-in scenario ({names}) or a path to a "
+                                        "scenario YAML")
+    else:
+        p.add_argument("scenario", nargs="?", default=default,
+                       help=f"a built-in scenario ({names}) or a path to a scenario YAML "
+                            f"(default: {default})")
     p.add_argument("--scenario-text", default=None, metavar="YAML",
                    help="YAML overlay for one-off changes, e.g. "
                         "'{duration: 5, interference: {default: {F_u: 4.0}}}'")
@@ -278,6 +335,12 @@ def main(argv=None) -> int:
     from .robot import RobotError
     from .scenario import ScenarioError
 
+    argv = sys.argv[1:] if argv is None else list(argv)
+    if argv[:1] == ["emulate"]:
+        # argparse cannot hand options through a sub-command untouched; the emulator parses
+        # its own.
+        from .hardware.emulator import main as emulator_main
+        return emulator_main(argv[1:])
     args = _parser().parse_args(argv)
     try:
         return int(args.func(args) or 0)

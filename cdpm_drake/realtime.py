@@ -1,0 +1,178 @@
+"""Running the same diagram in real time against the reels (`cdpm run`).
+
+The scenario's plant must be `!HardwareReels`; the builder is the simulation's. Every tick is
+streamed to `DIR/ticks.bin` as the run goes (nothing but the last few unflushed ticks is lost if
+the process is killed); at the end it is converted to `DIR/log.npz` (docs/LOG_FORMAT.md). Any
+way the run ends (its duration, Ctrl-C, SIGTERM, a reel fault, any error) zero reel velocity
+with enable off is sent before anything else.
+"""
+
+import dataclasses
+import signal
+import sys
+import threading
+import time
+from pathlib import Path
+
+import numpy as np
+from pydrake.systems.analysis import Simulator
+
+from .diagram import LOGGED, BuildOptions, build_diagram
+from .scenario import Scenario, ScenarioError, SimulatedReels, check_scenario, scenario_to_yaml
+from .simulation import assemble_log
+
+
+@dataclasses.dataclass
+class RunResult:
+    log: dict
+    # Tick timing from the tick log (hardware.tick_log.realtime_stats), s.
+    timing: dict
+    # The link's counters and the bridge's count of commands it never received.
+    link: dict
+    # Why the run ended early (ReelFault, KinematicsError, ...), or None.
+    error: Exception | None
+    # "completed", "interrupted" (Ctrl-C / SIGTERM) or "fault".
+    ending: str
+    log_path: Path
+    tick_log_path: Path
+
+
+class _StopRequest:
+    """Ctrl-C and SIGTERM set a flag that the run loop checks between short steps; raising
+    inside Drake's event loop instead would skip nothing but could leave a half-done tick."""
+
+    def __init__(self):
+        self.signal = None
+        self._previous = {}
+
+    def __enter__(self):
+        if threading.current_thread() is threading.main_thread():
+            for sig in (signal.SIGINT, signal.SIGTERM):
+                self._previous[sig] = signal.signal(sig, self._handle)
+        return self
+
+    def _handle(self, signum, frame):
+        self.signal = signal.Signals(signum).name
+
+    def __exit__(self, *exc):
+        for sig, handler in self._previous.items():
+            signal.signal(sig, handler)
+
+
+def run(*, scenario: Scenario, out_dir, duration: float | None = None, status=None,
+        status_period: float = 1.0, step: float = 0.02) -> RunResult:
+    """Run the scenario's diagram at real-time rate 1 against the reel bridge.
+
+    `status(text)` receives a one-line live status every `status_period` s of run time.
+    The loop advances `step` s at a time, so Ctrl-C / SIGTERM stop it within that.
+    """
+    from .hardware.reels import ReelFault, start_realtime
+    from .hardware.tick_log import read_tick_log, realtime_stats
+
+    robot = check_scenario(scenario)
+    if isinstance(scenario.plant, SimulatedReels):
+        raise ScenarioError(
+            f"scenario {scenario.name!r} has plant: !SimulatedReels; `cdpm run` drives real "
+            "reels and needs plant: !HardwareReels {address: ..., port: ...} (use `cdpm "
+            "simulate` for a simulation, or --scenario-text 'plant: !HardwareReels {}')")
+    duration = scenario.duration if duration is None else float(duration)
+    if not (duration > 0 and np.isfinite(duration)):
+        raise ScenarioError(f"duration must be a finite number > 0 s, got {duration!r}")
+    out = Path(out_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    (out / "scenario.yaml").write_text(scenario_to_yaml(scenario))
+    tick_path = out / "ticks.bin"
+    diagram = build_diagram(scenario, BuildOptions(loggers=False, tick_log=str(tick_path)))
+    reels = diagram.GetSubsystemByName("reels")
+    sink = diagram.GetSubsystemByName("tick_log")
+    simulator = Simulator(diagram)
+    context = simulator.get_context()
+    T = scenario.time_step
+    end = np.floor(duration / T + 1e-9) * T
+    error, ending = None, "completed"
+    with _StopRequest() as stop:
+        try:
+            start_realtime(simulator, 1.0)
+            t, next_status = 0.0, 0.0
+            while t < end - 1e-12:
+                if stop.signal is not None:
+                    ending = "interrupted"
+                    break
+                t = min(t + step, end)
+                simulator.AdvanceTo(t)
+                if status is not None and t >= next_status:
+                    status(_status_line(diagram, context, reels, t))
+                    next_status += status_period
+        except ReelFault as e:
+            error, ending = e, "fault"
+        except Exception as e:  # KinematicsError, a bad packet path, ...: stop the reels
+            error, ending = e, "fault"
+        finally:
+            reels.shutdown()  # zero velocity first, whatever happened
+            sink.close()
+            link = _link_report(reels, context)
+            reels.close()
+    raw = read_tick_log(tick_path) if tick_path.exists() else {}
+    timing = realtime_stats(raw, T) if raw else {}
+    signals = {key: raw[key] for key, _, _ in LOGGED if key in raw}
+    log = assemble_log(raw.get("time", np.zeros(0)), signals, scenario, robot)
+    log["tick"] = raw.get("tick", np.zeros(0, dtype=int))
+    log["wall"] = raw.get("wall", np.zeros(0))
+    log_path = out / "log.npz"
+    np.savez_compressed(log_path, **log)
+    return RunResult(log=log, timing=timing, link=link, error=error, ending=ending,
+                     log_path=log_path, tick_log_path=tick_path)
+
+
+def _output(diagram, context, system_name, port_name):
+    system = diagram.GetSubsystemByName(system_name)
+    return system.GetOutputPort(port_name).Eval(system.GetMyContextFromRoot(context))
+
+
+def _status_line(diagram, context, reels, t) -> str:
+    p = _output(diagram, context, "forward_kinematics", "p_WP")
+    F_H = _output(diagram, context, "force_sensor", "F_H")
+    text = (f"t {t:7.2f} s  p [{p[0]:.3f}, {p[1]:.3f}, {p[2]:.3f}] m  |F_H| "
+            f"{np.linalg.norm(F_H):5.2f} N")
+    if diagram.HasSubsystemNamed("interference_force"):
+        d = _output(diagram, context, "interference_force", "pair_distances")
+        F = _output(diagram, context, "interference_force", "F_int")
+        text += f"  |F_int| {np.linalg.norm(F):4.2f} N  closest pair {1000 * d.min():6.1f} mm"
+    link = reels.link
+    if link is not None:
+        k = link.counters
+        text += f"  link sent {k.sent} accepted {k.accepted} lost {k.lost}"
+    return text
+
+
+def _link_report(reels, context) -> dict:
+    link = reels.link
+    report = {} if link is None else link.counters.as_dict()
+    try:
+        report["commands_lost_at_bridge"] = int(reels.book(
+            reels.GetMyContextFromRoot(context))["commands_lost"])
+    except Exception:  # the context may be gone after a failed initialisation
+        report.setdefault("commands_lost_at_bridge", None)
+    return report
+
+
+def report_lines(result: RunResult) -> list[str]:
+    """The end-of-run summary: tick period percentiles, overruns, lost packets, faults."""
+    t = result.timing
+    lines = [f"run ended: {result.ending}"
+             + (f" ({type(result.error).__name__}: {result.error})" if result.error else "")]
+    if t:
+        ms = {k: 1e3 * t[k] for k in ("p50", "p99", "max")}
+        lines.append(f"ticks logged {t['ticks']}, missing {t['missing_ticks']}, overruns "
+                     f"{t['overruns']}; tick period p50 {ms['p50']:.3f} ms, p99 "
+                     f"{ms['p99']:.3f} ms, max {ms['max']:.3f} ms")
+    k = result.link
+    if k:
+        rejected = {r: n for r, n in k.get("rejected", {}).items() if n}
+        lines.append(
+            f"packets: commands sent {k.get('sent', 0)}, lost before the bridge "
+            f"{k.get('commands_lost_at_bridge')}; statuses received {k.get('received', 0)}, "
+            f"accepted {k.get('accepted', 0)}, lost {k.get('lost', 0)}, rejected "
+            f"{rejected or 0}, foreign {k.get('foreign', 0)}")
+    lines.append(f"log: {result.log_path} (stream: {result.tick_log_path})")
+    return lines
