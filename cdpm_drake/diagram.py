@@ -77,7 +77,7 @@ def build_diagram(scenario: Scenario, options: BuildOptions = BuildOptions()) ->
     forces = [force_sensor.GetOutputPort("F_H")]
     if scenario.interference.enabled and options.interference and robot.num_pairs > 0:
         interference = builder.AddNamedSystem("interference_force", InterferenceForce(
-            robot, interference_params(scenario, robot), initial_position=p0, time_step=T))
+            robot, interference_params(scenario, robot), time_step=T))
         builder.Connect(p_WP, interference.GetInputPort("p_WP"))
         forces.append(interference.GetOutputPort("F_int"))
     wall = scenario.wall_force

@@ -4,7 +4,7 @@ import numpy as np
 from pydrake.common.value import AbstractValue
 from pydrake.systems.framework import LeafSystem, ValueProducer
 
-from ..interference import initial_side, interference_force
+from ..interference import interference_force
 
 
 class InterferenceForce(LeafSystem):
@@ -14,8 +14,9 @@ class InterferenceForce(LeafSystem):
     The crossing-side memory (one entry per pair, see `interference.update_side`: its sign is
     the side the cables started on, 0 while unknown, magnitude 2 while crossed) lives in
     discrete state, updated every tick, so that a crossing is remembered and the force pushes
-    back towards the side the cables started on. Its initial value comes from the default start position; call
-    `SetSideFromPosition` to start elsewhere.
+    back towards the side the cables started on. It starts unknown (0): the first tick adopts
+    the sides the cables are on wherever the platform really is (on the robot, the measured
+    pose rather than the scenario's start); the start is assumed not crossed.
 
     .. pydrake_system::
 
@@ -29,14 +30,13 @@ class InterferenceForce(LeafSystem):
         - crossed (1 where the pair is crossed)
     """
 
-    def __init__(self, robot, params, *, initial_position, time_step=0.002):
+    def __init__(self, robot, params, *, time_step=0.002):
         super().__init__()
         self._robot = robot
         self._params = params
         P = robot.num_pairs
         self._p = self.DeclareVectorInputPort("p_WP", 3)
-        self._side = self.DeclareDiscreteState(
-            initial_side(robot, np.asarray(initial_position, dtype=float)).astype(float))
+        self._side = self.DeclareDiscreteState(P)  # 0: unknown
         deps = {self._p.ticket(), self.discrete_state_ticket(self._side)}
         # One evaluation of the math per tick, shared by all outputs and the update.
         self._result = self.DeclareCacheEntry(
@@ -51,11 +51,6 @@ class InterferenceForce(LeafSystem):
         self.DeclareVectorOutputPort("crossed", P, self._calc_crossed,
                                      prerequisites_of_calc=deps)
         self.DeclarePeriodicDiscreteUpdateEvent(time_step, 0.0, self._update_side)
-
-    def SetSideFromPosition(self, context, p):
-        """Reset the crossing-side memory to the sides the cables are on at `p` (m)."""
-        context.SetDiscreteState(self._side,
-                                 initial_side(self._robot, np.asarray(p, float)).astype(float))
 
     def _calc_result(self, context, abstract_value):
         side = context.get_discrete_state(self._side).get_value().astype(np.int8)
