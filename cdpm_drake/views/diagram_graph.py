@@ -18,7 +18,18 @@ def stable_graphviz(diagram, max_depth: int = 1) -> str:
             ids[key] = str(len(ids))
         return match.group(1) + ids[key]
 
-    return _ID.sub(renumber, text)
+    lines = _ID.sub(renumber, text).split("\n")
+    # Drake lists connections in pointer order, which differs between processes: sort each
+    # run of edge lines.
+    out, run = [], []
+    for line in lines + [""]:
+        if " -> " in line:
+            run.append(line)
+            continue
+        out.extend(sorted(run))
+        run = []
+        out.append(line)
+    return "\n".join(out[:-1])
 
 
 def render_svg(dot_text: str) -> str:
