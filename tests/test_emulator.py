@@ -344,3 +344,21 @@ def test_cli_runs_as_a_process_for_a_bounded_time():
     assert out.returncode == 0, out.stderr
     assert "robot 'paper_7cable' (7 cables) on 127.0.0.1:" in out.stdout
     assert "0 commands received" in out.stdout
+
+
+def test_rt_priority_flag_sets_sched_fifo_or_says_why_not():
+    code = ("import os, sys\n"
+            "from cdpm_drake.hardware.priority import PriorityError, set_realtime_priority\n"
+            "try:\n"
+            "    set_realtime_priority(1)\n"
+            "except PriorityError as e:\n"
+            "    print('refused', e); sys.exit(0)\n"
+            "print('fifo', os.sched_getscheduler(0) == os.SCHED_FIFO)\n")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
+                         timeout=60)
+    assert out.returncode == 0, out.stderr
+    assert out.stdout.startswith(("fifo True", "refused cannot set SCHED_FIFO priority 1: run "
+                                               "as root, grant CAP_SYS_NICE"))
+    with pytest.raises(ValueError, match=r"rt_priority must be an integer in 0..99 .* got 100"):
+        from cdpm_drake.hardware.priority import set_realtime_priority
+        set_realtime_priority(100)

@@ -15,6 +15,7 @@ Examples:
 import argparse
 import collections
 import dataclasses
+import gc
 import math
 import socket
 import sys
@@ -26,6 +27,7 @@ import numpy as np
 from ..kinematics import KinematicsError, cable_lengths, forward_kinematics, jacobian
 from .config import DEFAULT_BRIDGE_PORT
 from .link import resolve_ipv4
+from .priority import set_realtime_priority
 from .protocol import (FAULT_COMMAND_TIMEOUT, FAULT_OVERSPEED, MAX_FORCE, REASONS,
                        ProtocolError, SequenceTracker, Status, decode_command, encode_status,
                        next_sequence)
@@ -184,6 +186,8 @@ class ReelBridgeServer:
                  faults: FaultPlan = FaultPlan(), period: float = 0.002, seed: int = 0,
                  controller: tuple[str, int] | None = None, command_timeout: float = 0.05,
                  record: int = 100_000):
+        """`record`: how many received commands to keep in `commands` (tests read them; the
+        command-line emulator keeps none)."""
         if not (math.isfinite(period) and period > 0):
             raise ValueError(f"period must be a finite number > 0 s, got {period!r}")
         self.bridge = bridge
@@ -227,6 +231,12 @@ class ReelBridgeServer:
     @property
     def faults(self) -> FaultPlan:
         return self._faults
+
+    @property
+    def commands_lost(self) -> int:
+        """Command sequence numbers skipped by the commands read (the status's
+        commands_lost)."""
+        return self._tracker.lost
 
     def inject(self, faults: FaultPlan) -> None:
         """Replace the fault plan while running; its `after` counts from now."""
@@ -423,6 +433,9 @@ def _parser() -> argparse.ArgumentParser:
                    help="raise COMMAND_TIMEOUT when enabled and no command came for this "
                    "long, s (default 0.05)")
     n.add_argument("--duration", type=float, default=None, help="stop after this long, s")
+    n.add_argument("--rt-priority", type=int, default=0, metavar="N",
+                   help="run under SCHED_FIFO at priority N (1..99; needs root or "
+                   "CAP_SYS_NICE), as a real bridge's firmware would; default 0: normal")
     f = p.add_argument_group("fault injection (from --fault-after s after the first enable)")
     f.add_argument("--seed", type=int, default=0, help="random seed of the impairments")
     f.add_argument("--drop", type=float, default=0.0, help="share of datagrams dropped")
@@ -487,16 +500,22 @@ def build_server(args) -> ReelBridgeServer:
     return ReelBridgeServer(bridge, address=(args.address or address,
                                              args.port if args.port is not None else port),
                             faults=faults, period=args.period, seed=args.seed,
-                            controller=controller, command_timeout=args.command_timeout)
+                            controller=controller, command_timeout=args.command_timeout,
+                            record=0)
 
 
 def main(argv=None) -> int:
     args = _parser().parse_args(argv)
     try:
+        set_realtime_priority(args.rt_priority)
         server = build_server(args)
     except (ValueError, OSError) as e:  # RobotError, ScenarioError are ValueErrors
         print(f"cdpm-reel-emulator: error: {e}", file=sys.stderr)
         return 2
+    # A full garbage collection scans every object alive, modules included (19 ms measured
+    # with pydrake loaded), long enough to trip the controller's watchdog; what exists now
+    # lives for the whole run, so take it out of the collector's sight.
+    gc.freeze()
     host, port = server.address
     robot = server.bridge.robot
     print(f"cdpm-reel-emulator: robot {robot.name!r} ({robot.num_cables} cables) on "
@@ -510,7 +529,7 @@ def main(argv=None) -> int:
         server.stop()
         c = server.counters
         print(f"cdpm-reel-emulator: {c['commands_received']} commands received, "
-              f"{c['statuses_sent']} statuses sent, commands lost {server._tracker.lost}, "
+              f"{c['statuses_sent']} statuses sent, commands lost {server.commands_lost}, "
               f"faults {server.bridge.faults:#06x}", flush=True)
     return 0
 

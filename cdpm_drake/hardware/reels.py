@@ -24,6 +24,7 @@ into or restored from a Context. Everything that changes what the system outputs
 the Context.
 """
 
+import gc
 import time
 
 import numpy as np
@@ -289,7 +290,11 @@ def start_realtime(simulator, rate: float = 1.0) -> None:
     """Initialise a simulator holding a HardwareReelsSystem for a real-time run.
 
     Initialize() blocks while the reels wait for the bridge; Drake starts its real-time clock
-    before that, so without ResetStatistics() the first ticks would race to catch up."""
+    before that, so without ResetStatistics() the first ticks would race to catch up. The
+    objects alive by then (modules, the diagram) live for the whole run: gc.freeze() keeps
+    full garbage collections short (one scanning them all takes ~20 ms with pydrake loaded, more
+    than the watchdog allows)."""
     simulator.set_target_realtime_rate(rate)
     simulator.Initialize()
+    gc.freeze()
     simulator.ResetStatistics()
