@@ -283,14 +283,15 @@ def test_a_catch_up_burst_after_a_stall_does_not_trip_the_watchdog(robot, emulat
 
 
 FAULTS = {
+    # A busy host can add a tick or two before the wall-clock condition holds: \d+ ticks.
     "stop": (FaultPlan(stop=True), r"no valid status from the reel bridge at 127.0.0.1:\d+ for "
-                                   r"3 ticks \(6 ms; watchdog_ticks = 3\)"),
-    "freeze": (FaultPlan(freeze=True), r"for 3 ticks .* last rejected datagram: sequence \d+ "
+                                   r"\d+ ticks \(\d+ ms; watchdog_ticks = 3\)"),
+    "freeze": (FaultPlan(freeze=True), r"ticks .* last rejected datagram: sequence \d+ "
                                        r"repeats the last accepted one"),
-    "nan": (FaultPlan(nan=True), r"for 3 ticks .* last rejected datagram: lengths of cable 1 "
+    "nan": (FaultPlan(nan=True), r"ticks .* last rejected datagram: lengths of cable 1 "
                                  r"is nan m"),
-    "corrupt": (FaultPlan(corrupt=1.0), r"for 3 ticks .* rejected \{'(crc|magic|version|"
-                                        r"cable_count|flags)': 3"),
+    "corrupt": (FaultPlan(corrupt=1.0), r"ticks .* rejected \{'(crc|magic|version|"
+                                        r"cable_count|flags)': \d+"),
     "fault_bit": (FaultPlan(fault_bits=FAULT_DRIVE), r"the reel bridge reports fault bits "
                                                      r"0x0002 \(DRIVE\)"),
 }
