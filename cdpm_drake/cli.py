@@ -184,6 +184,12 @@ def run_main(*, scenario, duration=None, out_dir=None, out=None, on_status=None)
 
 def _cmd_run(args) -> int:
     _check_duration(args.duration)
+    if args.rt_priority:
+        from .hardware.priority import PriorityError, set_realtime_priority
+        try:
+            set_realtime_priority(args.rt_priority)
+        except (PriorityError, ValueError) as e:
+            raise CliError(f"--rt-priority {args.rt_priority!r}: {e}") from None
     return run_main(scenario=_load_scenario_arg(args), duration=args.duration, out_dir=args.out)
 
 
@@ -281,6 +287,10 @@ def _parser() -> argparse.ArgumentParser:
     p.add_argument("--duration", type=float, help="run time, s (default: the scenario's)")
     p.add_argument("--out", type=Path,
                    help="output directory (default: runs/<scenario name>_robot)")
+    p.add_argument("--rt-priority", type=int, default=0, metavar="N",
+                   help="run under SCHED_FIFO at priority N (1..99; needs root or "
+                        "CAP_SYS_NICE): keeps a busy host from delaying ticks past the "
+                        "watchdog (default 0: normal scheduling)")
     p.set_defaults(func=_cmd_run)
 
     p = sub.add_parser("emulate", help="play the reel bridge on loopback (cdpm-reel-emulator)",

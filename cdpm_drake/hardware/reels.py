@@ -8,8 +8,11 @@ control rate (period `time_step`):
   velocity ramp at 0. The state starts from those lengths, so the controller's forward
   kinematics starts from the measured pose, not from the scenario's start.
 * publish at t_k: sends ramp x reel_velocity_command(t_k) (zero while disabled).
-* unrestricted update at t_k: drains the link, keeps the newest valid status, runs the
-  watchdog and advances the ramp. (Drake handles a step's publishes before the next step's
+* discrete update at t_k: drains the link, keeps the newest valid status, runs the
+  watchdog and advances the ramp. A discrete update, like the simulated reels', so every
+  block's update at t_k sees the same sample: an unrestricted update would run before the
+  other blocks' discrete updates and feed them tick k+1's lengths and force (the sensor filter
+  would count a sample twice). (Drake handles a step's publishes before the next step's
   updates, so the command sent at t_k uses the lengths read at t_{k-1}.)
 
 A fault (no valid status for `watchdog_ticks` ticks, a bridge fault bit, a non-finite command)
@@ -107,7 +110,7 @@ class HardwareReelsSystem(LeafSystem):
         self.DeclareStateOutputPort("cable_lengths", self._lengths)
         self.DeclareStateOutputPort("measured_force", self._force)
         self.DeclareInitializationUnrestrictedUpdateEvent(self._initialize_from_bridge)
-        self.DeclarePeriodicUnrestrictedUpdateEvent(self._T, 0.0, self._update_from_bridge)
+        self.DeclarePeriodicDiscreteUpdateEvent(self._T, 0.0, self._update_from_bridge)
         self.DeclarePeriodicPublishEvent(self._T, 0.0, self._publish_command)
 
     # --- resources ---------------------------------------------------------------------------
@@ -206,8 +209,8 @@ class HardwareReelsSystem(LeafSystem):
         status = link.receive(last)
         now = time.monotonic()
         if status is not None:
-            state.get_mutable_discrete_state(self._lengths).SetFromVector(status.lengths)
-            state.get_mutable_discrete_state(self._force).SetFromVector(status.force)
+            state.get_mutable_vector(self._lengths).SetFromVector(status.lengths)
+            state.get_mutable_vector(self._force).SetFromVector(status.force)
             book[STATUS_SEQ] = status.sequence
             book[HAVE_STATUS] = 1.0
             if status.echo_sequence is not None:
@@ -231,7 +234,7 @@ class HardwareReelsSystem(LeafSystem):
             self.shutdown()
         elif book[ENABLED]:
             book[RAMP] = min(1.0, book[RAMP] + self._ramp_step)
-        state.get_mutable_discrete_state(self._book).SetFromVector(book)
+        state.get_mutable_vector(self._book).SetFromVector(book)
 
     def _publish_command(self, context):
         book = context.get_discrete_state(self._book).get_value()
