@@ -43,9 +43,28 @@ fits a Drake discrete state:
 back as `side` on the next tick. A crossed pair is active at full intensity F_u, pushed along
 o (t_L - s_L) m_hat, the gradient of o sigma, which points back to the remembered side (t_L,
 s_L: the closest-point parameters of the two lines, equal to t, s while the segments
-straddle). A pair that is not crossed follows the paper (direction grad d / |grad d|); at
-d == 0 with a known side it uses the same side-aware direction o (t - s) m_hat, the limit of
-grad d from the remembered side.
+straddle). A pair that is not crossed follows the paper (direction grad d / |grad d|, but see
+the gradient floor below); at d == 0 with a known side it uses the same side-aware direction
+o (t - s) m_hat, the limit of grad d from the remembered side.
+
+Translation bound. With t = s, C_i(s) - C_j(s) = (1 - s)(b_i - b_j) + s (a_i - a_j) does not
+depend on p, so d <= g_ij, the distance from the origin to the segment [b_i - b_j, a_i - a_j]
+(`translation_distance_bound`); d = g_ij on a whole plane of positions, where s = t and the
+gradient vanishes. Gradient ascent of d ends on that ridge: a pair with g_ij < d_u can never
+switch its force off by translating.
+
+Gradient floor (beyond the paper). The paper pushes along the unit gradient (the equation
+after eq. 25). Near the ridge s = t, |grad d| = |t - s| goes to 0, the unit direction is
+ill-defined and flips sign from one tick to the next as the platform crosses the ridge: the
+force chatters at full intensity instead of fading. We push along
+grad d / max(|grad d|, gradient_floor) instead: the unit gradient wherever |t - s| >=
+gradient_floor (the paper exactly), shrinking linearly to zero at the ridge, so the force is
+continuous in p and zero where the gradient is. gradient_floor = 0 is the paper. The default
+(DEFAULT_GRADIENT_FLOOR) is below |t - s| everywhere the shipped experiments are active. The
+floor applies only to pairs that follow the paper's gradient: a crossed pair, and a touching
+pair (d == 0) with a known side, keep their unit side-aware direction at full intensity,
+because fading there would let a tangle stay in place (where that direction itself is
+ill-defined, t_L = s_L, it may still flip; we accept that over losing the push-back).
 """
 
 import dataclasses
@@ -58,6 +77,11 @@ import numpy as np
 PARALLEL_SIN = 1e-6
 # |t - s| (the gradient norm, m/m) below which a pair has no direction to push along.
 MIN_GRADIENT = 1e-12
+# Default gradient floor (m/m, see the module docstring). The paper's robot has |t - s| =
+# 0.005..0.017 where its swapped pairs are active (d <= 62 mm): 0.002 leaves the paper's force
+# unchanged there (0.05 would scale it down to 10-35 %) and still spreads the fade over tens of
+# centimetres of platform motion around a ridge, far more than one tick's step.
+DEFAULT_GRADIENT_FLOOR = 0.002
 # Smallest normal float: squared lengths at or below it are treated as zero.
 _TINY = np.finfo(float).tiny
 
@@ -283,6 +307,28 @@ def pair_distances(robot, p) -> np.ndarray:
     return _robot_kernel(_geometry(robot), _position(p))[0]
 
 
+def translation_distance_bound(robot) -> np.ndarray:
+    """g_ij (m) per watched pair, in `robot.pairs` order: the largest distance the pair can
+    reach by translating the platform, sup over p of d_ij(p).
+
+    With t = s, C_i(s) - C_j(s) = (1 - s)(b_i - b_j) + s (a_i - a_j) does not depend on p, so
+    d_ij(p) <= g_ij = min over s in [0, 1] of that norm: the distance from the origin to the
+    segment [b_i - b_j, a_i - a_j]. The bound is attained: with e = that closest vector and s*
+    its parameter, every p on the plane e . p = e . (a_i - b_i) has (s*, s*) as a KKT point
+    of the convex problem (10) (stationary for 0 < s* < 1; for s* = 0 or 1 the two end points
+    there are closest), so d_ij = g_ij and grad d = (t - s) n_hat = 0 there. Gradient ascent
+    of d therefore ends on that ridge at d = g_ij: a pair whose g_ij is below its d_u can never
+    leave the active band by translation. g_ij = 0: the cables meet at every position.
+    """
+    i, j = robot.pair_index
+    W = robot.attachments[i] - robot.attachments[j]  # (P, 3), the s = 0 end
+    D = (robot.reels[i] - robot.reels[j]) - W        # from the s = 0 end to the s = 1 end
+    DD = (D * D).sum(axis=1)
+    s = np.clip(-(W * D).sum(axis=1) / (DD + (DD <= _TINY)), 0.0, 1.0)
+    e = W + s[:, None] * D
+    return np.sqrt((e * e).sum(axis=1))
+
+
 def initial_side(robot, p) -> np.ndarray:
     """The crossing-side memory at start (P,) int8 in {-1, 0, +1}: the sign of each pair's
     line signed distance at p (0 where undefined). Assumes no pair starts crossed."""
@@ -417,6 +463,9 @@ class InterferenceParams:
 
     `pairs` (1-based (i, j) per entry) names pairs in error messages and lets
     `interference_force` check that the parameters belong to its robot; `uniform` fills it.
+    `gradient_floor` (m/m, in [0, 1]; beyond the paper): an uncrossed pair pushes along
+    grad d / max(|grad d|, gradient_floor), so its force fades to zero where the gradient
+    vanishes instead of flipping sign; 0 is the paper's unit gradient (module docstring).
     """
 
     d_l: np.ndarray
@@ -425,6 +474,7 @@ class InterferenceParams:
     eps: np.ndarray
     F_max: float
     pairs: tuple | None = None
+    gradient_floor: float = DEFAULT_GRADIENT_FLOOR
 
     def __post_init__(self):
         arrays = {}
@@ -454,19 +504,26 @@ class InterferenceParams:
         _check_logistic(arrays["d_l"], arrays["d_u"], arrays["F_u"], arrays["eps"], names)
         if not (_finite(self.F_max) and float(self.F_max) > 0):
             raise ValueError(f"F_max must be a finite value > 0 N, got {self.F_max!r}")
+        # |grad d| = |t - s| <= 1, so a floor above 1 would only rescale every force.
+        if not (_finite(self.gradient_floor) and 0.0 <= float(self.gradient_floor) <= 1.0):
+            raise ValueError(f"gradient_floor must be a number in [0, 1] (m/m; 0 = the paper's "
+                             f"unit gradient), got {self.gradient_floor!r}")
         for field, arr in arrays.items():
             arr.flags.writeable = False
             object.__setattr__(self, field, arr)
         object.__setattr__(self, "F_max", float(self.F_max))
+        object.__setattr__(self, "gradient_floor", float(self.gradient_floor))
         object.__setattr__(self, "pairs", pairs)
         b, mid = _steepness(arrays["d_l"], arrays["d_u"], arrays["F_u"], arrays["eps"])
         object.__setattr__(self, "_b", b)
         object.__setattr__(self, "_mid", mid)
 
     @classmethod
-    def uniform(cls, robot, d_l, d_u, F_u, eps=0.1, F_max=None) -> "InterferenceParams":
+    def uniform(cls, robot, d_l, d_u, F_u, eps=0.1, F_max=None,
+                gradient_floor=DEFAULT_GRADIENT_FLOOR) -> "InterferenceParams":
         """The same d_l, d_u (m), F_u, eps (N) for every watched pair of `robot`;
-        F_max (N) defaults to max(F_u), as in the paper."""
+        F_max (N) defaults to max(F_u), as in the paper; gradient_floor (m/m) as in the
+        class docstring."""
         P = robot.num_pairs
         arrays = []
         for field, x in (("d_l", d_l), ("d_u", d_u), ("F_u", F_u), ("eps", eps)):
@@ -477,7 +534,8 @@ class InterferenceParams:
                                  f"({P} for robot {robot.name!r}), got {x!r}") from None
         if F_max is None:
             F_max = float(np.max(arrays[2])) if P else 1.0
-        return cls(*arrays, F_max=F_max, pairs=tuple(robot.pairs))
+        return cls(*arrays, F_max=F_max, pairs=tuple(robot.pairs),
+                   gradient_floor=gradient_floor)
 
 
 def _finite(x) -> bool:
@@ -500,16 +558,20 @@ class InterferenceResult:
     active: np.ndarray      # (P,) bool, d <= d_u or crossed
     side: np.ndarray        # (P,) int8, updated side memory, to store for the next tick
     crossed: np.ndarray     # (P,) bool, cables crossed relative to their remembered side
-    direction: np.ndarray   # (P, 3) unit push direction per pair (zero row: none)
+    # (P, 3) push direction per pair: unit, except within the gradient floor of an uncrossed
+    # pair, where it is grad d / gradient_floor (norm < 1); zero row: none. F = sum intensity
+    # * direction, before the clip.
+    direction: np.ndarray
 
 
 def interference_force(robot, p, params: InterferenceParams, side=None) -> InterferenceResult:
     """The interference force F_int (N) at platform position p (3,), base frame, m.
 
-    Active pairs (d <= d_u) push with the logistic intensity (eq. 26) along the normalised
-    distance gradient (eq. 29); crossed pairs push back to their remembered side at F_u. The
-    sum (eq. 30) is clipped to norm F_max. `side` is the memory returned by the previous tick
-    (None: `initial_side(robot, p)`).
+    Active pairs (d <= d_u) push with the logistic intensity (eq. 26) along the distance
+    gradient divided by max(|gradient|, params.gradient_floor) (eq. 29 when the floor is 0:
+    the unit gradient); crossed pairs push back to their remembered side at F_u along a unit
+    direction, never floored. The sum (eq. 30) is clipped to norm F_max. `side` is the memory
+    returned by the previous tick (None: `initial_side(robot, p)`).
     """
     geo = _geometry(robot)
     P, pairs = geo.P, geo.pairs
@@ -532,8 +594,14 @@ def interference_force(robot, p, params: InterferenceParams, side=None) -> Inter
     # (a reciprocal 1 / d could); at d == 0 it is diff itself, i.e. zero.
     n_hat = diff / (dist + ~pos)
     grad = n_hat * ts
-    # |grad| = |t - s|, so the unit push direction is sign(t - s) n_hat.
-    direction = n_hat * (np.sign(ts) * (np.abs(ts) > MIN_GRADIENT))
+    floor = params.gradient_floor
+    if floor > 0.0:
+        # |grad| = |t - s|: grad / max(|grad|, floor) = n_hat (t - s) / max(|t - s|, floor),
+        # continuous in p and exactly zero where t == s (no division by |grad|).
+        direction = n_hat * (ts / np.maximum(np.abs(ts), floor))
+    else:
+        # The paper: the unit direction sign(t - s) n_hat.
+        direction = n_hat * (np.sign(ts) * (np.abs(ts) > MIN_GRADIENT))
     intensity = _logistic(dist, params.F_u, params._b, params._mid) * near
     use_side = crossed | (straddle & ~pos)
     if use_side.any():
