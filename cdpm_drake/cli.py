@@ -52,14 +52,15 @@ def info(*, robot: str, out=None) -> None:
           f" reel speed {lim.max_reel_speed} m/s", file=out)
     for pair, why in sorted(r.excluded_reasons.items()):
         print(f"pair {pair} skipped: {why}", file=out)
-    try:
-        from .interference import pair_distances
-    except ImportError:
-        return
+    from .interference import pair_distances, translation_distance_bound
+
     d = pair_distances(r, c)
-    rows = [(f"({i},{j})", f"{1000 * dk:.1f}") for (i, j), dk in zip(r.pairs, d)]
-    print("cable-cable distances at the centre:", file=out)
-    print(_table(["pair", "distance (mm)"], rows), file=out)
+    g = translation_distance_bound(r)
+    rows = [(f"({i},{j})", f"{1000 * dk:.1f}", f"{1000 * gk:.1f}")
+            for (i, j), dk, gk in zip(r.pairs, d, g)]
+    print("cable-cable distances at the centre, and the largest any translation gives:",
+          file=out)
+    print(_table(["pair", "distance (mm)", "largest (mm)"], rows), file=out)
 
 
 def _cmd_info(args) -> int:

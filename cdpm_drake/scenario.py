@@ -7,6 +7,7 @@ directory; `--scenario-text` overlays a YAML snippet for one-off changes.
 """
 
 import dataclasses
+import logging
 import math
 import typing
 from pathlib import Path
@@ -18,6 +19,8 @@ from .operators import (CsvOperator, NoOperator, OperatorError, ScriptedOperator
 from .robot import Robot, RobotError, load_robot, resolve_robot_path
 
 SCENARIOS_DIR = Path(__file__).resolve().parent / "scenarios"
+
+_log = logging.getLogger(__name__)
 
 
 class ScenarioError(ValueError):
@@ -76,6 +79,10 @@ class Interference:
     pairs: list[PairLogistic] = dataclasses.field(default_factory=list)
     # Clip of |F_int| (eq. 30), N; None: the largest F_u.
     F_max: typing.Optional[float] = None
+    # Beyond the paper: each pair pushes along grad d / max(|grad d|, gradient_floor), so the
+    # force fades where translation cannot separate the cables any further (|grad d| -> 0)
+    # instead of flipping direction every tick; 0 is the paper's unit gradient. Dimensionless.
+    gradient_floor: typing.Optional[float] = None
 
 
 @dataclasses.dataclass
@@ -216,7 +223,9 @@ def load_scenario(name_or_path="exp2_interaction", overlay_text: str | None = No
     # Absolute, so the resolved scenario written beside a log (which records base_dir) finds
     # the same robot and CSV files when loaded back from elsewhere.
     scenario.base_dir = str((path.parent / scenario.base_dir).resolve())
-    check_scenario(scenario, source=str(path))
+    robot = check_scenario(scenario, source=str(path))
+    if scenario.interference.enabled and robot.num_pairs:
+        _warn_unreachable_d_u(robot, interference_params(scenario, robot))
     return scenario
 
 
@@ -374,7 +383,8 @@ def interference_params(scenario: Scenario, robot: Robot):
                 arrays[key][k] = float(value)
     F_max = float(cfg.F_max) if cfg.F_max is not None else (float(arrays["F_u"].max()) if P else 0.0)
     try:
-        return InterferenceParams(F_max=F_max, pairs=tuple(robot.pairs), **arrays)
+        extra = {} if cfg.gradient_floor is None else {"gradient_floor": cfg.gradient_floor}
+        return InterferenceParams(F_max=F_max, pairs=tuple(robot.pairs), **arrays, **extra)
     except ValueError as e:
         raise ScenarioError(f"interference: {e}") from None
 
@@ -427,6 +437,20 @@ def check_scenario(scenario: Scenario, source: str = "<scenario>") -> Robot:
     if scenario.interference.enabled:
         interference_params(scenario, robot)
     return robot
+
+
+def _warn_unreachable_d_u(robot, params):
+    """A pair whose d_u is above the largest distance translation can give it keeps its force
+    on everywhere: worth saying before a run, not an error (the paper's own numbers come close)."""
+    from .interference import translation_distance_bound
+
+    bound = translation_distance_bound(robot)
+    for (i, j), d_u, g in zip(robot.pairs, params.d_u, bound):
+        if d_u >= g:
+            _log.warning(
+                "pair (%d,%d): d_u = %.1f mm is not below %.1f mm, the largest distance any "
+                "platform translation gives these cables; its interference force never "
+                "switches off", i, j, 1000 * d_u, 1000 * g)
 
 
 def scenario_to_yaml(scenario: Scenario) -> str:

@@ -143,7 +143,7 @@ def test_desired_force_is_the_sum_of_hand_interference_and_wall_forces():
     three non-zero: a 1 N push, 5 cm from the lower x face (box 0.5..3.0 m, wall force 1 N
     there), cables 1 and 3 (swapped) about 60 mm apart, inside d_u = 61 mm."""
     scenario = load_scenario("exp1_no_interaction", overlay_text=(
-        "{wall_force: {enabled: true, margin: 0.1}, initial_position: [0.55, 3.65, 1.22], "
+        "{wall_force: {enabled: true, margin: 0.1}, initial_position: [0.55, 1.85, 2.2], "
         "operator: !ScriptedOperator {times: [0], forces: [[0.0, 1.0, 0.0]]}}"))
     log = run(scenario, 0.1)
     for key in ("F_H", "F_int", "F_wall"):
