@@ -157,7 +157,8 @@ def _live_meshcat(scenario):
 # --- run -------------------------------------------------------------------------------------
 
 
-def run_main(*, scenario, duration=None, out_dir=None, out=None, on_status=None) -> int:
+def run_main(*, scenario, duration=None, out_dir=None, out=None, on_status=None,
+             on_view=None) -> int:
     """Run on the reels in real time; print live status and the end report. Exit code 0 when
     the run completed or was stopped by Ctrl-C/SIGTERM, 1 on a fault."""
     from .realtime import report_lines, run
@@ -172,7 +173,8 @@ def run_main(*, scenario, duration=None, out_dir=None, out=None, on_status=None)
         print(("\r" + line) if tty else line, end="" if tty else "\n", file=sys.stderr,
               flush=True)
 
-    result = run(scenario=scenario, out_dir=out_dir, duration=duration, status=status)
+    result = run(scenario=scenario, out_dir=out_dir, duration=duration, status=status,
+                 on_view=on_view)
     if tty:
         print(file=sys.stderr)
     for line in report_lines(result):
@@ -191,7 +193,10 @@ def _cmd_run(args) -> int:
             set_realtime_priority(args.rt_priority)
         except (PriorityError, ValueError) as e:
             raise CliError(f"--rt-priority {args.rt_priority!r}: {e}") from None
-    return run_main(scenario=_load_scenario_arg(args), duration=args.duration, out_dir=args.out)
+    scenario = _load_scenario_arg(args)
+    on_view = _live_meshcat(scenario) if args.meshcat else None
+    return run_main(scenario=scenario, duration=args.duration, out_dir=args.out,
+                    on_view=on_view)
 
 
 # --- plot ------------------------------------------------------------------------------------
@@ -292,6 +297,8 @@ def _parser() -> argparse.ArgumentParser:
                    help="run under SCHED_FIFO at priority N (1..99; needs root or "
                         "CAP_SYS_NICE): keeps a busy host from delaying ticks past the "
                         "watchdog (default 0: normal scheduling)")
+    p.add_argument("--meshcat", action="store_true",
+                   help="show the robot live in Meshcat (prints the URL to open)")
     p.set_defaults(func=_cmd_run)
 
     p = sub.add_parser("emulate", help="play the reel bridge on loopback (cdpm-reel-emulator)",

@@ -60,10 +60,12 @@ class _StopRequest:
 
 
 def run(*, scenario: Scenario, out_dir, duration: float | None = None, status=None,
-        status_period: float = 1.0, step: float = 0.02) -> RunResult:
+        status_period: float = 1.0, step: float = 0.02, on_view=None,
+        view_period: float = 0.1) -> RunResult:
     """Run the scenario's diagram at real-time rate 1 against the reel bridge.
 
-    `status(text)` receives a one-line live status every `status_period` s of run time.
+    `status(text)` receives a one-line live status every `status_period` s of run time;
+    `on_view(diagram, context)` (a live 3D view) is called every `view_period` s.
     The loop advances `step` s at a time, so Ctrl-C / SIGTERM stop it within that.
     """
     from .hardware.reels import ReelFault, start_realtime
@@ -93,7 +95,7 @@ def run(*, scenario: Scenario, out_dir, duration: float | None = None, status=No
     with _StopRequest() as stop:
         try:
             start_realtime(simulator, 1.0)
-            t, next_status = 0.0, 0.0
+            t, next_status, next_view = 0.0, 0.0, 0.0
             while t < end - 1e-12:
                 if stop.signal is not None:
                     ending = "interrupted"
@@ -103,6 +105,9 @@ def run(*, scenario: Scenario, out_dir, duration: float | None = None, status=No
                 if status is not None and t >= next_status:
                     status(_status_line(diagram, context, reels, t))
                     next_status += status_period
+                if on_view is not None and t >= next_view:
+                    on_view(diagram, context)
+                    next_view += view_period
         except ReelFault as e:
             error, ending = e, "fault"
         except Exception as e:  # KinematicsError, a bad packet path, ...: stop the reels

@@ -286,6 +286,29 @@ def test_live_view_callback_draws_the_latest_logged_tick(meshcat):
     assert visible_level(meshcat, view, 1) == 0 and visible_level(meshcat, view, 3) == 0
 
 
+def test_live_view_callback_reads_the_blocks_when_there_are_no_loggers(meshcat):
+    # A real-time run has no in-memory loggers (it streams to disk): the view must then read
+    # the blocks' output ports, here of the full controller diagram at its first tick.
+    from pydrake.systems.analysis import Simulator
+
+    from cdpm_drake.diagram import BuildOptions, build_diagram
+    from cdpm_drake.scenario import load_scenario, scenario_robot
+
+    scenario = load_scenario("exp1_no_interaction")
+    robot = scenario_robot(scenario)
+    diagram = build_diagram(scenario, BuildOptions(loggers=False))
+    simulator = Simulator(diagram)
+    simulator.AdvanceTo(0.01)
+    view = mv.CdpmMeshcatView(meshcat, robot.reels, robot.attachments, robot.workspace.lower,
+                              robot.workspace.upper, robot.pairs, d_l=0.050, d_u=0.061)
+    mv.live_view_callback(view)(diagram, simulator.get_context())
+    fk = diagram.GetSubsystemByName("forward_kinematics")
+    p = fk.GetOutputPort("p_WP").Eval(fk.GetMyContextFromRoot(simulator.get_context()))
+    np.testing.assert_allclose(transform(meshcat, "/cdpm/platform")[:3, 3], p)
+    # exp1 starts with cables 1 and 3 inside d_u: F_int is drawn (its arrow is visible).
+    assert prop(meshcat, view.force_path("F_int"), "visible") is True
+
+
 def test_replay_frames_sample_the_log_at_fps():
     time = np.arange(501) * 0.002 + 3.0  # 1 s of 2 ms ticks, not starting at 0
     frames, rows = mv.replay_frames(time, 50.0)

@@ -43,24 +43,29 @@ def test_a_run_against_the_emulator_matches_the_simulation(tmp_path):
     """Experiment 1 (the interference force alone moves the platform) for 3 s, on the emulated
     bridge and in pure simulation: positions agree within 1 mm at every tick. What differs is
     the bridge's 1-2 tick command latency and its per-reel integration (no projection onto the
-    geometry), a few hundredths of a millimetre here."""
+    geometry): about 0.1 mm here. A host stall of tens of ms (this 2-core machine is shared)
+    makes the bridge hold a command longer and can add a transient millimetre, so a run whose
+    tick timing shows such a stall is repeated, up to three times in all."""
     sim_scenario = load_scenario("exp1_no_interaction")
-    server = _server(sim_scenario)
-    try:
-        result = run(scenario=_hardware("exp1_no_interaction", server), out_dir=tmp_path,
-                     duration=DURATION)
-    finally:
-        server.stop()
-    assert result.ending == "completed", result.error
-    hw = result.log
     sim = simulate(scenario=sim_scenario, duration=DURATION).log
-    n = min(len(hw["time"]), len(sim["time"]))
+    for attempt in range(3):
+        server = _server(sim_scenario)
+        try:
+            result = run(scenario=_hardware("exp1_no_interaction", server),
+                         out_dir=tmp_path / f"run{attempt}", duration=DURATION)
+        finally:
+            server.stop()
+        assert result.ending == "completed", result.error
+        hw = result.log
+        n = min(len(hw["time"]), len(sim["time"]))
+        err = np.linalg.norm(hw["p"][:n] - sim["p"][:n], axis=1)
+        if err.max() < 1e-3 or result.timing["max"] < 0.010:
+            break  # matched, or failed without a stall to blame
     assert n >= DURATION / 0.002
     np.testing.assert_allclose(hw["time"][:n], sim["time"][:n], atol=1e-12)
     moved = np.linalg.norm(sim["p"][n - 1] - sim["p"][0])
     assert moved > 0.01  # the comparison means something: the platform moved > 1 cm
-    err = np.linalg.norm(hw["p"][:n] - sim["p"][:n], axis=1)
-    assert err.max() < 1e-3, err.max()
+    assert err.max() < 1e-3, (err.max(), result.timing)
     # One row per tick, no gaps, in the stream and in log.npz.
     assert np.all(np.diff(hw["tick"]) == 1) and hw["tick"][0] == 0
     assert result.timing["missing_ticks"] == 0

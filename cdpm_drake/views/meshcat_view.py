@@ -299,19 +299,29 @@ class CdpmMeshcatView:
 
 
 def live_view_callback(view: CdpmMeshcatView):
-    """`on_chunk(diagram, context)` for `simulation.simulate`: draws the latest logged tick
-    (loggers named log_<key> as in diagram.LOGGED); signals without a logger are drawn as
-    zero."""
+    """`on_chunk(diagram, context)` for `simulation.simulate` and `realtime.run`: draws the
+    latest tick, from the loggers (log_<key>, diagram.LOGGED) where the diagram has them and
+    from the blocks' output ports otherwise (a real-time run streams to disk instead);
+    signals the diagram lacks are drawn as zero."""
+    from ..diagram import LOGGED
+
+    sources = {key: (system, port) for key, system, port in LOGGED}
+
+    def latest(diagram, context, key, width):
+        name = f"log_{key}"
+        if diagram.HasSubsystemNamed(name):
+            data = diagram.GetSubsystemByName(name).FindLog(context).data()
+            return data[:, -1] if data.shape[1] else np.zeros(width)
+        system_name, port_name = sources[key]
+        if diagram.HasSubsystemNamed(system_name):
+            system = diagram.GetSubsystemByName(system_name)
+            return system.GetOutputPort(port_name).Eval(system.GetMyContextFromRoot(context))
+        return np.zeros(width)
 
     def on_chunk(diagram, context) -> None:
-        row = {}
-        for key, width in (("p", 3), ("F_H", 3), ("F_int", 3), ("F_d", 3),
-                           ("pair_distances", len(view.pairs))):
-            name = f"log_{key}"
-            data = None
-            if diagram.HasSubsystemNamed(name):
-                data = diagram.GetSubsystemByName(name).FindLog(context).data()
-            row[key] = data[:, -1] if data is not None and data.shape[1] else np.zeros(width)
+        row = {key: latest(diagram, context, key, width)
+               for key, width in (("p", 3), ("F_H", 3), ("F_int", 3), ("F_d", 3),
+                                  ("pair_distances", len(view.pairs)))}
         view.draw(row["p"], row["F_H"], row["F_int"], row["F_d"], row["pair_distances"])
 
     return on_chunk
