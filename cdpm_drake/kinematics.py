@@ -124,9 +124,8 @@ def _gauss_newton_warm(offsets, L, p, tol, max_residual, max_iterations=8):
         n = np.sqrt(np.einsum("ij,ij->i", rho, rho))
         r = n - L
         J = rho / n[:, None]
-        try:
-            step = np.linalg.solve(J.T @ J, J.T @ r)
-        except np.linalg.LinAlgError:
+        step = _solve_sym3(J.T @ J, J.T @ r)
+        if step is None:
             return None
         p = p - step
         if step @ step < tol * tol:
@@ -134,6 +133,21 @@ def _gauss_newton_warm(offsets, L, p, tol, max_residual, max_iterations=8):
             worst = np.max(np.abs(np.sqrt(np.einsum("ij,ij->i", rho, rho)) - L))
             return p if worst <= max_residual else None
     return None
+
+
+def _solve_sym3(A, b):
+    """x with A x = b for a symmetric 3x3 A, by cofactors (np.linalg.solve's call overhead is
+    most of its cost at this size); None when A is singular to working precision."""
+    (a, d, e), (_, c, f), (_, _, k) = A.tolist()
+    c00, c01, c02 = c * k - f * f, e * f - d * k, d * f - c * e
+    det = a * c00 + d * c01 + e * c02
+    if not abs(det) > 1e-14 * (abs(a) + abs(c) + abs(k)) ** 3:
+        return None
+    c11, c12, c22 = a * k - e * e, d * e - a * f, a * c - d * d
+    x, y, z = b.tolist()
+    return np.array([c00 * x + c01 * y + c02 * z,
+                     c01 * x + c11 * y + c12 * z,
+                     c02 * x + c12 * y + c22 * z]) / det
 
 
 def condition_number(robot: Robot, p) -> float:
