@@ -127,8 +127,11 @@ def _cmd_simulate(args) -> int:
     code = simulate_main(scenario=scenario, duration=args.duration, out_dir=args.out,
                          progress=not args.no_progress, on_chunk=on_chunk,
                          html=args.html, plots=args.plot)
-    if args.meshcat and not args.no_wait:
-        input("Meshcat is still serving the last frame; press Enter to quit. ")
+    if args.meshcat and not args.no_wait and sys.stdin.isatty():
+        try:
+            input("Meshcat is still serving the last frame; press Enter to quit. ")
+        except EOFError:
+            pass
     return code
 
 
