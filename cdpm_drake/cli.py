@@ -9,17 +9,11 @@ from pathlib import Path
 
 import numpy as np
 
+from .text import format_table
+
 
 class CliError(Exception):
     """A bad command-line argument; printed without a traceback."""
-
-
-def _table(headers, rows) -> str:
-    cells = [[str(h) for h in headers]] + [[str(c) for c in row] for row in rows]
-    widths = [max(len(r[k]) for r in cells) for k in range(len(headers))]
-    lines = ["  ".join(c.rjust(w) for c, w in zip(r, widths)) for r in cells]
-    lines.insert(1, "  ".join("-" * w for w in widths))
-    return "\n".join(lines)
 
 
 def _fmt(v, digits=3) -> str:
@@ -42,7 +36,7 @@ def info(*, robot: str, out=None) -> None:
           file=out)
     rows = [(i + 1, _fmt(r.reels[i]), _fmt(r.attachments[i]), f"{lengths[i]:.4f}")
             for i in range(r.num_cables)]
-    print(_table(["cable", "reel a_i (m)", "attachment b_i (m)", "length at centre (m)"], rows),
+    print(format_table(["cable", "reel a_i (m)", "attachment b_i (m)", "length at centre (m)"], rows),
           file=out)
     print(f"workspace box: lower {_fmt(r.workspace.lower)} m, upper {_fmt(r.workspace.upper)} m,"
           f" centre {_fmt(c)} m", file=out)
@@ -60,7 +54,7 @@ def info(*, robot: str, out=None) -> None:
             for (i, j), dk, gk in zip(r.pairs, d, g)]
     print("cable-cable distances at the centre, and the largest any translation gives:",
           file=out)
-    print(_table(["pair", "distance (mm)", "largest (mm)"], rows), file=out)
+    print(format_table(["pair", "distance (mm)", "largest (mm)"], rows), file=out)
 
 
 def _cmd_info(args) -> int:
@@ -94,7 +88,7 @@ def simulate_main(*, scenario, duration=None, out_dir=None, progress=True, out=N
           f"in {result.wall_time:.2f} s wall ({result.realtime_factor:.1f}x real time)", file=out)
     rows = summary_rows(log)
     if rows:
-        print(_table(["pair", "min distance (mm)", "ticks active", "crossed"], rows), file=out)
+        print(format_table(["pair", "min distance (mm)", "ticks active", "crossed"], rows), file=out)
     else:
         print("no cable pair came within its d_u", file=out)
     norms = {k: np.linalg.norm(log[k], axis=1).max() if T else 0.0

@@ -324,18 +324,25 @@ def robot_names() -> list[str]:
     return sorted(p.stem for p in ROBOTS_DIR.glob("*.yaml"))
 
 
-def resolve_robot_path(name_or_path: str | Path) -> Path:
-    """A shipped robot's name (e.g. 'paper_7cable') or a path to a YAML file."""
+def resolve_named_yaml(name_or_path, directory: Path, what: str, error=ValueError) -> Path:
+    """A YAML file given by path, or by the name of one shipped in `directory` ("paper_7cable"
+    for directory/paper_7cable.yaml). `error` is raised naming the `what` and the choices."""
     path = Path(name_or_path)
     if path.suffix in (".yaml", ".yml") or path.exists():
         if not path.is_file():
-            raise RobotError(f"robot file {str(path)!r} does not exist")
+            raise error(f"{what} file {str(path)!r} does not exist")
         return path
-    candidate = ROBOTS_DIR / f"{name_or_path}.yaml"
+    candidate = directory / f"{name_or_path}.yaml"
     if candidate.is_file():
         return candidate
-    raise RobotError(f"unknown robot {str(name_or_path)!r}; built-in robots: "
-                     f"{robot_names()} (or give a path to a .yaml file)")
+    shipped = sorted(p.stem for p in directory.glob("*.yaml"))
+    raise error(f"unknown {what} {str(name_or_path)!r}; built-in {what}s: {shipped} (or give a "
+                f"path to a .yaml file)")
+
+
+def resolve_robot_path(name_or_path: str | Path) -> Path:
+    """A shipped robot's name (e.g. 'paper_7cable') or a path to a YAML file."""
+    return resolve_named_yaml(name_or_path, ROBOTS_DIR, "robot", RobotError)
 
 
 def load_robot(path: str | Path) -> Robot:

@@ -16,7 +16,7 @@ import numpy as np
 
 from .operators import (CsvOperator, NoOperator, OperatorError, ScriptedOperator,
                         SpringHandOperator, OPERATOR_TYPES, make_operator)
-from .robot import Robot, RobotError, load_robot, resolve_robot_path
+from .robot import Robot, RobotError, load_robot, resolve_named_yaml
 
 SCENARIOS_DIR = Path(__file__).resolve().parent / "scenarios"
 
@@ -192,16 +192,7 @@ def scenario_names() -> list[str]:
 
 
 def resolve_scenario_path(name_or_path) -> Path:
-    path = Path(name_or_path)
-    if path.suffix in (".yaml", ".yml") or path.exists():
-        if not path.is_file():
-            raise ScenarioError(f"scenario file {str(path)!r} does not exist")
-        return path
-    candidate = SCENARIOS_DIR / f"{name_or_path}.yaml"
-    if candidate.is_file():
-        return candidate
-    raise ScenarioError(f"unknown scenario {str(name_or_path)!r}; built-in scenarios: "
-                        f"{scenario_names()} (or give a path to a .yaml file)")
+    return resolve_named_yaml(name_or_path, SCENARIOS_DIR, "scenario", ScenarioError)
 
 
 def load_scenario(name_or_path="exp2_interaction", overlay_text: str | None = None) -> Scenario:

@@ -30,6 +30,7 @@ from pydrake.systems.framework import LeafSystem
 import cdpm_drake.systems
 from cdpm_drake.diagram import BuildOptions, build_diagram
 from cdpm_drake.scenario import load_scenario
+from cdpm_drake.text import format_table
 
 GOAL = 100.0  # issue 5: >= 100x real time for the full diagram on one core
 
@@ -94,15 +95,6 @@ class BlockTimer:
         self._patched.clear()
 
 
-def table(headers, rows):
-    cells = [headers] + [[str(c) for c in row] for row in rows]
-    widths = [max(len(r[k]) for r in cells) for k in range(len(headers))]
-    lines = ["  ".join(c.ljust(w) if k == 0 else c.rjust(w) for k, (c, w)
-                       in enumerate(zip(r, widths))) for r in cells]
-    lines.insert(1, "  ".join("-" * w for w in widths))
-    return "\n".join(lines)
-
-
 def main():
     parser = argparse.ArgumentParser(description=__doc__,
                                      formatter_class=argparse.RawDescriptionHelpFormatter)
@@ -152,7 +144,7 @@ def main():
     print(f"scenario {scenario.name!r}, {duration:g} s simulated ({ticks} ticks of "
           f"{1000 * scenario.time_step:g} ms), best of {args.repeat}; ratios are wall time / "
           "full diagram's")
-    print(table(["run / block", "wall (s)", "real-time factor", "vs full", "share"], rows))
+    print(format_table(["run / block", "wall (s)", "real-time factor", "vs full", "share"], rows))
     print(f"per tick, full diagram: {1e6 * full / ticks:.0f} us; goal {GOAL:g}x real time "
           f"({1e6 * scenario.time_step / GOAL:.0f} us per tick): "
           f"{'met' if duration / full >= GOAL else 'not met'}")

@@ -29,6 +29,7 @@ from cdpm_drake.hardware.priority import set_realtime_priority
 from cdpm_drake.hardware.reels import ReelFault, start_realtime
 from cdpm_drake.hardware.tick_log import read_tick_log, realtime_stats
 from cdpm_drake.scenario import SimulatedReels, load_scenario
+from cdpm_drake.text import format_table
 
 
 def _free_port() -> int:
@@ -85,14 +86,6 @@ def stop_emulator(process) -> int | None:
     return int(found.group(1)) if found else None
 
 
-def _table(headers, rows) -> str:
-    cells = [[str(h) for h in headers]] + [[str(c) for c in row] for row in rows]
-    widths = [max(len(r[k]) for r in cells) for k in range(len(headers))]
-    lines = ["  ".join(c.rjust(w) for c, w in zip(r, widths)) for r in cells]
-    lines.insert(1, "  ".join("-" * w for w in widths))
-    return "\n".join(lines)
-
-
 def main(argv=None) -> int:
     parser = argparse.ArgumentParser(description=__doc__,
                                      formatter_class=argparse.RawDescriptionHelpFormatter)
@@ -144,7 +137,7 @@ def main(argv=None) -> int:
           f"{1e3 * load_scenario(args.scenario).time_step:g} ms, watchdog "
           f"{args.watchdog_ticks} ticks, SCHED_FIFO priority {args.rt_priority or 'off'}; "
           f"ratios against the reference")
-    print(_table(["case", "ticks", "p50 ms", "p99 ms", "p99.9 ms", "max ms", "p99 ratio",
+    print(format_table(["case", "ticks", "p50 ms", "p99 ms", "p99.9 ms", "max ms", "p99 ratio",
                   "max ratio", "overruns", "missing ticks", "statuses lost",
                   "statuses rejected", "commands lost", "fault"], rows))
     return 0
