@@ -20,7 +20,7 @@ from cdpm_drake.realtime import run
 from cdpm_drake.scenario import ScenarioError, load_scenario, scenario_operator, scenario_robot
 from cdpm_drake.simulation import simulate
 
-DURATION = 3.0
+DURATION = 5.0
 
 
 def _server(scenario):
@@ -40,7 +40,7 @@ def _hardware(scenario_name, server, extra=""):
 
 
 def test_a_run_against_the_emulator_matches_the_simulation(tmp_path):
-    """Experiment 1 (the interference force alone moves the platform) for 3 s, on the emulated
+    """Experiment 1 (the interference force alone moves the platform) for 5 s, on the emulated
     bridge and in pure simulation: positions agree within 1 mm at every tick. What differs is
     the bridge's 1-2 tick command latency and its per-reel integration (no projection onto the
     geometry): about 0.1 mm here. A host stall of tens of ms (this 2-core machine is shared)
