@@ -425,7 +425,7 @@ def check_scenario(scenario: Scenario, source: str = "<scenario>") -> Robot:
         if scenario.plant.max_reel_speed is not None:
             _positive(scenario.plant.max_reel_speed, "plant.max_reel_speed")
     scenario_operator(scenario)
-    if scenario.interference.enabled:
+    if scenario.interference.enabled and robot.num_pairs:
         interference_params(scenario, robot)
     return robot
 
