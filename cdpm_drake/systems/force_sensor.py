@@ -1,5 +1,7 @@
 """The force-sensor source of Fig. 5: sensor range and the sliding-average filter."""
 
+import math
+
 import numpy as np
 from pydrake.systems.framework import BasicVector, LeafSystem
 
@@ -7,13 +9,17 @@ from pydrake.systems.framework import BasicVector, LeafSystem
 def clip_to_sensor_range(f, axis, axial_range, transverse_range) -> np.ndarray:
     """Saturate a force (N) as an FSE103 does: axial component to +-axial_range along the handle
     `axis` (unit), transverse part to transverse_range in norm."""
-    f = np.asarray(f, dtype=float)
-    axial = float(f @ axis)
-    transverse = f - axial * axis
-    n = np.linalg.norm(transverse)
+    # Plain floats: three components, every tick.
+    fx, fy, fz = (float(c) for c in f)
+    ax, ay, az = (float(c) for c in axis)
+    axial = fx * ax + fy * ay + fz * az
+    tx, ty, tz = fx - axial * ax, fy - axial * ay, fz - axial * az
+    n = math.sqrt(tx * tx + ty * ty + tz * tz)
     if n > transverse_range:
-        transverse *= transverse_range / n
-    return np.clip(axial, -axial_range, axial_range) * axis + transverse
+        k = transverse_range / n
+        tx, ty, tz = tx * k, ty * k, tz * k
+    axial = min(max(axial, -axial_range), axial_range)
+    return np.array([axial * ax + tx, axial * ay + ty, axial * az + tz])
 
 
 class ForceSensorSource(LeafSystem):
