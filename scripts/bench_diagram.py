@@ -10,6 +10,10 @@ input ports, is charged to those). The rest is Drake's own work: event dispatch,
 C++ blocks (admittance, adder, loggers). The wrappers cost about a microsecond per call, so the
 instrumented run is a little slower than the plain one.
 
+A last row measures the floor of this architecture: the same diagram with every block's numpy
+math replaced by a constant (the LeafSystems, ports, caches, events and loggers all still run).
+No optimisation of the math can make the full diagram faster than that row.
+
 With --repeat N the variants run N times, interleaved, and each keeps its fastest run (the
 least disturbed by other load on the machine).
 
@@ -95,6 +99,43 @@ class BlockTimer:
         self._patched.clear()
 
 
+def run_without_math(scenario, duration):
+    """Wall time of the full diagram whose blocks call constant stand-ins for their math."""
+    import numpy as np
+
+    import cdpm_drake.systems.force_sensor as force_sensor
+    import cdpm_drake.systems.forward_kinematics as forward_kinematics
+    import cdpm_drake.systems.interference_force as interference_force
+    import cdpm_drake.systems.jacobian_mapping as jacobian_mapping
+    import cdpm_drake.systems.safety_limits as safety_limits
+    import cdpm_drake.systems.simulated_reels as simulated_reels
+    from cdpm_drake.interference import interference_force as real_interference_force
+    from cdpm_drake.kinematics import cable_lengths, jacobian
+    from cdpm_drake.scenario import interference_params, scenario_robot
+
+    robot = scenario_robot(scenario)
+    p0 = np.array(scenario.initial_position)
+    result = real_interference_force(robot, p0, interference_params(scenario, robot))
+    lengths, J = cable_lengths(robot, p0), jacobian(robot, p0)
+    stand_ins = [
+        (interference_force, "interference_force", lambda *a, **k: result),
+        (forward_kinematics, "forward_kinematics", lambda r, l, p_guess=None, **k: p_guess),
+        (simulated_reels, "forward_kinematics", lambda r, l, p_guess=None, **k: p_guess),
+        (simulated_reels, "cable_lengths", lambda *a: lengths),
+        (safety_limits, "limit_velocity", lambda v, *a, **k: v),
+        (jacobian_mapping, "jacobian", lambda *a: J),
+        (force_sensor, "clip_to_sensor_range", lambda f, *a: f),
+    ]
+    saved = [(module, name, getattr(module, name)) for module, name, _ in stand_ins]
+    try:
+        for module, name, fake in stand_ins:
+            setattr(module, name, fake)
+        return run_once(scenario, BuildOptions(), duration)
+    finally:
+        for module, name, original in saved:
+            setattr(module, name, original)
+
+
 def main():
     parser = argparse.ArgumentParser(description=__doc__,
                                      formatter_class=argparse.RawDescriptionHelpFormatter)
@@ -139,6 +180,10 @@ def main():
     rest = instrumented - sum(timer.exclusive.values())
     rows.append(["  Drake framework and C++ blocks", f"{rest:.2f}", "", f"{rest / full:.2f}",
                  f"{100 * rest / instrumented:.1f} %"])
+
+    floor = run_without_math(scenario, duration)
+    rows.append(["floor: same blocks, math replaced by constants", f"{floor:.2f}",
+                 f"{duration / floor:.1f}x", f"{floor / full:.2f}", ""])
 
     ticks = round(duration / scenario.time_step)
     print(f"scenario {scenario.name!r}, {duration:g} s simulated ({ticks} ticks of "
