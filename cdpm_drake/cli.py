@@ -79,6 +79,7 @@ def simulate_main(*, scenario, duration=None, out_dir=None, progress=True, out=N
 
     out = sys.stdout if out is None else out
     out_dir = Path(out_dir if out_dir is not None else Path("runs") / scenario.name)
+    _writable_dir(out_dir, "--out")  # before the run: a long run's log must have a place
     result = simulate(scenario=scenario, duration=duration, progress=progress,
                       on_chunk=on_chunk)
     log = result.log
@@ -129,6 +130,17 @@ def _cmd_simulate(args) -> int:
     return code
 
 
+def _writable_dir(path: Path, field: str) -> None:
+    try:
+        path.mkdir(parents=True, exist_ok=True)
+        probe = path / ".cdpm_write_test"
+        probe.write_bytes(b"")
+        probe.unlink()
+    except OSError as e:
+        raise CliError(f"{field} {str(path)!r} is not a writable directory: "
+                       f"{e.strerror or e}") from None
+
+
 def _check_duration(duration):
     if duration is not None and not (duration > 0 and np.isfinite(duration)):
         raise CliError(f"--duration must be a number of seconds > 0, got {duration!r}")
@@ -162,6 +174,7 @@ def run_main(*, scenario, duration=None, out_dir=None, out=None, on_status=None,
 
     out = sys.stdout if out is None else out
     out_dir = Path(out_dir if out_dir is not None else Path("runs") / f"{scenario.name}_robot")
+    _writable_dir(out_dir, "--out")
     tty = sys.stderr.isatty()
 
     def status(line):

@@ -168,3 +168,14 @@ def test_simulate_help_through_the_installed_entry_point():
         assert option in result.stdout
     for name in ("exp1_no_interaction", "exp2_interaction", "exp3_two_pairs"):
         assert name in result.stdout
+
+
+def test_an_unwritable_out_dir_is_refused_before_the_run(tmp_path, capsys):
+    # A file where the directory should be: refused at once, naming the option and the path,
+    # instead of losing the log of a finished run.
+    blocker = tmp_path / "a_file"
+    blocker.write_text("")
+    code = main(["simulate", "exp1_no_interaction", "--out", str(blocker), "--no-progress"])
+    err = capsys.readouterr().err
+    assert code == 2
+    assert "--out" in err and str(blocker) in err and "not a writable directory" in err
