@@ -175,7 +175,7 @@ def test_an_unwritable_out_dir_is_refused_before_the_run(tmp_path, capsys):
     # instead of losing the log of a finished run.
     blocker = tmp_path / "a_file"
     blocker.write_text("")
-    code = main(["simulate", "exp1_no_interaction", "--out", str(blocker), "--no-progress"])
+    code = cli.main(["simulate", "exp1_no_interaction", "--out", str(blocker), "--no-progress"])
     err = capsys.readouterr().err
     assert code == 2
     assert "--out" in err and str(blocker) in err and "not a writable directory" in err
