@@ -11,12 +11,11 @@ import numpy as np
 from pydrake.systems.framework import Diagram, DiagramBuilder
 from pydrake.systems.primitives import Adder, VectorLogSink
 
-from .scenario import Scenario, SimulatedReels as SimulatedReelsConfig, check_scenario, \
-    interference_params, scenario_operator
+from .scenario import (Scenario, SimulatedReels as SimulatedReelsConfig, check_scenario,
+                       interference_params, scenario_operator)
 from .systems import (ForceSensorSource, ForwardKinematicsEstimator, InterferenceForce,
                       JacobianVelocityMapping, SafetyLimits, SensorNoise, SimulatedOperator,
-                      SimulatedReels,
-                      WorkspaceWallForce, make_admittance)
+                      SimulatedReels, WorkspaceWallForce, make_admittance)
 
 # Logged signals: (logger name suffix, system name, output port name). Every signal of the
 # paper's Figs. 10, 11, 13, 14 and 16, and what the limits and reels did with them.
