@@ -136,9 +136,6 @@ class Robot:
         excluded, reasons = _never_separating(self)
         object.__setattr__(self, "excluded_pairs", excluded)
         object.__setattr__(self, "excluded_reasons", reasons)
-        for pair, why in reasons.items():
-            _log.info("%s: cable pair (%d, %d) skipped by the interference block: %s",
-                      self.name, pair[0], pair[1], why)
         i, j = np.triu_indices(self.num_cables, k=1)
         keep = np.array([(a + 1, b + 1) not in excluded for a, b in zip(i, j)], dtype=bool)
         object.__setattr__(self, "_pair_i", i[keep])
@@ -382,7 +379,17 @@ def load_robot(path: str | Path) -> Robot:
         schema = yaml_load_typed(schema=RobotSchema, filename=src)
     except Exception as e:  # Drake's messages name the field; add the file.
         raise RobotError(f"{src}: {e}") from None
-    return robot_from_schema(schema, source=src)
+    robot = robot_from_schema(schema, source=src)
+    if robot.excluded_reasons:
+        # Once per load, not per copy: said where the user can see it, since these pairs get
+        # no protection from the interference force.
+        by_reason: dict[str, list] = {}
+        for (i, j), why in sorted(robot.excluded_reasons.items()):
+            by_reason.setdefault(why, []).append(f"({i},{j})")
+        _log.warning("%s: the interference block skips %d cable pair(s): %s", robot.name,
+                     len(robot.excluded_reasons),
+                     "; ".join(f"{', '.join(pairs)}: {why}" for why, pairs in by_reason.items()))
+    return robot
 
 
 def _check_keys(raw: dict, schema, prefix: str, src: str) -> None:
