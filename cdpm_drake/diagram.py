@@ -15,7 +15,7 @@ from .scenario import (Scenario, SimulatedReels as SimulatedReelsConfig, check_s
                        interference_params, scenario_operator)
 from .systems import (ForceSensorSource, ForwardKinematicsEstimator, InterferenceForce,
                       JacobianVelocityMapping, SafetyLimits, SensorNoise, SimulatedOperator,
-                      SimulatedReels, WorkspaceWallForce, make_admittance)
+                      SimulatedReels, WorkspaceWallForce, Admittance)
 
 # Logged signals: (logger name suffix, system name, output port name). Every signal of the
 # paper's Figs. 10, 11, 13, 14 and 16, and what the limits and reels did with them.
@@ -25,7 +25,7 @@ LOGGED = (
     ("F_int", "interference_force", "F_int"),
     ("F_wall", "wall_force", "F_wall"),
     ("F_d", "F_d_adder", "sum"),
-    ("velocity_admittance", "admittance", "y0"),
+    ("velocity_admittance", "admittance", "velocity"),
     ("velocity", "safety_limits", "velocity_command"),
     ("reel_velocity", "jacobian_mapping", "reel_velocity_command"),
     ("lengths", "reels", "cable_lengths"),
@@ -90,9 +90,9 @@ def build_diagram(scenario: Scenario, options: BuildOptions = BuildOptions()) ->
     for k, port in enumerate(forces):
         builder.Connect(port, adder.get_input_port(k))
 
-    admittance = builder.AddNamedSystem("admittance", make_admittance(
+    admittance = builder.AddNamedSystem("admittance", Admittance(
         scenario.admittance.mass, scenario.admittance.damping, T))
-    builder.Connect(adder.get_output_port(), admittance.get_input_port())
+    builder.Connect(adder.get_output_port(), admittance.GetInputPort("F_d"))
 
     limits_cfg = scenario.limits
     limits = builder.AddNamedSystem("safety_limits", SafetyLimits(
@@ -100,8 +100,12 @@ def build_diagram(scenario: Scenario, options: BuildOptions = BuildOptions()) ->
         max_velocity=_or(limits_cfg.max_velocity, robot.limits.max_velocity),
         max_acceleration=_or(limits_cfg.max_acceleration, robot.limits.max_acceleration),
         virtual_wall=limits_cfg.virtual_wall, time_step=T))
-    builder.Connect(admittance.get_output_port(), limits.GetInputPort("velocity_desired"))
+    builder.Connect(admittance.GetOutputPort("velocity"),
+                    limits.GetInputPort("velocity_desired"))
     builder.Connect(p_WP, limits.GetInputPort("p_WP"))
+    # Anti-windup: the admittance integrates from the velocity actually commanded.
+    builder.Connect(limits.GetOutputPort("velocity_command"),
+                    admittance.GetInputPort("velocity_command"))
 
     mapping = builder.AddNamedSystem("jacobian_mapping", JacobianVelocityMapping(robot))
     builder.Connect(p_WP, mapping.GetInputPort("p_WP"))

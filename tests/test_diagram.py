@@ -179,7 +179,35 @@ def test_pushing_into_a_face_stops_at_it_within_every_limit(start, force, axis, 
     target = (upper if face == "upper" else lower)[axis]
     assert abs(p[-1, axis] - target) < 1e-5
     np.testing.assert_allclose(v[-50:, axis], 0.0, atol=1e-12)  # stopped, and stays there
-    assert abs(log["velocity_admittance"][-1, axis]) > 5.0  # the admittance still pushes
+    # Anti-windup: at rest on the face the admittance integrates from the commanded 0, so its
+    # velocity is one tick of the force, B_d F = F (1 - exp(-T C/M)) / C, not F/C = 9.6 m/s.
+    one_tick = force[axis] * (1 - np.exp(-T * 6.25 / 6.25)) / 6.25
+    assert log["velocity_admittance"][-1, axis] == pytest.approx(one_tick, rel=1e-9)
+
+
+def test_pulling_away_from_the_wall_leaves_it_at_once_and_a_release_coasts_m_over_c():
+    """The admittance integrates from the limited command (back-calculation), so holding the
+    platform against the wall or at the speed limit winds nothing up: 40 N into the x face
+    for 2 s, then 40 N away; the platform leaves within a few ticks (the acceleration limit
+    builds speed from 0). Then a release at full speed: the velocity decays with M/C = 1 s, so
+    the platform coasts about v_max M/C = 0.5 m (plus the acceleration limit's share)."""
+    scenario = scripted([0.0, 2.0, 2.002, 3.0, 3.002], [[40.0, 0, 0], [40.0, 0, 0],
+                                                        [-40.0, 0, 0], [-40.0, 0, 0],
+                                                        [0.0, 0, 0]],
+                        NO_INTERFERENCE + "initial_position: [2.7, 3.65, 1.22], "
+                        "sensor: {filter_window: 1},", name="exp2_interaction")
+    log = run(scenario, 8.0)
+    t, x, v = log["time"], log["p"][:, 0], log["velocity"][:, 0]
+    upper = scenario_robot(scenario).workspace.upper[0]
+    at_wall = np.flatnonzero(np.abs(x - upper) < 1e-6)
+    assert at_wall.size and t[at_wall[0]] < 2.0  # reached the wall during the push
+    left = np.flatnonzero((t > 2.0) & (x < upper - 1e-6))[0]
+    assert t[left] - 2.0 < 0.02, t[left]  # off the wall within 10 ticks of pulling away
+    # Released at 3 s moving at -0.5 m/s: it coasts 0.5 m M/C plus at most a few cm.
+    released = np.searchsorted(t, 3.0)
+    assert v[released] == pytest.approx(-0.5, abs=1e-9)
+    coast = x[released] - x[-1]
+    assert 0.45 < coast < 0.55, coast
 
 
 def test_pushing_into_an_edge_keeps_the_acceleration_limit():

@@ -1,6 +1,6 @@
 """One Drake LeafSystem per block of the paper's Fig. 5; each a thin wrapper of numpy math."""
 
-from .admittance import make_admittance
+from .admittance import Admittance, make_admittance
 from .force_sensor import ForceSensorSource
 from .forward_kinematics import ForwardKinematicsEstimator
 from .interference_force import InterferenceForce
@@ -10,7 +10,7 @@ from .simulated_reels import SensorNoise, SimulatedOperator, SimulatedReels
 from .wall_force import WorkspaceWallForce
 
 __all__ = [
-    "ForceSensorSource", "ForwardKinematicsEstimator", "InterferenceForce",
+    "Admittance", "ForceSensorSource", "ForwardKinematicsEstimator", "InterferenceForce",
     "JacobianVelocityMapping", "SafetyLimits", "SensorNoise", "SimulatedOperator",
     "SimulatedReels", "WorkspaceWallForce", "make_admittance",
 ]
