@@ -167,7 +167,7 @@ def _live_meshcat(scenario):
 
 
 def run_main(*, scenario, duration=None, out_dir=None, out=None, on_status=None,
-             on_view=None) -> int:
+             on_view=None, force=False) -> int:
     """Run on the reels in real time; print live status and the end report. Exit code 0 when
     the run completed or was stopped by Ctrl-C/SIGTERM, 1 on a fault."""
     from .realtime import report_lines, run
@@ -175,6 +175,9 @@ def run_main(*, scenario, duration=None, out_dir=None, out=None, on_status=None,
     out = sys.stdout if out is None else out
     out_dir = Path(out_dir if out_dir is not None else Path("runs") / f"{scenario.name}_robot")
     _writable_dir(out_dir, "--out")
+    if not force and ((out_dir / "ticks.bin").exists() or (out_dir / "log.npz").exists()):
+        raise CliError(f"--out {str(out_dir)!r} already holds the log of a run; give another "
+                       "--out, or --force to overwrite it")
     tty = sys.stderr.isatty()
 
     def status(line):
@@ -206,7 +209,7 @@ def _cmd_run(args) -> int:
     scenario = _load_scenario_arg(args)
     on_view = _live_meshcat(scenario) if args.meshcat else None
     return run_main(scenario=scenario, duration=args.duration, out_dir=args.out,
-                    on_view=on_view)
+                    on_view=on_view, force=args.force)
 
 
 # --- plot ------------------------------------------------------------------------------------
@@ -309,6 +312,8 @@ def _parser() -> argparse.ArgumentParser:
                         "watchdog (default 0: normal scheduling)")
     p.add_argument("--meshcat", action="store_true",
                    help="show the robot live in Meshcat (prints the URL to open)")
+    p.add_argument("--force", action="store_true",
+                   help="overwrite the log of an earlier run in --out")
     p.set_defaults(func=_cmd_run)
 
     p = sub.add_parser("emulate", help="play the reel bridge on loopback (cdpm-reel-emulator)",
@@ -358,6 +363,7 @@ def _scenario_args(p, default="exp2_interaction"):
 
 
 def main(argv=None) -> int:
+    from .hardware.tick_log import TickLogError
     from .kinematics import KinematicsError
     from .operators import OperatorError
     from .robot import RobotError
@@ -372,7 +378,8 @@ def main(argv=None) -> int:
     args = _parser().parse_args(argv)
     try:
         return int(args.func(args) or 0)
-    except (CliError, RobotError, KinematicsError, ScenarioError, OperatorError) as e:
+    except (CliError, RobotError, KinematicsError, ScenarioError, OperatorError,
+            TickLogError) as e:
         print(f"cdpm {args.command}: error: {e}", file=sys.stderr)
         return 2
 

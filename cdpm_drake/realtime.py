@@ -114,9 +114,20 @@ def run(*, scenario: Scenario, out_dir, duration: float | None = None, status=No
             error, ending = e, "fault"
         finally:
             reels.shutdown()  # zero velocity first, whatever happened
-            sink.close()
-            link = _link_report(reels, context)
-            reels.close()
+            # Each clean-up step on its own: a failing log writer (disk full) must not skip
+            # the link report, the socket's release or the conversion of what was written.
+            cleanup_errors = []
+            link = {}
+            for step_name, action in (("tick log", sink.close),
+                                      ("link report", lambda: link.update(
+                                          _link_report(reels, context))),
+                                      ("reel link", reels.close)):
+                try:
+                    action()
+                except Exception as e:  # noqa: PERF203 - report them all
+                    cleanup_errors.append(f"{step_name}: {type(e).__name__}: {e}")
+            if cleanup_errors and error is None:
+                error, ending = RuntimeError("; ".join(cleanup_errors)), "fault"
     raw = read_tick_log(tick_path) if tick_path.exists() else {}
     timing = realtime_stats(raw, T) if raw else {}
     signals = {key: raw[key] for key, _, _ in LOGGED if key in raw}

@@ -132,3 +132,40 @@ def test_cdpm_run_cli_reports_timing_and_packets(tmp_path, capsys):
     assert "run ended: completed" in out
     assert "tick period p50" in out and "packets: commands sent" in out
     assert (tmp_path / "log.npz").exists() and (tmp_path / "ticks.bin").exists()
+    # A second run into the same directory would overwrite the robot's log: refused.
+    code = main(["run", "exp1_no_interaction", "--duration", "1", "--out", str(tmp_path),
+                 "--scenario-text", "plant: !HardwareReels {port: 9}"])
+    assert code == 2
+    assert "already holds the log of a run" in capsys.readouterr().err
+
+
+def test_a_failing_log_writer_still_leaves_a_log_and_a_report(tmp_path, monkeypatch):
+    # The disk fills up mid-run: the writer's error ends the run as a fault (zero velocity was
+    # sent first), and what was written is still converted to log.npz with the link report.
+    from cdpm_drake.hardware import tick_log
+
+    real_write = tick_log.os.write
+    calls = {"n": 0}
+
+    def write_then_fail(fd, data):
+        calls["n"] += 1
+        if calls["n"] > 20:
+            raise OSError(28, "No space left on device")
+        return real_write(fd, data)
+
+    scenario = load_scenario("exp1_no_interaction")
+    server = _server(scenario)
+    monkeypatch.setattr(tick_log.os, "write", write_then_fail)
+    try:
+        result = run(scenario=_hardware("exp1_no_interaction", server), out_dir=tmp_path,
+                     duration=2.0)
+    finally:
+        monkeypatch.setattr(tick_log.os, "write", real_write)
+        server.stop()
+    assert result.ending == "fault"
+    assert "No space left" in str(result.error)
+    assert result.link.get("sent", 0) > 0
+    log = np.load(tmp_path / "log.npz")
+    assert len(log["time"]) > 0 and np.all(np.diff(log["tick"]) == 1)
+    last = list(server.commands)[-1]
+    assert not last.enable and np.all(last.velocity == 0.0)
