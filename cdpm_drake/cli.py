@@ -106,9 +106,14 @@ def simulate_main(*, scenario, duration=None, out_dir=None, progress=True, out=N
     if html is not None:
         from .views.meshcat_view import save_replay_html
         print(f"3D replay: {save_replay_html(log, html)} (open it in a browser)", file=out)
+    stopped = f"t = {log['time'][-1] if T else 0:.3f} s"
+    if isinstance(result.error, KeyboardInterrupt):
+        print(f"cdpm simulate: interrupted at {stopped}; the log up to there is written",
+              file=sys.stderr)
+        return 130
     if result.error is not None:
-        print(f"cdpm simulate: error: the run stopped at t = {log['time'][-1] if T else 0:.3f} s: "
-              f"{result.error}", file=sys.stderr)
+        print(f"cdpm simulate: error: the run stopped at {stopped}: {result.error}",
+              file=sys.stderr)
         return 1
     return 0
 

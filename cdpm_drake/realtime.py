@@ -82,7 +82,8 @@ def run(*, scenario: Scenario, out_dir, duration: float | None = None, status=No
         raise ScenarioError(f"duration must be a finite number > 0 s, got {duration!r}")
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
-    (out / "scenario.yaml").write_text(scenario_to_yaml(scenario))
+    (out / "scenario.yaml").write_text(scenario_to_yaml(
+        dataclasses.replace(scenario, duration=duration)))
     tick_path = out / "ticks.bin"
     diagram = build_diagram(scenario, BuildOptions(loggers=False, tick_log=str(tick_path)))
     reels = diagram.GetSubsystemByName("reels")

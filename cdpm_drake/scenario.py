@@ -217,7 +217,18 @@ def load_scenario(name_or_path="exp2_interaction", overlay_text: str | None = No
     robot = check_scenario(scenario, source=str(path))
     if scenario.interference.enabled and robot.num_pairs:
         _warn_unreachable_d_u(robot, interference_params(scenario, robot))
+    _warn_reel_saturation(scenario, robot)
     return scenario
+
+
+def _warn_reel_saturation(scenario, robot):
+    """Each reel's speed is |u_i . v| <= |v| (J's rows are unit vectors): a platform speed limit
+    above the reel speed limit lets the reels saturate, which slows the motion."""
+    v_max = scenario.limits.max_velocity or robot.limits.max_velocity
+    reel = getattr(scenario.plant, "max_reel_speed", None) or robot.limits.max_reel_speed
+    if v_max > reel:
+        _log.warning("the platform speed limit %g m/s is above the reel speed limit %g m/s: "
+                     "fast motions will be slowed by the reels", v_max, reel)
 
 
 def _check_yaml_text(source: str, **where) -> None:
@@ -398,6 +409,9 @@ def check_scenario(scenario: Scenario, source: str = "<scenario>") -> Robot:
         v = getattr(scenario.limits, name)
         if v is not None:
             _positive(v, f"limits.{name}")
+    if not (isinstance(scenario.random_seed, int) and scenario.random_seed >= 0):
+        raise ScenarioError(f"random_seed must be an integer >= 0, got "
+                            f"{scenario.random_seed!r}")
     s = scenario.sensor
     _positive(s.axial_range, "sensor.axial_range")
     _positive(s.transverse_range, "sensor.transverse_range")

@@ -65,7 +65,7 @@ def simulate(*, scenario: Scenario, duration: float | None = None, progress: boo
             t = t_next
             if on_chunk is not None:
                 on_chunk(diagram, context)
-    except Exception as e:  # keep what was logged; the caller decides how to report
+    except (Exception, KeyboardInterrupt) as e:  # keep what was logged; the caller reports
         error = e
     finally:
         wall = time.perf_counter() - start
@@ -125,7 +125,12 @@ def assemble_log(time_column, signals: dict, scenario: Scenario, robot) -> dict:
 
 
 def save_log(log: dict, out_dir, scenario: Scenario) -> Path:
-    """Write DIR/log.npz and the resolved scenario DIR/scenario.yaml; returns the npz path."""
+    """Write DIR/log.npz and the resolved scenario DIR/scenario.yaml; returns the npz path.
+    The scenario's duration is set to what the log covers, so the file reproduces the run."""
+    import dataclasses
+
+    if len(log["time"]):
+        scenario = dataclasses.replace(scenario, duration=float(log["time"][-1]))
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     path = out / "log.npz"

@@ -248,3 +248,8 @@ def test_default_scenario_is_valid():
     robot = check_scenario(Scenario())
     assert robot.num_cables == 7
     assert np.all(robot.workspace.contains(Scenario().initial_position))
+
+
+def test_a_negative_random_seed_is_refused_at_load():
+    with pytest.raises(ScenarioError, match=r"random_seed must be an integer >= 0, got -1"):
+        load_scenario("exp1_no_interaction", overlay_text="random_seed: -1")

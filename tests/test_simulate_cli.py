@@ -85,7 +85,8 @@ def test_simulate_writes_every_key_of_the_log_format_with_its_shape(exp1_run):
 def test_resolved_scenario_is_written_beside_the_log_and_loads_back(exp1_run):
     _, _, out_dir = exp1_run
     back = load_scenario(out_dir / "scenario.yaml")
-    assert back == load_scenario("exp1_no_interaction")
+    # Everything as shipped but the duration, which is what the log covers (--duration 0.2).
+    assert back == load_scenario("exp1_no_interaction", overlay_text="duration: 0.2")
 
 
 def test_summary_reports_ticks_and_the_logged_minimum_distances(exp1_run):
@@ -179,3 +180,25 @@ def test_an_unwritable_out_dir_is_refused_before_the_run(tmp_path, capsys):
     err = capsys.readouterr().err
     assert code == 2
     assert "--out" in err and str(blocker) in err and "not a writable directory" in err
+
+
+def test_ctrl_c_during_a_simulation_keeps_the_log(tmp_path, capsys):
+    # KeyboardInterrupt raised from inside the run (here by the progress callback after the
+    # first chunk, as Ctrl-C would): the ticks simulated so far are written, exit code 130.
+    from cdpm_drake.scenario import load_scenario
+
+    calls = {"n": 0}
+
+    def interrupt(diagram, context):
+        calls["n"] += 1
+        raise KeyboardInterrupt
+
+    scenario = load_scenario("exp1_no_interaction")
+    code = cli.simulate_main(scenario=scenario, duration=5.0, out_dir=tmp_path, progress=False,
+                             on_chunk=interrupt)
+    assert code == 130 and calls["n"] == 1
+    assert "interrupted at t = " in capsys.readouterr().err
+    log = np.load(tmp_path / "log.npz")
+    assert 0.0 < log["time"][-1] < 5.0
+    # The scenario written beside it says how long the log is, so it reproduces the run.
+    assert f"duration: {log['time'][-1]}" in (tmp_path / "scenario.yaml").read_text()

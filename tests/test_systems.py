@@ -181,16 +181,21 @@ def reels_log(command, ticks, **kwargs):
     return run_chain(ConstantVectorSource(command), reels, ticks, output="cable_lengths")
 
 
-def test_ideal_reels_integrate_the_command_and_clip_the_reel_speed():
-    # 1.5 m/s on cable 3 is above max_reel_speed = 1 m/s: it runs at 1 m/s.
+def test_ideal_reels_integrate_the_command_and_scale_it_to_the_reel_speed():
+    # 1.5 m/s on cable 3 is above max_reel_speed = 1 m/s: the whole command is scaled by
+    # 1/1.5 (direction kept, as the hardware plant does): (0.2, -0.3, 1.5) / 1.5.
     command = np.array([0.2, -0.3, 1.5])
     lengths = reels_log(command, 50)
     k = np.arange(51)[:, None]
-    expected = cable_lengths(TRIPOD, P0) + k * T * np.array([0.2, -0.3, 1.0])
+    expected = cable_lengths(TRIPOD, P0) + k * T * command / 1.5
     np.testing.assert_allclose(lengths, expected, rtol=0, atol=1e-9)
-    # max_reel_speed from the scenario overrides the robot's.
+    # max_reel_speed from the scenario overrides the robot's: scaled by 0.25 / 1.5.
     lengths = reels_log(command, 50, max_reel_speed=0.25)
-    expected = cable_lengths(TRIPOD, P0) + k * T * np.array([0.2, -0.25, 0.25])
+    expected = cable_lengths(TRIPOD, P0) + k * T * command * (0.25 / 1.5)
+    np.testing.assert_allclose(lengths, expected, rtol=0, atol=1e-9)
+    # Within the limit nothing changes.
+    lengths = reels_log(np.array([0.2, -0.3, 0.5]), 50)
+    expected = cable_lengths(TRIPOD, P0) + k * T * np.array([0.2, -0.3, 0.5])
     np.testing.assert_allclose(lengths, expected, rtol=0, atol=1e-9)
 
 

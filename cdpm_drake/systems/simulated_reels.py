@@ -9,7 +9,7 @@ from ..kinematics import cable_lengths, forward_kinematics
 class SimulatedReels(LeafSystem):
     """Reels that integrate their velocity commands to cable lengths at the control rate.
 
-    Each tick: the command is clipped to the reel speed limit, passed through a first-order lag
+    Each tick: the command is scaled down to the reel speed limit (all reels alike), passed through a first-order lag
     (time constant `time_constant`, s; 0 for ideal drives) and integrated over one step. Seven
     cables over-constrain a translating platform, so the integrated lengths are projected back
     onto the geometry (least-squares forward kinematics, then inverse kinematics): the platform
@@ -55,7 +55,12 @@ class SimulatedReels(LeafSystem):
         return context.get_discrete_state(self._pose).get_value()
 
     def _update_reels(self, context, discrete_state):
-        command = np.clip(self._command.Eval(context), -self._vmax, self._vmax)
+        command = self._command.Eval(context)
+        peak = float(np.max(np.abs(command))) if command.size else 0.0
+        if peak > self._vmax:
+            # Scale all reels alike, as the hardware plant does: the platform slows down but
+            # keeps its direction (clipping one reel would steer it).
+            command = command * (self._vmax / peak)
         speed = context.get_discrete_state(self._reel_speed).get_value()
         speed = speed + self._lag * (command - speed)
         lengths = context.get_discrete_state(self._lengths).get_value() + self._T * speed
