@@ -362,3 +362,41 @@ def test_rt_priority_flag_sets_sched_fifo_or_says_why_not():
     with pytest.raises(ValueError, match=r"rt_priority must be an integer in 0..99 .* got 100"):
         from cdpm_drake.hardware.priority import set_realtime_priority
         set_realtime_priority(100)
+
+
+def test_a_new_session_is_accepted_only_with_enable_clear_and_the_reels_at_rest():
+    """hardware/PROTOCOL.md, check 8: the bridge takes an out-of-order command as a new
+    controller session only if it is enable-clear while its reels are at rest; an out-of-order
+    enabling command is always dropped (a replayed command must never move the reels)."""
+    import socket
+
+    from cdpm_drake.hardware.protocol import Command, encode_command
+    from cdpm_drake.robot import load_robot
+
+    robot = load_robot("paper_7cable")
+    server = ReelBridgeServer(ReelBridge(robot, cable_lengths(robot, robot.workspace.center),
+                                         time_constant=0.0))
+    client = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+    client.bind(("127.0.0.1", 0))
+
+    def send(sequence, enable):
+        client.sendto(encode_command(Command(sequence, 0.0, np.zeros(7), enable, None)),
+                      server.address)
+        time.sleep(0.01)
+        newest = server._drain(0.0)
+        if newest is not None:
+            server.bridge.set_command(newest.velocity, newest.enable)
+        return newest
+
+    try:
+        assert send(5, enable=True) is not None and server.bridge.enabled
+        assert send(3, enable=False) is None  # out of order while enabled: dropped
+        assert send(6, enable=False) is not None and not server.bridge.enabled
+        assert send(2, enable=True) is None  # an old enabling command: never accepted
+        assert server.counters["rejected"]["sequence"] == 2
+        assert send(1, enable=False) is not None  # at rest, enable-clear from 1: new session
+        assert server.counters["sessions"] == 1
+        assert send(2, enable=True) is not None and server.bridge.enabled
+    finally:
+        client.close()
+        server.stop()

@@ -169,3 +169,19 @@ def test_a_failing_log_writer_still_leaves_a_log_and_a_report(tmp_path, monkeypa
     assert len(log["time"]) > 0 and np.all(np.diff(log["tick"]) == 1)
     last = list(server.commands)[-1]
     assert not last.enable and np.all(last.velocity == 0.0)
+
+
+def test_a_second_run_against_the_same_bridge_is_a_new_session(tmp_path):
+    # The next `cdpm run` counts its commands from 1 again: the bridge, at rest after the first
+    # run's enable-clear shutdown, must take that as a new session, not drop it as old.
+    scenario = load_scenario("exp1_no_interaction")
+    server = _server(scenario)
+    try:
+        for k in range(2):
+            result = run(scenario=_hardware("exp1_no_interaction", server),
+                         out_dir=tmp_path / f"run{k}", duration=0.5)
+            assert result.ending == "completed", (k, result.error)
+    finally:
+        server.stop()
+    assert server.counters["sessions"] == 1
+    assert server.counters["rejected"]["sequence"] == 0

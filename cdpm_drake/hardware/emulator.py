@@ -221,6 +221,7 @@ class ReelBridgeServer:
         self.commands = collections.deque(maxlen=record)
         self.counters = {"statuses_sent": 0, "statuses_dropped": 0, "commands_received": 0,
                          "commands_dropped": 0, "commands_foreign": 0, "late_ticks": 0,
+                         "sessions": 0,
                          "rejected": {r: 0 for r in REASONS}}
 
     @property
@@ -309,7 +310,7 @@ class ReelBridgeServer:
                 continue
             try:
                 command = decode_command(data, self._m)
-                self._tracker.accept(command.sequence)
+                self._accept_sequence(command)
             except ProtocolError as e:
                 self.counters["rejected"][e.reason] += 1
                 continue
@@ -321,6 +322,19 @@ class ReelBridgeServer:
             self.commands.append(ReceivedCommand(now, self.tick, command.sequence, command.time,
                                                  command.enable, command.velocity, active))
         return newest
+
+    def _accept_sequence(self, command) -> None:
+        """Order the command stream. A controller that starts again (a new `cdpm run`) greets
+        with enable-clear commands from sequence 1; while the reels are at rest, such a
+        command opens a new session instead of being dropped as old (hardware/PROTOCOL.md)."""
+        try:
+            self._tracker.accept(command.sequence)
+        except ProtocolError as e:
+            if e.reason != "sequence" or command.enable or self.bridge.enabled:
+                raise
+            self._tracker = SequenceTracker()
+            self._tracker.accept(command.sequence)
+            self.counters["sessions"] += 1
 
     def _send_status(self, now: float, active: bool) -> None:
         plan = self._faults if active else FaultPlan()
@@ -505,7 +519,10 @@ def build_server(args) -> ReelBridgeServer:
 
 
 def main(argv=None) -> int:
-    args = _parser().parse_args(argv)
+    parser = _parser()
+    args = parser.parse_args(argv)
+    if args.duration is not None and not (args.duration > 0 and math.isfinite(args.duration)):
+        parser.error(f"--duration must be a number of seconds > 0, got {args.duration!r}")
     try:
         set_realtime_priority(args.rt_priority)
         server = build_server(args)
@@ -528,9 +545,11 @@ def main(argv=None) -> int:
     finally:
         server.stop()
         c = server.counters
-        print(f"cdpm-reel-emulator: {c['commands_received']} commands received, "
-              f"{c['statuses_sent']} statuses sent, commands lost {server.commands_lost}, "
-              f"faults {server.bridge.faults:#06x}", flush=True)
+        rejected = {r: n for r, n in c["rejected"].items() if n}
+        print(f"cdpm-reel-emulator: {c['commands_received']} commands received "
+              f"({c['sessions'] + 1 if c['commands_received'] else 0} controller session(s)), "
+              f"rejected {rejected or 0}, {c['statuses_sent']} statuses sent, commands lost "
+              f"{server.commands_lost}, faults {server.bridge.faults:#06x}", flush=True)
     return 0
 
 
