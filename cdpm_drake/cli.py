@@ -72,7 +72,8 @@ def _load_scenario_arg(args):
 
 
 def simulate_main(*, scenario, duration=None, out_dir=None, progress=True, out=None,
-                  on_chunk=None, html=None, plots=False) -> int:
+                  on_chunk=None, html=None, plots=False, realtime_rate=None,
+                  chunk=0.5) -> int:
     """Simulate, write DIR/log.npz and DIR/scenario.yaml, print a summary. Returns an exit
     code: 0, or 1 when the run ended early (the log up to then is written all the same)."""
     from .simulation import save_log, simulate, summary_rows
@@ -81,7 +82,7 @@ def simulate_main(*, scenario, duration=None, out_dir=None, progress=True, out=N
     out_dir = Path(out_dir if out_dir is not None else Path("runs") / scenario.name)
     _writable_dir(out_dir, "--out")  # before the run: a long run's log must have a place
     result = simulate(scenario=scenario, duration=duration, progress=progress,
-                      on_chunk=on_chunk)
+                      on_chunk=on_chunk, realtime_rate=realtime_rate, chunk=chunk)
     log = result.log
     path = save_log(log, out_dir, scenario)
     T = log["time"].size
@@ -104,8 +105,7 @@ def simulate_main(*, scenario, duration=None, out_dir=None, progress=True, out=N
         for png in plot_log(log, out_dir):
             print(f"plot: {png}", file=out)
     if html is not None:
-        from .views.meshcat_view import save_replay_html
-        print(f"3D replay: {save_replay_html(log, html)} (open it in a browser)", file=out)
+        print(f"3D replay: {_save_replay(log, html)} (open it in a browser)", file=out)
     stopped = f"t = {log['time'][-1] if T else 0:.3f} s"
     if isinstance(result.error, KeyboardInterrupt):
         print(f"cdpm simulate: interrupted at {stopped}; the log up to there is written",
@@ -122,11 +122,17 @@ def _cmd_simulate(args) -> int:
     _check_duration(args.duration)
     scenario = _load_scenario_arg(args)
     on_chunk = None
+    realtime = args.realtime
+    if realtime is not None and not (realtime > 0 and np.isfinite(realtime)):
+        raise CliError(f"--realtime must be a rate > 0 (1: real time), got {realtime!r}")
     if args.meshcat:
         on_chunk = _live_meshcat(scenario)
+        # Something to watch: paced at real time unless told otherwise.
+        realtime = 1.0 if realtime is None else realtime
     code = simulate_main(scenario=scenario, duration=args.duration, out_dir=args.out,
                          progress=not args.no_progress, on_chunk=on_chunk,
-                         html=args.html, plots=args.plot)
+                         html=args.html, plots=args.plot, realtime_rate=realtime,
+                         chunk=0.04 if args.meshcat else 0.5)
     if args.meshcat and not args.no_wait and sys.stdin.isatty():
         try:
             input("Meshcat is still serving the last frame; press Enter to quit. ")
@@ -144,6 +150,22 @@ def _writable_dir(path: Path, field: str) -> None:
     except OSError as e:
         raise CliError(f"{field} {str(path)!r} is not a writable directory: "
                        f"{e.strerror or e}") from None
+
+
+def _save_replay(log, path):
+    """The self-contained HTML replay. The Meshcat server it records with is private to it, so
+    Drake's "listening at http://..." line would only mislead: silenced."""
+    import logging
+
+    from .views.meshcat_view import save_replay_html
+
+    drake_log = logging.getLogger("drake")
+    previous = drake_log.level
+    drake_log.setLevel(logging.WARNING)
+    try:
+        return save_replay_html(log, path)
+    finally:
+        drake_log.setLevel(previous)
 
 
 def _check_duration(duration):
@@ -232,8 +254,7 @@ def _cmd_plot(args) -> int:
     for png in plot_log(log, out_dir):
         print(f"plot: {png}")
     if args.html is not None:
-        from .views.meshcat_view import save_replay_html
-        print(f"3D replay: {save_replay_html(log, args.html)}")
+        print(f"3D replay: {_save_replay(log, args.html)} (open it in a browser)")
     return 0
 
 
@@ -292,7 +313,11 @@ def _parser() -> argparse.ArgumentParser:
     p.add_argument("--out", type=Path, help="output directory (default: runs/<scenario name>)")
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
     p.add_argument("--meshcat", action="store_true",
-                   help="show the robot live in Meshcat (prints the URL to open)")
+                   help="show the robot live in Meshcat (prints the URL to open); the "
+                        "simulation then runs at real time (see --realtime)")
+    p.add_argument("--realtime", type=float, metavar="RATE",
+                   help="pace the simulation at RATE x real time (default: as fast as "
+                        "possible; 1.0 with --meshcat)")
     p.add_argument("--no-wait", action="store_true",
                    help="with --meshcat: quit at the end instead of waiting for Enter")
     p.add_argument("--html", type=Path, metavar="FILE",
@@ -387,6 +412,10 @@ def main(argv=None) -> int:
             TickLogError) as e:
         print(f"cdpm {args.command}: error: {e}", file=sys.stderr)
         return 2
+    except BrokenPipeError:
+        # `cdpm info | head`: the reader left; not an error of ours.
+        sys.stderr.close()
+        return 0
 
 
 if __name__ == "__main__":

@@ -26,17 +26,21 @@ class NoForce:
 class ForceProfile:
     """A piecewise-linear force table (t_k, F_k); held at the end values outside the table."""
 
-    def __init__(self, times, forces, *, field: str = "operator"):
+    def __init__(self, times, forces, *, field: str = "operator",
+                 values: tuple[str, str] = ("forces", "[Fx, Fy, Fz] row (N)")):
+        """`values` names the rows' field and what a row is, for messages (the spring hand's
+        rows are waypoints)."""
+        name, row = values
         t = np.asarray(times, dtype=float)
         f = np.asarray(forces, dtype=float)
         if t.ndim != 1 or t.size == 0:
             raise OperatorError(f"{field}.times must be a non-empty list of seconds, got "
                                 f"{times!r}")
         if f.shape != (t.size, 3):
-            raise OperatorError(f"{field}.forces must have one [Fx, Fy, Fz] row (N) per time; "
+            raise OperatorError(f"{field}.{name} must have one {row} per time; "
                                 f"got shape {f.shape} for {t.size} times")
         if not (np.all(np.isfinite(t)) and np.all(np.isfinite(f))):
-            raise OperatorError(f"{field}: times and forces must be finite numbers")
+            raise OperatorError(f"{field}: times and {name} must be finite numbers")
         if np.any(np.diff(t) <= 0):
             k = int(np.argmax(np.diff(t) <= 0))
             raise OperatorError(f"{field}.times must increase strictly: times[{k + 1}] = "
@@ -87,7 +91,8 @@ class SpringHand:
     def __init__(self, waypoints, times, stiffness, damping, max_force, release_time=None, *,
                  field: str = "operator"):
         w = np.asarray(waypoints, dtype=float)
-        self.profile = ForceProfile(times, w, field=field)  # same checks: rows of 3 per time
+        self.profile = ForceProfile(times, w, field=field,  # same checks: rows of 3 per time
+                                    values=("waypoints", "[x, y, z] row (m)"))
         for name, value in (("stiffness", stiffness), ("damping", damping),
                             ("max_force", max_force)):
             if not np.isfinite(value) or value < 0:

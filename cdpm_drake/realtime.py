@@ -82,6 +82,9 @@ def run(*, scenario: Scenario, out_dir, duration: float | None = None, status=No
         raise ScenarioError(f"duration must be a finite number > 0 s, got {duration!r}")
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
+    for stale in ("ticks.bin", "log.npz"):
+        # An earlier run's files would otherwise be reported as this run's if it fails early.
+        (out / stale).unlink(missing_ok=True)
     (out / "scenario.yaml").write_text(scenario_to_yaml(
         dataclasses.replace(scenario, duration=duration)))
     tick_path = out / "ticks.bin"
@@ -158,7 +161,8 @@ def _status_line(diagram, context, reels, t) -> str:
     link = reels.link
     if link is not None:
         k = link.counters
-        text += f"  link sent {k.sent} accepted {k.accepted} lost {k.lost}"
+        text += (f"  commands sent {k.sent}, statuses accepted {k.accepted}, "
+                 f"statuses lost {k.lost}")
     return text
 
 

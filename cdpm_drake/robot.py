@@ -357,8 +357,12 @@ def load_robot(path: str | Path) -> Robot:
                          f"got {type(raw).__name__}")
     missing = [k for k in _REQUIRED if k not in raw]
     if missing:
+        valid = [f.name for f in dataclasses.fields(RobotSchema)]
+        unknown = [k for k in raw if k not in valid]
+        # A misspelt required field shows up as both: say both, so the typo is obvious.
         raise RobotError(f"{src}: missing required field(s) {missing}; a robot file needs "
-                         f"{list(_REQUIRED)}")
+                         f"{list(_REQUIRED)}"
+                         + (f" (unknown field(s) {unknown!r} given)" if unknown else ""))
     _check_keys(raw, RobotSchema, "", src)
     if not isinstance(raw["workspace"], dict):
         raise RobotError(f"{src}: workspace must be a mapping with fields lower and upper, "

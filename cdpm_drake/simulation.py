@@ -13,7 +13,8 @@ import numpy as np
 from pydrake.systems.analysis import Simulator
 
 from .diagram import LOGGED, build_diagram
-from .scenario import Scenario, check_scenario, interference_params, scenario_to_yaml
+from .scenario import (Scenario, ScenarioError, SimulatedReels, check_scenario,
+                       interference_params, scenario_to_yaml)
 
 
 @dataclasses.dataclass
@@ -31,20 +32,28 @@ class SimulationResult:
 
 
 def simulate(*, scenario: Scenario, duration: float | None = None, progress: bool = False,
-             on_chunk=None, chunk: float = 0.5, diagram=None) -> SimulationResult:
+             on_chunk=None, chunk: float = 0.5, diagram=None,
+             realtime_rate: float | None = None) -> SimulationResult:
     """Simulate the scenario's diagram for `duration` s (default: the scenario's).
 
     `on_chunk(diagram, context)` is called every `chunk` s of simulated time (views hang off
-    it). Exceptions raised by the diagram end the run; the result carries them in `error`
-    with the log up to that point.
+    it). `realtime_rate` paces the simulation (1.0: real time, for a live view); None runs
+    as fast as it can. Exceptions raised by the diagram end the run; the result carries them
+    in `error` with the log up to that point.
     """
     robot = check_scenario(scenario)
+    if diagram is None and not isinstance(scenario.plant, SimulatedReels):
+        raise ScenarioError(
+            f"scenario {scenario.name!r} has plant: !{type(scenario.plant).__name__}; a "
+            "simulation needs plant: !SimulatedReels {} (use `cdpm run` to drive real reels)")
     duration = scenario.duration if duration is None else float(duration)
     if not (duration > 0 and np.isfinite(duration)):
         raise ValueError(f"duration must be a finite number > 0 s, got {duration!r}")
     diagram = build_diagram(scenario) if diagram is None else diagram
     simulator = Simulator(diagram)
     context = simulator.get_mutable_context()
+    if realtime_rate is not None:
+        simulator.set_target_realtime_rate(float(realtime_rate))
     simulator.Initialize()
     bar = None
     if progress:

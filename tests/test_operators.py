@@ -159,7 +159,8 @@ def test_spring_hand_bad_gains_name_the_field_and_value(field, value):
 
 
 def test_spring_hand_waypoints_must_match_the_times():
-    with pytest.raises(OperatorError, match=r"one \[Fx, Fy, Fz\] row"):
+    # The message names the field the user wrote (waypoints), not the force table inside.
+    with pytest.raises(OperatorError, match=r"waypoints must have one \[x, y, z\] row \(m\)"):
         hand(waypoints=[[1.0, 2.0, 1.0]], times=[0.0, 1.0])
 
 

@@ -159,7 +159,7 @@ def test_load_log_roundtrip_and_errors(log, tmp_path):
     with pytest.raises(plots.LogError, match="does not exist"):
         plots.load_log(tmp_path / "nowhere")
     (tmp_path / "junk.npz").write_text("not a zip")
-    with pytest.raises(plots.LogError, match="not a readable"):
+    with pytest.raises(plots.LogError, match="is not a log written by cdpm simulate or cdpm run"):
         plots.load_log(tmp_path / "junk.npz")
 
 

@@ -33,7 +33,11 @@ def stable_graphviz(diagram, max_depth: int = 1) -> str:
 
 
 def render_svg(dot_text: str) -> str:
-    import pygraphviz
+    try:
+        import pygraphviz
+    except ImportError as e:
+        raise RuntimeError(f"rendering SVG needs pygraphviz ({e}); `pip install pygraphviz`, "
+                           "or write only the .dot files with --no-svg") from None
 
     return pygraphviz.AGraph(string=dot_text).draw(format="svg", prog="dot").decode()
 

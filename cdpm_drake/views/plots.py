@@ -47,9 +47,14 @@ def load_log(path) -> dict:
                        "log.npz, or the .npz file)")
     try:
         with np.load(path, allow_pickle=False) as data:
+            if not hasattr(data, "files"):  # a bare .npy array, not an archive
+                raise ValueError("a single array, not an .npz archive")
             log = {k: data[k] for k in data.files}
     except (OSError, ValueError) as e:
-        raise LogError(f"{str(path)!r} is not a readable .npz log: {e}") from None
+        why = ("not a NumPy .npz archive" if "pickle" in str(e) or "allow_pickle" in str(e)
+               else str(e))
+        raise LogError(f"{str(path)!r} is not a log written by cdpm simulate or cdpm run "
+                       f"(docs/LOG_FORMAT.md): {why}") from None
     missing = [k for k in LOG_KEYS if k not in log]
     if missing:
         raise LogError(f"{str(path)!r} lacks the key(s) {missing!r} of docs/LOG_FORMAT.md; "
