@@ -44,3 +44,22 @@ def test_a_robot_described_by_someone_else_simulates_plots_and_replays(name, tmp
     for png in ("distances", "forces", "trajectory", "logistic"):
         assert (out / f"{png}.png").stat().st_size > 5000
     assert (out / "replay.html").stat().st_size > 100_000
+
+
+def test_the_readme_examples_load_and_simulate(tmp_path):
+    # The README's "Describe your own robot" and "Write a scenario" blocks, verbatim: a new
+    # user copies them first.
+    import re
+    from pathlib import Path
+
+    readme = (Path(__file__).resolve().parent.parent / "README.md").read_text()
+    blocks = re.findall(r"```yaml\n(.*?)```", readme, re.DOTALL)
+    robot = next(b for b in blocks if b.startswith("name: my_robot"))
+    scenario = next(b for b in blocks if b.startswith("name: my_push"))
+    (tmp_path / "my_robot.yaml").write_text(robot)
+    (tmp_path / "my_push.yaml").write_text(scenario)
+    assert main(["info", str(tmp_path / "my_robot.yaml")]) == 0
+    assert main(["simulate", str(tmp_path / "my_push.yaml"), "--duration", "1",
+                 "--out", str(tmp_path / "out"), "--no-progress"]) == 0
+    log = np.load(tmp_path / "out" / "log.npz")
+    assert log["p"][-1, 0] > log["p"][0, 0]  # the hand pulled towards +x
