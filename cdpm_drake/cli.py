@@ -55,6 +55,8 @@ def info(*, robot: str, out=None) -> None:
     print("cable-cable distances at the centre, and the largest any translation gives:",
           file=out)
     print(format_table(["pair", "distance (mm)", "largest (mm)"], rows), file=out)
+    print("(the two are equal where the closest points are the attachment points; d_u must "
+          "stay below 'largest' or that pair's force never switches off)", file=out)
 
 
 def _cmd_info(args) -> int:
