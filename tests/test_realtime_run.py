@@ -45,7 +45,8 @@ def test_a_run_against_the_emulator_matches_the_simulation(tmp_path):
     the bridge's 1-2 tick command latency and its per-reel integration (no projection onto the
     geometry): about 0.1 mm here. A host stall of tens of ms (this 2-core machine is shared)
     makes the bridge hold a command longer and can add a transient millimetre, so a run whose
-    tick timing shows such a stall is repeated, up to three times in all."""
+    tick timing shows such a stall (or that a stall ended through the watchdog) is repeated,
+    up to three times in all."""
     sim_scenario = load_scenario("exp1_no_interaction")
     sim = simulate(scenario=sim_scenario, duration=DURATION).log
     for attempt in range(3):
@@ -55,12 +56,15 @@ def test_a_run_against_the_emulator_matches_the_simulation(tmp_path):
                          out_dir=tmp_path / f"run{attempt}", duration=DURATION)
         finally:
             server.stop()
+        if result.ending == "fault" and "no valid status" in str(result.error):
+            continue  # the host starved the bridge thread past even 25 ticks: run again
         assert result.ending == "completed", result.error
         hw = result.log
         n = min(len(hw["time"]), len(sim["time"]))
         err = np.linalg.norm(hw["p"][:n] - sim["p"][:n], axis=1)
         if err.max() < 1e-3 or result.timing["max"] < 0.010:
             break  # matched, or failed without a stall to blame
+    assert result.ending == "completed", result.error
     assert n >= DURATION / 0.002
     np.testing.assert_allclose(hw["time"][:n], sim["time"][:n], atol=1e-12)
     moved = np.linalg.norm(sim["p"][n - 1] - sim["p"][0])
