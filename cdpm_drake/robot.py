@@ -123,8 +123,17 @@ class Robot:
     def __post_init__(self):
         reels = _as_points(self.reels, "reels", self.source)
         attachments = _as_points(self.attachments, "attachments", self.source)
-        lower = _as_vector(self.workspace.lower, "workspace.lower", self.source)
-        upper = _as_vector(self.workspace.upper, "workspace.upper", self.source)
+        workspace = self.workspace
+        # In code a workspace may also be given as {"lower": ..., "upper": ...} or (lower, upper).
+        if isinstance(workspace, dict):
+            workspace = Workspace(workspace.get("lower", ()), workspace.get("upper", ()))
+        elif isinstance(workspace, (tuple, list)) and len(workspace) == 2:
+            workspace = Workspace(*workspace)
+        elif not isinstance(workspace, Workspace):
+            raise RobotError(f"{self.source}: workspace must be a Workspace, a mapping with "
+                             f"lower and upper, or a pair (lower, upper); got {workspace!r}")
+        lower = _as_vector(workspace.lower, "workspace.lower", self.source)
+        upper = _as_vector(workspace.upper, "workspace.upper", self.source)
         object.__setattr__(self, "reels", reels)
         object.__setattr__(self, "attachments", attachments)
         object.__setattr__(self, "workspace", Workspace(lower, upper))

@@ -383,3 +383,19 @@ def test_swap_rejects_bad_cable_numbers(i, j, bad):
     with pytest.raises(RobotError) as info:
         robot.with_swapped_attachments(i, j)
     assert_names(str(info.value), f"cable {bad}", "1..7")
+
+
+def test_a_robot_built_in_code_takes_the_workspace_in_any_plain_form():
+    import numpy as np
+
+    from cdpm_drake.robot import Robot, RobotError, Workspace
+
+    reels = [[0, 0, 3], [4, 0, 3], [2, 4, 3]]
+    attachments = [[0, 0, 0.1], [0.1, 0, 0], [0, 0.1, 0]]
+    for workspace in (Workspace([1, 1, 0.5], [3, 3, 2]), {"lower": [1, 1, 0.5],
+                                                          "upper": [3, 3, 2]},
+                      ([1, 1, 0.5], [3, 3, 2])):
+        robot = Robot("tri", reels, attachments, workspace)
+        np.testing.assert_array_equal(robot.workspace.center, [2.0, 2.0, 1.25])
+    with pytest.raises(RobotError, match="workspace must be a Workspace"):
+        Robot("tri", reels, attachments, 3.0)
