@@ -135,7 +135,7 @@ def figure_forces(log: Mapping) -> Figure:
     names = ["F_H", "F_int", "F_d"]
     if "F_wall" in log and np.any(np.asarray(log["F_wall"]) != 0):
         names.insert(2, "F_wall")
-    fig = Figure(figsize=(8, 7), layout="constrained")
+    fig = Figure(figsize=(9, 7), layout="constrained")
     axes = fig.subplots(3, 1, sharex=True)
     for c, (ax, axis) in enumerate(zip(axes, "xyz")):
         for name in names:
@@ -143,7 +143,8 @@ def figure_forces(log: Mapping) -> Figure:
                     label=f"{name},{axis}", linewidth=1.0)
         ax.set_ylabel(f"F_{axis} (N)")
         ax.grid(True, alpha=0.3)
-        ax.legend(loc="upper right", fontsize="small")
+        # Beside the axes, so it never hides the end of a curve.
+        ax.legend(loc="upper left", bbox_to_anchor=(1.01, 1.0), fontsize="small")
     axes[-1].set_xlabel("time (s)")
     fig.suptitle(f"{_title(log)}\nForces on the platform (Figs. 11, 13, 16)")
     return fig
