@@ -9,9 +9,7 @@ with enable off is sent before anything else.
 
 import dataclasses
 import signal
-import sys
 import threading
-import time
 from pathlib import Path
 
 import numpy as np

@@ -136,8 +136,6 @@ def assemble_log(time_column, signals: dict, scenario: Scenario, robot) -> dict:
 def save_log(log: dict, out_dir, scenario: Scenario) -> Path:
     """Write DIR/log.npz and the resolved scenario DIR/scenario.yaml; returns the npz path.
     The scenario's duration is set to what the log covers, so the file reproduces the run."""
-    import dataclasses
-
     if len(log["time"]):
         scenario = dataclasses.replace(scenario, duration=float(log["time"][-1]))
     out = Path(out_dir)

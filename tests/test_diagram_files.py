@@ -5,7 +5,6 @@ Regenerate with `cdpm diagram` when a block or a connection changes."""
 import dataclasses
 from pathlib import Path
 
-import pytest
 
 from cdpm_drake.cli import main
 from cdpm_drake.diagram import BuildOptions, PLANT_PORTS, build_diagram

@@ -17,7 +17,6 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from cdpm_drake import interference as itf
 from cdpm_drake.interference import (InterferenceParams, distance_gradient, initial_side,
                                      interference_force, logistic_intensity, pair_distances,
                                      segment_distance, update_side)

@@ -3,7 +3,7 @@
 import math
 
 import numpy as np
-from pydrake.systems.framework import BasicVector, LeafSystem
+from pydrake.systems.framework import LeafSystem
 
 
 def clip_to_sensor_range(f, axis, axial_range, transverse_range) -> np.ndarray:
