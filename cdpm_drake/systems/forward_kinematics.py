@@ -4,6 +4,7 @@ import numpy as np
 from pydrake.systems.framework import LeafSystem
 
 from ..kinematics import forward_kinematics
+from ._tick_cache import declare_tick_cache
 
 
 class ForwardKinematicsEstimator(LeafSystem):
@@ -29,18 +30,15 @@ class ForwardKinematicsEstimator(LeafSystem):
         self._lengths = self.DeclareVectorInputPort("cable_lengths", robot.num_cables)
         self._previous = self.DeclareDiscreteState(np.asarray(initial_position, dtype=float))
         deps = {self._lengths.ticket(), self.discrete_state_ticket(self._previous)}
-        self._estimate = self.DeclareCacheEntry(
-            description="p_WP_estimate",
-            value_producer=_vector_producer(3, self._calc_estimate),
-            prerequisites_of_calc=deps)
+        self._estimate = declare_tick_cache(self, "p_WP_estimate", self._compute_estimate, deps)
         self.DeclareVectorOutputPort("p_WP", 3, self._calc_p_WP, prerequisites_of_calc=deps)
         self.DeclarePeriodicDiscreteUpdateEvent(time_step, 0.0, self._update_previous)
 
-    def _calc_estimate(self, context, value):
-        value.set_value(forward_kinematics(
+    def _compute_estimate(self, context):
+        return forward_kinematics(
             self._robot, self._lengths.Eval(context),
             p_guess=context.get_discrete_state(self._previous).get_value(),
-            max_residual=self._max_residual))
+            max_residual=self._max_residual)
 
     def _calc_p_WP(self, context, output):
         output.SetFromVector(self._estimate.Eval(context))
@@ -49,9 +47,3 @@ class ForwardKinematicsEstimator(LeafSystem):
         discrete_state.get_mutable_vector(self._previous).SetFromVector(
             self._estimate.Eval(context))
 
-
-def _vector_producer(size, calc):
-    from pydrake.common.value import AbstractValue
-    from pydrake.systems.framework import ValueProducer
-
-    return ValueProducer(allocate=AbstractValue.Make(np.zeros(size)).Clone, calc=calc)

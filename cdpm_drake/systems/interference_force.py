@@ -1,10 +1,10 @@
 """The interference-force block of Fig. 5 (section 4, eqs. 23-30)."""
 
 import numpy as np
-from pydrake.common.value import AbstractValue
-from pydrake.systems.framework import LeafSystem, ValueProducer
+from pydrake.systems.framework import LeafSystem
 
 from ..interference import interference_force
+from ._tick_cache import declare_tick_cache
 
 
 class InterferenceForce(LeafSystem):
@@ -39,11 +39,7 @@ class InterferenceForce(LeafSystem):
         self._side = self.DeclareDiscreteState(P)  # 0: unknown
         deps = {self._p.ticket(), self.discrete_state_ticket(self._side)}
         # One evaluation of the math per tick, shared by all outputs and the update.
-        self._result = self.DeclareCacheEntry(
-            description="interference_result",
-            value_producer=ValueProducer(
-                allocate=AbstractValue.Make(object()).Clone, calc=self._calc_result),
-            prerequisites_of_calc=deps)
+        self._result = declare_tick_cache(self, "interference_result", self._compute_result, deps)
         self.DeclareVectorOutputPort("F_int", 3, self._calc_F_int, prerequisites_of_calc=deps)
         self.DeclareVectorOutputPort("pair_distances", P, self._calc_pair_distances,
                                      prerequisites_of_calc=deps)
@@ -52,10 +48,9 @@ class InterferenceForce(LeafSystem):
                                      prerequisites_of_calc=deps)
         self.DeclarePeriodicDiscreteUpdateEvent(time_step, 0.0, self._update_side)
 
-    def _calc_result(self, context, abstract_value):
+    def _compute_result(self, context):
         side = context.get_discrete_state(self._side).get_value().astype(np.int8)
-        abstract_value.set_value(
-            interference_force(self._robot, self._p.Eval(context), self._params, side=side))
+        return interference_force(self._robot, self._p.Eval(context), self._params, side=side)
 
     def _result_of(self, context):
         return self._result.Eval(context)

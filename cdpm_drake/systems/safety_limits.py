@@ -1,10 +1,10 @@
 """The threshold block of Fig. 5: velocity, acceleration and the virtual wall."""
 
 import numpy as np
-from pydrake.common.value import AbstractValue
-from pydrake.systems.framework import LeafSystem, ValueProducer
+from pydrake.systems.framework import LeafSystem
 
 from ..limits import limit_velocity
+from ._tick_cache import declare_tick_cache
 
 
 class SafetyLimits(LeafSystem):
@@ -36,21 +36,17 @@ class SafetyLimits(LeafSystem):
         deps = {self._v_desired.ticket(), self._p.ticket(),
                 self.discrete_state_ticket(self._previous)}
         # Computed once per tick, for the output and the update alike.
-        self._command = self.DeclareCacheEntry(
-            description="velocity_command",
-            value_producer=ValueProducer(allocate=AbstractValue.Make(np.zeros(3)).Clone,
-                                         calc=self._calc_command),
-            prerequisites_of_calc=deps)
+        self._command = declare_tick_cache(self, "velocity_command", self._compute_command, deps)
         self.DeclareVectorOutputPort("velocity_command", 3, self._calc_velocity_command,
                                      prerequisites_of_calc=deps)
         self.DeclarePeriodicDiscreteUpdateEvent(time_step, 0.0, self._update_previous)
 
-    def _calc_command(self, context, value):
-        value.set_value(limit_velocity(
+    def _compute_command(self, context):
+        return limit_velocity(
             self._v_desired.Eval(context),
             context.get_discrete_state(self._previous).get_value(),
             self._p.Eval(context), self._lower, self._upper, max_velocity=self._vmax,
-            max_acceleration=self._amax, time_step=self._T, virtual_wall=self._wall))
+            max_acceleration=self._amax, time_step=self._T, virtual_wall=self._wall)
 
     def _calc_velocity_command(self, context, output):
         output.SetFromVector(self._command.Eval(context))
