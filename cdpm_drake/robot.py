@@ -22,9 +22,9 @@ _log = logging.getLogger(__name__)
 # above round-off for coordinates of a few metres.
 SAME_POINT_TOL = 1e-9
 
-# Shipped robot descriptions live at the top of the repository (hardware/robots), next to the
-# reel link protocol, so integrators find them; the package is installed in editable mode.
-ROBOTS_DIR = Path(__file__).resolve().parent.parent / "hardware" / "robots"
+# Shipped robot descriptions are package data, so a wheel (not only an editable install) has
+# them; the repository's hardware/robots, next to the reel link protocol, links here.
+ROBOTS_DIR = Path(__file__).resolve().parent / "robots"
 
 
 class RobotError(ValueError):
