@@ -64,14 +64,14 @@ def simulate(*, scenario: Scenario, duration: float | None = None, progress: boo
     start = time.perf_counter()
     t = 0.0
     try:
-        # Step to the last whole tick inside the duration: one log row per tick.
-        end = np.floor(duration / scenario.time_step + 1e-9) * scenario.time_step
-        while t < end - 1e-12:
-            t_next = min(t + chunk, end)
-            simulator.AdvanceTo(t_next)
+        # Step to the last whole tick inside the duration: one log row per tick, ticks 0..n.
+        # Targets are whole ticks counted in integers: summing a chunk such as 0.04 s in
+        # floating point ends a hair short of the last tick, which then is never logged.
+        for target in tick_targets(duration, scenario.time_step, chunk):
+            simulator.AdvanceTo(target)
             if bar is not None:
-                bar.update(round(t_next - t, 6))
-            t = t_next
+                bar.update(round(target - t, 6))
+            t = target
             if on_chunk is not None:
                 on_chunk(diagram, context)
     except (Exception, KeyboardInterrupt) as e:  # keep what was logged; the caller reports
@@ -81,7 +81,33 @@ def simulate(*, scenario: Scenario, duration: float | None = None, progress: boo
         if bar is not None:
             bar.close()
     log = collect_log(diagram, context, scenario, robot)
+    mark_ending(log, "completed" if error is None else
+                "interrupted" if isinstance(error, KeyboardInterrupt) else "fault", error)
     return SimulationResult(log=log, wall_time=wall, error=error)
+
+
+def tick_targets(duration: float, time_step: float, chunk: float) -> list[float]:
+    """The times to advance to, every `chunk` s (rounded to whole ticks, at least one), ending
+    exactly at the last whole tick n * time_step <= duration (the log then has n + 1 rows)."""
+    n = int(np.floor(duration / time_step + 1e-9))
+    per = max(1, int(round(chunk / time_step)))
+    ticks = list(range(per, n, per)) + [n]
+    return [k * time_step for k in ticks if k > 0]
+
+
+def mark_ending(log: dict, ending: str, error: BaseException | None) -> dict:
+    """Add how the run ended (docs/LOG_FORMAT.md): `ending` "completed", "interrupted" or
+    "fault"; for a fault, `fault_time` (the last logged tick, s) and `fault_message`."""
+    if ending not in ("completed", "interrupted", "fault"):
+        raise ValueError(f"ending must be 'completed', 'interrupted' or 'fault', got {ending!r}")
+    t = log["time"]
+    fault = ending == "fault"
+    log["ending"] = np.array(ending)
+    log["fault_time"] = np.array(float(t[-1]) if fault and len(t) else np.nan)
+    message = "" if not fault else (f"{type(error).__name__}: {error}" if error is not None
+                                    else "unknown fault")
+    log["fault_message"] = np.array(message)
+    return log
 
 
 def collect_log(diagram, context, scenario: Scenario, robot) -> dict:

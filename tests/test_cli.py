@@ -86,9 +86,10 @@ def test_info_robot_file_by_path(capsys):
     assert str(HAND_ROBOT) in out and "'garage_4cable'" in out
 
 
-def test_info_unknown_robot_exits_2_listing_builtins(capsys):
+def test_info_unknown_robot_exits_1_listing_builtins(capsys):
+    # 1, an error (the robot cannot be loaded); 2 is kept for a malformed command line.
     code, out, err = run_info(capsys, "nonexistent")
-    assert code == 2
+    assert code == 1
     assert out == ""
     assert err.startswith("cdpm info: error:")
     for part in ("'nonexistent'", "paper_7cable", "cube_8cable"):
@@ -96,11 +97,11 @@ def test_info_unknown_robot_exits_2_listing_builtins(capsys):
     assert "Traceback" not in err
 
 
-def test_info_invalid_robot_file_exits_2_naming_the_field(capsys, write_robot, valid_spec):
+def test_info_invalid_robot_file_exits_1_naming_the_field(capsys, write_robot, valid_spec):
     valid_spec["reels"][1][2] = float("nan")
     path = write_robot(valid_spec)
     code, out, err = run_info(capsys, str(path))
-    assert code == 2
+    assert code == 1
     assert str(path) in err and "reels of cable 2" in err and "nan" in err
 
 
@@ -115,4 +116,4 @@ def test_installed_console_script():
     assert numbers == list(range(1, 9))
     bad = subprocess.run([str(exe), "info", "nonexistent"], capture_output=True, text=True,
                          timeout=120)
-    assert bad.returncode == 2 and "'nonexistent'" in bad.stderr
+    assert bad.returncode == 1 and "'nonexistent'" in bad.stderr

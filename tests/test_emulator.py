@@ -334,7 +334,7 @@ def test_cli_takes_robot_start_and_operator_from_a_scenario():
 def test_cli_errors_name_the_flag(capsys):
     assert E.main(["--robot", "paper_7cable", "--length-offset", "9", "0.1", "--port", "0"]) == 2
     assert "--length-offset cable '9': cables are numbered 1..7" in capsys.readouterr().err
-    assert E.main(["--robot", "no_such_robot", "--port", "0"]) == 2
+    assert E.main(["--robot", "no_such_robot", "--port", "0"]) == 1  # an error, not usage
     assert "unknown robot 'no_such_robot'" in capsys.readouterr().err
 
 

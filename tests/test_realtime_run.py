@@ -140,7 +140,8 @@ def test_cdpm_run_cli_reports_timing_and_packets(tmp_path, capsys):
     code = main(["run", "exp1_no_interaction", "--duration", "1", "--out", str(tmp_path),
                  "--scenario-text", "plant: !HardwareReels {port: 9}"])
     assert code == 2
-    assert "already holds the log of a run" in capsys.readouterr().err
+    assert f"--out {str(tmp_path)!r} is not empty" in capsys.readouterr().err
+    assert np.load(tmp_path / "log.npz")["time"].size == 501  # untouched: 1 s at 500 Hz
 
 
 def test_a_failing_log_writer_still_leaves_a_log_and_a_report(tmp_path, monkeypatch):

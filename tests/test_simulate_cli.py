@@ -1,5 +1,6 @@
 """`cdpm simulate`: the log.npz contract of docs/LOG_FORMAT.md, the resolved scenario beside
-it, the summary, every shipped scenario through the CLI, and exit code 2 on bad arguments."""
+it, the summary, every shipped scenario through the CLI, the run-folder policy, exit codes and
+signals."""
 
 import re
 import subprocess
@@ -125,13 +126,71 @@ def test_scenario_text_overlay_reaches_the_run(capsys, tmp_path):
         assert np.isnan(log["d_u"]).all()
 
 
-def test_default_output_directory_is_runs_slash_the_scenario_name(capsys, tmp_path,
-                                                                  monkeypatch):
+def test_each_default_run_gets_its_own_folder_and_latest_points_at_the_newest(
+        capsys, tmp_path, monkeypatch):
+    # Issue 10, point 4: a second run never overwrites the first one's log nor shares its
+    # folder (the first one's PNGs stay with the first log only).
     monkeypatch.chdir(tmp_path)
-    code, _, err = simulate_cli(capsys, "exp1_no_interaction", "--duration", "0.05",
-                                "--no-progress")
+    code, out1, err = simulate_cli(capsys, "exp1_no_interaction", "--duration", "0.05",
+                                   "--no-progress", "--plot")
     assert code == 0, err
-    assert (tmp_path / "runs" / "exp1_no_interaction" / "log.npz").is_file()
+    code, out2, err = simulate_cli(capsys, "exp1_no_interaction", "--duration", "0.1",
+                                   "--no-progress")
+    assert code == 0, err
+    parent = tmp_path / "runs" / "exp1_no_interaction"
+    runs = sorted(p for p in parent.iterdir() if p.name != "latest")
+    assert len(runs) == 2
+    first, second = runs  # UTC timestamps sort in time order
+    assert f"log: {Path('runs', 'exp1_no_interaction', first.name, 'log.npz')}" in out1
+    assert f"log: {Path('runs', 'exp1_no_interaction', second.name, 'log.npz')}" in out2
+    with np.load(first / "log.npz") as a, np.load(second / "log.npz") as b:
+        assert len(a["time"]) == 26 and len(b["time"]) == 51  # 0.05 s, 0.1 s at 500 Hz
+    assert list(first.glob("*.png")) and not list(second.glob("*.png"))
+    latest = parent / "latest"
+    assert latest.is_symlink() and latest.resolve() == second.resolve()
+    # `cdpm plot runs/<name>` plots the latest run.
+    assert cli.main(["plot", str(parent)]) == 0
+    assert list(second.glob("*.png"))
+
+
+def test_a_non_empty_out_needs_force_which_empties_it(capsys, tmp_path):
+    out_dir = tmp_path / "mine"
+    code, _, err = simulate_cli(capsys, "exp1_no_interaction", "--duration", "0.05",
+                                "--no-progress", "--out", str(out_dir), "--plot")
+    assert code == 0, err
+    assert list(out_dir.glob("*.png"))
+    code, _, err = simulate_cli(capsys, "exp1_no_interaction", "--duration", "0.1",
+                                "--no-progress", "--out", str(out_dir))
+    assert code == 2
+    assert f"--out {str(out_dir)!r} is not empty" in err and "--force" in err
+    with np.load(out_dir / "log.npz") as log:
+        assert len(log["time"]) == 26  # untouched
+    code, _, err = simulate_cli(capsys, "exp1_no_interaction", "--duration", "0.1",
+                                "--no-progress", "--out", str(out_dir), "--force")
+    assert code == 0, err
+    with np.load(out_dir / "log.npz") as log:
+        assert len(log["time"]) == 51
+    assert not list(out_dir.glob("*.png"))  # the earlier run's plots went with it
+    # --force empties a run's folder only, never an unrelated one.
+    other = tmp_path / "notes"
+    other.mkdir()
+    (other / "thesis.tex").write_text("precious")
+    code, _, err = simulate_cli(capsys, "exp1_no_interaction", "--duration", "0.05",
+                                "--no-progress", "--out", str(other), "--force")
+    assert code == 2 and "holds no run" in err
+    assert (other / "thesis.tex").read_text() == "precious"
+
+
+@pytest.mark.parametrize("args", [
+    ("--scenario-text", "plant: !HardwareReels {}"),          # fails inside simulate()
+    ("--scenario-text", "{admittance: {mas: 1}}"),             # fails loading
+    ("--duration", "-1"),                                      # a bad flag
+])
+def test_an_early_error_leaves_no_run_folder(capsys, tmp_path, monkeypatch, args):
+    monkeypatch.chdir(tmp_path)
+    code, _, err = simulate_cli(capsys, "exp1_no_interaction", "--no-progress", *args)
+    assert code in (1, 2) and "error:" in err
+    assert not (tmp_path / "runs").exists(), list((tmp_path / "runs").rglob("*"))
 
 
 @pytest.mark.parametrize("duration", ["-1", "0", "nan", "inf"])
@@ -143,20 +202,21 @@ def test_bad_duration_exits_2_with_a_clear_message(capsys, tmp_path, duration):
     assert not (tmp_path / "log.npz").exists()
 
 
-def test_unknown_scenario_exits_2_listing_the_built_in_ones(capsys, tmp_path):
+def test_unknown_scenario_exits_1_listing_the_built_in_ones(capsys, tmp_path):
+    # Exit 1: an error (the scenario cannot be loaded), not a malformed command line (2).
     code, out, err = simulate_cli(capsys, "exp7_teleport", "--out", str(tmp_path),
                                   "--no-progress")
-    assert code == 2
+    assert code == 1
     assert "unknown scenario 'exp7_teleport'" in err
     for name in ("exp1_no_interaction", "exp2_interaction", "exp3_two_pairs"):
         assert name in err
     assert "Traceback" not in err
 
 
-def test_bad_overlay_exits_2_naming_the_field(capsys, tmp_path):
+def test_bad_overlay_exits_1_naming_the_field(capsys, tmp_path):
     code, _, err = simulate_cli(capsys, "exp1_no_interaction", "--out", str(tmp_path),
                                 "--no-progress", "--scenario-text", "{admittance: {mas: 1}}")
-    assert code == 2
+    assert code == 1
     assert "unknown field 'admittance.mas'" in err
 
 
