@@ -11,6 +11,7 @@ Cables are numbered 1..m in everything a user sees (files, messages); arrays are
 
 import dataclasses
 import logging
+import os
 import math
 from pathlib import Path
 
@@ -330,13 +331,25 @@ def robot_names() -> list[str]:
     return sorted(p.stem for p in ROBOTS_DIR.glob("*.yaml"))
 
 
+def is_path_like(name_or_path) -> bool:
+    """A .yaml/.yml name or one with a folder in it is a path; anything else is a name."""
+    text = str(name_or_path)
+    return Path(text).suffix in (".yaml", ".yml") or "/" in text or os.sep in text
+
+
 def resolve_named_yaml(name_or_path, directory: Path, what: str, error=ValueError) -> Path:
     """A YAML file given by path, or by the name of one shipped in `directory` ("paper_7cable"
-    for directory/paper_7cable.yaml). `error` is raised naming the `what` and the choices."""
+    for directory/paper_7cable.yaml). A name resolves to a file (given as a path, or an
+    existing file) or to the shipped one, never to a folder: a folder `exp2_interaction/` in
+    the current directory does not hide the shipped scenario. `error` is raised naming the
+    `what`, the full path tried and the choices."""
     path = Path(name_or_path)
-    if path.suffix in (".yaml", ".yml") or path.exists():
+    if is_path_like(name_or_path) or path.is_file():
         if not path.is_file():
-            raise error(f"{what} file {str(path)!r} does not exist")
+            where = "a folder" if path.is_dir() else "does not exist"
+            raise error(f"{what} file {str(path)!r} {'is ' if path.is_dir() else ''}{where}"
+                        + (f" (tried {str(path.absolute())!r})" if not path.is_absolute()
+                           else ""))
         return path
     candidate = directory / f"{name_or_path}.yaml"
     if candidate.is_file():

@@ -199,18 +199,31 @@ def load_scenario(name_or_path="exp2_interaction", overlay_text: str | None = No
     """Load a scenario by name or path, apply a YAML overlay, and check it."""
     from pydrake.common.yaml import yaml_load_typed
 
+    from pydrake.common.yaml import yaml_load
+
     path = resolve_scenario_path(name_or_path)
     _check_yaml_text(f"{path}", filename=str(path))
     try:
         scenario = yaml_load_typed(schema=Scenario, filename=str(path))
     except Exception as e:
         raise ScenarioError(f"{path}: {_explain(e)}") from None
+    # Every path resolves against the file it appears in, so a scenario means the same from
+    # every directory; an overlay's, typed on the command line, against the current one.
+    source = f"--scenario-text {overlay_text!r}"
+    raw = {}
     if overlay_text:
-        _check_yaml_text(f"--scenario-text {overlay_text!r}", data=overlay_text)
+        _check_yaml_text(source, data=overlay_text)
+        raw = yaml_load(data=overlay_text) or {}
+    _resolve_paths(scenario, path.parent.resolve(), f"scenario {str(path)!r}",
+                   "the scenario file's folder", robot="robot" not in raw,
+                   operator="operator" not in raw)
+    if overlay_text:
         try:
             scenario = yaml_load_typed(schema=Scenario, data=overlay_text, defaults=scenario)
         except Exception as e:
-            raise ScenarioError(f"--scenario-text {overlay_text!r}: {_explain(e)}") from None
+            raise ScenarioError(f"{source}: {_explain(e)}") from None
+        _resolve_paths(scenario, Path.cwd(), source, "the current directory for an overlay",
+                       robot="robot" in raw, operator="operator" in raw)
     # Absolute, so the resolved scenario written beside a log (which records base_dir) finds
     # the same robot and CSV files when loaded back from elsewhere.
     scenario.base_dir = str((path.parent / scenario.base_dir).resolve())
@@ -219,6 +232,37 @@ def load_scenario(name_or_path="exp2_interaction", overlay_text: str | None = No
         _warn_unreachable_d_u(robot, interference_params(scenario, robot))
     _warn_reel_saturation(scenario, robot)
     return scenario
+
+
+def _resolve_paths(scenario: Scenario, base: Path, source: str, base_what: str, *,
+                   robot: bool, operator: bool) -> None:
+    """Make the scenario's robot file and CSV operator path absolute, relative to `base`
+    (the folder of the file they appear in), with no fallback; a robot name must be a
+    built-in one. ScenarioError names the `source` and the full path tried."""
+    from .robot import ROBOTS_DIR, is_path_like, robot_names
+
+    if robot:
+        ref = scenario.robot
+        if is_path_like(ref):
+            full = Path(ref) if Path(ref).is_absolute() else base / ref
+            if not full.is_file():
+                raise ScenarioError(
+                    f"{source}: robot file {ref!r} does not exist: tried {str(full)!r}"
+                    + ("" if Path(ref).is_absolute() else
+                       f" (relative paths are relative to {base_what})"))
+            scenario.robot = str(full)
+        elif not (ROBOTS_DIR / f"{ref}.yaml").is_file():
+            raise ScenarioError(f"{source}: unknown robot {ref!r}; built-in robots: "
+                                f"{robot_names()} (or give a path to a .yaml file)")
+    if operator and isinstance(scenario.operator, CsvOperator) and scenario.operator.path:
+        ref = scenario.operator.path
+        full = Path(ref) if Path(ref).is_absolute() else base / ref
+        if not full.is_file():
+            raise ScenarioError(
+                f"{source}: operator.path {ref!r} does not exist: tried {str(full)!r}"
+                + ("" if Path(ref).is_absolute() else
+                   f" (relative paths are relative to {base_what})"))
+        scenario.operator.path = str(full)
 
 
 def _warn_reel_saturation(scenario, robot):
@@ -328,12 +372,15 @@ def _explain(e: Exception) -> str:
 
 def scenario_robot(scenario: Scenario) -> Robot:
     """The scenario's robot with its cable swaps applied."""
+    from .robot import ROBOTS_DIR, is_path_like
+
     ref = scenario.robot
-    base = Path(scenario.base_dir) if scenario.base_dir else None
-    if base is not None and (ref.endswith((".yaml", ".yml"))) and not Path(ref).is_absolute():
-        candidate = base / ref
-        if candidate.exists():
-            ref = str(candidate)
+    if is_path_like(ref):
+        # Loaded scenarios hold absolute paths; one built in code resolves against base_dir.
+        if scenario.base_dir and not Path(ref).is_absolute():
+            ref = str(Path(scenario.base_dir) / ref)
+    elif (ROBOTS_DIR / f"{ref}.yaml").is_file():
+        ref = str(ROBOTS_DIR / f"{ref}.yaml")  # a name is a built-in robot, wherever we are
     try:
         robot = load_robot(ref)
     except RobotError as e:
