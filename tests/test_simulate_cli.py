@@ -262,3 +262,28 @@ def test_ctrl_c_during_a_simulation_keeps_the_log(tmp_path, capsys):
     assert 0.0 < log["time"][-1] < 5.0
     # The scenario written beside it says how long the log is, so it reproduces the run.
     assert f"duration: {log['time'][-1]}" in (tmp_path / "scenario.yaml").read_text()
+
+
+def test_meshcat_runs_log_the_last_tick_too(capsys, tmp_path):
+    # Issue 10, point 7: --meshcat advances in 0.04 s chunks; summed in floating point they
+    # ended a hair short of 10 s and the last tick was never logged (5000 rows, not 5001).
+    code, out, err = simulate_cli(capsys, "exp1_no_interaction", "--meshcat", "--no-wait",
+                                  "--realtime", "1000", "--duration", "10", "--out",
+                                  str(tmp_path), "--no-progress")
+    assert code == 0, err
+    assert "Meshcat: open http://" in err
+    assert "5001 ticks" in out  # ticks 0..5000
+    with np.load(tmp_path / "log.npz") as log:
+        assert log["time"].size == 5001 and log["time"][-1] == pytest.approx(10.0, abs=1e-12)
+
+
+@pytest.mark.parametrize("duration, chunk", [(25.0, 0.04), (5.0, 0.02), (10.0, 0.5),
+                                             (0.0031, 0.5)])
+def test_tick_targets_end_exactly_on_the_last_whole_tick(duration, chunk):
+    from cdpm_drake.simulation import tick_targets
+
+    targets = tick_targets(duration, T, chunk)
+    n = int(np.floor(duration / T + 1e-9))  # the last whole tick inside the duration
+    assert targets[-1] == n * T  # exactly: Drake then handles tick n's events
+    assert np.all(np.diff(targets) > 0)
+    assert np.allclose(np.diff(targets)[:-1], max(1, round(chunk / T)) * T)
