@@ -339,8 +339,7 @@ def _check_yaml(value, schema, field: str) -> None:
             try:  # an untagged entry is the first member, as yaml_load_typed reads it
                 return _check_yaml(value, args[0], field)
             except ScenarioError as e:
-                raise ScenarioError(f"{e} (an untagged {field} is {tags[0]}; valid {field} "
-                                    f"types: {tags})") from None
+                raise ScenarioError(_untagged_hint(e, value, args, tags, field)) from None
         if tag not in tags:
             raise ScenarioError(f"{field}: unknown type {tag!r}; valid {field} types: {tags}")
         return _check_yaml(value, args[tags.index(tag)], field)
@@ -358,6 +357,33 @@ def _check_yaml(value, schema, field: str) -> None:
         raise ScenarioError(f"{name} must be true or false, got {value!r}")
     if schema is str and not isinstance(value, str):
         raise ScenarioError(f"{name} must be a string, got {value!r}")
+
+
+def _untagged_hint(e: ScenarioError, value, args, tags, field: str) -> str:
+    """The message for an untagged mapping that does not fit the union's first member: name
+    the tag it needs, with the members that have its fields (a scenario whose operator is a
+    !SpringHandOperator still needs the tag in an overlay: untagged means the first member)."""
+    text = f"{e} (an untagged {field} is {tags[0]}; valid {field} types: {tags})"
+    if not isinstance(value, dict) or not value:
+        return text
+    keys = [k for k in value if k != "_tag"]
+    fits = [tag for tag, member in zip(tags, args) if dataclasses.is_dataclass(member)
+            and set(keys) <= {f.name for f in dataclasses.fields(member)}]
+    if not fits:
+        return text
+    flow = ", ".join(f"{k}: {_flow_yaml(value[k])}" for k in keys)
+    article = "an" if field[:1] in "aeiou" else "a"
+    return (f"{e}; a mapping without a tag is read as {tags[0]}, so {article} {field} needs "
+            f"its tag, e.g. `{field}: {fits[0]} {{{flow}}}` (types with these fields: "
+            f"{fits}; valid {field} types: {tags})")
+
+
+def _flow_yaml(v) -> str:
+    if isinstance(v, list):
+        return "[" + ", ".join(_flow_yaml(x) for x in v) + "]"
+    if isinstance(v, dict):
+        return "{" + ", ".join(f"{k}: {_flow_yaml(x)}" for k, x in v.items()) + "}"
+    return str(v)
 
 
 def _explain(e: Exception) -> str:

@@ -319,3 +319,17 @@ def test_default_scenario_is_valid():
 def test_a_negative_random_seed_is_refused_at_load():
     with pytest.raises(ScenarioError, match=r"random_seed must be an integer >= 0, got -1"):
         load_scenario("exp1_no_interaction", overlay_text="random_seed: -1")
+
+
+def test_an_untagged_operator_overlay_says_the_operator_needs_its_tag():
+    # Issue 10, point 10: exp1 has no operator; an untagged mapping is the union's first
+    # member (!NoOperator), which has no max_force: say which tag is meant.
+    msg = error_of("{operator: {max_force: 3}}")
+    assert "an operator needs its tag, e.g. `operator: !SpringHandOperator {max_force: 3}`" \
+        in msg, msg
+    # The same on a scenario whose operator already is a !SpringHandOperator.
+    msg = error_of("{operator: {max_force: 3}}", name="exp2_interaction")
+    assert "`operator: !SpringHandOperator {max_force: 3}`" in msg
+    # A field no operator has: the plain unknown-field message with the valid types.
+    msg = error_of("{operator: {bogus: 3}}")
+    assert "unknown field 'operator.bogus'" in msg and "'!SpringHandOperator'" in msg
