@@ -9,7 +9,7 @@ from pathlib import Path
 
 import numpy as np
 
-from .text import format_table
+from .text import format_table, prefixed_log_records
 
 
 class CliError(Exception):
@@ -600,7 +600,7 @@ def main(argv=None) -> int:
         from .hardware.emulator import main as emulator_main
         return emulator_main(argv[1:])
     args = _parser().parse_args(argv)
-    with _warnings_prefixed(), terminate_raises():
+    with prefixed_log_records(), terminate_raises():
         try:
             return int(args.func(args) or 0)
         except CliError as e:
@@ -617,29 +617,6 @@ def main(argv=None) -> int:
             # `cdpm info | head`: the reader left; not an error of ours.
             sys.stderr.close()
             return 0
-
-
-class _warnings_prefixed:
-    """Log records (the package's and Drake's) print as `warning: ...` on stderr, as the
-    `cdpm X: error: ...` lines do, instead of a bare message."""
-
-    def __enter__(self):
-        import logging
-
-        class Format(logging.Formatter):
-            def format(self, record):
-                return f"{record.levelname.lower()}: {record.getMessage()}"
-
-        self._handler = logging.StreamHandler(sys.stderr)
-        self._handler.setFormatter(Format())
-        self._handler.setLevel(logging.WARNING)
-        root = logging.getLogger()
-        root.addHandler(self._handler)
-        return self
-
-    def __exit__(self, *exc):
-        import logging
-        logging.getLogger().removeHandler(self._handler)
 
 
 if __name__ == "__main__":

@@ -631,6 +631,13 @@ def build_server(args, log=None) -> ReelBridgeServer:
 def main(argv=None) -> int:
     """Exit codes as `cdpm`'s: 0 done (--duration), 1 error (robot, scenario, cannot bind),
     2 bad usage, 130 / 143 after Ctrl-C / SIGTERM (the summary is printed first)."""
+    from ..text import prefixed_log_records
+
+    with prefixed_log_records():
+        return _main(argv)
+
+
+def _main(argv) -> int:
     from ..interrupt import exit_code, terminate_raises
     from ..robot import RobotError
     from ..scenario import ScenarioError
