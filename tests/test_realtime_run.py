@@ -56,8 +56,11 @@ def test_a_run_against_the_emulator_matches_the_simulation(tmp_path):
                          out_dir=tmp_path / f"run{attempt}", duration=DURATION)
         finally:
             server.stop()
-        if result.ending == "fault" and "no valid status" in str(result.error):
-            continue  # the host starved the bridge thread past even 25 ticks: run again
+        if result.ending == "fault" and ("no valid status" in str(result.error)
+                                         or "COMMAND_TIMEOUT" in str(result.error)):
+            # The host starved the bridge thread past even 25 ticks, or this process past the
+            # bridge's own 50 ms command timeout: run again.
+            continue
         assert result.ending == "completed", result.error
         hw = result.log
         n = min(len(hw["time"]), len(sim["time"]))
@@ -118,7 +121,9 @@ def test_a_bridge_that_goes_silent_ends_the_run_with_a_fault_and_keeps_the_log(t
     assert "no valid status" in str(result.error) and "zero reel velocity sent" in str(
         result.error)
     log = np.load(result.log_path)
-    assert 0.8 < log["time"][-1] < 2.0
+    # The bridge stops 1 s (wall) after the timer started, which is before the diagram was
+    # built and the run began: on a loaded host that takes a few tenths of a second.
+    assert 0.5 < log["time"][-1] < 2.0
     assert np.all(np.diff(log["tick"]) == 1)
     # The fault is in the log: how the run ended, when (the last logged tick) and why.
     assert str(log["ending"]) == "fault"
@@ -254,6 +259,14 @@ def test_a_fault_log_is_plotted_and_a_killed_run_is_recovered(tmp_path, capsys):
 def test_recover_names_what_is_missing(tmp_path, capsys):
     assert main(["recover", str(tmp_path)]) == 2
     assert "has no ticks.bin" in capsys.readouterr().err
+
+
+def test_cdpm_run_of_a_simulated_plant_exits_1_and_leaves_no_folder(tmp_path, capsys,
+                                                                    monkeypatch):
+    monkeypatch.chdir(tmp_path)
+    assert main(["run", "exp1_no_interaction", "--duration", "1"]) == 1
+    assert "needs plant: !HardwareReels" in capsys.readouterr().err
+    assert not (tmp_path / "runs").exists()
 
 
 def test_run_refuses_a_simulated_plant(tmp_path):
