@@ -269,9 +269,12 @@ def run_main(*, scenario, duration=None, out_dir=None, out=None, on_status=None,
     if result.ending == "fault":
         print(f"cdpm run: error: {result.error}", file=sys.stderr)
         if not result.enabled and "do not fit robot" in str(result.error):
-            print("cdpm run: hint: a cdpm emulate playing another scenario or robot reports "
-                  "other lengths; start it with this run's scenario (cdpm emulate --scenario "
-                  f"{scenario.name} ...) or robot (--robot ...)", file=sys.stderr)
+            from .scenario import scenario_names
+            which = (scenario.name if scenario.name in scenario_names()
+                     else "<this run's scenario file>")
+            print("cdpm run: hint: against cdpm emulate, the emulator may be playing another "
+                  "scenario or robot (other start, swaps or cables); start it with this run's: "
+                  f"cdpm emulate --scenario {which} ...", file=sys.stderr)
         return 1
     if result.ending == "interrupted":
         return exit_code(result.signal)

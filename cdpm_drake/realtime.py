@@ -89,14 +89,15 @@ def run(*, scenario: Scenario, out_dir, duration: float | None = None, status=No
     for stale in ("ticks.bin", "log.npz"):
         # An earlier run's files would otherwise be reported as this run's if it fails early.
         (out / stale).unlink(missing_ok=True)
-    scenario_path = out / "scenario.yaml"
-    scenario_path.write_text(scenario_to_yaml(dataclasses.replace(scenario, duration=duration)))
     tick_path = out / "ticks.bin"
     diagram = build_diagram(scenario, BuildOptions(loggers=False, tick_log=str(tick_path)))
     reels = diagram.GetSubsystemByName("reels")
     sink = diagram.GetSubsystemByName("tick_log")
     simulator = Simulator(diagram)
     context = simulator.get_context()
+    # Written before the run (`cdpm recover` needs it after a kill), once nothing can fail early.
+    scenario_path = out / "scenario.yaml"
+    scenario_path.write_text(scenario_to_yaml(dataclasses.replace(scenario, duration=duration)))
     T = scenario.time_step
     error, ending, enabled = None, "completed", False
     with _StopRequest() as stop:

@@ -39,6 +39,7 @@ class RunFolder:
         self.force = force
         self.root = Path(root)
         self.path = Path(out) if out is not None else None
+        self._planned = False
         self._created = []
 
     def plan(self) -> Path:
@@ -66,11 +67,12 @@ class RunFolder:
                 n += 1
                 p = parent / f"{stamp}-{n}"
             self.path = p
+        self._planned = True
         return self.path
 
     def create(self) -> Path:
         """Make the folder (emptying an explicit one under --force); check it is writable."""
-        p = self.plan() if self.path is None or not self.explicit else self.path
+        p = self.path if self._planned else self.plan()
         if self.explicit and self.force and p.is_dir():
             for child in p.iterdir():
                 if child.is_dir() and not child.is_symlink():
