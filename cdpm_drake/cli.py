@@ -117,9 +117,13 @@ def simulate_main(*, scenario, duration=None, out_dir=None, progress=True, out=N
     # one already decided the exit code.
     with _signals_ignored(result.error is not None):
         if plots:
-            from .views.plots import plot_log
-            for png in plot_log(log, out_dir):
-                print(f"plot: {png}", file=out)
+            from .views.plots import LogError, plot_log
+            try:
+                for png in plot_log(log, out_dir):
+                    print(f"plot: {png}", file=out)
+            except LogError as e:  # the log is written; say why the figures are not
+                print(f"cdpm simulate: error: plots: {e}", file=sys.stderr)
+                return 1
         if html is not None:
             print(f"3D replay: {_save_replay(log, html)} (open it in a browser)", file=out)
     stopped = f"t = {log['time'][-1] if T else 0:.3f} s"

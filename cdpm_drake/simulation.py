@@ -112,16 +112,29 @@ def mark_ending(log: dict, ending: str, error: BaseException | None) -> dict:
 
 def collect_log(diagram, context, scenario: Scenario, robot) -> dict:
     """The loggers' contents as named arrays, one row per tick (docs/LOG_FORMAT.md)."""
-    signals = {}
-    time_column = np.zeros(0)
+    columns = {}
     for key, _, _ in LOGGED:
         name = f"log_{key}"
         if not diagram.HasSubsystemNamed(name):
             continue
         data = diagram.GetSubsystemByName(name).FindLog(context)
-        signals[key] = data.data().T.copy()
-        time_column = data.sample_times().copy()
+        columns[key] = (data.sample_times().copy(), data.data().T.copy())
+    time_column, signals = whole_ticks(columns)
     return assemble_log(time_column, signals, scenario, robot)
+
+
+def whole_ticks(columns: dict) -> tuple[np.ndarray, dict]:
+    """(time, {key: rows}) from {key: (sample times, rows)}, cut to the ticks every logger
+    logged: Ctrl-C or SIGTERM can stop the run between two loggers' publishes of one tick,
+    which leaves that tick in some of them only."""
+    if not columns:
+        return np.zeros(0), {}
+    n = min(len(times) for times, _ in columns.values())
+    times = next(iter(columns.values()))[0][:n]
+    for key, (t, _) in columns.items():
+        if not np.array_equal(t[:n], times):
+            raise RuntimeError(f"logger {key!r} sampled other times than the others")
+    return times, {key: rows[:n] for key, (_, rows) in columns.items()}
 
 
 def assemble_log(time_column, signals: dict, scenario: Scenario, robot) -> dict:
