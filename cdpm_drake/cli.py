@@ -279,6 +279,10 @@ def run_main(*, scenario, duration=None, out_dir=None, out=None, on_status=None,
             print("cdpm run: hint: against cdpm emulate, the emulator may be playing another "
                   "scenario or robot (other start, swaps or cables); start it with this run's: "
                   f"cdpm emulate --scenario {which} ...", file=sys.stderr)
+        if not result.enabled and "fault bits" in str(result.error):
+            print("cdpm run: hint: fault bits stay set until the bridge is reset (power "
+                  "cycle; restart cdpm emulate); COMMAND_TIMEOUT is the bridge's own watchdog "
+                  "after a controller that stopped while enabled (killed)", file=sys.stderr)
         return 1
     if result.ending == "interrupted":
         return exit_code(result.signal)

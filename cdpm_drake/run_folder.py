@@ -1,7 +1,8 @@
 """Where a run writes: one folder per run, never shared, never overwritten by accident.
 
 By default `runs/<name>/<UTC timestamp>/`, with `runs/<name>/latest` a symlink to the newest
-run that wrote a log. `--out DIR` chooses the folder exactly; an existing, non-empty DIR is
+run (pointed there when the run starts, so a run killed half-way is the latest; back again if
+the run writes nothing). `--out DIR` chooses the folder exactly; an existing, non-empty DIR is
 refused unless `--force`, which empties it first (only when it holds a run: log.npz, ticks.bin
 or scenario.yaml, so a mistyped --out cannot wipe an unrelated folder). The folder is created
 only when the run starts and removed again if the run writes nothing. No Drake import.
@@ -30,8 +31,8 @@ def utc_stamp(now: datetime.datetime | None = None) -> str:
 
 class RunFolder:
     """The folder of one run. `plan()` checks before anything is created (an early error
-    leaves nothing behind); `create()` makes it; `finish()` points `latest` at it; `discard()`
-    removes it again if the run wrote nothing."""
+    leaves nothing behind); `create()` makes it and points `latest` at it; `discard()` removes
+    it again, and restores `latest`, if the run wrote nothing."""
 
     def __init__(self, name: str, out=None, force: bool = False, root=RUNS_DIR):
         self.name = name
@@ -41,6 +42,7 @@ class RunFolder:
         self.path = Path(out) if out is not None else None
         self._planned = False
         self._created = []
+        self._previous_latest = None  # where `latest` pointed before create() ("": nowhere)
 
     def plan(self) -> Path:
         """Choose the path and check it may be used (nothing is created)."""
@@ -93,29 +95,52 @@ class RunFolder:
         except OSError as e:
             raise RunFolderError(f"--out {str(p)!r} is not a writable directory: "
                                  f"{e.strerror or e}") from None
+        self.finish()
         return p
 
     def finish(self) -> None:
-        """Point runs/<name>/latest at this run (default folders only)."""
+        """Point runs/<name>/latest at this run (default folders only). create() does it
+        already, so that a run killed half-way (its ticks.bin to recover) is the latest."""
         if self.explicit or self.path is None:
             return
         link = self.path.parent / LATEST
-        tmp = self.path.parent / f".{LATEST}.{os.getpid()}"
-        try:
-            tmp.unlink(missing_ok=True)
-            tmp.symlink_to(self.path.name, target_is_directory=True)
-            os.replace(tmp, link)
-        except OSError:
-            tmp.unlink(missing_ok=True)  # no symlinks here: the timestamped folder still is
+        if self._previous_latest is None:
+            self._previous_latest = os.readlink(link) if link.is_symlink() else ""
+        _point(link, self.path.name)
 
     def discard(self) -> None:
-        """Remove the folders create() made, if they are (still) empty."""
-        for q in self._created:
+        """Remove the folders create() made, if they are (still) empty, and point `latest`
+        back where it pointed before."""
+        created, self._created = self._created, []
+        if not created:
+            return
+        try:
+            created[0].rmdir()  # the run's own folder: only if the run wrote nothing
+        except OSError:
+            return
+        if self._previous_latest is not None:
+            link = self.path.parent / LATEST
+            if self._previous_latest:
+                _point(link, self._previous_latest)
+            else:
+                link.unlink(missing_ok=True)
+            self._previous_latest = None
+        for q in created[1:]:  # runs/<name>, runs: if this run made them and they are empty
             try:
                 q.rmdir()
             except OSError:
                 break
-        self._created = []
+
+
+def _point(link: Path, target: str) -> None:
+    """Make `link` a symlink to `target` atomically (a reader never sees it missing)."""
+    tmp = link.parent / f".{link.name}.{os.getpid()}"
+    try:
+        tmp.unlink(missing_ok=True)
+        tmp.symlink_to(target, target_is_directory=True)
+        os.replace(tmp, link)
+    except OSError:
+        tmp.unlink(missing_ok=True)  # no symlinks here: the timestamped folder still is
 
 
 def resolve_latest(path: Path) -> Path:

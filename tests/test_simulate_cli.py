@@ -304,3 +304,27 @@ def test_a_tick_some_loggers_missed_is_cut_from_the_log():
     assert whole_ticks({})[0].size == 0
     with pytest.raises(RuntimeError, match="logger 'F_H' sampled other times"):
         whole_ticks({"p": (t, np.ones((5, 3))), "F_H": (t + T, np.ones((5, 3)))})
+
+
+def test_latest_points_at_a_run_as_it_starts_and_back_if_it_writes_nothing(tmp_path):
+    from cdpm_drake.run_folder import RunFolder
+
+    root = tmp_path / "runs"
+    first = RunFolder("exp", root=root)
+    a = first.create()
+    (a / "log.npz").write_bytes(b"x")
+    latest = root / "exp" / "latest"
+    assert latest.resolve() == a.resolve()
+    second = RunFolder("exp", root=root)
+    b = second.create()
+    # While it runs (and if it is killed), the newest run is the latest.
+    assert latest.resolve() == b.resolve() and a != b
+    second.discard()  # it wrote nothing
+    assert not b.exists() and latest.resolve() == a.resolve()
+    first.discard()  # wrote a log: kept
+    assert a.is_dir()
+    # A lone run that writes nothing leaves no runs/ at all.
+    lone = RunFolder("other", root=tmp_path / "fresh")
+    lone.create()
+    lone.discard()
+    assert not (tmp_path / "fresh").exists()
