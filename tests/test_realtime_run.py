@@ -211,6 +211,24 @@ def test_refusing_to_enable_hints_at_an_emulator_playing_something_else(tmp_path
     assert not (tmp_path / "run").exists()
 
 
+def test_a_bridge_fault_at_startup_hints_at_a_reset(tmp_path, capsys):
+    from cdpm_drake.hardware.protocol import FAULT_COMMAND_TIMEOUT
+
+    server = _server(load_scenario("exp1_no_interaction"))
+    server.bridge.raise_fault(FAULT_COMMAND_TIMEOUT)  # left by a controller killed earlier
+    try:
+        code = main(["run", "exp1_no_interaction", "--duration", "1", "--out",
+                     str(tmp_path / "run"), "--scenario-text",
+                     f"plant: !HardwareReels {{port: {server.address[1]}}}"])
+    finally:
+        server.stop()
+    err = capsys.readouterr().err
+    assert code == 1
+    assert "reports fault bits 0x0010 (COMMAND_TIMEOUT) at startup" in err
+    assert "fault bits stay set until the bridge is reset" in err
+    assert not (tmp_path / "run").exists()
+
+
 def test_a_fault_log_is_plotted_and_a_killed_run_is_recovered(tmp_path, capsys):
     from cdpm_drake.hardware.emulator import FaultPlan
 
