@@ -654,7 +654,8 @@ def _main(argv) -> int:
         set_realtime_priority(args.rt_priority)
         server = build_server(args, log=say)
     except (RobotError, ScenarioError, OSError) as e:
-        print(f"cdpm-reel-emulator: error: {e}", file=sys.stderr)
+        why = e.strerror if isinstance(e, OSError) and e.strerror else e
+        print(f"cdpm-reel-emulator: error: {why}", file=sys.stderr)
         return 1
     except ValueError as e:  # a flag's value
         print(f"cdpm-reel-emulator: error: {e}", file=sys.stderr)
