@@ -525,7 +525,11 @@ def _plan_text(plan: FaultPlan) -> str:
 
 def _parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(prog="cdpm-reel-emulator", description=__doc__,
-                                formatter_class=argparse.RawDescriptionHelpFormatter)
+                                formatter_class=argparse.RawDescriptionHelpFormatter,
+                                epilog="exit codes: 0 done (--duration), 1 error (robot, "
+                                       "scenario, cannot listen), 2 bad usage, 130 after "
+                                       "Ctrl-C, 143 after SIGTERM (the summary is printed "
+                                       "first)")
     g = p.add_argument_group("robot and operator")
     g.add_argument("--scenario", help="take robot, cable swaps, start position, operator and "
                    "bridge address/port from this scenario (name or path)")
