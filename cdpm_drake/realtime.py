@@ -189,6 +189,10 @@ def recover(run_dir) -> tuple[Path, dict]:
         if not path.is_file():
             raise RecoverError(f"{str(run_dir)!r} has no {path.name} (a `cdpm run` folder "
                                "holds ticks.bin and scenario.yaml)")
+    if (run_dir / "log.npz").exists():
+        # The run converted its stream itself, with how it ended: never replace that.
+        raise RecoverError(f"{str(run_dir)!r} already has its log.npz; nothing to recover "
+                           "(remove it to convert ticks.bin again)")
     scenario = load_scenario(scenario_path)
     robot = check_scenario(scenario)
     log, _, tail = log_from_tick_log(tick_path, scenario, robot)

@@ -266,8 +266,11 @@ def test_a_fault_log_is_plotted_and_a_killed_run_is_recovered(tmp_path, capsys):
     np.testing.assert_array_equal(back["p"], full["p"][:T - 1])
     np.testing.assert_array_equal(back["tick"], full["tick"][:T - 1])
     assert str(back["ending"]) == "interrupted"
-    # `cdpm recover` itself, on the whole stream.
+    # `cdpm recover` itself, on the whole stream; never over a log.npz that is there.
     (run_dir / "ticks.bin").write_bytes(data)
+    assert main(["recover", str(run_dir)]) == 2
+    assert "already has its log.npz" in capsys.readouterr().err
+    (run_dir / "log.npz").unlink()
     assert main(["recover", str(run_dir)]) == 0
     out = capsys.readouterr().out
     assert f"recovered {T} ticks of 2501 (interrupted); the tail was whole" in out
