@@ -249,8 +249,10 @@ def test_a_fault_log_is_plotted_and_a_killed_run_is_recovered(tmp_path, capsys):
     # before).
     assert _shutdown_burst(server) == 3
     full = dict(np.load(run_dir / "log.npz"))
-    # The bridge stops 0.4 s (wall) after the first enable; a loaded host lags behind that.
-    assert str(full["ending"]) == "fault" and 0.1 < full["time"][-1] < 1.5
+    # The bridge stops 0.4 s (wall) after the first enable (on a loaded host the controller
+    # may lag that, or trip on a stall even earlier): a fault, some ticks before it.
+    assert str(full["ending"]) == "fault" and 10 < len(full["time"]) < 751, \
+        str(full["fault_message"])
     # A fault log is a complete log: `cdpm plot` takes it.
     assert main(["plot", str(run_dir)]) == 0
     assert (run_dir / "distances.png").is_file()
