@@ -57,7 +57,7 @@ def test_a_signal_during_cdpm_simulate_keeps_the_log_and_the_plots(tmp_path, sig
             proc.kill()
     err = err.decode(errors="replace")
     assert proc.returncode == code, err
-    assert f"interrupted at t = " in err and name in err, err
+    assert "interrupted at t = " in err and name in err, err
     with np.load(out_dir / "log.npz") as log:
         t_end = float(log["time"][-1])
         assert 0.0 < t_end < 30.0
