@@ -39,7 +39,8 @@ def installed(tmp_path_factory):
                    timeout=60)
     bin_dir = venv / ("Scripts" if os.name == "nt" else "bin")
     purelib = subprocess.run(
-        [str(bin_dir / "python"), "-c", "import sysconfig; print(sysconfig.get_paths()['purelib'])"],
+        [str(bin_dir / "python"), "-c",
+         "import sysconfig; print(sysconfig.get_paths()['purelib'])"],
         check=True, capture_output=True, text=True).stdout.strip()
     Path(purelib, "outer_env.pth").write_text(sysconfig.get_paths()["purelib"] + "\n")
     subprocess.run([sys.executable, "-m", "pip", "--python", str(bin_dir / "python"), "install",
