@@ -1,11 +1,13 @@
 """A non-editable install works: build a wheel, install it into a fresh virtual environment and
 run `cdpm` from a directory outside the source tree (issue 10, point 1).
 
-Offline and fast: the wheel is built without build isolation, and the fresh environment reaches
-the test environment's packages (drake, numpy, ...) through a .pth line, which does not process
-that environment's own .pth files, so its editable install of cdpm_drake stays invisible.
+Offline and fast: the wheel is built without build isolation and installed without its
+dependencies; the fresh environment then reaches the test environment's packages (drake,
+numpy, ...) through a .pth line, which does not process the test environment's own .pth files,
+so its editable install of cdpm_drake stays invisible.
 """
 
+import importlib.metadata
 import os
 import shutil
 import subprocess
@@ -35,17 +37,25 @@ def installed(tmp_path_factory):
                    check=True, capture_output=True, text=True, timeout=120)
     (wheel,) = dist.glob("cdpm_drake-*.whl")
     venv = tmp / "venv"
-    subprocess.run([sys.executable, "-m", "venv", "--without-pip", str(venv)], check=True,
-                   timeout=60)
     bin_dir = venv / ("Scripts" if os.name == "nt" else "bin")
+    # Installed before the fresh venv can see the test environment (its pip would otherwise
+    # find the editable cdpm_drake there and uninstall it): by this pip into that venv
+    # (--python, pip >= 22.3: seconds), or by the venv's own pip (ensurepip: slower).
+    pip_version = tuple(int(x) for x in importlib.metadata.version("pip").split(".")[:2])
+    if pip_version >= (22, 3):
+        subprocess.run([sys.executable, "-m", "venv", "--without-pip", str(venv)], check=True,
+                       timeout=120)
+        installer = [sys.executable, "-m", "pip", "--python", str(bin_dir / "python")]
+    else:
+        subprocess.run([sys.executable, "-m", "venv", str(venv)], check=True, timeout=120)
+        installer = [str(bin_dir / "python"), "-m", "pip"]
+    subprocess.run(installer + ["install", "-q", "--no-deps", "--no-index", str(wheel)],
+                   check=True, capture_output=True, text=True, timeout=120)
     purelib = subprocess.run(
         [str(bin_dir / "python"), "-c",
          "import sysconfig; print(sysconfig.get_paths()['purelib'])"],
         check=True, capture_output=True, text=True).stdout.strip()
     Path(purelib, "outer_env.pth").write_text(sysconfig.get_paths()["purelib"] + "\n")
-    subprocess.run([sys.executable, "-m", "pip", "--python", str(bin_dir / "python"), "install",
-                    "-q", "--no-deps", str(wheel)], check=True, capture_output=True, text=True,
-                   timeout=120)
     return bin_dir, wheel
 
 
