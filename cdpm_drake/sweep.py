@@ -270,6 +270,8 @@ def _raw(value):
     if dataclasses.is_dataclass(value):
         from pydrake.common.yaml import yaml_dump_typed
         return yaml_load(data=yaml_dump_typed(value))
+    if isinstance(value, list):
+        return [_raw(v) for v in value]
     return copy.deepcopy(value)
 
 
@@ -449,7 +451,16 @@ def load_sweep(name_or_path, *, on_warning=None) -> Sweep:
     except ScenarioError as e:
         raise SweepError(f"{path}: overlay {_flow(sweep_file.overlay)}: {e}") from None
 
-    grid = [(axis.field, axis_values(axis)) for axis in sweep_file.axes]
+    grid = []
+    for axis in sweep_file.axes:
+        values = axis_values(axis)
+        if not axis.values and _leaf_type(base, parse_field_path(axis.field)) is int:
+            # A spaced axis of an integer field (sensor.filter_window): whole numbers.
+            if not all(float(v).is_integer() for v in values):
+                raise SweepError(f"{path}: axis {axis.field} is an integer field, but its "
+                                 f"values {values} are not whole numbers")
+            values = [int(v) for v in values]
+        grid.append((axis.field, values))
     samples = _random_samples(sweep_file.random, base) if sweep_file.random else [{}]
     overlays = list(sweep_file.variants) or [None]
     seeds = list(sweep_file.seeds) or [None]
@@ -640,8 +651,9 @@ def run_metrics(log: dict, scenario: Scenario) -> dict:
         out["time_below_d_l"] = held(np.any(d < d_l[None, :], axis=1))
     else:
         out.update(min_distance=math.nan, min_distance_pair="", time_below_d_l=0.0)
-    # The crossing flags come from the interference block; without it the log has none.
-    has_block = scenario.interference.enabled and d.shape[1] > 0
+    # The crossing flags come from the interference block; without it (the log's logistic
+    # parameters are NaN then, docs/LOG_FORMAT.md) the log has none.
+    has_block = d.shape[1] > 0 and bool(np.all(np.isfinite(np.asarray(log["d_l"], float))))
     out["crossings"] = (int(np.any(np.asarray(log["crossed"]), axis=0).sum()) if has_block
                         and T else math.nan)
     out["peak_F_int"] = peak("F_int")
@@ -1255,7 +1267,7 @@ def sweep_main(*, sweep, out_dir=None, workers=None, ray=False, ray_address=None
     if ok:
         print(f"best runs by {metric} ({METRICS[metric][0]}, "
               f"{'largest' if METRICS[metric][1] == 'max' else 'smallest'} first):", file=out)
-        print(best_table(columns, outcome.rows, metric), file=out)
+        print(best_table(columns, outcome.rows, metric, top), file=out)
     if plot and ok:
         from .views.sweep_plots import plot_sweep
         for png in plot_sweep(columns, outcome.rows, out_dir, metric=metric):
