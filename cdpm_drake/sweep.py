@@ -683,6 +683,11 @@ class RunTask:
     keep_log: bool = False
 
 
+def tasks_for(variants, keep_logs: bool = False) -> list[RunTask]:
+    return [RunTask(run=v.run, index=v.index, values=v.values, scenario_yaml=v.scenario_yaml,
+                    scenario_hash=v.scenario_hash, keep_log=keep_logs) for v in variants]
+
+
 def execute_run(task: RunTask, before_run=None) -> dict:
     """Run one variant: load its resolved scenario from its YAML (the file written beside the
     row), simulate it, and return its row (and the compressed log bytes with keep_log).
@@ -752,13 +757,15 @@ def _describe_exit(code) -> str:
 
 class LocalRunner:
     """One spawned process per worker, each fed one run at a time over its own pipe, so a
-    worker that dies is known to have died on that run (its error row), and is replaced."""
+    worker that dies is known to have died on that run (its error row), and is replaced.
+    The pool lives from the first `run` to `close` (a benchmark warms it up once)."""
 
     def __init__(self, workers: int, before_run=None):
         import multiprocessing
         self.workers = int(workers)
         self._ctx = multiprocessing.get_context("spawn")
         self._before_run = before_run
+        self._pool = []
 
     def describe(self) -> str:
         return f"{self.workers} local worker process{'es' if self.workers != 1 else ''}"
@@ -772,47 +779,46 @@ class LocalRunner:
         return {"conn": parent, "proc": proc, "task": None}
 
     def run(self, tasks: list[RunTask], on_row, should_stop) -> None:
+        """Run the tasks; returns when all are done, or as soon as should_stop() is true (the
+        runs under way are then abandoned: close() stops their workers)."""
         from multiprocessing.connection import wait
 
         pending = list(reversed(tasks))
-        pool = [self._start() for _ in range(min(self.workers, len(tasks)))]
-        try:
-            while pending or any(w["task"] is not None for w in pool):
-                if should_stop():
-                    return
-                for w in pool:
-                    if w["task"] is None and pending:
-                        w["task"] = pending.pop()
-                        w["conn"].send(w["task"])
-                busy = [w for w in pool if w["task"] is not None]
-                wait([w["conn"] for w in busy] + [w["proc"].sentinel for w in busy],
-                     timeout=0.25)
-                for k, w in enumerate(pool):
-                    if w["task"] is None:
-                        continue
+        pool = self._pool
+        while len(pool) < min(self.workers, len(tasks)):
+            pool.append(self._start())
+        while pending or any(w["task"] is not None for w in pool):
+            if should_stop():
+                return
+            for w in pool:
+                if w["task"] is None and pending:
+                    w["task"] = pending.pop()
+                    w["conn"].send(w["task"])
+            busy = [w for w in pool if w["task"] is not None]
+            wait([w["conn"] for w in busy] + [w["proc"].sentinel for w in busy], timeout=0.25)
+            for k, w in enumerate(pool):
+                if w["task"] is None:
+                    continue
+                row = None
+                try:
+                    if w["conn"].poll():
+                        row = w["conn"].recv()
+                except (EOFError, OSError):
                     row = None
-                    try:
-                        if w["conn"].poll():
-                            row = w["conn"].recv()
-                    except (EOFError, OSError):
-                        row = None
-                    if row is not None:
-                        w["task"] = None
-                        on_row(row)
-                    elif not w["proc"].is_alive():
-                        w["proc"].join()
-                        task = w["task"]
-                        on_row(_died_row(task, f"the worker process died "
-                                               f"({_describe_exit(w['proc'].exitcode)}) while "
-                                               "running this variant"))
-                        w["conn"].close()
-                        pool[k] = self._start() if pending else {**w, "task": None,
-                                                                  "dead": True}
-                pool = [w for w in pool if not w.get("dead")]
-        finally:
-            self._shutdown(pool)
+                if row is not None:
+                    w["task"] = None
+                    on_row(row)
+                elif not w["proc"].is_alive():
+                    w["proc"].join()
+                    on_row(_died_row(w["task"], "the worker process died "
+                                                f"({_describe_exit(w['proc'].exitcode)}) "
+                                                "while running this variant"))
+                    w["conn"].close()
+                    pool[k] = self._start()
 
-    def _shutdown(self, pool):
+    def close(self) -> None:
+        """Stop every worker: idle ones are told to quit, busy ones are terminated."""
+        pool, self._pool = self._pool, []
         for w in pool:
             try:
                 if w["task"] is None and w["proc"].is_alive():
@@ -859,6 +865,7 @@ class RayRunner:
         self._started = False
         self.cpus = None
         self.chunks = 0
+        self.task_stats = []
 
     def describe(self) -> str:
         where = self.address or "a local Ray"
@@ -909,31 +916,36 @@ class RayRunner:
         for k in range(0, len(tasks), size):
             submit(tasks[k:k + size])
         self.chunks = len(refs)
-        try:
-            while refs:
-                if should_stop():
-                    for ref in refs:
-                        ray.cancel(ref, force=True)
-                    return
-                done, _ = ray.wait(list(refs), num_returns=1, timeout=0.25)
-                for ref in done:
-                    group = refs.pop(ref)
-                    try:
-                        rows = ray.get(ref)
-                    except (rex.WorkerCrashedError, rex.RayTaskError, rex.TaskCancelledError,
-                            rex.NodeDiedError, rex.ObjectLostError) as e:
-                        if len(group) > 1:  # find the run that kills: one task each
-                            for task in group:
-                                submit([task])
-                            self.chunks += len(group)
-                            continue
-                        rows = [_died_row(group[0], "the Ray worker died while running this "
-                                                    f"variant ({type(e).__name__})")]
-                    for row in rows:
-                        on_row(row)
-        finally:
-            if self._started:
-                ray.shutdown()
+        while refs:
+            if should_stop():
+                for ref in refs:
+                    ray.cancel(ref, force=True)
+                return
+            done, _ = ray.wait(list(refs), num_returns=1, timeout=0.25)
+            for ref in done:
+                group = refs.pop(ref)
+                try:
+                    rows = ray.get(ref)
+                except (rex.WorkerCrashedError, rex.RayTaskError, rex.TaskCancelledError,
+                        rex.NodeDiedError, rex.ObjectLostError) as e:
+                    if len(group) > 1:  # find the run that kills: one task each
+                        for task in group:
+                            submit([task])
+                        self.chunks += len(group)
+                        continue
+                    rows = [_died_row(group[0], "the Ray worker died while running this "
+                                                f"variant ({type(e).__name__})")]
+                # (runs in the task, seconds of compute inside it): for bench_sweep.py.
+                self.task_stats.append((len(rows), sum(r.get("_task_s", 0.0) for r in rows)))
+                for row in rows:
+                    on_row(row)
+
+    def close(self) -> None:
+        """Shut Ray down if this runner started it (a Ray the caller started stays up)."""
+        if self._started:
+            import ray
+            ray.shutdown()
+            self._started = False
 
 
 # --- The sweep -------------------------------------------------------------------------------
@@ -1111,12 +1123,9 @@ def run_sweep(sweep: Sweep, out_dir, *, workers: int | None = None, ray: bool = 
     failed = [0]
     start = time.perf_counter()
     try:
-        tasks = []
         for v in todo:
             store.prepare(v)
-            tasks.append(RunTask(run=v.run, index=v.index, values=v.values,
-                                 scenario_yaml=v.scenario_yaml, scenario_hash=v.scenario_hash,
-                                 keep_log=keep_logs))
+        tasks = tasks_for(todo, keep_logs=keep_logs)
         if tasks and progress:
             from tqdm import tqdm
             bar = tqdm(total=len(tasks), desc=f"sweep {sweep.file.name}", unit="run",
@@ -1133,11 +1142,14 @@ def run_sweep(sweep: Sweep, out_dir, *, workers: int | None = None, ray: bool = 
                 bar.set_postfix(failed=failed[0])
 
         if tasks:
-            if ray:
-                runner.run(tasks, on_row, lambda: stop["signal"] is not None,
-                           durations=[v.scenario.duration for v in todo])
-            else:
-                runner.run(tasks, on_row, lambda: stop["signal"] is not None)
+            try:
+                if ray:
+                    runner.run(tasks, on_row, lambda: stop["signal"] is not None,
+                               durations=[v.scenario.duration for v in todo])
+                else:
+                    runner.run(tasks, on_row, lambda: stop["signal"] is not None)
+            finally:
+                runner.close()
     finally:
         if bar is not None:
             bar.close()
