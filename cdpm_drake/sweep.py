@@ -698,6 +698,7 @@ def execute_run(task: RunTask, before_run=None) -> dict:
 
     row = {"run": task.run, "scenario_hash": task.scenario_hash, "status": "ok", "error": ""}
     start = time.perf_counter()
+    cpu = time.process_time()
     log = None
     try:
         if before_run is not None:
@@ -718,6 +719,9 @@ def execute_run(task: RunTask, before_run=None) -> dict:
     except Exception as e:
         row.update(status="error", error=f"{type(e).__name__}: {e}",
                    wall_s=time.perf_counter() - start)
+    # Internal (not a column): CPU seconds of the run, which bench_sweep.py sets against wall
+    # time to tell a busy machine from overhead of ours.
+    row["_cpu_s"] = time.process_time() - cpu
     if task.keep_log and log is not None:
         buf = io.BytesIO()
         np.savez_compressed(buf, **log)
@@ -1008,6 +1012,7 @@ class ResultStore:
     def keep(self, variant: Variant, row: dict) -> None:
         log = row.pop("_log_npz", None)
         row.pop("_task_s", None)
+        row.pop("_cpu_s", None)
         full = self._full_row(variant, row)
         d = self.run_dir(variant.run)
         d.mkdir(parents=True, exist_ok=True)
