@@ -1208,10 +1208,15 @@ def best_rows(rows: list[dict], metric: str, top: int = 5) -> list[dict]:
     if metric not in NUMERIC_METRICS:
         raise SweepError(f"metric {metric!r} cannot rank runs; valid metrics: "
                          f"{NUMERIC_METRICS}")
-    better = METRICS[metric][1] or "max"
+    better = _better(metric)
     ok = [r for r in rows if r.get("status") == "ok" and math.isfinite(metric_value(r, metric))]
     sign = -1.0 if better == "max" else 1.0
     return sorted(ok, key=lambda r: sign * metric_value(r, metric))[:max(0, int(top))]
+
+
+def _better(metric: str) -> str:
+    """"max" or "min": which way ranks first (metrics without a better side: largest)."""
+    return METRICS[metric][1] or "max"
 
 
 def best_table(columns: list[str], rows: list[dict], metric: str, top: int = 5) -> str:
@@ -1283,7 +1288,7 @@ def sweep_main(*, sweep, out_dir=None, workers=None, ray=False, ray_address=None
     columns = columns_for(s)
     if ok:
         print(f"best runs by {metric} ({METRICS[metric][0]}, "
-              f"{'largest' if METRICS[metric][1] == 'max' else 'smallest'} first):", file=out)
+              f"{'largest' if _better(metric) == 'max' else 'smallest'} first):", file=out)
         print(best_table(columns, outcome.rows, metric, top), file=out)
     if plot and ok:
         from .views.sweep_plots import plot_sweep

@@ -385,3 +385,16 @@ def test_cli_errors(tmp_path, capsys):
     assert "--workers must be an integer >= 1, got 0" in capsys.readouterr().err
     assert main(["sweep", "exp2_du_Fu", "--dry-run"]) == 0
     assert "25 runs of 'exp2_interaction'" in capsys.readouterr().out
+
+
+def test_the_readme_sweep_example_loads(tmp_path):
+    """The README's sweep block, verbatim: 3 x 3 x 2 grid points x 2 seeds, the pair (1,3)
+    override created on a base that has none."""
+    readme = (REPO / "README.md").read_text()
+    block = next(b for b in re.findall(r"```yaml\n(.*?)```", readme, re.DOTALL)
+                 if b.startswith("name: my_sweep"))
+    s = sw.load_sweep(write(tmp_path, block))
+    assert len(s.variants) == 36
+    last = s.variants[-1].scenario
+    assert [(p.pair, p.d_l) for p in last.interference.pairs] == [([1, 3], 0.060)]
+    assert last.random_seed == 2 and last.duration == 5.0
