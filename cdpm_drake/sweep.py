@@ -370,19 +370,23 @@ def apply_overlay(scenario: Scenario, overlay: dict) -> Scenario:
     """The scenario with a YAML overlay (raw mapping) applied, as `--scenario-text` applies
     one: the scenario's schema check, yaml_load_typed with the scenario as defaults, then
     check_scenario. ScenarioError with the scenario's own message."""
+    return _apply(scenario, overlay)[0]
+
+
+def _apply(scenario: Scenario, overlay: dict):
+    """apply_overlay, also returning check_scenario's robot (None for an empty overlay)."""
     from pydrake.common.yaml import yaml_dump, yaml_load_typed
 
     from .scenario import _check_yaml, _explain
 
     if not overlay:
-        return scenario
+        return scenario, None
     _check_yaml(overlay, Scenario, "")
     try:
         result = yaml_load_typed(schema=Scenario, data=yaml_dump(overlay), defaults=scenario)
     except Exception as e:
         raise ScenarioError(_explain(e)) from None
-    check_scenario(result)
-    return result
+    return result, check_scenario(result)
 
 
 # --- Variants --------------------------------------------------------------------------------
@@ -542,8 +546,8 @@ def _resolve_variant(index, base, values, overlay, seed, path) -> Variant:
             _put(assign, scenario, parse_field_path(field), value, field)
         if seed is not None:
             assign["random_seed"] = seed
-        scenario = apply_overlay(scenario, assign)
-        robot = scenario_robot(scenario)
+        scenario, robot = _apply(scenario, assign)
+        robot = robot or check_scenario(scenario)
         if scenario.interference.enabled and robot.num_pairs:
             _warn_unreachable_d_u(robot, interference_params(scenario, robot))
         _warn_reel_saturation(scenario, robot)
