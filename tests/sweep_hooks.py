@@ -20,7 +20,12 @@ def raise_if(field, value, task):
 
 def signal_parent_if(field, value, signum, task):
     """Signal the sweep's parent process when the run where field == value starts, then hang so
-    that run never finishes (the parent stops the worker)."""
+    that run never finishes: until the parent stops the worker or, killed outright, is gone
+    (the worker is then reparented) or 30 s have passed."""
     if task.values.get(field) == value:
-        os.kill(os.getppid(), signum)
-        time.sleep(30)
+        parent = os.getppid()
+        os.kill(parent, signum)
+        deadline = time.monotonic() + 30.0
+        while os.getppid() == parent and time.monotonic() < deadline:
+            time.sleep(0.05)
+        os._exit(1)
