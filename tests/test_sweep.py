@@ -411,3 +411,24 @@ def test_the_readme_sweep_example_loads(tmp_path):
     last = s.variants[-1].scenario
     assert [(p.pair, p.d_l) for p in last.interference.pairs] == [([1, 3], 0.060)]
     assert last.random_seed == 2 and last.duration == 5.0
+
+
+def test_a_run_that_stops_part_way_is_an_error_row_with_how_far_it_got(tmp_path, monkeypatch):
+    """simulate() returns the log up to a failure with the exception in `error` (as when the
+    forward kinematics finds no pose): the row says error, where, and why."""
+    from cdpm_drake import simulation
+
+    real = simulation.simulate
+
+    def stops_at_0_1(*, scenario, **kw):
+        result = real(scenario=scenario, duration=0.1)
+        result.error = RuntimeError("no platform pose fits the cable lengths")
+        return result
+
+    monkeypatch.setattr(simulation, "simulate", stops_at_0_1)
+    v = sw.load_sweep(write(tmp_path, SMALL)).variants[0]
+    row = sw.execute_run(sw.tasks_for([v])[0])
+    assert row["status"] == "error"
+    assert row["error"] == ("the run stopped at t = 0.100 s: RuntimeError: no platform pose "
+                            "fits the cable lengths")
+    assert row["sim_s"] == pytest.approx(0.1) and "min_distance" not in row
