@@ -342,7 +342,7 @@ def _sweep_parser(sub) -> None:
                     "resolved scenario.yaml. Rerunning the same command resumes.")
     p.add_argument("sweep", help=f"a shipped sweep ({', '.join(sweep_names())}) or a path to "
                                  "a sweep YAML")
-    p.add_argument("--out", type=Path,
+    p.add_argument("--out", type=Path, metavar="DIR",
                    help="output directory (default: runs/sweeps/<sweep name>)")
     p.add_argument("--workers", type=int, metavar="N",
                    help="local worker processes (default: one per core)")
@@ -356,10 +356,11 @@ def _sweep_parser(sub) -> None:
                    help="rerun the rows that ended in an error (a resume skips them)")
     p.add_argument("--plot", action="store_true",
                    help="write the heatmap, metric-vs-axis and Pareto pictures")
-    p.add_argument("--metric", choices=NUMERIC_METRICS,
+    p.add_argument("--metric", choices=NUMERIC_METRICS, metavar="NAME",
                    help="metric of the pictures and the best-runs table (default: the sweep "
-                        "file's, else min_distance)")
-    p.add_argument("--top", type=int, default=5, help="rows in the best-runs table (default 5)")
+                        f"file's, else min_distance): {', '.join(NUMERIC_METRICS)}")
+    p.add_argument("--top", type=int, default=5, metavar="K",
+                   help="rows in the best-runs table (default 5)")
     p.add_argument("--dry-run", action="store_true",
                    help="check and list the variants, run nothing")
     p.add_argument("--no-progress", action="store_true", help="no progress bar")

@@ -157,9 +157,9 @@ def load_sweep_file(name_or_path) -> tuple[SweepFile, Path]:
             raise SweepError(f"{path}: seeds[{k}] must be an integer >= 0, got {s!r}")
     if len(set(sweep.seeds)) != len(sweep.seeds):
         raise SweepError(f"{path}: seeds lists a seed twice: {sweep.seeds!r}")
-    if sweep.metric not in METRICS:
-        raise SweepError(f"{path}: metric {sweep.metric!r} is not a metric; valid metrics: "
-                         f"{list(METRICS)}")
+    if sweep.metric not in NUMERIC_METRICS:
+        raise SweepError(f"{path}: metric {sweep.metric!r} is not a metric that ranks runs; "
+                         f"valid metrics: {NUMERIC_METRICS}")
     if not sweep.name:
         sweep.name = path.stem
     return sweep, path

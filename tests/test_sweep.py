@@ -161,6 +161,10 @@ variants: [{admittance: {damping: 3.0}}, {limits: {max_velocity: 0.2}}]
     (SMALL.replace("[2.0, 4.0]", "[2.0, 2.0]"), "lists 2.0 twice"),
     (SMALL.replace("base: exp2_interaction", "base: exp9"), "unknown scenario 'exp9'"),
     (SMALL + "metric: speed\n", "metric 'speed' is not a metric"),
+    (SMALL + "metric: min_distance_pair\n", "valid metrics: ['min_distance', "),
+    (SMALL + "seeds: [a]\n", "seeds[0] must be an integer, got 'a'"),
+    (SMALL.replace("linspace: [5.0, 7.0, 2]", "linspace: [5.0, 7.0, 2.5]"),
+     "must be [start, stop, count] with an integer count >= 1"),
 ])
 def test_bad_sweep_file_is_reported(tmp_path, text, expected):
     with pytest.raises(sw.SweepError) as e:
@@ -432,3 +436,9 @@ def test_a_run_that_stops_part_way_is_an_error_row_with_how_far_it_got(tmp_path,
     assert row["error"] == ("the run stopped at t = 0.100 s: RuntimeError: no platform pose "
                             "fits the cable lengths")
     assert row["sim_s"] == pytest.approx(0.1) and "min_distance" not in row
+
+
+def test_spaced_axes():
+    # np.linspace / np.geomspace, both ends included, rounded to 12 significant digits.
+    assert sw.axis_values(sw.Axis(field="x", linspace=[0.06, 0.062, 3])) == [0.06, 0.061, 0.062]
+    assert sw.axis_values(sw.Axis(field="x", geomspace=[1.0, 100.0, 3])) == [1.0, 10.0, 100.0]
