@@ -553,13 +553,21 @@ def _resolve_variant(index, base, values, overlay, seed, path) -> Variant:
         _warn_reel_saturation(scenario, robot)
     except (ScenarioError, SweepError) as e:
         raise SweepError(f"{where}: {e}") from None
-    if type(scenario.plant).__name__ != "SimulatedReels":
+    if _is_hardware(scenario.plant):
         raise SweepError(f"{where}: plant is !{type(scenario.plant).__name__}; a sweep "
-                         "simulates, so it needs plant: !SimulatedReels {}")
+                         "simulates, so it needs a simulated plant (plant: !SimulatedReels {})")
     text = scenario_to_yaml(scenario)
     return Variant(index=index, run=run, values=values, overlay=overlay,
                    random_seed=scenario.random_seed, scenario=scenario, scenario_yaml=text,
                    scenario_hash=hashlib.sha256(text.encode()).hexdigest()[:16])
+
+
+def _is_hardware(plant) -> bool:
+    try:
+        from .hardware.config import HardwareReels
+    except ImportError:
+        return False
+    return isinstance(plant, HardwareReels)
 
 
 def _random_samples(r: RandomSamples, base: Scenario) -> list[dict]:

@@ -161,6 +161,8 @@ variants: [{admittance: {damping: 3.0}}, {limits: {max_velocity: 0.2}}]
     (SMALL.replace("[2.0, 4.0]", "[2.0, 2.0]"), "lists 2.0 twice"),
     (SMALL.replace("base: exp2_interaction", "base: exp9"), "unknown scenario 'exp9'"),
     (SMALL + "metric: speed\n", "metric 'speed' is not a metric"),
+    (SMALL.replace("{duration: 0.2}", "{duration: 0.2, plant: !HardwareReels {}}"),
+     "plant is !HardwareReels; a sweep simulates"),
     (SMALL + "metric: min_distance_pair\n", "valid metrics: ['min_distance', "),
     (SMALL + "seeds: [a]\n", "seeds[0] must be an integer, got 'a'"),
     (SMALL.replace("linspace: [5.0, 7.0, 2]", "linspace: [5.0, 7.0, 2.5]"),
