@@ -303,9 +303,10 @@ def _is_sweep_dir(path: Path) -> bool:
 
 def _cmd_plot_sweep(args) -> int:
     from .sweep import SweepError, plot_main
+    from .views.sweep_plots import plot_sweep
 
     try:
-        return plot_main(sweep_dir=args.log, out_dir=args.out)
+        return plot_main(sweep_dir=args.log, plot=plot_sweep, out_dir=args.out)
     except SweepError as e:
         raise CliError(str(e)) from None
 
@@ -321,11 +322,14 @@ def _cmd_sweep(args) -> int:
         raise CliError(f"--top must be an integer >= 1, got {args.top!r}")
     if args.out is not None:
         _writable_dir(args.out, "--out")
+    plot = None
+    if args.plot:
+        from .views.sweep_plots import plot_sweep as plot
     try:
         return sweep_main(sweep=args.sweep, out_dir=args.out, workers=args.workers,
                           ray=args.ray is not None, ray_address=args.ray or None,
                           ray_chunk=args.ray_chunk, keep_logs=args.keep_logs,
-                          retry_errors=args.retry_errors, plot=args.plot, metric=args.metric,
+                          retry_errors=args.retry_errors, plot=plot, metric=args.metric,
                           top=args.top, dry_run=args.dry_run, progress=not args.no_progress)
     except SweepError as e:
         raise CliError(str(e)) from None

@@ -1256,7 +1256,7 @@ def _short(cell: str) -> str:
 
 
 def sweep_main(*, sweep, out_dir=None, workers=None, ray=False, ray_address=None,
-               ray_chunk=None, keep_logs=False, retry_errors=False, plot=False, metric=None,
+               ray_chunk=None, keep_logs=False, retry_errors=False, plot=None, metric=None,
                top=5, dry_run=False, progress=True, out=None, before_run=None,
                ray_init=None) -> int:
     """`cdpm sweep`: load and check every variant, run what is not done, write the results,
@@ -1302,9 +1302,8 @@ def sweep_main(*, sweep, out_dir=None, workers=None, ray=False, ray_address=None
         print(f"best runs by {metric} ({METRICS[metric][0]}, "
               f"{'largest' if _better(metric) == 'max' else 'smallest'} first):", file=out)
         print(best_table(columns, outcome.rows, metric, top), file=out)
-    if plot and ok:
-        from .views.sweep_plots import plot_sweep
-        for png in plot_sweep(columns, outcome.rows, out_dir, metric=metric):
+    if plot is not None and ok:  # the views hang off the CLI, which passes them in
+        for png in plot(columns, outcome.rows, out_dir, metric=metric):
             print(f"plot: {png}", file=out)
     if outcome.ending == "interrupted":
         print(f"cdpm sweep: interrupted; {len(outcome.rows)} finished row(s) kept in "
@@ -1317,10 +1316,9 @@ def sweep_main(*, sweep, out_dir=None, workers=None, ray=False, ray_address=None
     return 1 if errors else 0
 
 
-def plot_main(*, sweep_dir, out_dir=None, metric=None, out=None) -> int:
-    """`cdpm plot SWEEP_DIR`: the sweep's pictures and its best runs from results.csv."""
-    from .views.sweep_plots import plot_sweep
-
+def plot_main(*, sweep_dir, plot, out_dir=None, metric=None, out=None) -> int:
+    """`cdpm plot SWEEP_DIR`: the sweep's pictures (`plot`, views.sweep_plots.plot_sweep) and
+    its best runs, from results.csv."""
     out = sys.stdout if out is None else out
     sweep_dir = Path(sweep_dir)
     columns, rows = read_results(sweep_dir)
@@ -1330,7 +1328,7 @@ def plot_main(*, sweep_dir, out_dir=None, metric=None, out=None) -> int:
             metric = load_sweep_file(sweep_dir / "sweep.yaml")[0].metric
         except (SweepError, ScenarioError):
             pass
-    for png in plot_sweep(columns, rows, out_dir or sweep_dir, metric=metric):
+    for png in plot(columns, rows, out_dir or sweep_dir, metric=metric):
         print(f"plot: {png}", file=out)
     if any(r["status"] == "ok" for r in rows):
         print(f"best runs by {metric}:", file=out)
