@@ -1092,16 +1092,43 @@ def default_workers() -> int:
 def run_sweep(sweep: Sweep, out_dir, *, workers: int | None = None, ray: bool = False,
               ray_address: str | None = None, ray_chunk: int | None = None,
               ray_init: dict | None = None, keep_logs: bool = False,
-              retry_errors: bool = False, progress: bool = True, before_run=None,
-              out=None) -> SweepOutcome:
+              retry_errors: bool = False, progress: bool = True,
+              before_run=None) -> SweepOutcome:
     """Run every variant not already done in `out_dir`; return the rows in sweep order.
 
     `before_run(task)` is called in the worker before each run (an extension point; the
     tests use it to make a variant kill its worker). Ctrl-C and SIGTERM stop the sweep: the
     runs under way are abandoned (rerun next time), every finished row is kept."""
-    out = sys.stdout if out is None else out
     out_dir = Path(out_dir)
     out_dir.mkdir(parents=True, exist_ok=True)
+    lock = _lock(out_dir)
+    try:
+        return _run_sweep(sweep, out_dir, workers=workers, ray=ray, ray_address=ray_address,
+                          ray_chunk=ray_chunk, ray_init=ray_init, keep_logs=keep_logs,
+                          retry_errors=retry_errors, progress=progress, before_run=before_run)
+    finally:
+        lock.close()
+
+
+def _lock(out_dir: Path):
+    """An exclusive lock on DIR/.sweep.lock: two sweeps writing one directory would run the
+    same variants twice and race on results.csv."""
+    f = open(out_dir / ".sweep.lock", "a+")
+    try:
+        import fcntl
+    except ImportError:  # not POSIX: no lock
+        return f
+    try:
+        fcntl.flock(f.fileno(), fcntl.LOCK_EX | fcntl.LOCK_NB)
+    except OSError:
+        f.close()
+        raise SweepError(f"--out {str(out_dir)!r} is in use by another cdpm sweep; wait for it "
+                         "or give another --out") from None
+    return f
+
+
+def _run_sweep(sweep, out_dir, *, workers, ray, ray_address, ray_chunk, ray_init, keep_logs,
+               retry_errors, progress, before_run) -> SweepOutcome:
     store = ResultStore(sweep, out_dir)
     _atomic_write(out_dir / "sweep.yaml", sweep.path.read_bytes())
     previous = store.previous()
@@ -1285,8 +1312,7 @@ def sweep_main(*, sweep, out_dir=None, workers=None, ray=False, ray_address=None
         return 0
     outcome = run_sweep(s, out_dir, workers=workers, ray=ray, ray_address=ray_address,
                         ray_chunk=ray_chunk, ray_init=ray_init, keep_logs=keep_logs,
-                        retry_errors=retry_errors, progress=progress, before_run=before_run,
-                        out=out)
+                        retry_errors=retry_errors, progress=progress, before_run=before_run)
     ok = sum(r["status"] == "ok" for r in outcome.rows)
     errors = [r for r in outcome.rows if r["status"] != "ok"]
     print(f"{outcome.ran} run(s) done now"

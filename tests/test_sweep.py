@@ -444,3 +444,16 @@ def test_spaced_axes():
     # np.linspace / np.geomspace, both ends included, rounded to 12 significant digits.
     assert sw.axis_values(sw.Axis(field="x", linspace=[0.06, 0.062, 3])) == [0.06, 0.061, 0.062]
     assert sw.axis_values(sw.Axis(field="x", geomspace=[1.0, 100.0, 3])) == [1.0, 10.0, 100.0]
+
+
+def test_a_second_sweep_on_the_same_directory_is_refused(tmp_path):
+    import fcntl
+
+    s = sw.load_sweep(write(tmp_path, SMALL))
+    out = tmp_path / "out"
+    out.mkdir()
+    with open(out / ".sweep.lock", "a+") as held:  # as another cdpm sweep would hold it
+        fcntl.flock(held.fileno(), fcntl.LOCK_EX)
+        with pytest.raises(sw.SweepError, match="is in use by another cdpm sweep"):
+            sw.run_sweep(s, out, workers=1, progress=False)
+    assert not (out / "results.csv").exists()
