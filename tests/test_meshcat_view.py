@@ -258,9 +258,14 @@ def test_the_default_camera_frames_the_whole_robot(meshcat, robot_name):
     view = mv.CdpmMeshcatView(meshcat, robot.reels, robot.attachments, robot.workspace.lower,
                               robot.workspace.upper, robot.pairs)
     eye, target = mv.camera_pose(robot.reels, direction=view.view_direction)
-    # What Meshcat got: the camera's fov, and its position (three.js is y up: (x, z, -y)).
-    camera = unpack(meshcat._GetPackedObject("/Cameras/default/rotated"))["object"]["object"]
-    assert camera["type"] == "PerspectiveCamera" and camera["fov"] == mv.CAMERA_FOV
+    # Meshcat's default camera, whose field of view is in the meshcat.js that pydrake ships:
+    # `create_camera(){... new PerspectiveCamera(75, 1, .01, 100)`.
+    import pydrake
+
+    js = (Path(pydrake.__file__).parent / "share/drake/geometry/meshcat.js").read_text()
+    fov = float(re.search(r"create_camera\(\)\{.*?\((\d+(?:\.\d+)?),1,\.01,100\)", js).group(1))
+    assert fov == mv.CAMERA_FOV
+    # What Meshcat got: the camera's position (three.js is y up: (x, z, -y)).
     x, y, z = prop(meshcat, "/Cameras/default/rotated/<object>", "position")
     np.testing.assert_allclose([x, -z, y], eye - [0, 0, 0], atol=1e-9)
     # The target is the centre of the reels' box: every corner of that box (so every reel,
@@ -269,7 +274,7 @@ def test_the_default_camera_frames_the_whole_robot(meshcat, robot_name):
     np.testing.assert_allclose(target, 0.5 * (lo + hi))
     corners = np.array([[(hi if (n >> a) & 1 else lo)[a] for a in range(3)] for n in range(8)])
     for aspect in (4 / 3, 16 / 9):
-        ndc = _ndc(corners, eye, target, camera["fov"], aspect)
+        ndc = _ndc(corners, eye, target, fov, aspect)
         assert np.all(np.abs(ndc) < 0.98), (aspect, ndc)
         # ... and it fills the view: not a speck in the middle of it.
         assert np.abs(ndc).max() > 0.6, ndc

@@ -49,9 +49,10 @@ _HEAD_FRACTION = 0.2
 # m of arrow per N of force: 1 N is 0.25 m, longer than the paper's platform half-size (0.15 m),
 # so an arrow of the forces these scenarios use (F_u 2-3 N, a hand's 1-5 N) reaches well out.
 FORCE_SCALE = 0.25
-# The default camera: vertical field of view (deg), and the narrowest window (width / height)
-# it must frame the robot in.
-CAMERA_FOV = 50.0
+# The default camera: Meshcat's own (its meshcat.js creates a perspective camera of 75 deg
+# vertical field of view), and the narrowest window (width / height) it must frame the robot
+# in.
+CAMERA_FOV = 75.0
 CAMERA_MIN_ASPECT = 4.0 / 3.0
 # From the robot's centre towards the camera: in front (-y), to the left (-x), above (+z).
 CAMERA_DIRECTION = np.array([-0.45, -1.0, 0.5]) / np.linalg.norm([-0.45, -1.0, 0.5])
@@ -437,13 +438,9 @@ class CdpmMeshcatView:
         mc.SetTransform(scale, RigidTransform([0.0, -1.4 * height, 0.0]))
 
     def set_camera(self) -> None:
-        """Frame the whole robot from the front, left and above (camera_pose), in a perspective
-        view of CAMERA_FOV."""
+        """Frame the whole robot from view_direction (camera_pose) with Meshcat's default
+        camera (CAMERA_FOV)."""
         eye, target = camera_pose(self.reels, direction=self.view_direction)
-        distance = float(np.linalg.norm(eye - target))
-        camera = Meshcat.PerspectiveCamera(fov=CAMERA_FOV, near=0.01 * distance,
-                                           far=10.0 * distance)
-        self.meshcat.SetCamera(camera)
         self.meshcat.SetCameraPose(eye, target)
         # The origin triad would be confused with the force arrows.
         self.meshcat.SetProperty("/Axes", "visible", False)
