@@ -394,7 +394,7 @@ class CdpmMeshcatView:
             mc.SetTransform(f"{scaled}/head", RigidTransform(RollPitchYaw(np.pi, 0, 0),
                                                              [0.0, 0.0, 1.0]))
         self._build_text()
-        self._visible.clear()
+        self.forget_drawn_state()
 
     def _text(self, path: str, text: str, height: float) -> None:
         vertices, faces = text_mesh(text, height)
@@ -448,6 +448,7 @@ class CdpmMeshcatView:
     def forget_drawn_state(self) -> None:
         """Make the next draw send everything (e.g. at the first frame of a recording)."""
         self._visible.clear()
+        self._clock = [None] * CLOCK_SLOTS
 
     # -- per-frame drawing --
 
@@ -475,9 +476,12 @@ class CdpmMeshcatView:
         if sim_time is not None:
             text = clock_text(sim_time).ljust(CLOCK_SLOTS)
             for slot in range(CLOCK_SLOTS):
+                if self._clock[slot] == text[slot]:
+                    continue
                 for glyph in CLOCK_GLYPHS:
                     self._set_visible(self.clock_glyph_path(slot, glyph), glyph == text[slot],
                                       time)
+                self._clock[slot] = text[slot]
         p = _vector(p, "p")
         mc.SetTransform(f"{self.prefix}/platform", RigidTransform(p), time)
         levels = cable_levels(pair_distances, self.pairs, self.num_cables,
