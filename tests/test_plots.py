@@ -337,8 +337,15 @@ def test_timing_figure_shows_tick_period_compute_and_the_limits():
         # The 2 ms period of the log's time column, the 3-tick (6 ms) watchdog limit.
         assert marks == pytest.approx({"period": 2.0, "watchdog": 6.0})
     assert "p50 2.00 ms" in fig.get_suptitle() and "max 5.00 ms" in fig.get_suptitle()
-    with pytest.raises(plots.LogError, match=r"needs log key\(s\) \['wall', 'compute'\]"):
+    with pytest.raises(plots.LogError, match=r"needs log key\(s\) \['wall'\]"):
         plots.figure_timing(synthetic_log(0.1))
+    # A log of an older cdpm run (tick and wall only): the period, and a note for compute.
+    older = {k: v for k, v in log.items() if k not in ("compute", "watchdog_limit")}
+    fig = plots.figure_timing(older)
+    assert _lines(fig.axes[0], "tick period")
+    assert not _lines(fig.axes[1], "compute")
+    assert any("not recorded" in t.get_text() for t in fig.axes[1].texts)
+    assert not any(line.get_gid() == "watchdog" for ax in fig.axes for line in ax.get_lines())
 
 
 def test_cables_figure_shows_lengths_and_reel_speeds_numbered_from_1(log):

@@ -27,7 +27,7 @@ _NEEDS = {
     "trajectory": ("time", "p", "active", "crossed", "reels", "attachments", "pairs"),
     "logistic": ("pairs", "d_l", "d_u", "F_u", "eps"),
     "cables": ("time", "lengths", "reel_velocity"),
-    "timing": ("time", "wall", "compute"),
+    "timing": ("time", "wall"),
 }
 # Figures drawn only for logs that hold their keys.
 OPTIONAL = ("timing",)
@@ -99,7 +99,7 @@ def _check(log: Mapping, figure: str) -> None:
         for key in _NEEDS[figure]:
             arr = np.asarray(log[key])
             if key in ("time", "p", "F_H", "F_int", "F_d", "pair_distances", "active",
-                       "crossed", "lengths", "reel_velocity", "wall", "compute") and (arr.ndim == 0 or arr.shape[0] != T):
+                       "crossed", "lengths", "reel_velocity", "wall") and (arr.ndim == 0 or arr.shape[0] != T):
                 raise LogError(f"log key {key!r} has shape {arr.shape!r}; expected one row per "
                                f"tick ({T} rows, as 'time')")
 
@@ -493,11 +493,12 @@ def _nominal_period(log: Mapping) -> float:
 def figure_timing(log: Mapping) -> Figure:
     """Tick period (ms, wall-clock time between consecutive ticks) and compute time per tick
     (ms) vs log time (s) of a real-time run, with the nominal period and the watchdog limit
-    (`watchdog_limit`, s) drawn; only logs of `cdpm run` have these columns."""
+    (`watchdog_limit`, s) drawn; only logs of `cdpm run` have these columns (`wall`; older
+    ones lack `compute` and `watchdog_limit`, which are then left out)."""
     _check(log, "timing")
     t = np.asarray(log["time"], dtype=float).reshape(-1)
     t_p, period = tick_periods(log)
-    compute = np.asarray(log["compute"], dtype=float).reshape(-1)
+    compute = np.asarray(log.get("compute", np.full(len(t), np.nan)), dtype=float).reshape(-1)
     nominal = _nominal_period(log)
     limit = float(log["watchdog_limit"]) if "watchdog_limit" in log else float("nan")
     fig = Figure(figsize=(9, 6.5), layout="constrained")
