@@ -360,3 +360,19 @@ def test_cables_figure_shows_lengths_and_reel_speeds_numbered_from_1(log):
         styles = {(line.get_color(), line.get_linestyle()) for line in lines.values()}
         assert len(styles) == 7
     assert "(m)" in top.get_ylabel() and "(m/s)" in bottom.get_ylabel()
+
+
+def test_views_benchmark_prints_its_table():
+    import subprocess
+    import sys
+    from pathlib import Path
+
+    script = Path(__file__).resolve().parent.parent / "scripts" / "bench_views.py"
+    done = subprocess.run([sys.executable, str(script), "--duration", "0.2", "--fps", "10"],
+                          capture_output=True, text=True, timeout=300)
+    assert done.returncode == 0, done.stderr
+    # 0.2 s of 2 ms ticks: 101 ticks; at 10 frames/s, 3 frames (0, 0.1, 0.2 s).
+    assert "101 ticks" in done.stdout and "3 frames" in done.stdout
+    for row in ("simulation (reference)", "figure forces", "figure cables", "HTML replay",
+                "live view: one frame"):
+        assert row in done.stdout, done.stdout
