@@ -12,6 +12,7 @@ Figures that need keys only some logs have (`timing`: the tick clock of `cdpm ru
 in OPTIONAL and skipped by `plot_log` when a log lacks them.
 """
 
+import warnings
 from collections.abc import Mapping
 from pathlib import Path
 
@@ -31,6 +32,9 @@ _NEEDS = {
 }
 # Figures drawn only for logs that hold their keys.
 OPTIONAL = ("timing",)
+# Keys with one row per tick.
+_PER_TICK = ("time", "p", "F_H", "F_int", "F_d", "pair_distances", "active", "crossed",
+             "lengths", "reel_velocity", "wall")
 LOG_KEYS = ("time", "p", "F_H", "F_int", "F_wall", "F_d", "velocity_admittance", "velocity",
             "reel_velocity", "lengths", "pair_distances", "active", "crossed", "pairs", "d_l",
             "d_u", "F_u", "eps", "F_max", "reels", "attachments", "workspace_lower",
@@ -98,8 +102,7 @@ def _check(log: Mapping, figure: str) -> None:
         T = len(log["time"])
         for key in _NEEDS[figure]:
             arr = np.asarray(log[key])
-            if key in ("time", "p", "F_H", "F_int", "F_d", "pair_distances", "active",
-                       "crossed", "lengths", "reel_velocity", "wall") and (arr.ndim == 0 or arr.shape[0] != T):
+            if key in _PER_TICK and (arr.ndim == 0 or arr.shape[0] != T):
                 raise LogError(f"log key {key!r} has shape {arr.shape!r}; expected one row per "
                                f"tick ({T} rows, as 'time')")
 
@@ -200,7 +203,9 @@ def force_spans(log: Mapping, names) -> tuple[np.ndarray, float]:
     finite = np.where(np.isfinite(data), data, np.nan)
     if finite.size == 0 or np.all(np.isnan(finite)):
         return np.zeros(3), MIN_FORCE_SPAN
-    lo, hi = np.nanmin(finite, axis=(0, 1)), np.nanmax(finite, axis=(0, 1))
+    with warnings.catch_warnings():  # a component with no finite value: drawn around 0
+        warnings.simplefilter("ignore", RuntimeWarning)
+        lo, hi = np.nanmin(finite, axis=(0, 1)), np.nanmax(finite, axis=(0, 1))
     lo, hi = np.where(np.isfinite(lo), lo, 0.0), np.where(np.isfinite(hi), hi, 0.0)
     return 0.5 * (lo + hi), max(float(np.max(hi - lo)), MIN_FORCE_SPAN)
 
@@ -350,7 +355,8 @@ def figure_trajectory(log: Mapping) -> Figure:
                                linewidth=1.2 if i + 1 in hot else 0.7,
                                color="red" if i + 1 in hot else "0.55")
             line.set_gid(f"cable {i + 1}")
-        cable, = robot.plot([], [], color="0.55", linewidth=0.7, label=f"cables at t = {t[k]:.2f} s")
+        cable, = robot.plot([], [], color="0.55", linewidth=0.7,
+                            label=f"cables at t = {t[k]:.2f} s")
         keep(cable.get_label(), cable)
         if hot:
             red, = robot.plot([], [], color="red", linewidth=1.2,
