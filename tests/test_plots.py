@@ -292,7 +292,7 @@ def test_a_fault_is_marked_in_every_figure(tmp_path):
     time_axes = 0
     for name, make in plots.FIGURES.items():
         fig = make(log)
-        assert note in fig.get_suptitle(), name
+        assert note in fig.get_suptitle().replace("\n", " "), name
         for ax in fig.axes:
             if ax.name == "3d":
                 continue
@@ -317,6 +317,14 @@ def test_a_fault_is_marked_in_every_figure(tmp_path):
         fig = plots.figure_forces(quiet)
         assert "fault" not in fig.get_suptitle()
         assert not any(line.get_gid() == "fault" for ax in fig.axes for line in ax.get_lines())
+    # A long message (a ReelFault's names the bridge, the watchdog and the link counts) is
+    # wrapped, not cut before its reason.
+    long = dict(log, fault_message=np.array(
+        "ReelFault: reel fault at t = 0.300 s: no valid status from the reel bridge at "
+        "127.0.0.1:47100 for 3 ticks (6 ms; watchdog_ticks = 3); zero reel velocity sent."))
+    title = plots.figure_cables(long).get_suptitle()
+    assert "zero reel velocity sent." in title
+    assert max(len(line) for line in title.split("\n")) <= 100
 
 
 def test_timing_figure_shows_tick_period_compute_and_the_limits():

@@ -12,6 +12,7 @@ Figures that need keys only some logs have (`timing`: the tick clock of `cdpm ru
 in OPTIONAL and skipped by `plot_log` when a log lacks them.
 """
 
+import textwrap
 import warnings
 from collections.abc import Mapping
 from pathlib import Path
@@ -130,11 +131,15 @@ def run_fault(log: Mapping) -> tuple[float, str] | None:
     return when, message or "fault"
 
 
-def _fault_label(fault) -> str:
+def _fault_label(fault, width: int = 100, lines: int = 3) -> str:
+    """"fault at t = ... s: message", wrapped to `width` characters, at most `lines` lines."""
     when, message = fault
-    text = message if len(message) <= 70 else message[:67] + "..."
     at = f" at t = {when:.3f} s" if np.isfinite(when) else ""
-    return f"fault{at}: {text}"
+    wrapped = textwrap.wrap(f"fault{at}: {message}", width)
+    if len(wrapped) > lines:
+        wrapped = wrapped[:lines]
+        wrapped[-1] = wrapped[-1][:width - 3] + "..."
+    return "\n".join(wrapped)
 
 
 def _mark_fault_time(ax, log: Mapping) -> None:
@@ -144,7 +149,8 @@ def _mark_fault_time(ax, log: Mapping) -> None:
         return
     line = ax.axvline(fault[0], color=FAULT_COLOR, linestyle="-", linewidth=1.4, zorder=5)
     line.set_gid("fault")
-    ax.text(fault[0], 0.98, " fault", color=FAULT_COLOR, fontsize="small", ha="left",
+    # Left of the line: a run ends at its fault, so the right is usually empty axis margin.
+    ax.text(fault[0], 0.97, "fault ", color=FAULT_COLOR, fontsize="small", ha="right",
             va="top", transform=ax.get_xaxis_transform(), gid="fault label")
 
 
