@@ -36,7 +36,7 @@ def test_plot_log_writes_the_pngs(log, tmp_path):
     head = paths[0].read_bytes()[:24]
     assert (int.from_bytes(head[16:20], "big"), int.from_bytes(head[20:24], "big")) == (400, 225)
     assert plt.get_fignums() == before
-    realtime = plots.plot_log(synthetic_log(0.4, realtime=True), tmp_path / "rt", dpi=30)
+    realtime = plots.plot_log(synthetic_log(0.1, realtime=True), tmp_path / "rt", dpi=20)
     assert realtime[-1].name == "timing.png" and len(realtime) == 6
 
 
