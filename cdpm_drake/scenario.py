@@ -145,14 +145,18 @@ class DynamicReels:
     parameters come from the robot file (platform:, cables:, reel_drives:)."""
 
     # Time step of the discrete MultibodyPlant and the reel drives, s; must divide the
-    # control period (0.5 ms: four steps per 2 ms tick).
-    time_step: float = 0.0005
+    # control period (1 ms: two steps per 2 ms tick; the default cables allow up to ~4 ms).
+    time_step: float = 0.001
     # Floor of the start tension distribution, N: every cable at least this taut at t = 0.
     min_tension: float = 5.0
     # The platform's start orientation [roll, pitch, yaw], rad; the start position is the
     # scenario's initial_position. A robot whose cables cannot hold the platform level at the
     # start pose needs a tilt (the refusal says which one would do).
     initial_rpy: list[float] = dataclasses.field(default_factory=lambda: [0.0, 0.0, 0.0])
+    # True holds the platform at its start orientation (three prismatic joints take the
+    # cables' moments): the translation-only model of the paper and of !SimulatedReels, for
+    # comparing with it. False: the platform rotates freely, as the real one does.
+    lock_rotation: bool = False
     # Reel speed limit, m/s of cable; None takes the robot file's max_reel_speed.
     max_reel_speed: typing.Optional[float] = None
     # Largest residual of the controller's forward kinematics on the encoder lengths, m: the
@@ -495,8 +499,10 @@ def check_dynamic_reels(scenario: Scenario, robot: Robot):
     _positive(cfg.max_length_residual, "plant.max_length_residual")
     p0 = np.asarray(scenario.initial_position, dtype=float)
     dyn = robot.dynamics
-    dist = tension_distribution(wrench_matrix(robot, p0, rotation_from_rpy(rpy)),
-                                gravity_wrench(dyn.mass), cfg.min_tension)
+    W, wrench = wrench_matrix(robot, p0, rotation_from_rpy(rpy)), gravity_wrench(dyn.mass)
+    if cfg.lock_rotation:  # the lock takes the moments; the cables balance the force
+        W, wrench = W[:3], wrench[:3]
+    dist = tension_distribution(W, wrench, cfg.min_tension)
     if not dist.feasible:
         cables = [k + 1 for k in dist.slack]
         msg = (f"initial_position {scenario.initial_position!r} m with plant.initial_rpy "
@@ -508,7 +514,7 @@ def check_dynamic_reels(scenario: Scenario, robot: Robot):
             msg = (f"initial_position {scenario.initial_position!r} m with plant.initial_rpy "
                    f"{list(rpy)!r} rad: the cables of robot {robot.name!r} cannot balance the "
                    f"platform's weight at all (force/moment residual {dist.residual:.3g})")
-        elif not any(rpy):
+        elif not any(rpy) and not cfg.lock_rotation:
             tilt = balancing_rotation(robot, p0, mass=dyn.mass, min_tension=cfg.min_tension)
             if tilt is not None:
                 msg += (f"; the cables hold it tilted by plant.initial_rpy "

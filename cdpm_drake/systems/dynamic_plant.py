@@ -13,11 +13,13 @@ from pydrake.common.value import Value
 from pydrake.math import RigidTransform, RotationMatrix
 from pydrake.multibody.math import SpatialForce
 from pydrake.multibody.plant import ExternallyAppliedSpatialForce, MultibodyPlant
-from pydrake.multibody.tree import RotationalInertia, SpatialInertia
+from pydrake.multibody.tree import (FixedOffsetFrame, PrismaticJoint, RotationalInertia,
+                                    SpatialInertia)
 from pydrake.systems.framework import DiagramBuilder, LeafSystem
 from pydrake.systems.primitives import Adder, VectorLogSink
 
 from ..rotation import rotation_from_rpy, rpy_from_rotation
+from ._tick_cache import declare_tick_cache
 from .simulated_reels import SensorNoise, SimulatedOperator
 
 # The plant's logged ground truth: (log key, system, output port), collected by name.
@@ -61,8 +63,7 @@ class ReelDrives(LeafSystem):
     with viscous and Coulomb friction (`reel_step`), paying out the unstretched lengths L0.
 
     The command is first scaled to the reel speed limit (all reels alike, as the other plants
-    do). The encoder (`cable_lengths`) reads L0 once per control tick, at the tick, as the
-    kinematic plant's lengths are.
+    do).
 
     .. pydrake_system::
 
@@ -70,18 +71,15 @@ class ReelDrives(LeafSystem):
         input_ports:
         - reel_velocity_command (m/s, one per cable)
         output_ports:
-        - cable_lengths (m: the encoders, L0 at the last tick)
-        - unstretched_lengths (m: L0 now)
+        - unstretched_lengths (m: L0)
         - reel_speeds (m/s)
     """
 
-    def __init__(self, *, initial_lengths, dynamics, time_step, control_period,
-                 max_reel_speed):
+    def __init__(self, *, initial_lengths, dynamics, time_step, max_reel_speed):
         super().__init__()
         L0 = np.asarray(initial_lengths, dtype=float)
         m = L0.size
         self._h = float(time_step)
-        self._substeps = int(round(control_period / time_step))
         self._vmax = float(max_reel_speed)
         d = dynamics
         self._params = dict(bandwidth=d.bandwidth, inertia=d.reel_inertia,
@@ -89,9 +87,6 @@ class ReelDrives(LeafSystem):
         self._command = self.DeclareVectorInputPort("reel_velocity_command", m)
         self._L0 = self.DeclareDiscreteState(L0)
         self._speed = self.DeclareDiscreteState(m)
-        self._encoder = self.DeclareDiscreteState(L0)
-        self._step = self.DeclareDiscreteState(1)  # sub-steps taken, for the encoder tick
-        self.DeclareStateOutputPort("cable_lengths", self._encoder)
         self.DeclareStateOutputPort("unstretched_lengths", self._L0)
         self.DeclareStateOutputPort("reel_speeds", self._speed)
         self.DeclarePeriodicDiscreteUpdateEvent(self._h, 0.0, self._update_reels)
@@ -104,19 +99,42 @@ class ReelDrives(LeafSystem):
         w = reel_step(context.get_discrete_state(self._speed).get_value(), u, self._h,
                       **self._params)
         L0 = context.get_discrete_state(self._L0).get_value() + self._h * w
-        k = int(context.get_discrete_state(self._step).get_value()[0])
         discrete_state.get_mutable_vector(self._L0).SetFromVector(L0)
         discrete_state.get_mutable_vector(self._speed).SetFromVector(w)
-        if k % self._substeps == 0:
-            discrete_state.get_mutable_vector(self._encoder).SetFromVector(L0)
-        discrete_state.get_mutable_vector(self._step).SetFromVector([k + 1])
+
+
+class Encoders(LeafSystem):
+    """The reel encoders, read once per control tick: L0 at the tick, held until the next
+    (the controller reads them at its own rate, and its blocks are not re-evaluated at the
+    plant's finer steps).
+
+    .. pydrake_system::
+
+        name: encoders
+        input_ports:
+        - unstretched_lengths (m)
+        output_ports:
+        - cable_lengths (m)
+    """
+
+    def __init__(self, initial_lengths, period):
+        super().__init__()
+        L0 = np.asarray(initial_lengths, dtype=float)
+        self._input = self.DeclareVectorInputPort("unstretched_lengths", L0.size)
+        self._held = self.DeclareDiscreteState(L0)
+        self.DeclareStateOutputPort("cable_lengths", self._held)
+        self.DeclarePeriodicDiscreteUpdateEvent(period, 0.0, self._update_held)
+
+    def _update_held(self, context, discrete_state):
+        discrete_state.get_mutable_vector(self._held).SetFromVector(self._input.Eval(context))
 
 
 class CableForces(LeafSystem):
     """The cables' tensions and the hand force, as one spatial force on the platform.
 
     Reads the platform's state (quaternion floating body: q = [qw qx qy qz x y z], v =
-    [w_WB_W, v_WBo_W]), computes each cable's length L_i = |a_i - (p + R b_i)| and stretch
+    [w_WB_W, v_WBo_W]; with `locked_rotation` R_WB, three prismatic joints: q = p, v = p_dot),
+    computes each cable's length L_i = |a_i - (p + R b_i)| and stretch
     rate, its tension (`cable_tensions`), and applies sum T_i u_i + F_hand at the centre with
     the moment sum (R b_i) x T_i u_i + (R h) x F_hand (h the handle point). Also the true
     pose and velocity for the simulated operator and the loggers.
@@ -138,21 +156,28 @@ class CableForces(LeafSystem):
         - rpy_true (rad: roll, pitch, yaw of the platform)
     """
 
-    def __init__(self, robot, *, body_index):
+    def __init__(self, robot, *, body_index, locked_rotation=None):
         super().__init__()
         m = robot.num_cables
+        self._locked = None if locked_rotation is None else np.asarray(locked_rotation, float)
+        # Where p and v sit in the state.
+        self._ip, self._iv = (slice(4, 7), slice(10, 13)) if self._locked is None else (
+            slice(0, 3), slice(3, 6))
         self._a = robot.reels.copy()
         self._b = robot.attachments.copy()
         d = robot.dynamics
         self._EA, self._c = float(d.EA), float(d.damping)
         self._handle = np.asarray(d.handle, dtype=float)
         self._body = body_index
-        self._state = self.DeclareVectorInputPort("platform_state", 13)
+        self._state = self.DeclareVectorInputPort("platform_state",
+                                                  13 if self._locked is None else 6)
         self._L0 = self.DeclareVectorInputPort("unstretched_lengths", m)
         self._speed = self.DeclareVectorInputPort("reel_speeds", m)
         self._hand = self.DeclareVectorInputPort("hand_force", 3)
         pose_deps = {self._state.ticket()}
         cable_deps = {self._state.ticket(), self._L0.ticket(), self._speed.ticket()}
+        # One evaluation per plant step, shared by the force and the logged outputs.
+        self._cache = declare_tick_cache(self, "cables", self._compute_cables, cable_deps)
         self.DeclareAbstractOutputPort(
             "spatial_forces", lambda: Value[list[ExternallyAppliedSpatialForce]](),
             self._calc_spatial_forces, prerequisites_of_calc=cable_deps | {self._hand.ticket()})
@@ -161,26 +186,33 @@ class CableForces(LeafSystem):
         self.DeclareVectorOutputPort("slack", m, self._calc_slack,
                                      prerequisites_of_calc=cable_deps)
         self.DeclareVectorOutputPort(
-            "p_WP_true", 3, lambda c, o: o.SetFromVector(self._state.Eval(c)[4:7]),
+            "p_WP_true", 3, lambda c, o: o.SetFromVector(self._state.Eval(c)[self._ip]),
             prerequisites_of_calc=pose_deps)
         self.DeclareVectorOutputPort(
-            "v_WP_true", 3, lambda c, o: o.SetFromVector(self._state.Eval(c)[10:13]),
+            "v_WP_true", 3, lambda c, o: o.SetFromVector(self._state.Eval(c)[self._iv]),
             prerequisites_of_calc=pose_deps)
         self.DeclareVectorOutputPort(
             "rpy_true", 3,
-            lambda c, o: o.SetFromVector(rpy_from_rotation(_rotation(self._state.Eval(c)))),
+            lambda c, o: o.SetFromVector(rpy_from_rotation(self._rotation_of(self._state.Eval(c)))),
             prerequisites_of_calc=pose_deps)
 
+    def _rotation_of(self, x):
+        return _rotation(x) if self._locked is None else self._locked
+
     def _cables(self, context):
-        """Tensions T (m,), unit vectors u (m, 3) attachment -> reel, and R b (m, 3)."""
+        return self._cache.Eval(context)
+
+    def _compute_cables(self, context):
+        """Tensions T (m,), unit vectors u (m, 3) attachment -> reel, R b (m, 3) and R."""
         x = self._state.Eval(context)
-        R = _rotation(x)
-        p, w, v = x[4:7], x[7:10], x[10:13]
+        R = self._rotation_of(x)
+        p, v = x[self._ip], x[self._iv]
+        w = x[7:10] if self._locked is None else np.zeros(3)
         Rb = self._b @ R.T
         rho = self._a - (p + Rb)
         L = np.sqrt(np.einsum("ij,ij->i", rho, rho))
         u = rho / L[:, None]
-        v_B = v + np.cross(w, Rb)
+        v_B = v + _cross(w, Rb)
         L_dot = -np.einsum("ij,ij->i", u, v_B)
         T = cable_tensions(L, L_dot - self._speed.Eval(context), self._L0.Eval(context),
                            self._EA, self._c)
@@ -197,12 +229,19 @@ class CableForces(LeafSystem):
         F_hand = self._hand.Eval(context)
         Tu = T[:, None] * u
         f = Tu.sum(axis=0) + F_hand
-        tau = np.cross(Rb, Tu).sum(axis=0) + np.cross(R @ self._handle, F_hand)
+        tau = _cross(Rb, Tu).sum(axis=0) + _cross(R @ self._handle, F_hand)
         force = ExternallyAppliedSpatialForce()
         force.body_index = self._body
         force.p_BoBq_B = np.zeros(3)
         force.F_Bq_W = SpatialForce(tau=tau, f=f)
         output.set_value([force])
+
+
+def _cross(a, b) -> np.ndarray:
+    """a x b over the last axis (np.cross's argument handling costs more than the product)."""
+    a0, a1, a2 = a[..., 0], a[..., 1], a[..., 2]
+    b0, b1, b2 = b[..., 0], b[..., 1], b[..., 2]
+    return np.stack([a1 * b2 - a2 * b1, a2 * b0 - a0 * b2, a0 * b1 - a1 * b0], axis=-1)
 
 
 def _rotation(x) -> np.ndarray:
@@ -267,15 +306,33 @@ def build_dynamic_plant(scenario, robot, operator, start_tensions):
         d.mass, np.zeros(3),
         RotationalInertia(I[0, 0], I[1, 1], I[2, 2], I[0, 1], I[0, 2], I[1, 2]))
     body = mbp.AddRigidBody("platform", inertia)
+    if cfg.lock_rotation:
+        # The translation-only limit (the paper's and the kinematic plant's model): three
+        # prismatic joints through massless sliders; the joints take the cables' moments.
+        parent = mbp.world_frame()
+        for axis, name in enumerate("xyz"):
+            child = (mbp.AddRigidBody(f"slider_{name}", SpatialInertia.Zero()).body_frame()
+                     if name != "z" else mbp.AddFrame(FixedOffsetFrame(
+                         "platform_lock", body.body_frame(),
+                         RigidTransform(RotationMatrix(R0).inverse()))))
+            joint = mbp.AddJoint(PrismaticJoint(f"platform_{name}", parent, child,
+                                                np.eye(3)[axis]))
+            joint.set_default_translation(p0[axis])
+            parent = child
     mbp.Finalize()
-    mbp.SetDefaultFloatingBaseBodyPose(body, RigidTransform(RotationMatrix(R0), p0))
+    if not cfg.lock_rotation:
+        mbp.SetDefaultFloatingBaseBodyPose(body, RigidTransform(RotationMatrix(R0), p0))
 
+    L0 = unstretched_lengths(lengths0, tensions0, d.EA)
     drives = builder.AddNamedSystem("reel_drives", ReelDrives(
-        initial_lengths=unstretched_lengths(lengths0, tensions0, d.EA), dynamics=d,
-        time_step=h, control_period=T,
+        initial_lengths=L0, dynamics=d, time_step=h,
         max_reel_speed=cfg.max_reel_speed if cfg.max_reel_speed is not None
         else robot.limits.max_reel_speed))
-    cables = builder.AddNamedSystem("cables", CableForces(robot, body_index=body.index()))
+    encoders = builder.AddNamedSystem("encoders", Encoders(L0, T))
+    builder.Connect(drives.GetOutputPort("unstretched_lengths"),
+                    encoders.GetInputPort("unstretched_lengths"))
+    cables = builder.AddNamedSystem("cables", CableForces(
+        robot, body_index=body.index(), locked_rotation=R0 if cfg.lock_rotation else None))
     builder.Connect(mbp.get_state_output_port(), cables.GetInputPort("platform_state"))
     builder.Connect(drives.GetOutputPort("unstretched_lengths"),
                     cables.GetInputPort("unstretched_lengths"))
@@ -289,7 +346,7 @@ def build_dynamic_plant(scenario, robot, operator, start_tensions):
     builder.Connect(person.GetOutputPort("hand_force"), cables.GetInputPort("hand_force"))
 
     builder.ExportInput(drives.GetInputPort("reel_velocity_command"), "reel_velocity_command")
-    builder.ExportOutput(drives.GetOutputPort("cable_lengths"), "cable_lengths")
+    builder.ExportOutput(encoders.GetOutputPort("cable_lengths"), "cable_lengths")
     force = person.GetOutputPort("hand_force")
     if scenario.sensor.noise_std > 0:
         noise = builder.AddNamedSystem("sensor_noise", SensorNoise(
@@ -323,6 +380,6 @@ def ground_truth_log(diagram, context) -> dict:
     return out
 
 
-__all__ = ["CableForces", "GROUND_TRUTH", "ReelDrives", "build_dynamic_plant",
+__all__ = ["CableForces", "Encoders", "GROUND_TRUTH", "ReelDrives", "build_dynamic_plant",
            "cable_tensions", "ground_truth_log", "reel_step",
            "stable_time_step", "unstretched_lengths"]
