@@ -11,7 +11,7 @@ import numpy as np
 from pydrake.systems.framework import Diagram, DiagramBuilder
 from pydrake.systems.primitives import Adder, VectorLogSink
 
-from .scenario import (DynamicReels as DynamicReelsConfig, Scenario, ScenarioError,
+from .scenario import (DynamicReels as DynamicReelsConfig, Scenario,
                        SimulatedReels as SimulatedReelsConfig, check_dynamic_reels,
                        check_scenario, interference_params, scenario_operator)
 from .systems import (ForceSensorSource, ForwardKinematicsEstimator, InterferenceForce,
@@ -131,11 +131,8 @@ def make_plant(scenario: Scenario, robot):
         return build_simulated_plant(scenario, robot)
     if isinstance(cfg, DynamicReelsConfig):
         from .systems.dynamic_plant import build_dynamic_plant
-        try:
-            return build_dynamic_plant(scenario, robot, scenario_operator(scenario),
-                                       check_dynamic_reels(scenario, robot).tensions)
-        except ValueError as e:  # a time step the cables make unstable
-            raise ScenarioError(str(e)) from None
+        return build_dynamic_plant(scenario, robot, scenario_operator(scenario),
+                                   check_dynamic_reels(scenario, robot).tensions)
     from .hardware.config import HardwareReels
     from .hardware.reels import HardwareReelsSystem
 

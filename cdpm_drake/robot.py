@@ -181,7 +181,7 @@ class Dynamics:
 def _validate_dynamics(d: Dynamics, src: str) -> Dynamics:
     """The checked Dynamics (arrays as float arrays); RobotError naming field and value."""
     def positive(value, field, unit, allow_zero=False):
-        if not _finite(value) or (value < 0 if allow_zero else value <= 0):
+        if not _finite(value) or (float(value) < 0 if allow_zero else float(value) <= 0):
             bound = ">= 0" if allow_zero else "> 0"
             raise RobotError(f"{src}: {field} must be a finite value {bound} {unit}, "
                              f"got {_show(value)!r}")
@@ -504,6 +504,8 @@ def load_robot(path: str | Path) -> Robot:
                              f"{raw[key]!r}")
         if isinstance(raw.get(key), dict):
             _check_keys(raw[key], section, f"{key}.", src)
+    # The dynamic-plant sections likewise (a scalar inertia, a string mass).
+    _validate_dynamics(_raw_dynamics(raw), src)
     # Check the geometry on the raw data first: Drake's messages for a non-number or a scalar
     # row do not say which field or cable is wrong.
     _as_points(raw["reels"], "reels", src)
@@ -525,6 +527,20 @@ def load_robot(path: str | Path) -> Robot:
                      len(robot.excluded_reasons),
                      "; ".join(f"{', '.join(pairs)}: {why}" for why, pairs in by_reason.items()))
     return robot
+
+
+def _raw_dynamics(raw: dict) -> Dynamics:
+    """Dynamics from a robot file's raw YAML (defaults where a field is absent), to check."""
+    platform, cables, drives = (raw.get(k) or {} for k in ("platform", "cables", "reel_drives"))
+    d = Dynamics()
+    return dataclasses.replace(
+        d, mass=platform.get("mass", d.mass), inertia=platform.get("inertia", d.inertia),
+        handle=platform.get("handle", d.handle), EA=cables.get("EA", d.EA),
+        damping=cables.get("damping", d.damping),
+        bandwidth=drives.get("bandwidth", d.bandwidth),
+        reel_inertia=drives.get("inertia", d.reel_inertia),
+        viscous_friction=drives.get("viscous_friction", d.viscous_friction),
+        coulomb_friction=drives.get("coulomb_friction", d.coulomb_friction))
 
 
 def _check_keys(raw: dict, schema, prefix: str, src: str) -> None:

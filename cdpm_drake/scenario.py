@@ -478,7 +478,8 @@ def check_dynamic_reels(scenario: Scenario, robot: Robot):
     (tension.Distribution). A start pose no positive tension distribution holds is refused,
     naming the pose and the cables that would go slack."""
     from .rotation import rotation_from_rpy
-    from .tension import balancing_rotation, gravity_wrench, tension_distribution, wrench_matrix
+    from .tension import (balancing_rotation, gravity_wrench, stable_time_step,
+                          tension_distribution, wrench_matrix)
 
     cfg = scenario.plant
     _positive(cfg.time_step, "plant.time_step")
@@ -520,6 +521,15 @@ def check_dynamic_reels(scenario: Scenario, robot: Robot):
                 msg += (f"; the cables hold it tilted by plant.initial_rpy "
                         f"{np.round(tilt, 3).tolist()!r} rad")
         raise ScenarioError(msg)
+    h_max = stable_time_step(robot, p0, rotation_from_rpy(rpy), dist.tensions,
+                             locked=cfg.lock_rotation)
+    if cfg.time_step > 0.5 * h_max:
+        raise ScenarioError(
+            f"plant.time_step {cfg.time_step!r} s is too long for the cables of robot "
+            f"{robot.name!r} (cables.EA {dyn.EA:g} N, platform.mass {dyn.mass:g} kg): their "
+            f"stiffest mode is stable up to {h_max:.3g} s and accurate to half of that; use "
+            f"plant.time_step <= {0.5 * h_max:.2g} s (dividing time_step "
+            f"{scenario.time_step:g} s)")
     return dist
 
 

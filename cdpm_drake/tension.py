@@ -14,6 +14,7 @@ with b_i the attachment point relative to the centre, in the base frame.
 from __future__ import annotations
 
 import dataclasses
+import math
 
 import numpy as np
 
@@ -208,6 +209,34 @@ def wrench_feasibility(robot, *, mass: float, hand_force: float = 0.0, handle=(0
                 feasible[k] = False
                 break
     return Feasibility(pts, feasible)
+
+
+def unstretched_lengths(lengths, tensions, EA):
+    """L0 (m) that stretch to `lengths` (m) under `tensions` (N): T = EA (L - L0) / L0."""
+    lengths = np.asarray(lengths, dtype=float)
+    return lengths * EA / (EA + np.asarray(tensions, dtype=float))
+
+
+def stable_time_step(robot, p, R_WB, tensions, locked: bool = False) -> float:
+    """The largest plant time step (s) that keeps the explicit cable forces stable at the
+    start pose (p m, R_WB): 2 / omega_max (symplectic Euler is stable for h omega < 2), with
+    omega_max^2 the largest eigenvalue of M^-1 K; K = W diag(EA / L0_i + T_i / L_i) W^T is
+    the cables' axial stiffness (plus a bound on the tensions' geometric stiffness) in the
+    platform's twist coordinates, M its mass and inertia (only the translation when the
+    rotation is `locked`)."""
+    d = robot.dynamics
+    lengths = np.linalg.norm(robot.reels - (p + robot.attachments @ R_WB.T), axis=1)
+    L0 = unstretched_lengths(lengths, tensions, d.EA)
+    W = wrench_matrix(robot, p, R_WB)
+    K = W @ np.diag(d.EA / L0 + tensions / lengths) @ W.T
+    M = np.zeros((6, 6))
+    M[:3, :3] = d.mass * np.eye(3)
+    M[3:, 3:] = d.inertia
+    if locked:
+        K, M = K[:3, :3], M[:3, :3]
+    L_inv = np.linalg.inv(np.linalg.cholesky(M))
+    omega2 = float(np.linalg.eigvalsh(L_inv @ K @ L_inv.T).max())
+    return 2.0 / math.sqrt(max(omega2, 1e-300))
 
 
 def balancing_rotation(robot, p, *, mass: float, min_tension: float = 0.0,

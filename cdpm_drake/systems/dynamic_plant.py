@@ -19,6 +19,7 @@ from pydrake.systems.framework import DiagramBuilder, LeafSystem
 from pydrake.systems.primitives import Adder, VectorLogSink
 
 from ..rotation import rotation_from_rpy, rpy_from_rotation
+from ..tension import unstretched_lengths
 from ._tick_cache import declare_tick_cache
 from .simulated_reels import SensorNoise, SimulatedOperator
 
@@ -29,12 +30,6 @@ GROUND_TRUTH = (
     ("p_true", "cables", "p_WP_true"),
     ("rpy_true", "cables", "rpy_true"),
 )
-
-
-def unstretched_lengths(lengths, tensions, EA):
-    """L0 (m) that stretch to `lengths` (m) under `tensions` (N): T = EA (L - L0) / L0."""
-    lengths = np.asarray(lengths, dtype=float)
-    return lengths * EA / (EA + np.asarray(tensions, dtype=float))
 
 
 def reel_step(w, u, h, *, bandwidth, inertia, viscous, coulomb):
@@ -253,34 +248,13 @@ def _rotation(x) -> np.ndarray:
         [2 * (x_ * z - y * w), 2 * (y * z + x_ * w), 1 - 2 * (x_ * x_ + y * y)]])
 
 
-def stable_time_step(robot, p, R_WB, tensions) -> float:
-    """The largest plant time step (s) that keeps the explicit cable forces stable at the
-    start pose (p m, R_WB): 2 / omega_max (symplectic Euler is stable for h omega < 2), with
-    omega_max^2 the largest eigenvalue of M^-1 K; K = W diag(EA / L0_i + T_i / L_i) W^T is
-    the cables' axial stiffness (plus a bound on the tensions' geometric stiffness) in the
-    platform's twist coordinates, M its mass and inertia."""
-    from ..tension import wrench_matrix
-
-    d = robot.dynamics
-    lengths = np.linalg.norm(robot.reels - (p + robot.attachments @ R_WB.T), axis=1)
-    L0 = unstretched_lengths(lengths, tensions, d.EA)
-    W = wrench_matrix(robot, p, R_WB)
-    K = W @ np.diag(d.EA / L0 + tensions / lengths) @ W.T
-    M = np.zeros((6, 6))
-    M[:3, :3] = d.mass * np.eye(3)
-    M[3:, 3:] = d.inertia
-    L_inv = np.linalg.inv(np.linalg.cholesky(M))
-    omega2 = float(np.linalg.eigvalsh(L_inv @ K @ L_inv.T).max())
-    return 2.0 / math.sqrt(max(omega2, 1e-300))
-
-
 def build_dynamic_plant(scenario, robot, operator, start_tensions):
     """The `!DynamicReels` plant as a Diagram named `reels`, with the ports in PLANT_PORTS.
 
     `operator` is the scenario's operator model (operators.py), `start_tensions` (m,) N the
-    start tension distribution (scenario.check_dynamic_reels): the unstretched lengths are set
-    so the platform starts in equilibrium at the scenario's initial_position and
-    plant.initial_rpy.
+    start tension distribution (scenario.check_dynamic_reels, which also checks the time
+    step): the unstretched lengths are set so the platform starts in equilibrium at the
+    scenario's initial_position and plant.initial_rpy.
     """
     cfg = scenario.plant
     d = robot.dynamics
@@ -291,14 +265,6 @@ def build_dynamic_plant(scenario, robot, operator, start_tensions):
     rho0 = robot.reels - (p0 + robot.attachments @ R0.T)
     lengths0 = np.linalg.norm(rho0, axis=1)
     tensions0 = np.asarray(start_tensions, dtype=float)
-    h_max = stable_time_step(robot, p0, R0, tensions0)
-    if h > 0.5 * h_max:
-        raise ValueError(
-            f"plant.time_step {h!r} s is too long for the cables of robot {robot.name!r} "
-            f"(cables.EA {d.EA:g} N, platform.mass {d.mass:g} kg): the stiffest cable mode "
-            f"needs at most {h_max:.3g} s to stay stable and half of it to be accurate; use "
-            f"plant.time_step <= {0.5 * h_max:.2g} s (dividing time_step {T:g} s)")
-
     builder = DiagramBuilder()
     mbp = builder.AddNamedSystem("platform_plant", MultibodyPlant(time_step=h))
     I = d.inertia
@@ -382,4 +348,4 @@ def ground_truth_log(diagram, context) -> dict:
 
 __all__ = ["CableForces", "Encoders", "GROUND_TRUTH", "ReelDrives", "build_dynamic_plant",
            "cable_tensions", "ground_truth_log", "reel_step",
-           "stable_time_step", "unstretched_lengths"]
+           "unstretched_lengths"]
