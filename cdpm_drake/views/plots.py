@@ -20,6 +20,9 @@ _NEEDS = {
     "forces": ("time", "F_H", "F_int", "F_d"),
     "trajectory": ("time", "p", "active", "crossed", "reels", "attachments", "pairs"),
     "logistic": ("pairs", "d_l", "d_u", "F_u", "eps"),
+    # The dynamic plant's ground truth (plant: !DynamicReels); plotted only when logged.
+    "tensions": ("time", "tensions", "slack"),
+    "pose_error": ("time", "p", "p_true", "rpy_true"),
 }
 LOG_KEYS = ("time", "p", "F_H", "F_int", "F_wall", "F_d", "velocity_admittance", "velocity",
             "reel_velocity", "lengths", "pair_distances", "active", "crossed", "pairs", "d_l",
@@ -72,7 +75,7 @@ def _check(log: Mapping, figure: str) -> None:
         for key in _NEEDS[figure]:
             arr = np.asarray(log[key])
             if key in ("time", "p", "F_H", "F_int", "F_d", "pair_distances", "active",
-                       "crossed") and (arr.ndim == 0 or arr.shape[0] != T):
+                       "crossed", "tensions", "slack", "p_true", "rpy_true") and (arr.ndim == 0 or arr.shape[0] != T):
                 raise LogError(f"log key {key!r} has shape {arr.shape!r}; expected one row per "
                                f"tick ({T} rows, as 'time')")
 
@@ -283,13 +286,70 @@ def figure_logistic(log: Mapping) -> Figure:
     return fig
 
 
+# --- The dynamic plant: tensions and pose error ---------------------------------------------
+
+
+def figure_tensions(log: Mapping) -> Figure:
+    """Each cable's tension (N) vs time (s), with the ticks where it was slack marked (a dynamic
+    plant's log)."""
+    _check(log, "tensions")
+    t = np.asarray(log["time"], dtype=float)
+    tensions = np.asarray(log["tensions"], dtype=float).reshape(len(t), -1)
+    slack = np.asarray(log["slack"]).reshape(len(t), -1) > 0.5
+    fig = Figure(figsize=(9, 4.5), layout="constrained")
+    ax = fig.add_subplot()
+    for i in range(tensions.shape[1]):
+        (line,) = ax.plot(t, tensions[:, i], linewidth=1.0, label=f"cable {i + 1}")
+        if slack[:, i].any():
+            ax.plot(t[slack[:, i]], np.zeros(int(slack[:, i].sum())), "|",
+                    color=line.get_color(), markersize=8,
+                    label=f"cable {i + 1} slack ({int(slack[:, i].sum())} ticks)")
+    ax.set_xlabel("time (s)")
+    ax.set_ylabel("tension (N)")
+    ax.set_title("Cable tensions (dynamic plant)", fontsize="medium")
+    ax.grid(True, alpha=0.3)
+    ax.legend(loc="upper left", bbox_to_anchor=(1.01, 1.0), fontsize="small")
+    fig.suptitle(_title(log))
+    return fig
+
+
+def figure_pose_error(log: Mapping) -> Figure:
+    """The controller's position estimate minus the true position (mm, per axis and its norm),
+    and the platform's true roll, pitch, yaw (deg), vs time (s) (a dynamic plant's log)."""
+    _check(log, "pose_error")
+    t = np.asarray(log["time"], dtype=float)
+    error = 1000.0 * (np.asarray(log["p"], float) - np.asarray(log["p_true"], float))
+    rpy = np.degrees(np.asarray(log["rpy_true"], dtype=float))
+    fig = Figure(figsize=(9, 6), layout="constrained")
+    top, bottom = fig.subplots(2, 1, sharex=True)
+    for c, axis in enumerate("xyz"):
+        top.plot(t, error[:, c], linewidth=1.0, label=f"p_{axis} - p_true,{axis}")
+    top.plot(t, np.linalg.norm(error, axis=1), color="black", linewidth=1.2, label="|p - p_true|")
+    top.set_ylabel("FK estimate error (mm)")
+    top.set_title("Forward kinematics (translating, rigid cables) vs the true platform",
+                  fontsize="medium")
+    for c, name in enumerate(("roll", "pitch", "yaw")):
+        bottom.plot(t, rpy[:, c], linewidth=1.0, label=name)
+    bottom.set_ylabel("platform rotation (deg)")
+    bottom.set_xlabel("time (s)")
+    for ax in (top, bottom):
+        ax.grid(True, alpha=0.3)
+        ax.legend(loc="upper left", bbox_to_anchor=(1.01, 1.0), fontsize="small")
+    fig.suptitle(_title(log))
+    return fig
+
+
 FIGURES = {"distances": figure_distances, "forces": figure_forces,
            "trajectory": figure_trajectory, "logistic": figure_logistic}
+# Drawn only from logs that hold their keys (the dynamic plant's).
+OPTIONAL_FIGURES = {"tensions": figure_tensions, "pose_error": figure_pose_error}
+FIGURE_FILES.update({"tensions": "tensions.png", "pose_error": "pose_error.png"})
 
 
 def plot_log(log: Mapping[str, np.ndarray], out_dir, dpi: int = 120) -> list[Path]:
     """Write the four figures as PNGs in out_dir (created if needed); returns their paths in the
-    order distances, forces, trajectory, logistic."""
+    order distances, forces, trajectory, logistic (then tensions and pose_error, for a log of
+    the dynamic plant)."""
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     paths = []
@@ -297,4 +357,9 @@ def plot_log(log: Mapping[str, np.ndarray], out_dir, dpi: int = 120) -> list[Pat
         path = out / FIGURE_FILES[name]
         make(log).savefig(path, dpi=dpi)
         paths.append(path)
+    for name, make in OPTIONAL_FIGURES.items():
+        if all(k in log for k in _NEEDS[name]):
+            path = out / FIGURE_FILES[name]
+            make(log).savefig(path, dpi=dpi)
+            paths.append(path)
     return paths
