@@ -420,3 +420,85 @@ def test_the_log_has_the_ground_truth_for_the_dynamic_plant_only():
     doc = (Path(__file__).resolve().parent.parent / "docs" / "LOG_FORMAT.md").read_text()
     for key in ("tensions", "slack", "p_true", "rpy_true"):
         assert f"`{key}`" in doc
+
+
+# --- Views and cdpm info ---------------------------------------------------------------------
+
+
+@pytest.fixture(scope="module")
+def dynamic_log():
+    """0.2 s of exp2 on the dynamic plant, with a tilt and cable 3 marked slack at row 5 (the
+    views draw what the log says; the plant's own slack is tested above)."""
+    log = simulate(scenario=load_scenario("exp2_interaction", "plant: !DynamicReels {}"),
+                   duration=0.2).log
+    log = dict(log)
+    log["rpy_true"] = log["rpy_true"].copy()
+    log["rpy_true"][5] = [0.1, -0.2, 0.3]
+    log["slack"] = log["slack"].copy()
+    log["slack"][5, 2] = True
+    return log
+
+
+def test_plot_log_adds_tensions_and_pose_error_for_a_dynamic_log(dynamic_log, tmp_path):
+    from cdpm_drake.views import plots
+
+    names = [p.name for p in plots.plot_log(dynamic_log, tmp_path, dpi=40)]
+    assert names[-2:] == ["tensions.png", "pose_error.png"]
+    fig = plots.figure_tensions(dynamic_log)
+    lines = [line for line in fig.axes[0].get_lines() if line.get_label().startswith("cable")
+             and "slack" not in line.get_label()]
+    assert len(lines) == 7
+    np.testing.assert_allclose(lines[2].get_ydata(), dynamic_log["tensions"][:, 2])
+    slack_marks = [line for line in fig.axes[0].get_lines() if "slack" in line.get_label()]
+    assert [line.get_label() for line in slack_marks] == ["cable 3 slack (1 ticks)"]
+    fig = plots.figure_pose_error(dynamic_log)
+    norm = [line for line in fig.axes[0].get_lines() if line.get_label() == "|p - p_true|"][0]
+    np.testing.assert_allclose(norm.get_ydata(), 1000 * np.linalg.norm(
+        dynamic_log["p"] - dynamic_log["p_true"], axis=1))
+    roll = [line for line in fig.axes[1].get_lines() if line.get_label() == "roll"][0]
+    assert roll.get_ydata()[5] == pytest.approx(np.degrees(0.1))
+
+
+def test_meshcat_draws_the_true_rotated_platform_and_slack_cables(dynamic_log):
+    from test_meshcat_view import prop, transform
+
+    from cdpm_drake.views import meshcat_view as mv
+
+    meshcat = mv.make_meshcat(port=0)
+    view = mv.CdpmMeshcatView.from_log(meshcat, dynamic_log)
+    view.draw_row(dynamic_log, 5)
+    R = rotation_from_rpy([0.1, -0.2, 0.3])
+    X = transform(meshcat, "/cdpm/platform")
+    np.testing.assert_allclose(X[:3, :3], R, atol=1e-6)
+    p = dynamic_log["p_true"][5]
+    np.testing.assert_allclose(X[:3, 3], p, atol=1e-6)
+    for i in (1, 3):
+        a = dynamic_log["reels"][i - 1]
+        cable = transform(meshcat, view.cable_path(i))
+        direction = p + R @ dynamic_log["attachments"][i - 1] - a
+        np.testing.assert_allclose(cable[:3, 3], a, atol=1e-6)
+        np.testing.assert_allclose(cable[:3, 2], direction / np.linalg.norm(direction),
+                                   atol=1e-6)
+    assert prop(meshcat, view.cable_slack_path(3), "visible") is True
+    assert not any(prop(meshcat, view.cable_level_path(3, k), "visible")
+                   for k in range(mv.LEVELS))
+    assert prop(meshcat, view.cable_slack_path(1), "visible") is False
+    view.draw_row(dynamic_log, 6)  # taut again: its distance colour is back
+    assert prop(meshcat, view.cable_slack_path(3), "visible") is False
+
+
+def test_cdpm_info_prints_the_wrench_feasibility_table(capsys):
+    from cdpm_drake import cli
+    from cdpm_drake.tension import wrench_feasibility
+
+    assert cli.main(["info", "paper_7cable"]) == 0
+    out = capsys.readouterr().out
+    robot = load_robot("paper_7cable")
+    d = robot.dynamics
+    table = out.split("wrench feasibility")[1]
+    for force in cli.FEASIBILITY_FORCES:
+        shares = [wrench_feasibility(robot, mass=d.mass, hand_force=force, handle=d.handle,
+                                     min_tension=floor, n=cli.FEASIBILITY_GRID).share
+                  for floor in cli.FEASIBILITY_FLOORS]
+        row = f"{force:g}" + "".join(f"  {100 * s:.1f}" for s in shares)
+        assert " ".join(row.split()) in [" ".join(line.split()) for line in table.splitlines()]

@@ -207,7 +207,9 @@ class CableForces(LeafSystem):
         rho = self._a - (p + Rb)
         L = np.sqrt(np.einsum("ij,ij->i", rho, rho))
         u = rho / L[:, None]
-        v_B = v + _cross(w, Rb)
+        wx, wy, wz = (float(c) for c in w)
+        # v_B = v + w x (R b), the cross product as a matrix product over all cables.
+        v_B = v + Rb @ np.array([[0.0, wz, -wy], [-wz, 0.0, wx], [wy, -wx, 0.0]])
         L_dot = -np.einsum("ij,ij->i", u, v_B)
         T = cable_tensions(L, L_dot - self._speed.Eval(context), self._L0.Eval(context),
                            self._EA, self._c)
@@ -224,19 +226,15 @@ class CableForces(LeafSystem):
         F_hand = self._hand.Eval(context)
         Tu = T[:, None] * u
         f = Tu.sum(axis=0) + F_hand
-        tau = _cross(Rb, Tu).sum(axis=0) + _cross(R @ self._handle, F_hand)
+        # sum_i (R b_i) x (T_i u_i) + (R h) x F_hand, as sums of products of columns.
+        r, g = Rb.T, Tu.T
+        tau = np.array([r[1] @ g[2] - r[2] @ g[1], r[2] @ g[0] - r[0] @ g[2],
+                        r[0] @ g[1] - r[1] @ g[0]]) + np.cross(R @ self._handle, F_hand)
         force = ExternallyAppliedSpatialForce()
         force.body_index = self._body
         force.p_BoBq_B = np.zeros(3)
         force.F_Bq_W = SpatialForce(tau=tau, f=f)
         output.set_value([force])
-
-
-def _cross(a, b) -> np.ndarray:
-    """a x b over the last axis (np.cross's argument handling costs more than the product)."""
-    a0, a1, a2 = a[..., 0], a[..., 1], a[..., 2]
-    b0, b1, b2 = b[..., 0], b[..., 1], b[..., 2]
-    return np.stack([a1 * b2 - a2 * b1, a2 * b0 - a0 * b2, a0 * b1 - a1 * b0], axis=-1)
 
 
 def _rotation(x) -> np.ndarray:
