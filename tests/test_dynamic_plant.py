@@ -502,3 +502,15 @@ def test_cdpm_info_prints_the_wrench_feasibility_table(capsys):
                   for floor in cli.FEASIBILITY_FLOORS]
         row = f"{force:g}" + "".join(f"  {100 * s:.1f}" for s in shares)
         assert " ".join(row.split()) in [" ".join(line.split()) for line in table.splitlines()]
+
+
+def test_the_plant_diagram_graphviz_is_stable_across_builds():
+    # The committed diagrams/plant_dynamic.dot is drawn from the plant alone, whose port
+    # clusters Drake names after its system id (`clusters<id>in`).
+    from cdpm_drake.views.diagram_graph import stable_graphviz
+
+    scenario = load_scenario("exp2_interaction", "plant: !DynamicReels {}")
+    first = stable_graphviz(build_diagram(scenario).GetSubsystemByName("reels"))
+    build_diagram(scenario)  # more systems in between
+    second = stable_graphviz(build_diagram(scenario).GetSubsystemByName("reels"))
+    assert first == second and "clusters0in" in first
