@@ -92,6 +92,15 @@ def _cmd_info(args) -> int:
 # --- simulate --------------------------------------------------------------------------------
 
 
+def _print_dynamic_summary(log, out) -> None:
+    slack = [f"{i + 1} ({int(n)} ticks)" for i, n in enumerate(log["slack"].sum(axis=0)) if n]
+    error = 1000 * np.linalg.norm(log["p"] - log["p_true"], axis=1).max()
+    rotation = np.degrees(np.abs(log["rpy_true"]).max())
+    print(f"tensions {log['tensions'].min():.2f} to {log['tensions'].max():.1f} N; slack "
+          f"cables: {', '.join(slack) or 'none'}; largest rotation {rotation:.2f} deg; largest "
+          f"FK error {error:.2f} mm", file=out)
+
+
 def _load_scenario_arg(args):
     from .scenario import load_scenario
 
@@ -126,6 +135,8 @@ def simulate_main(*, scenario, duration=None, out_dir=None, progress=True, out=N
           file=out)
     crossings = int(np.any(log["crossed"], axis=0).sum()) if T else 0
     print(f"pairs that crossed: {crossings}", file=out)
+    if T and "tensions" in log:  # the dynamic plant's ground truth
+        _print_dynamic_summary(log, out)
     print(f"log: {path}", file=out)
     if plots:
         from .views.plots import plot_log
