@@ -96,7 +96,7 @@ def main(argv=None) -> int:
         settings = [("defaults", "plant: !DynamicReels {}")]
         if not args.no_stiff:
             settings.append(("stiff", f"{{robot: {stiff_file}, plant: !DynamicReels "
-                                      "{time_step: 0.00025, lock_rotation: true, "
+                                      "{time_step: 0.0005, lock_rotation: true, "
                                       "min_tension: 1.0}}"))
         for setting, text in settings:
             scenario, note = dynamic_scenario(name, text)
