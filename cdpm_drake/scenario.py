@@ -514,7 +514,9 @@ def check_dynamic_reels(scenario: Scenario, robot: Robot):
         if dist.residual > 1e-6:
             msg = (f"initial_position {scenario.initial_position!r} m with plant.initial_rpy "
                    f"{list(rpy)!r} rad: the cables of robot {robot.name!r} cannot balance the "
-                   f"platform's weight at all (force/moment residual {dist.residual:.3g})")
+                   f"platform's weight at all (force/moment residual {dist.residual:.3g}): "
+                   f"their {robot.num_cables} lines of action leave a moment unbalanced; "
+                   "plant.lock_rotation: true models the platform as only translating")
         elif not any(rpy) and not cfg.lock_rotation:
             tilt = balancing_rotation(robot, p0, mass=dyn.mass, min_tension=cfg.min_tension)
             if tilt is not None:

@@ -325,6 +325,29 @@ def test_a_start_pose_no_tension_distribution_holds_is_refused():
     load_scenario("exp1_no_interaction", f"plant: !DynamicReels {{initial_rpy: {tilt}}}")
 
 
+def test_a_robot_whose_cables_cannot_balance_the_moments_is_refused_unless_locked(tmp_path):
+    # Four cables to off-centre points: six equations, four tensions; gravity's balance needs
+    # moments the cables cannot give. Locked, the joints take the moments.
+    robot_file = tmp_path / "four.yaml"
+    robot_file.write_text((Path(__file__).parent / "data" / "robots" / "hand_4cable.yaml")
+                          .read_text())
+    robot = load_robot(robot_file)
+    p0 = robot.workspace.center.tolist()
+    text = f"{{robot: {robot_file}, initial_position: {p0}, swaps: [], interference: " \
+           "{enabled: false}, plant: !DynamicReels {%s}}"
+    with pytest.raises(ScenarioError) as e:
+        load_scenario("exp2_interaction", text % "")
+    assert "cannot balance the platform's weight at all" in str(e.value)
+    assert "plant.lock_rotation: true" in str(e.value)
+    # Locked: four cables, three force equations; the least-norm positive solution holds
+    # the 2.5 kg (the floor cable 4 pulls down against).
+    scenario = load_scenario("exp2_interaction", text % "lock_rotation: true, min_tension: 0.0")
+    dist = check_dynamic_reels(scenario, scenario_robot(scenario))
+    W = wrench_matrix(robot, p0)[:3]
+    np.testing.assert_allclose(W @ dist.tensions, [0, 0, 2.5 * GRAVITY], atol=1e-9)
+    assert dist.tensions.min() > 0
+
+
 @pytest.mark.parametrize("plant,message", [
     ("{time_step: 0.0015}", "plant.time_step 0.0015 s must divide the control period"),
     ("{time_step: 0.0}", "plant.time_step must be a finite number > 0, got 0.0"),
