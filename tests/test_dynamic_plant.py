@@ -540,3 +540,20 @@ def test_the_plant_diagram_graphviz_is_stable_across_builds():
     build_diagram(scenario)  # more systems in between
     second = stable_graphviz(build_diagram(scenario).GetSubsystemByName("reels"))
     assert first == second and "clusters0in" in first
+
+
+def test_the_live_view_follows_the_true_platform_of_a_dynamic_run(dynamic_log):
+    # The ground truth sits in loggers inside the plant: the live view finds them there.
+    from test_meshcat_view import transform
+
+    from cdpm_drake.views import meshcat_view as mv
+
+    meshcat = mv.make_meshcat(port=0)
+    view = mv.CdpmMeshcatView.from_log(meshcat, dynamic_log)
+    scenario = load_scenario("exp2_interaction", "plant: !DynamicReels {}")
+    result = simulate(scenario=scenario, duration=0.1, chunk=0.1,
+                      on_chunk=mv.live_view_callback(view))
+    X = transform(meshcat, "/cdpm/platform")
+    np.testing.assert_allclose(X[:3, 3], result.log["p_true"][-1], atol=1e-9)
+    np.testing.assert_allclose(X[:3, :3], rotation_from_rpy(result.log["rpy_true"][-1]),
+                               atol=1e-6)
