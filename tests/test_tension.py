@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 from scipy.optimize import linprog, nnls as scipy_nnls
 
-from cdpm_drake.robot import Robot, Workspace, load_robot
+from cdpm_drake.robot import Robot, load_robot
 from cdpm_drake.rotation import rotation_from_rpy, rpy_from_rotation
 from cdpm_drake.tension import (GRAVITY, balancing_rotation, grid_points, gravity_wrench,
                                 hand_force_directions, least_distance, nnls,
