@@ -482,6 +482,21 @@ def test_plot_log_adds_tensions_and_pose_error_for_a_dynamic_log(dynamic_log, tm
     assert roll.get_ydata()[5] == pytest.approx(np.degrees(0.1))
 
 
+def test_the_dynamic_figures_mark_a_fault_like_the_others(dynamic_log):
+    # A dynamic run can end on a fault (the controller's forward kinematics refusing lengths
+    # a rotated platform gives): its time is marked on every time axis, its message titled.
+    from cdpm_drake.views import plots
+
+    log = dict(dynamic_log, ending=np.array("fault"), fault_time=np.array(0.1),
+               fault_message=np.array("cable lengths are inconsistent"))
+    for make in (plots.figure_tensions, plots.figure_pose_error):
+        fig = make(log)
+        assert "fault at t = 0.100 s: cable lengths are inconsistent" in fig.get_suptitle()
+        for ax in fig.axes:
+            marks = [line for line in ax.get_lines() if line.get_gid() == "fault"]
+            assert len(marks) == 1 and list(marks[0].get_xdata()) == [0.1, 0.1]
+
+
 def test_meshcat_draws_the_true_rotated_platform_and_slack_cables(dynamic_log):
     from test_meshcat_view import prop, transform
 
