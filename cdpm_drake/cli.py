@@ -57,6 +57,31 @@ def info(*, robot: str, out=None) -> None:
     print(format_table(["pair", "distance (mm)", "largest (mm)"], rows), file=out)
     print("(the two are equal where the closest points are the attachment points; d_u must "
           "stay below 'largest' or that pair's force never switches off)", file=out)
+    _print_wrench_feasibility(r, out)
+
+
+# Hand forces (N) and tension floors (N) of the feasibility table, and its grid per axis.
+FEASIBILITY_FORCES = (0.0, 5.0, 10.0, 20.0)
+FEASIBILITY_FLOORS = (0.0, 5.0)
+FEASIBILITY_GRID = 5
+
+
+def _print_wrench_feasibility(r, out) -> None:
+    from .tension import wrench_feasibility
+
+    d = r.dynamics
+    n = FEASIBILITY_GRID
+    rows = []
+    for force in FEASIBILITY_FORCES:
+        shares = [wrench_feasibility(r, mass=d.mass, hand_force=force, handle=d.handle,
+                                     min_tension=floor, n=n).share
+                  for floor in FEASIBILITY_FLOORS]
+        rows.append((f"{force:g}", *(f"{100 * share:.1f}" for share in shares)))
+    print(f"wrench feasibility: share of a {n}x{n}x{n} grid of the workspace box where the "
+          f"cables hold the level platform ({d.mass:g} kg, moments about its centre) plus a "
+          f"hand force at the handle {_fmt(d.handle, 2)} m in each of 26 directions:", file=out)
+    print(format_table(["hand force (N)"] + [f"all cables >= {floor:g} N (%)"
+                                             for floor in FEASIBILITY_FLOORS], rows), file=out)
 
 
 def _cmd_info(args) -> int:
@@ -65,6 +90,15 @@ def _cmd_info(args) -> int:
 
 
 # --- simulate --------------------------------------------------------------------------------
+
+
+def _print_dynamic_summary(log, out) -> None:
+    slack = [f"{i + 1} ({int(n)} ticks)" for i, n in enumerate(log["slack"].sum(axis=0)) if n]
+    error = 1000 * np.linalg.norm(log["p"] - log["p_true"], axis=1).max()
+    rotation = np.degrees(np.abs(log["rpy_true"]).max())
+    print(f"tensions {log['tensions'].min():.2f} to {log['tensions'].max():.1f} N; slack "
+          f"cables: {', '.join(slack) or 'none'}; largest rotation {rotation:.2f} deg; largest "
+          f"FK error {error:.2f} mm", file=out)
 
 
 def _load_scenario_arg(args):
@@ -112,6 +146,8 @@ def simulate_main(*, scenario, duration=None, out_dir=None, progress=True, out=N
           file=out)
     crossings = int(np.any(log["crossed"], axis=0).sum()) if T else 0
     print(f"pairs that crossed: {crossings}", file=out)
+    if T and "tensions" in log:  # the dynamic plant's ground truth
+        _print_dynamic_summary(log, out)
     print(f"log: {path}", file=out)
     # A second Ctrl-C / SIGTERM while the outputs are written must not lose them: the first
     # one already decided the exit code.
@@ -426,12 +462,12 @@ def _cmd_list(args) -> int:
 
 
 def diagram_main(*, scenario, out_dir, depth=1, svg=True, out=None) -> int:
-    """Write the controller diagram, with the simulated and with the hardware plant."""
+    """Write the controller diagram, with the simulated, the hardware and the dynamic plant."""
     import dataclasses
 
     from .diagram import BuildOptions, build_diagram
     from .hardware.config import HardwareReels
-    from .scenario import SimulatedReels
+    from .scenario import DynamicReels, ScenarioError, SimulatedReels
     from .views.diagram_graph import write_diagrams
 
     out = sys.stdout if out is None else out
@@ -442,6 +478,14 @@ def diagram_main(*, scenario, out_dir, depth=1, svg=True, out=None) -> int:
         "controller_hardware": build_diagram(
             dataclasses.replace(scenario, plant=HardwareReels()), options),
     }
+    dynamic = scenario.plant if isinstance(scenario.plant, DynamicReels) else DynamicReels()
+    try:
+        diagrams["controller_dynamic"] = build_diagram(
+            dataclasses.replace(scenario, plant=dynamic), options)
+        # Inside the dynamic plant: the MultibodyPlant, drives, encoders, cables, loggers.
+        diagrams["plant_dynamic"] = diagrams["controller_dynamic"].GetSubsystemByName("reels")
+    except ScenarioError as e:  # a start the cables cannot hold level: say so, draw the rest
+        print(f"skipped controller_dynamic: {e}", file=out)
     for path in write_diagrams(diagrams, out_dir, svg=svg, max_depth=depth):
         print(f"wrote {path}", file=out)
     return 0

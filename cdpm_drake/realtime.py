@@ -16,7 +16,8 @@ import numpy as np
 from pydrake.systems.analysis import Simulator
 
 from .diagram import LOGGED, BuildOptions, build_diagram
-from .scenario import Scenario, ScenarioError, SimulatedReels, check_scenario, scenario_to_yaml
+from .scenario import (DynamicReels, Scenario, ScenarioError, SimulatedReels, check_scenario,
+                       scenario_to_yaml)
 from .simulation import assemble_log, mark_ending, tick_targets
 
 
@@ -76,9 +77,10 @@ def run(*, scenario: Scenario, out_dir, duration: float | None = None, status=No
     from .hardware.reels import ReelFault, start_realtime
 
     robot = check_scenario(scenario)
-    if isinstance(scenario.plant, SimulatedReels):
+    if isinstance(scenario.plant, (SimulatedReels, DynamicReels)):
         raise ScenarioError(
-            f"scenario {scenario.name!r} has plant: !SimulatedReels; `cdpm run` drives real "
+            f"scenario {scenario.name!r} has plant: !{type(scenario.plant).__name__}; `cdpm "
+            "run` drives real "
             "reels and needs plant: !HardwareReels {address: ..., port: ...} (use `cdpm "
             "simulate` for a simulation, or --scenario-text 'plant: !HardwareReels {}')")
     duration = scenario.duration if duration is None else float(duration)

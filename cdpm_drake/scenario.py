@@ -138,12 +138,39 @@ class SimulatedReels:
     max_reel_speed: typing.Optional[float] = None
 
 
+@dataclasses.dataclass
+class DynamicReels:
+    """A dynamic plant (systems/dynamic_plant.py): the platform as a rigid body on elastic,
+    tension-only cables paid out by reel drives with friction. Mass, inertia, cable and drive
+    parameters come from the robot file (platform:, cables:, reel_drives:)."""
+
+    # Time step of the discrete MultibodyPlant and the reel drives, s; must divide the
+    # control period (1 ms: two steps per 2 ms tick; the default cables allow up to ~4 ms).
+    time_step: float = 0.001
+    # Floor of the start tension distribution, N: every cable at least this taut at t = 0.
+    min_tension: float = 5.0
+    # The platform's start orientation [roll, pitch, yaw], rad; the start position is the
+    # scenario's initial_position. A robot whose cables cannot hold the platform level at the
+    # start pose needs a tilt (the refusal says which one would do).
+    initial_rpy: list[float] = dataclasses.field(default_factory=lambda: [0.0, 0.0, 0.0])
+    # True holds the platform at its start orientation (three prismatic joints take the
+    # cables' moments): the translation-only model of the paper and of !SimulatedReels, for
+    # comparing with it. False: the platform rotates freely, as the real one does.
+    lock_rotation: bool = False
+    # Reel speed limit, m/s of cable; None takes the robot file's max_reel_speed.
+    max_reel_speed: typing.Optional[float] = None
+    # Largest residual of the controller's forward kinematics on the encoder lengths, m: the
+    # cables stretch and the platform rotates, so the lengths never fit a translating rigid
+    # platform exactly. Above it the controller stops the run, as on the robot.
+    max_length_residual: float = 0.02
+
+
 def _plant_types():
     try:
         from .hardware.config import HardwareReels
     except ImportError:  # the hardware package is optional for pure simulation
-        return (SimulatedReels,)
-    return (SimulatedReels, HardwareReels)
+        return (SimulatedReels, DynamicReels)
+    return (SimulatedReels, HardwareReels, DynamicReels)
 
 
 _PLANTS = _plant_types()
@@ -178,7 +205,7 @@ class Scenario:
     # The person at the handle (simulation and the emulator; on the robot, a real person).
     operator: OperatorConfig = dataclasses.field(default_factory=NoOperator)
     sensor: Sensor = dataclasses.field(default_factory=Sensor)
-    # The reel plant: `!SimulatedReels {...}` or `!HardwareReels {...}`.
+    # The reel plant: `!SimulatedReels {...}`, `!DynamicReels {...}` or `!HardwareReels {...}`.
     plant: PlantConfig = dataclasses.field(default_factory=SimulatedReels)
     # Seed of every random number generator (sensor noise), for repeatable runs.
     random_seed: int = 0
@@ -499,7 +526,9 @@ def check_scenario(scenario: Scenario, source: str = "<scenario>") -> Robot:
     if scenario.wall_force.enabled:
         _positive(scenario.wall_force.margin, "wall_force.margin")
         _positive(scenario.wall_force.max_force, "wall_force.max_force")
-    if not isinstance(scenario.plant, SimulatedReels):
+    if isinstance(scenario.plant, DynamicReels):
+        check_dynamic_reels(scenario, robot)
+    elif not isinstance(scenario.plant, SimulatedReels):
         from .hardware.config import check_hardware_reels
         try:
             check_hardware_reels(scenario.plant)
@@ -515,6 +544,68 @@ def check_scenario(scenario: Scenario, source: str = "<scenario>") -> Robot:
     if scenario.interference.enabled and robot.num_pairs:
         interference_params(scenario, robot)
     return robot
+
+
+def check_dynamic_reels(scenario: Scenario, robot: Robot):
+    """Check a !DynamicReels plant and its start; returns the start tension distribution
+    (tension.Distribution). A start pose no positive tension distribution holds is refused,
+    naming the pose and the cables that would go slack."""
+    from .rotation import rotation_from_rpy
+    from .tension import (balancing_rotation, gravity_wrench, stable_time_step,
+                          tension_distribution, wrench_matrix)
+
+    cfg = scenario.plant
+    _positive(cfg.time_step, "plant.time_step")
+    ticks = scenario.time_step / cfg.time_step
+    if abs(ticks - round(ticks)) > 1e-9 * ticks:
+        raise ScenarioError(f"plant.time_step {cfg.time_step!r} s must divide the control "
+                            f"period time_step {scenario.time_step!r} s (e.g. "
+                            f"{scenario.time_step / max(1, math.ceil(ticks)):g} s)")
+    if not (isinstance(cfg.min_tension, (int, float)) and math.isfinite(cfg.min_tension)
+            and cfg.min_tension >= 0):
+        raise ScenarioError(f"plant.min_tension must be a finite number >= 0 N, got "
+                            f"{cfg.min_tension!r}")
+    rpy = cfg.initial_rpy
+    if len(rpy) != 3 or not all(math.isfinite(a) for a in rpy):
+        raise ScenarioError(f"plant.initial_rpy must be [roll, pitch, yaw] in rad, got {rpy!r}")
+    if cfg.max_reel_speed is not None:
+        _positive(cfg.max_reel_speed, "plant.max_reel_speed")
+    _positive(cfg.max_length_residual, "plant.max_length_residual")
+    p0 = np.asarray(scenario.initial_position, dtype=float)
+    dyn = robot.dynamics
+    W, wrench = wrench_matrix(robot, p0, rotation_from_rpy(rpy)), gravity_wrench(dyn.mass)
+    if cfg.lock_rotation:  # the lock takes the moments; the cables balance the force
+        W, wrench = W[:3], wrench[:3]
+    dist = tension_distribution(W, wrench, cfg.min_tension)
+    if not dist.feasible:
+        cables = [k + 1 for k in dist.slack]
+        msg = (f"initial_position {scenario.initial_position!r} m with plant.initial_rpy "
+               f"{list(rpy)!r} rad: no tension distribution of robot {robot.name!r} holds the "
+               f"platform's {dyn.mass:g} kg with every cable >= plant.min_tension = "
+               f"{cfg.min_tension:g} N; cable(s) {cables} would go slack (the best "
+               f"distribution leaves them at {dist.best_min:.2f} N)")
+        if dist.residual > 1e-6:
+            msg = (f"initial_position {scenario.initial_position!r} m with plant.initial_rpy "
+                   f"{list(rpy)!r} rad: the cables of robot {robot.name!r} cannot balance the "
+                   f"platform's weight at all (force/moment residual {dist.residual:.3g}): "
+                   f"their {robot.num_cables} lines of action leave a moment unbalanced; "
+                   "plant.lock_rotation: true models the platform as only translating")
+        elif not any(rpy) and not cfg.lock_rotation:
+            tilt = balancing_rotation(robot, p0, mass=dyn.mass, min_tension=cfg.min_tension)
+            if tilt is not None:
+                msg += (f"; the cables hold it tilted by plant.initial_rpy "
+                        f"{np.round(tilt, 3).tolist()!r} rad")
+        raise ScenarioError(msg)
+    h_max = stable_time_step(robot, p0, rotation_from_rpy(rpy), dist.tensions,
+                             locked=cfg.lock_rotation)
+    if cfg.time_step > 0.5 * h_max:
+        raise ScenarioError(
+            f"plant.time_step {cfg.time_step!r} s is too long for the cables of robot "
+            f"{robot.name!r} (cables.EA {dyn.EA:g} N, platform.mass {dyn.mass:g} kg): their "
+            f"stiffest mode is stable up to {h_max:.3g} s and accurate to half of that; use "
+            f"plant.time_step <= {0.5 * h_max:.2g} s (dividing time_step "
+            f"{scenario.time_step:g} s)")
+    return dist
 
 
 def _warn_unreachable_d_u(robot, params):

@@ -13,7 +13,7 @@ import numpy as np
 from pydrake.systems.analysis import Simulator
 
 from .diagram import LOGGED, build_diagram
-from .scenario import (Scenario, ScenarioError, SimulatedReels, check_scenario,
+from .scenario import (DynamicReels, Scenario, ScenarioError, SimulatedReels, check_scenario,
                        interference_params, scenario_to_yaml)
 
 
@@ -42,10 +42,11 @@ def simulate(*, scenario: Scenario, duration: float | None = None, progress: boo
     in `error` with the log up to that point.
     """
     robot = check_scenario(scenario)
-    if diagram is None and not isinstance(scenario.plant, SimulatedReels):
+    if diagram is None and not isinstance(scenario.plant, (SimulatedReels, DynamicReels)):
         raise ScenarioError(
             f"scenario {scenario.name!r} has plant: !{type(scenario.plant).__name__}; a "
-            "simulation needs plant: !SimulatedReels {} (use `cdpm run` to drive real reels)")
+            "simulation needs plant: !SimulatedReels {} or !DynamicReels {} (use `cdpm run` "
+            "to drive real reels)")
     duration = scenario.duration if duration is None else float(duration)
     if not (duration > 0 and np.isfinite(duration)):
         raise ValueError(f"duration must be a finite number > 0 s, got {duration!r}")
@@ -120,6 +121,14 @@ def collect_log(diagram, context, scenario: Scenario, robot) -> dict:
         data = diagram.GetSubsystemByName(name).FindLog(context)
         columns[key] = (data.sample_times().copy(), data.data().T.copy())
     time_column, signals = whole_ticks(columns)
+    # The dynamic plant's ground truth, logged inside the plant (no ports for it), one row per
+    # tick like the rest: cut to the same whole ticks.
+    from .systems.dynamic_plant import ground_truth_log
+    truth = ground_truth_log(diagram, context)
+    if truth:
+        n = min([len(time_column)] + [len(rows) for rows in truth.values()])
+        time_column = time_column[:n]
+        signals = {key: rows[:n] for key, rows in {**signals, **truth}.items()}
     return assemble_log(time_column, signals, scenario, robot)
 
 
@@ -151,8 +160,9 @@ def assemble_log(time_column, signals: dict, scenario: Scenario, robot) -> dict:
     for key, width in (("F_int", 3), ("F_wall", 3), ("pair_distances", P), ("active", P),
                        ("crossed", P)):
         log.setdefault(key, np.zeros((T, width)))
-    for key in ("active", "crossed"):
-        log[key] = np.asarray(log[key]) > 0.5
+    for key in ("active", "crossed", "slack"):
+        if key in log:
+            log[key] = np.asarray(log[key]) > 0.5
     log["pairs"] = np.array(robot.pairs, dtype=int).reshape(P, 2)
     if scenario.interference.enabled and P:
         params = interference_params(scenario, robot)
