@@ -474,8 +474,10 @@ def test_a_fault_plan_applies_to_one_session(robot, p0):
     # --stop --fault-after 0: the first session that enables loses its statuses; the next
     # controller session gets a working bridge again.
     said = []
+    # A long command timeout: this test sends single commands, not a 500 Hz stream.
     server = ReelBridgeServer(ReelBridge(robot, cable_lengths(robot, p0), time_constant=0),
-                              faults=FaultPlan(stop=True), log=said.append).start()
+                              faults=FaultPlan(stop=True), log=said.append,
+                              command_timeout=10.0).start()
     first = Controller(server)
     try:
         first.send(np.zeros(7), enable=True)
