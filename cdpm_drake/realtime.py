@@ -16,7 +16,8 @@ import numpy as np
 from pydrake.systems.analysis import Simulator
 
 from .diagram import LOGGED, BuildOptions, build_diagram
-from .scenario import Scenario, ScenarioError, SimulatedReels, check_scenario, scenario_to_yaml
+from .scenario import (ResolvedScenario, Scenario, ScenarioError, SimulatedReels, resolve_scenario,
+                       scenario_to_yaml)
 from .simulation import assemble_log
 
 
@@ -57,7 +58,7 @@ class _StopRequest:
             signal.signal(sig, handler)
 
 
-def run(*, scenario: Scenario, out_dir, duration: float | None = None, status=None,
+def run(*, scenario: Scenario | ResolvedScenario, out_dir, duration: float | None = None, status=None,
         status_period: float = 1.0, step: float = 0.02, on_view=None,
         view_period: float = 0.1) -> RunResult:
     """Run the scenario's diagram at real-time rate 1 against the reel bridge.
@@ -69,7 +70,8 @@ def run(*, scenario: Scenario, out_dir, duration: float | None = None, status=No
     from .hardware.reels import ReelFault, start_realtime
     from .hardware.tick_log import read_tick_log, realtime_stats
 
-    robot = check_scenario(scenario)
+    resolved = resolve_scenario(scenario)  # once: the builder and the log take it
+    scenario, robot = resolved.scenario, resolved.robot
     if isinstance(scenario.plant, SimulatedReels):
         raise ScenarioError(
             f"scenario {scenario.name!r} has plant: !SimulatedReels; `cdpm run` drives real "
@@ -86,7 +88,7 @@ def run(*, scenario: Scenario, out_dir, duration: float | None = None, status=No
     (out / "scenario.yaml").write_text(scenario_to_yaml(
         dataclasses.replace(scenario, duration=duration)))
     tick_path = out / "ticks.bin"
-    diagram = build_diagram(scenario, BuildOptions(loggers=False, tick_log=str(tick_path)))
+    diagram = build_diagram(resolved, BuildOptions(loggers=False, tick_log=str(tick_path)))
     reels = diagram.GetSubsystemByName("reels")
     sink = diagram.GetSubsystemByName("tick_log")
     simulator = Simulator(diagram)
@@ -133,7 +135,7 @@ def run(*, scenario: Scenario, out_dir, duration: float | None = None, status=No
     raw = read_tick_log(tick_path) if tick_path.exists() else {}
     timing = realtime_stats(raw, T) if raw else {}
     signals = {key: raw[key] for key, _, _ in LOGGED if key in raw}
-    log = assemble_log(raw.get("time", np.zeros(0)), signals, scenario, robot)
+    log = assemble_log(raw.get("time", np.zeros(0)), signals, resolved, robot)
     log["tick"] = raw.get("tick", np.zeros(0, dtype=int))
     log["wall"] = raw.get("wall", np.zeros(0))
     log_path = out / "log.npz"
