@@ -9,7 +9,7 @@ import dataclasses
 
 import numpy as np
 from pydrake.systems.framework import Diagram, DiagramBuilder
-from pydrake.systems.primitives import Adder, VectorLogSink
+from pydrake.systems.primitives import Adder, Multiplexer, VectorLogSink
 
 from .scenario import (ResolvedScenario, Scenario, SimulatedReels as SimulatedReelsConfig,
                        resolve_scenario)
@@ -36,12 +36,17 @@ LOGGED = (
 
 PLANT_PORTS = ("reel_velocity_command", "cable_lengths", "measured_force")
 
+# The logger: every logged signal of the diagram, in LOGGED order, multiplexed into one C++
+# VectorLogSink (one publish event per tick instead of one per signal); `logged_signals`
+# splits its rows again.
+LOG_SINK = "log"
+
 
 @dataclasses.dataclass(frozen=True)
 class BuildOptions:
     """Switches for benchmarks and tests; the defaults are the product."""
 
-    # Add a VectorLogSink per logged signal.
+    # Log every signal of LOGGED (one VectorLogSink of them all, see LOG_SINK).
     loggers: bool = True
     # Overrides scenario.interference.enabled when False (benchmark without the block).
     interference: bool = True
@@ -170,9 +175,28 @@ def build_simulated_plant(scenario: Scenario | ResolvedScenario, robot=None) -> 
 
 
 def _add_loggers(builder, T):
-    for key, port in list(_logged_ports(builder)):
-        logger = builder.AddNamedSystem(f"log_{key}", VectorLogSink(port.size(), T))
-        builder.Connect(port, logger.get_input_port())
+    ports = [port for _, port in _logged_ports(builder)]
+    signals = builder.AddNamedSystem("log_signals", Multiplexer([p.size() for p in ports]))
+    for k, port in enumerate(ports):
+        builder.Connect(port, signals.get_input_port(k))
+    sink = builder.AddNamedSystem(LOG_SINK, VectorLogSink(signals.get_output_port().size(), T))
+    builder.Connect(signals.get_output_port(), sink.get_input_port())
+
+
+def logged_signals(diagram, context) -> tuple[np.ndarray, dict]:
+    """The logger's rows as (sample times (T,) s, {LOGGED key: (T, width)}) for the signals
+    the diagram logs; (empty, {}) for a diagram built without loggers."""
+    if not diagram.HasSubsystemNamed(LOG_SINK):
+        return np.zeros(0), {}
+    log = diagram.GetSubsystemByName(LOG_SINK).FindLog(context)
+    rows = log.data().T
+    signals, k = {}, 0
+    for key, system_name, port_name in LOGGED:
+        if diagram.HasSubsystemNamed(system_name):
+            width = diagram.GetSubsystemByName(system_name).GetOutputPort(port_name).size()
+            signals[key] = rows[:, k:k + width].copy()
+            k += width
+    return log.sample_times().copy(), signals
 
 
 def _logged_ports(builder):

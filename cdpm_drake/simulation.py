@@ -12,7 +12,7 @@ from pathlib import Path
 import numpy as np
 from pydrake.systems.analysis import Simulator
 
-from .diagram import LOGGED, build_diagram
+from .diagram import build_diagram, logged_signals
 from .scenario import (ResolvedScenario, Scenario, ScenarioError, SimulatedReels,
                        resolve_scenario, scenario_to_yaml)
 
@@ -86,16 +86,8 @@ def simulate(*, scenario: Scenario | ResolvedScenario, duration: float | None = 
 
 
 def collect_log(diagram, context, scenario: Scenario | ResolvedScenario, robot) -> dict:
-    """The loggers' contents as named arrays, one row per tick (docs/LOG_FORMAT.md)."""
-    signals = {}
-    time_column = np.zeros(0)
-    for key, _, _ in LOGGED:
-        name = f"log_{key}"
-        if not diagram.HasSubsystemNamed(name):
-            continue
-        data = diagram.GetSubsystemByName(name).FindLog(context)
-        signals[key] = data.data().T.copy()
-        time_column = data.sample_times().copy()
+    """The logger's contents as named arrays, one row per tick (docs/LOG_FORMAT.md)."""
+    time_column, signals = logged_signals(diagram, context)
     return assemble_log(time_column, signals, scenario, robot)
 
 
