@@ -269,9 +269,7 @@ def _interference_kernel(geo, par, floor, F_max, p, side, has_side, out):
             k = _sign(ts) if abs(ts) > MIN_GRADIENT else 0.0
         ex, ey, ez = hx * k, hy * k, hz * k
         F_u = par[j, 1]
-        # Eq. 26: F_u / (1 + exp(-b (d - mid))); the exponent is capped so exp cannot
-        # overflow far above the band (the value there is F_u e^-700, zero for every purpose).
-        intensity = F_u / (1.0 + math.exp(min(par[j, 2] * (par[j, 3] - dist), 700.0)))
+        intensity = _logistic(dist, F_u, par[j, 2], par[j, 3])
         if not near:
             intensity = 0.0
         if crossed or (straddle and not pos):
@@ -479,10 +477,17 @@ def _steepness(d_l, d_u, F_u, eps):
     return 2.0 * np.log((F_u - eps) / eps) / (d_l - d_u), 0.5 * (d_u + d_l)
 
 
+@_jit
 def _logistic(d, F_u, b, mid):
     # Eq. 26: F_u / (1 + exp(-b (d - mid))); the exponent is capped so exp cannot overflow
     # far above the band (the value there is F_u e^-700, zero for every purpose).
-    return F_u / (1.0 + np.exp(np.minimum(b * (mid - d), 700.0)))
+    return F_u / (1.0 + math.exp(min(b * (mid - d), 700.0)))
+
+
+@_jit
+def _logistic_many(d, F_u, b, mid, out):
+    for k in range(d.shape[0]):
+        out[k] = _logistic(d[k], F_u[k], b[k], mid[k])
 
 
 def logistic_intensity(d, d_l, d_u, F_u, eps):
@@ -493,7 +498,12 @@ def logistic_intensity(d, d_l, d_u, F_u, eps):
     """
     d_l, d_u, F_u, eps = (np.asarray(x, dtype=float) for x in (d_l, d_u, F_u, eps))
     _check_logistic(d_l, d_u, F_u, eps, names=None)
-    return _logistic(np.asarray(d, dtype=float), F_u, *_steepness(d_l, d_u, F_u, eps))
+    b, mid = _steepness(d_l, d_u, F_u, eps)
+    d, F_u, b, mid = np.broadcast_arrays(np.asarray(d, dtype=float), F_u, b, mid)
+    out = np.empty(d.shape)
+    _logistic_many(*(np.ascontiguousarray(x).reshape(-1) for x in (d, F_u, b, mid)),
+                   out.reshape(-1))
+    return out if out.ndim else float(out)
 
 
 def _check_logistic(d_l, d_u, F_u, eps, names):

@@ -87,9 +87,16 @@ def wall_force(p, lower, upper, *, margin, max_force) -> np.ndarray:
     max_force * ((margin - gap) / margin)^2 towards the inside, `max_force` at the face and
     beyond. Smooth (C1) at the margin, so the operator feels no step.
     """
-    p = np.asarray(p, dtype=float)
-    gap_lo = p - np.asarray(lower)
-    gap_up = np.asarray(upper) - p
-    push_lo = np.clip((margin - gap_lo) / margin, 0.0, 1.0) ** 2
-    push_up = np.clip((margin - gap_up) / margin, 0.0, 1.0) ** 2
-    return max_force * (push_lo - push_up)
+    out = np.empty(3)
+    bounds = np.array([np.asarray(lower, dtype=float), np.asarray(upper, dtype=float)])
+    wall_force_into(np.asarray(p, dtype=float), bounds, float(margin), float(max_force), out)
+    return out
+
+
+@_jit
+def wall_force_into(p, bounds, margin, max_force, out):
+    """`wall_force` compiled, into out (3,) N; bounds (2, 3) = (lower, upper), m."""
+    for k in range(3):
+        push_lo = min(max((margin - (p[k] - bounds[0, k])) / margin, 0.0), 1.0)
+        push_up = min(max((margin - (bounds[1, k] - p[k])) / margin, 0.0), 1.0)
+        out[k] = max_force * (push_lo * push_lo - push_up * push_up)

@@ -23,7 +23,8 @@ from cdpm_drake.simulation import simulate
 
 KERNELS = (interference._interference_kernel, kinematics.gauss_newton_warm,
            kinematics.reel_rates, kinematics.simulated_reel_step, limits.limit_velocity_into,
-           sensor.clip_into, operators._spring_force_into, operators._interp_into)
+           limits.wall_force_into, sensor.clip_into, operators._spring_force_into,
+           operators._interp_into)
 
 
 def _leaf_classes():
@@ -34,11 +35,14 @@ def _leaf_classes():
                 yield cls
 
 
-@pytest.mark.parametrize("name", ["exp2_interaction", "exp3_two_pairs"])
-def test_no_numba_compilation_happens_inside_the_run(name):
+@pytest.mark.parametrize("name,overlay", [
+    ("exp2_interaction", None), ("exp3_two_pairs", None),
+    ("exp1_no_interaction", "{wall_force: {enabled: true}, operator: !ScriptedOperator "
+                            "{times: [0, 1], forces: [[0, 0, 0], [1, 2, 3]]}}")])
+def test_no_numba_compilation_happens_inside_the_run(name, overlay):
     # Building the diagram compiles (or loads) every kernel its blocks call; the ticks then
     # find an existing specialisation for the argument types the ports deliver.
-    diagram = build_diagram(load_scenario(name))
+    diagram = build_diagram(load_scenario(name, overlay))
     before = [len(k.signatures) for k in KERNELS]
     simulator = Simulator(diagram)
     simulator.Initialize()
