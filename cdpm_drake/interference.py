@@ -1,6 +1,6 @@
 """Cable-cable interference: exact segment distance, its gradient, the repulsive force.
 
-Plain numpy, no Drake import (the Drake `InterferenceForce` system is a thin wrapper). Paper
+numpy and numba, no Drake import (the Drake `InterferenceForce` block calls `interference_tick`). Paper
 sections 3.3 and 4, eqs. 8-30. All positions are in the base frame A, in m; forces in N.
 
 Cable i is the segment from its platform point B_i = p + b_i (parameter 0) to its reel exit
@@ -219,7 +219,7 @@ def _pairs_kernel(geo, p, dist_out, side_out):
             side_out[k, j] = _line_side(dx, dy, dz, nx, ny, nz, D, a, c)
 
 
-# Offsets of the fields in `_interference_kernel`'s flat output of 3 + 13 P floats; the Drake
+# Offsets of the fields in `interference_tick`'s flat output of 3 + 13 P floats; the Drake
 # block exports the first five as its ports.
 def result_layout(P: int) -> dict:
     """{field: (start, stop)} in the flat result vector of a robot with P watched pairs."""
@@ -234,7 +234,7 @@ def result_layout(P: int) -> dict:
 
 
 @_jit
-def _interference_kernel(geo, par, floor, F_max, p, side, has_side, out):
+def interference_tick(geo, par, floor, F_max, p, side, has_side, out):
     """One tick of the interference block at p (3,): writes the flat result (see
     `result_layout`) into out (3 + 13 P,). par (P, 4): d_u, F_u, b, mid per pair; side (P,)
     float: the previous memory (ignored unless has_side: then each pair adopts its line
@@ -672,7 +672,7 @@ def interference_force(robot, p, params: InterferenceParams, side=None) -> Inter
         raise ValueError(f"interference_force takes one position (3,), got shape {p.shape}")
     q = np.zeros(P) if side is None else _side_memory(side, (P,)).astype(float)
     out = np.empty(3 + 13 * P)
-    _interference_kernel(geo, params.packed, params.gradient_floor, params.F_max, p, q,
+    interference_tick(geo, params.packed, params.gradient_floor, params.F_max, p, q,
                          side is not None, out)
     f = {name: out[a:b] for name, (a, b) in result_layout(P).items()}
     return InterferenceResult(

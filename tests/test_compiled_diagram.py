@@ -21,7 +21,7 @@ from cdpm_drake.diagram import build_diagram
 from cdpm_drake.scenario import ResolvedScenario, load_scenario, resolve_scenario
 from cdpm_drake.simulation import simulate
 
-KERNELS = (interference._interference_kernel, kinematics.gauss_newton_warm,
+KERNELS = (interference.interference_tick, kinematics.gauss_newton_warm,
            kinematics.reel_rates, kinematics.simulated_reel_step, limits.limit_velocity_into,
            limits.wall_force_into, sensor.clip_into, operators._spring_force_into,
            operators._interp_into)

@@ -4,7 +4,7 @@ import numpy as np
 from pydrake.systems.framework import Diagram, LeafSystem
 from pydrake.systems.primitives import Demultiplexer
 
-from ..interference import _interference_kernel, pair_geometry, result_layout
+from ..interference import interference_tick, pair_geometry, result_layout
 from ._wiring import sub_diagram, unit_delay
 
 # The ports of the block, in the order of the flat result (interference.result_layout).
@@ -40,11 +40,11 @@ class InterferencePairs(LeafSystem):
             "result", 3 + 13 * P, self._calc_result,
             prerequisites_of_calc={self._p.ticket(), self._side.ticket()})
         # Compile (or load) the kernel now, not in the first tick.
-        _interference_kernel(self._geo, self._par, self._floor, self._F_max, np.zeros(3),
+        interference_tick(self._geo, self._par, self._floor, self._F_max, np.zeros(3),
                              np.zeros(P), True, np.empty(3 + 13 * P))
 
     def _calc_result(self, context, output):
-        _interference_kernel(self._geo, self._par, self._floor, self._F_max,
+        interference_tick(self._geo, self._par, self._floor, self._F_max,
                              self._p.Eval(context), self._side.Eval(context), True,
                              output.get_mutable_value())
 
