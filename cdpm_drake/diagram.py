@@ -14,8 +14,8 @@ from pydrake.systems.primitives import Adder, Multiplexer, VectorLogSink
 from .scenario import (ResolvedScenario, Scenario, SimulatedReels as SimulatedReelsConfig,
                        resolve_scenario)
 from .systems import (ForceSensorSource, ForwardKinematicsEstimator, InterferenceForce,
-                      JacobianVelocityMapping, SafetyLimits, SensorNoise, SimulatedOperator,
-                      SimulatedReels, WorkspaceWallForce, Admittance)
+                      JacobianVelocityMapping, SafetyLimits, SensorNoise, WorkspaceWallForce,
+                      Admittance, add_simulated_world)
 
 # Logged signals: (logger name suffix, system name, output port name). Every signal of the
 # paper's Figs. 10, 11, 13, 14 and 16, and what the limits and reels did with them.
@@ -152,15 +152,14 @@ def build_simulated_plant(scenario: Scenario | ResolvedScenario, robot=None) -> 
     cfg = scenario.plant
     T = scenario.time_step
     builder = DiagramBuilder()
-    reels = builder.AddNamedSystem("simulated_reels", SimulatedReels(
-        robot, initial_position=scenario.initial_position, time_step=T,
-        time_constant=cfg.time_constant, max_reel_speed=resolved.max_reel_speed))
-    operator = builder.AddNamedSystem("operator", SimulatedOperator(resolved.operator))
-    builder.Connect(reels.GetOutputPort("p_WP_true"), operator.GetInputPort("p_WP_true"))
-    builder.Connect(reels.GetOutputPort("v_WP_true"), operator.GetInputPort("v_WP_true"))
-    builder.ExportInput(reels.GetInputPort("reel_velocity_command"), "reel_velocity_command")
-    builder.ExportOutput(reels.GetOutputPort("cable_lengths"), "cable_lengths")
-    force = operator.GetOutputPort("hand_force")
+    # The reels and the person added here directly (not as a nested diagram): one level of
+    # diagram less per tick.
+    command, world = add_simulated_world(
+        builder, robot, resolved.operator, initial_position=scenario.initial_position,
+        time_step=T, time_constant=cfg.time_constant, max_reel_speed=resolved.max_reel_speed)
+    builder.ExportInput(command, "reel_velocity_command")
+    builder.ExportOutput(world["cable_lengths"], "cable_lengths")
+    force = world["hand_force"]
     if scenario.sensor.noise_std > 0:
         noise = builder.AddNamedSystem("sensor_noise", SensorNoise(
             std=scenario.sensor.noise_std, seed=scenario.random_seed, time_step=T))

@@ -35,7 +35,7 @@ patch = None
 options = d.BuildOptions(loggers=variant != "without loggers") if hasattr(d, "BuildOptions") else None
 if variant.startswith("floor"):
     import bench_diagram as b
-    patch = (b.without_math if "Python" in variant else b.all_cpp)()
+    patch = (b.all_cpp if "all C++" in variant else b.without_math)()
     patch.__enter__()
 scenario = load_scenario("exp2_interaction")
 diagram = d.build_diagram(scenario, options) if options is not None else d.build_diagram(scenario)

@@ -13,11 +13,11 @@ from .forward_kinematics import ForwardKinematicsEstimator
 from .interference_force import InterferenceForce
 from .jacobian_mapping import JacobianVelocityMapping
 from .safety_limits import SafetyLimits
-from .simulated_reels import SensorNoise, SimulatedOperator, SimulatedReels
+from .simulated_reels import SensorNoise, SimulatedReels, add_simulated_world
 from .wall_force import WorkspaceWallForce
 
 __all__ = [
     "Admittance", "ForceSensorSource", "ForwardKinematicsEstimator", "InterferenceForce",
-    "JacobianVelocityMapping", "SafetyLimits", "SensorNoise", "SimulatedOperator",
+    "JacobianVelocityMapping", "SafetyLimits", "SensorNoise", "add_simulated_world",
     "SimulatedReels", "WorkspaceWallForce", "make_admittance",
 ]

@@ -1,70 +1,121 @@
-"""The simulated reel plant of Fig. 5 and the simulated person at the handle."""
+"""The simulated reel plant of Fig. 5, with the simulated person at the handle."""
 
 import numpy as np
 from pydrake.systems.framework import Diagram, LeafSystem
 from pydrake.systems.primitives import Demultiplexer
 
 from ..kinematics import cable_lengths, forward_kinematics, simulated_reel_step
+from ..operators import NoForce
 from ._wiring import sub_diagram, unit_delay
 
 
 class ReelStep(LeafSystem):
-    """The reels' next state from the command and the present state (an input): one call of
-    `kinematics.simulated_reel_step` per tick; stateless.
+    """The world's next state from the reel command and the present state (an input): one
+    call of `kinematics.simulated_reel_step` per tick, then the person's hand force at the
+    next tick on the new pose (the force sensor's next sample); stateless.
 
     .. pydrake_system::
 
         name: step
         input_ports:
         - reel_velocity_command (m/s, one per cable)
-        - state (lengths m, p m, v m/s, reel speeds m/s)
+        - state (see SimulatedReels)
         output_ports:
         - next_state (same layout)
     """
 
-    def __init__(self, robot, *, time_step, time_constant, max_reel_speed):
+    def __init__(self, robot, operator, *, time_step, time_constant, max_reel_speed):
         super().__init__()
         self._robot = robot
-        m = robot.num_cables
+        m = self._m = robot.num_cables
         self._offsets = np.ascontiguousarray(robot.attachments - robot.reels)
         self._T = float(time_step)
         self._lag = 1.0 - np.exp(-self._T / time_constant) if time_constant > 0 else 1.0
         self._vmax = float(max_reel_speed)
+        self._operator = operator
+        # The shipped models write into the state directly (operators.*.force_into).
+        self._force_into = getattr(operator, "force_into", None)
         self._command = self.DeclareVectorInputPort("reel_velocity_command", m)
-        self._state = self.DeclareVectorInputPort("state", 2 * m + 6)
+        self._state = self.DeclareVectorInputPort("state", state_size(m))
         self.DeclareVectorOutputPort(
-            "next_state", 2 * m + 6, self._calc_next_state,
-            prerequisites_of_calc={self._command.ticket(), self._state.ticket()})
-        # Compile (or load) the kernel now, not in the first tick.
+            "next_state", state_size(m), self._calc_next_state,
+            prerequisites_of_calc={self.time_ticket(), self._command.ticket(),
+                                   self._state.ticket()})
+        # Compile (or load) the kernels now, not in the first tick.
         simulated_reel_step(self._offsets, self._T, self._lag, self._vmax, np.zeros(m),
-                            np.ones(2 * m + 6), np.empty(2 * m + 6))
+                            np.ones(state_size(m)), np.empty(state_size(m)))
+        if self._force_into is not None:
+            self._force_into(0.0, np.zeros(3), np.zeros(3), np.empty(3))
 
     def _calc_next_state(self, context, output):
+        m = self._m
         state = self._state.Eval(context)
         out = output.get_mutable_value()
         if not simulated_reel_step(self._offsets, self._T, self._lag, self._vmax,
                                    self._command.Eval(context), state, out):
             # Gauss-Newton did not settle: the damped solver (and its error messages).
-            m = self._robot.num_cables
             p = state[m:m + 3]
             p_new = forward_kinematics(self._robot, out[:m].copy(), p_guess=p,
                                        max_residual=np.inf)
             out[:m] = cable_lengths(self._robot, p_new)
             out[m:m + 3] = p_new
             out[m + 3:m + 6] = (p_new - p) / self._T
+        # The hand force the sensor samples at the next tick, t + T, on the new pose.
+        hand_force(self._operator, self._force_into, context.get_time() + self._T,
+                   out[m:m + 3], out[m + 3:m + 6], out[2 * m + 6:])
+
+
+def state_size(m: int) -> int:
+    """The simulated world's state: cable lengths (m, m), platform p (3, m) and its velocity
+    v (3, m/s), lagged reel speeds (m, m/s), the hand force at this tick (3, N)."""
+    return 2 * m + 9
+
+
+def hand_force(operator, force_into, t, p, v, out):
+    """The operator model's force (N) at time t (s) on the pose p (m), v (m/s), into out."""
+    if force_into is not None:
+        force_into(t, p, v, out)
+    else:  # any model with force(t, p, v)
+        out[:] = operator.force(t, p, v)
+
+
+def add_simulated_world(builder, robot, operator, *, initial_position, time_step,
+                        time_constant, max_reel_speed):
+    """Add the simulated reels and the person to `builder` (systems `step`, `state`,
+    `split`); returns (reel_velocity_command input port, {output name: port}) with outputs
+    cable_lengths, p_WP_true, v_WP_true, hand_force. The state is held by a C++ one-tick
+    delay; its start is the scenario's pose at rest and the force at t = 0 there."""
+    m = robot.num_cables
+    p0 = np.asarray(initial_position, dtype=float)
+    x0 = np.concatenate([cable_lengths(robot, p0), p0, np.zeros(3), np.zeros(m), np.zeros(3)])
+    step = builder.AddNamedSystem("step", ReelStep(
+        robot, operator, time_step=time_step, time_constant=time_constant,
+        max_reel_speed=max_reel_speed))
+    hand_force(operator, getattr(operator, "force_into", None), 0.0, p0, np.zeros(3),
+               x0[2 * m + 6:])
+    state = builder.AddNamedSystem("state", unit_delay(state_size(m), time_step, x0))
+    split = builder.AddNamedSystem("split", Demultiplexer([m, 3, 3, m, 3]))
+    builder.Connect(step.GetOutputPort("next_state"), state.get_input_port())
+    builder.Connect(state.get_output_port(), step.GetInputPort("state"))
+    builder.Connect(state.get_output_port(), split.get_input_port())
+    names = ("cable_lengths", "p_WP_true", "v_WP_true", None, "hand_force")
+    return (step.GetInputPort("reel_velocity_command"),
+            {name: split.get_output_port(k) for k, name in enumerate(names) if name})
 
 
 class SimulatedReels(Diagram):
-    """Reels that integrate their velocity commands to cable lengths at the control rate.
+    """Reels that integrate their velocity commands to cable lengths at the control rate, and
+    the person at the handle (an operator model, see `operators`; default: nobody).
 
     Each tick: the command is scaled down to the reel speed limit (all reels alike), passed
     through a first-order lag (time constant `time_constant`, s; 0 for ideal drives) and
     integrated over one step. Seven cables over-constrain a translating platform, so the
     integrated lengths are projected back onto the geometry (least-squares forward
     kinematics, then inverse kinematics): the platform settles where the cables agree best, as
-    taut elastic cables make it do. The true platform position and velocity are outputs for
-    the simulated operator only; the controller sees the cable lengths, as on the robot. The
-    state (lengths, pose, lagged reel speeds) is held by a C++ one-tick delay.
+    taut elastic cables make it do. The person's force is the model evaluated at the tick's
+    time on the platform's true pose, sampled with the pose (so the hand costs no evaluation
+    of its own). The true pose is output for analysis only; the controller sees the cable
+    lengths and the force, as on the robot. The state is held by a C++ one-tick delay.
 
     .. pydrake_system::
 
@@ -75,66 +126,24 @@ class SimulatedReels(Diagram):
         - cable_lengths (m, one per cable)
         - p_WP_true (m, base frame)
         - v_WP_true (m/s, base frame)
-    """
-
-    def __init__(self, robot, *, initial_position, time_step=0.002, time_constant=0.0,
-                 max_reel_speed=None):
-        super().__init__()
-        m = robot.num_cables
-        p0 = np.asarray(initial_position, dtype=float)
-        x0 = np.concatenate([cable_lengths(robot, p0), p0, np.zeros(3), np.zeros(m)])
-        vmax = max_reel_speed if max_reel_speed is not None else robot.limits.max_reel_speed
-
-        def build(builder):
-            step = builder.AddNamedSystem("step", ReelStep(
-                robot, time_step=time_step, time_constant=time_constant,
-                max_reel_speed=vmax))
-            state = builder.AddNamedSystem("state", unit_delay(2 * m + 6, time_step, x0))
-            split = builder.AddNamedSystem("split", Demultiplexer([m, 3, 3, m]))
-            builder.Connect(step.GetOutputPort("next_state"), state.get_input_port())
-            builder.Connect(state.get_output_port(), step.GetInputPort("state"))
-            builder.Connect(state.get_output_port(), split.get_input_port())
-            builder.ExportInput(step.GetInputPort("reel_velocity_command"),
-                                "reel_velocity_command")
-            for k, name in enumerate(("cable_lengths", "p_WP_true", "v_WP_true")):
-                builder.ExportOutput(split.get_output_port(k), name)
-
-        sub_diagram(self, build)
-
-
-class SimulatedOperator(LeafSystem):
-    """The person at the handle: an operator model (see `operators`) evaluated on the
-    platform's true motion. Part of the simulated plant, never of the controller.
-
-    .. pydrake_system::
-
-        name: operator
-        input_ports:
-        - p_WP_true (m, base frame)
-        - v_WP_true (m/s, base frame)
-        output_ports:
         - hand_force (N, base frame)
     """
 
-    def __init__(self, operator):
+    def __init__(self, robot, *, initial_position, time_step=0.002, time_constant=0.0,
+                 max_reel_speed=None, operator=None):
         super().__init__()
-        self._operator = operator
-        # The shipped models write into the output directly (operators.*.force_into).
-        self._force_into = getattr(operator, "force_into", None)
-        if self._force_into is not None:  # compile (or load) now, not in the first tick
-            self._force_into(0.0, np.zeros(3), np.zeros(3), np.empty(3))
-        self._p = self.DeclareVectorInputPort("p_WP_true", 3)
-        self._v = self.DeclareVectorInputPort("v_WP_true", 3)
-        self.DeclareVectorOutputPort(
-            "hand_force", 3, self._calc_hand_force,
-            prerequisites_of_calc={self.time_ticket(), self._p.ticket(), self._v.ticket()})
+        vmax = max_reel_speed if max_reel_speed is not None else robot.limits.max_reel_speed
 
-    def _calc_hand_force(self, context, output):
-        t, p, v = context.get_time(), self._p.Eval(context), self._v.Eval(context)
-        if self._force_into is not None:
-            self._force_into(t, p, v, output.get_mutable_value())
-        else:  # any model with force(t, p, v)
-            output.SetFromVector(self._operator.force(t, p, v))
+        def build(builder):
+            command, outputs = add_simulated_world(
+                builder, robot, NoForce() if operator is None else operator,
+                initial_position=initial_position, time_step=time_step,
+                time_constant=time_constant, max_reel_speed=vmax)
+            builder.ExportInput(command, "reel_velocity_command")
+            for name, port in outputs.items():
+                builder.ExportOutput(port, name)
+
+        sub_diagram(self, build)
 
 
 class SensorNoise(LeafSystem):
