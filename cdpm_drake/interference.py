@@ -302,6 +302,12 @@ def interference_tick(geo, par, floor, F_max, p, side, has_side, out):
 
 
 @_jit
+def interference_tick_stacked(geo, par, floor, F_max, x, out):
+    """`interference_tick` on one stacked input x (3 + P,) = [p, previous side memory]."""
+    interference_tick(geo, par, floor, F_max, x[:3], x[3:], True, out)
+
+
+@_jit
 def _update_side_kernel(q, line_side, can_cross, out):
     for k in range(q.shape[0]):
         out[k] = _side_rule(int(q[k]), int(line_side[k]), can_cross[k])

@@ -244,3 +244,17 @@ def simulated_reel_step(offsets, time_step, lag, max_reel_speed, command, state,
         out[m + 3 + k] = (p[k] - state[m + k]) / time_step
         out[m + k] = p[k]
     return True
+
+
+@_jit
+def gauss_newton_warm_stacked(offsets, x, tol, max_residual, max_iterations, out):
+    """`gauss_newton_warm` on one stacked input x (m + 3,) = [lengths, p_guess] (m)."""
+    m = offsets.shape[0]
+    return gauss_newton_warm(offsets, x[:m], x[m:], tol, max_residual, max_iterations, out)
+
+
+@_jit
+def simulated_reel_step_stacked(offsets, time_step, lag, max_reel_speed, x, out):
+    """`simulated_reel_step` on one stacked input x = [command (m), state]."""
+    m = offsets.shape[0]
+    return simulated_reel_step(offsets, time_step, lag, max_reel_speed, x[:m], x[m:], out)

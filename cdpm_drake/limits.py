@@ -100,3 +100,13 @@ def wall_force_into(p, bounds, margin, max_force, out):
         push_lo = min(max((margin - (p[k] - bounds[0, k])) / margin, 0.0), 1.0)
         push_up = min(max((margin - (bounds[1, k] - p[k])) / margin, 0.0), 1.0)
         out[k] = max_force * (push_lo * push_lo - push_up * push_up)
+
+
+@_jit
+def limit_velocity_stacked(x, bounds, max_velocity, max_acceleration, time_step, virtual_wall,
+                           out):
+    """`limit_velocity_into` on one stacked input x (9,) = [v_desired, p, v_previous] (m/s,
+    m, m/s): the block reads its three inputs as one C++-multiplexed vector (one port
+    evaluation from Python instead of three)."""
+    limit_velocity_into(x[0:3], x[6:9], x[3:6], bounds, max_velocity, max_acceleration,
+                        time_step, virtual_wall, out)

@@ -98,11 +98,11 @@ def without_math():
 
     return Patch([
         (force_sensor, "clip_into", _no_op),
-        (forward_kinematics, "gauss_newton_warm", _no_op),
-        (interference_force, "interference_tick", _no_op),
-        (safety_limits, "limit_velocity_into", _no_op),
+        (forward_kinematics, "gauss_newton_warm_stacked", _no_op),
+        (interference_force, "interference_tick_stacked", _no_op),
+        (safety_limits, "limit_velocity_stacked", _no_op),
         (jacobian_mapping, "reel_rates", _no_op),
-        (simulated_reels, "simulated_reel_step", _no_op),
+        (simulated_reels, "simulated_reel_step_stacked", _no_op),
         (operators.SpringHand, "force_into", _no_op),
         (operators.ForceProfile, "force_into", _no_op),
         (operators.NoForce, "force_into", _no_op),

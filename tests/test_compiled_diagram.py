@@ -21,8 +21,11 @@ from cdpm_drake.diagram import build_diagram
 from cdpm_drake.scenario import ResolvedScenario, load_scenario, resolve_scenario
 from cdpm_drake.simulation import simulate
 
-KERNELS = (interference.interference_tick, kinematics.gauss_newton_warm,
-           kinematics.reel_rates, kinematics.simulated_reel_step, limits.limit_velocity_into,
+KERNELS = (interference.interference_tick, interference.interference_tick_stacked,
+           kinematics.gauss_newton_warm, kinematics.gauss_newton_warm_stacked,
+           kinematics.reel_rates, kinematics.simulated_reel_step,
+           kinematics.simulated_reel_step_stacked, limits.limit_velocity_into,
+           limits.limit_velocity_stacked,
            limits.wall_force_into, sensor.clip_into, operators._spring_force_into,
            operators._interp_into)
 

@@ -2,20 +2,21 @@
 
 import numpy as np
 from pydrake.systems.framework import Diagram, LeafSystem
+from pydrake.systems.primitives import Multiplexer
 
-from ..kinematics import forward_kinematics, gauss_newton_warm
+from ..kinematics import forward_kinematics, gauss_newton_warm_stacked
 from ._wiring import sub_diagram, unit_delay
 
 
 class ForwardKinematicsSolve(LeafSystem):
-    """p from the lengths, warm-started at the previous estimate (an input); stateless.
+    """p from the lengths, warm-started at the previous estimate; stateless. Its inputs
+    arrive stacked by a C++ Multiplexer (one evaluation from Python, not two).
 
     .. pydrake_system::
 
         name: solve
         input_ports:
-        - cable_lengths (m, one per cable)
-        - p_WP_previous (m, base frame)
+        - inputs ([cable_lengths m (one per cable), p_WP_previous m (base frame)])
         output_ports:
         - p_WP (m, base frame)
     """
@@ -25,24 +26,20 @@ class ForwardKinematicsSolve(LeafSystem):
         self._robot = robot
         self._offsets = np.ascontiguousarray(robot.attachments - robot.reels)
         self._max_residual = float(max_residual)
-        self._lengths = self.DeclareVectorInputPort("cable_lengths", robot.num_cables)
-        self._previous = self.DeclareVectorInputPort("p_WP_previous", 3)
-        self.DeclareVectorOutputPort(
-            "p_WP", 3, self._calc_p_WP,
-            prerequisites_of_calc={self._lengths.ticket(), self._previous.ticket()})
+        self._m = m = robot.num_cables
+        self._inputs = self.DeclareVectorInputPort("inputs", m + 3)
+        self.DeclareVectorOutputPort("p_WP", 3, self._calc_p_WP,
+                                     prerequisites_of_calc={self._inputs.ticket()})
         # Compile (or load) the kernel now, not in the first tick.
-        gauss_newton_warm(self._offsets, np.ones(robot.num_cables), np.zeros(3), 1e-10, 1.0, 1,
-                          np.empty(3))
+        gauss_newton_warm_stacked(self._offsets, np.ones(m + 3), 1e-10, 1.0, 1, np.empty(3))
 
     def _calc_p_WP(self, context, output):
-        lengths = self._lengths.Eval(context)
-        previous = self._previous.Eval(context)
+        x = self._inputs.Eval(context)
         out = output.get_mutable_value()
         # Plain Gauss-Newton from a tick away converges in two or three steps; anything else
         # (and every error message) goes through kinematics.forward_kinematics.
-        if not gauss_newton_warm(self._offsets, lengths, previous, 1e-10, self._max_residual,
-                                 8, out):
-            out[:] = forward_kinematics(self._robot, lengths, p_guess=previous,
+        if not gauss_newton_warm_stacked(self._offsets, x, 1e-10, self._max_residual, 8, out):
+            out[:] = forward_kinematics(self._robot, x[:self._m], p_guess=x[self._m:],
                                         max_residual=self._max_residual)
 
 
@@ -70,9 +67,11 @@ class ForwardKinematicsEstimator(Diagram):
                 robot, max_residual=max_residual))
             previous = builder.AddNamedSystem("previous", unit_delay(
                 3, time_step, np.asarray(initial_position, dtype=float)))
+            inputs = builder.AddNamedSystem("inputs", Multiplexer([robot.num_cables, 3]))
             builder.Connect(solve.GetOutputPort("p_WP"), previous.get_input_port())
-            builder.Connect(previous.get_output_port(), solve.GetInputPort("p_WP_previous"))
-            builder.ExportInput(solve.GetInputPort("cable_lengths"), "cable_lengths")
+            builder.Connect(previous.get_output_port(), inputs.get_input_port(1))
+            builder.Connect(inputs.get_output_port(), solve.GetInputPort("inputs"))
+            builder.ExportInput(inputs.get_input_port(0), "cable_lengths")
             builder.ExportOutput(solve.GetOutputPort("p_WP"), "p_WP")
 
         sub_diagram(self, build)

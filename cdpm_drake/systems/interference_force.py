@@ -2,9 +2,9 @@
 
 import numpy as np
 from pydrake.systems.framework import Diagram, LeafSystem
-from pydrake.systems.primitives import Demultiplexer
+from pydrake.systems.primitives import Demultiplexer, Multiplexer
 
-from ..interference import interference_tick, pair_geometry, result_layout
+from ..interference import interference_tick_stacked, pair_geometry, result_layout
 from ._wiring import sub_diagram, unit_delay
 
 # The ports of the block, in the order of the flat result (interference.result_layout).
@@ -16,14 +16,14 @@ class InterferencePairs(LeafSystem):
 
     The output is `interference.result_layout`'s flat vector: F_int (3), distances, active,
     crossed, the updated side memory (P each), then s, t, intensities, gradients and
-    directions. The previous side memory comes in as an input.
+    directions. The position and the previous side memory arrive stacked by a C++
+    Multiplexer (one evaluation from Python, not two).
 
     .. pydrake_system::
 
         name: pairs
         input_ports:
-        - p_WP (m, base frame)
-        - side_previous (crossing-side memory, one per watched pair)
+        - inputs ([p_WP m (base frame), previous side memory (one per watched pair)])
         output_ports:
         - result (see interference.result_layout)
     """
@@ -34,19 +34,16 @@ class InterferencePairs(LeafSystem):
         self._geo = pair_geometry(robot)
         self._par = params.packed
         self._floor, self._F_max = params.gradient_floor, params.F_max
-        self._p = self.DeclareVectorInputPort("p_WP", 3)
-        self._side = self.DeclareVectorInputPort("side_previous", P)
-        self.DeclareVectorOutputPort(
-            "result", 3 + 13 * P, self._calc_result,
-            prerequisites_of_calc={self._p.ticket(), self._side.ticket()})
+        self._inputs = self.DeclareVectorInputPort("inputs", 3 + P)
+        self.DeclareVectorOutputPort("result", 3 + 13 * P, self._calc_result,
+                                     prerequisites_of_calc={self._inputs.ticket()})
         # Compile (or load) the kernel now, not in the first tick.
-        interference_tick(self._geo, self._par, self._floor, self._F_max, np.zeros(3),
-                             np.zeros(P), True, np.empty(3 + 13 * P))
+        interference_tick_stacked(self._geo, self._par, self._floor, self._F_max,
+                                  np.zeros(3 + P), np.empty(3 + 13 * P))
 
     def _calc_result(self, context, output):
-        interference_tick(self._geo, self._par, self._floor, self._F_max,
-                             self._p.Eval(context), self._side.Eval(context), True,
-                             output.get_mutable_value())
+        interference_tick_stacked(self._geo, self._par, self._floor, self._F_max,
+                                  self._inputs.Eval(context), output.get_mutable_value())
 
 
 class InterferenceForce(Diagram):
@@ -84,11 +81,13 @@ class InterferenceForce(Diagram):
             pairs = builder.AddNamedSystem("pairs", InterferencePairs(robot, params))
             split = builder.AddNamedSystem("split", Demultiplexer(sizes))
             side = builder.AddNamedSystem("side_memory", unit_delay(P, time_step))
+            inputs = builder.AddNamedSystem("inputs", Multiplexer([3, P]))
             builder.Connect(pairs.GetOutputPort("result"), split.get_input_port())
             builder.Connect(split.get_output_port(OUTPUTS.index("side")),
                             side.get_input_port())
-            builder.Connect(side.get_output_port(), pairs.GetInputPort("side_previous"))
-            builder.ExportInput(pairs.GetInputPort("p_WP"), "p_WP")
+            builder.Connect(side.get_output_port(), inputs.get_input_port(1))
+            builder.Connect(inputs.get_output_port(), pairs.GetInputPort("inputs"))
+            builder.ExportInput(inputs.get_input_port(0), "p_WP")
             for k, name in enumerate(OUTPUTS[:-1]):
                 builder.ExportOutput(split.get_output_port(k), name)
 

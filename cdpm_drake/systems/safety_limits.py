@@ -2,22 +2,21 @@
 
 import numpy as np
 from pydrake.systems.framework import Diagram, LeafSystem
+from pydrake.systems.primitives import Multiplexer
 
-from ..limits import limit_velocity_into
+from ..limits import limit_velocity_stacked
 from ._wiring import sub_diagram, unit_delay
 
 
 class VelocityLimit(LeafSystem):
-    """`limits.limit_velocity` of the desired velocity, given the previous command (an
-    input); stateless.
+    """`limits.limit_velocity` of the desired velocity, given the previous command; stateless.
+    Its inputs arrive stacked by a C++ Multiplexer (one evaluation from Python, not three).
 
     .. pydrake_system::
 
         name: limit
         input_ports:
-        - velocity_desired (m/s, base frame)
-        - p_WP (m, base frame)
-        - velocity_previous (m/s, base frame)
+        - inputs ([velocity_desired m/s, p_WP m, velocity_previous m/s], base frame)
         output_ports:
         - velocity_command (m/s, base frame)
     """
@@ -29,20 +28,16 @@ class VelocityLimit(LeafSystem):
                                  np.asarray(upper, dtype=float)])
         self._args = (float(max_velocity), float(max_acceleration), float(time_step),
                       bool(virtual_wall))
-        self._v_desired = self.DeclareVectorInputPort("velocity_desired", 3)
-        self._p = self.DeclareVectorInputPort("p_WP", 3)
-        self._previous = self.DeclareVectorInputPort("velocity_previous", 3)
+        self._inputs = self.DeclareVectorInputPort("inputs", 9)
         self.DeclareVectorOutputPort(
             "velocity_command", 3, self._calc_velocity_command,
-            prerequisites_of_calc={self._v_desired.ticket(), self._p.ticket(),
-                                   self._previous.ticket()})
-        z = np.zeros(3)  # compile (or load) the kernel now, not in the first tick
-        limit_velocity_into(z, z, z, self._bounds, *self._args, np.empty(3))
+            prerequisites_of_calc={self._inputs.ticket()})
+        # Compile (or load) the kernel now, not in the first tick.
+        limit_velocity_stacked(np.zeros(9), self._bounds, *self._args, np.empty(3))
 
     def _calc_velocity_command(self, context, output):
-        limit_velocity_into(self._v_desired.Eval(context), self._previous.Eval(context),
-                            self._p.Eval(context), self._bounds, *self._args,
-                            output.get_mutable_value())
+        limit_velocity_stacked(self._inputs.Eval(context), self._bounds, *self._args,
+                               output.get_mutable_value())
 
 
 class SafetyLimits(Diagram):
@@ -69,11 +64,13 @@ class SafetyLimits(Diagram):
                 max_acceleration=max_acceleration, virtual_wall=virtual_wall,
                 time_step=time_step))
             previous = builder.AddNamedSystem("previous", unit_delay(3, time_step))
+            inputs = builder.AddNamedSystem("inputs", Multiplexer([3, 3, 3]))
             command = limit.GetOutputPort("velocity_command")
             builder.Connect(command, previous.get_input_port())
-            builder.Connect(previous.get_output_port(), limit.GetInputPort("velocity_previous"))
-            builder.ExportInput(limit.GetInputPort("velocity_desired"), "velocity_desired")
-            builder.ExportInput(limit.GetInputPort("p_WP"), "p_WP")
+            builder.Connect(previous.get_output_port(), inputs.get_input_port(2))
+            builder.Connect(inputs.get_output_port(), limit.GetInputPort("inputs"))
+            builder.ExportInput(inputs.get_input_port(0), "velocity_desired")
+            builder.ExportInput(inputs.get_input_port(1), "p_WP")
             builder.ExportOutput(command, "velocity_command")
 
         sub_diagram(self, build)

@@ -2,24 +2,24 @@
 
 import numpy as np
 from pydrake.systems.framework import Diagram, LeafSystem
-from pydrake.systems.primitives import Demultiplexer
+from pydrake.systems.primitives import Demultiplexer, Multiplexer
 
-from ..kinematics import cable_lengths, forward_kinematics, simulated_reel_step
+from ..kinematics import cable_lengths, forward_kinematics, simulated_reel_step_stacked
 from ..operators import NoForce
 from ._wiring import sub_diagram, unit_delay
 
 
 class ReelStep(LeafSystem):
-    """The world's next state from the reel command and the present state (an input): one
-    call of `kinematics.simulated_reel_step` per tick, then the person's hand force at the
-    next tick on the new pose (the force sensor's next sample); stateless.
+    """The world's next state from the reel command and the present state: one call of
+    `kinematics.simulated_reel_step` per tick, then the person's hand force at the next tick
+    on the new pose (the force sensor's next sample); stateless. Its inputs arrive stacked by
+    a C++ Multiplexer (one evaluation from Python, not two).
 
     .. pydrake_system::
 
         name: step
         input_ports:
-        - reel_velocity_command (m/s, one per cable)
-        - state (see SimulatedReels)
+        - inputs ([reel_velocity_command m/s (one per cable), state (see state_size)])
         output_ports:
         - next_state (same layout)
     """
@@ -35,26 +35,24 @@ class ReelStep(LeafSystem):
         self._operator = operator
         # The shipped models write into the state directly (operators.*.force_into).
         self._force_into = getattr(operator, "force_into", None)
-        self._command = self.DeclareVectorInputPort("reel_velocity_command", m)
-        self._state = self.DeclareVectorInputPort("state", state_size(m))
+        self._inputs = self.DeclareVectorInputPort("inputs", m + state_size(m))
         self.DeclareVectorOutputPort(
             "next_state", state_size(m), self._calc_next_state,
-            prerequisites_of_calc={self.time_ticket(), self._command.ticket(),
-                                   self._state.ticket()})
+            prerequisites_of_calc={self.time_ticket(), self._inputs.ticket()})
         # Compile (or load) the kernels now, not in the first tick.
-        simulated_reel_step(self._offsets, self._T, self._lag, self._vmax, np.zeros(m),
-                            np.ones(state_size(m)), np.empty(state_size(m)))
+        simulated_reel_step_stacked(self._offsets, self._T, self._lag, self._vmax,
+                                    np.ones(m + state_size(m)), np.empty(state_size(m)))
         if self._force_into is not None:
             self._force_into(0.0, np.zeros(3), np.zeros(3), np.empty(3))
 
     def _calc_next_state(self, context, output):
         m = self._m
-        state = self._state.Eval(context)
+        x = self._inputs.Eval(context)
         out = output.get_mutable_value()
-        if not simulated_reel_step(self._offsets, self._T, self._lag, self._vmax,
-                                   self._command.Eval(context), state, out):
+        if not simulated_reel_step_stacked(self._offsets, self._T, self._lag, self._vmax, x,
+                                           out):
             # Gauss-Newton did not settle: the damped solver (and its error messages).
-            p = state[m:m + 3]
+            p = x[2 * m:2 * m + 3]
             p_new = forward_kinematics(self._robot, out[:m].copy(), p_guess=p,
                                        max_residual=np.inf)
             out[:m] = cable_lengths(self._robot, p_new)
@@ -82,7 +80,7 @@ def hand_force(operator, force_into, t, p, v, out):
 def add_simulated_world(builder, robot, operator, *, initial_position, time_step,
                         time_constant, max_reel_speed):
     """Add the simulated reels and the person to `builder` (systems `step`, `state`,
-    `split`); returns (reel_velocity_command input port, {output name: port}) with outputs
+    `split`, `inputs`); returns (reel_velocity_command input port, {output name: port}) with outputs
     cable_lengths, p_WP_true, v_WP_true, hand_force. The state is held by a C++ one-tick
     delay; its start is the scenario's pose at rest and the force at t = 0 there."""
     m = robot.num_cables
@@ -95,11 +93,13 @@ def add_simulated_world(builder, robot, operator, *, initial_position, time_step
                x0[2 * m + 6:])
     state = builder.AddNamedSystem("state", unit_delay(state_size(m), time_step, x0))
     split = builder.AddNamedSystem("split", Demultiplexer([m, 3, 3, m, 3]))
+    inputs = builder.AddNamedSystem("inputs", Multiplexer([m, state_size(m)]))
     builder.Connect(step.GetOutputPort("next_state"), state.get_input_port())
-    builder.Connect(state.get_output_port(), step.GetInputPort("state"))
+    builder.Connect(state.get_output_port(), inputs.get_input_port(1))
+    builder.Connect(inputs.get_output_port(), step.GetInputPort("inputs"))
     builder.Connect(state.get_output_port(), split.get_input_port())
     names = ("cable_lengths", "p_WP_true", "v_WP_true", None, "hand_force")
-    return (step.GetInputPort("reel_velocity_command"),
+    return (inputs.get_input_port(0),
             {name: split.get_output_port(k) for k, name in enumerate(names) if name})
 
 
