@@ -17,7 +17,7 @@ class ReelStep(LeafSystem):
 
     .. pydrake_system::
 
-        name: step
+        name: simulated_reels
         input_ports:
         - inputs ([reel_velocity_command m/s (one per cable), state (see state_size)])
         output_ports:
@@ -79,14 +79,14 @@ def hand_force(operator, force_into, t, p, v, out):
 
 def add_simulated_world(builder, robot, operator, *, initial_position, time_step,
                         time_constant, max_reel_speed):
-    """Add the simulated reels and the person to `builder` (systems `step`, `state`,
-    `split`, `inputs`); returns (reel_velocity_command input port, {output name: port}) with outputs
+    """Add the simulated reels and the person to `builder` (systems `simulated_reels`, the
+    step of both, and `state`, `split`, `inputs`); returns (reel_velocity_command input port, {output name: port}) with outputs
     cable_lengths, p_WP_true, v_WP_true, hand_force. The state is held by a C++ one-tick
     delay; its start is the scenario's pose at rest and the force at t = 0 there."""
     m = robot.num_cables
     p0 = np.asarray(initial_position, dtype=float)
     x0 = np.concatenate([cable_lengths(robot, p0), p0, np.zeros(3), np.zeros(m), np.zeros(3)])
-    step = builder.AddNamedSystem("step", ReelStep(
+    step = builder.AddNamedSystem("simulated_reels", ReelStep(
         robot, operator, time_step=time_step, time_constant=time_constant,
         max_reel_speed=max_reel_speed))
     hand_force(operator, getattr(operator, "force_into", None), 0.0, p0, np.zeros(3),
