@@ -14,9 +14,13 @@ from pydrake.systems.primitives import Adder, Multiplexer, VectorLogSink
 from .scenario import (DynamicReels as DynamicReelsConfig, ResolvedScenario, Scenario,
                        SimulatedReels as SimulatedReelsConfig, check_dynamic_reels,
                        resolve_scenario)
-from .systems import (ForceSensorSource, ForwardKinematicsEstimator, InterferenceForce,
-                      JacobianVelocityMapping, SafetyLimits, SensorNoise, WorkspaceWallForce,
-                      Admittance, add_simulated_world)
+from .systems import JacobianVelocityMapping, SensorNoise, WorkspaceWallForce, add_simulated_world
+from .systems._wiring import FlatBlock
+from .systems.admittance import ADMITTANCE_MAIN, build_admittance
+from .systems.force_sensor import FORCE_SENSOR_MAIN, build_force_sensor
+from .systems.forward_kinematics import FORWARD_KINEMATICS_MAIN, build_forward_kinematics
+from .systems.interference_force import INTERFERENCE_FORCE_MAIN, build_interference_force
+from .systems.safety_limits import SAFETY_LIMITS_MAIN, build_safety_limits
 
 # Logged signals: (logger name suffix, system name, output port name). Every signal of the
 # paper's Figs. 10, 11, 13, 14 and 16, and what the limits and reels did with them.
@@ -65,56 +69,67 @@ def build_diagram(scenario: Scenario | ResolvedScenario,
     T = scenario.time_step
     p0 = np.asarray(scenario.initial_position, dtype=float)
     builder = DiagramBuilder()
+    # The blocks that are several systems are added flat (FlatBlock: named `block` and
+    # `block_<part>` in this diagram, not nested sub-diagrams): a level of diagram less per
+    # tick. {block name: the block's ports} for the wiring and the loggers.
+    blocks = {}
 
-    plant = builder.AddNamedSystem("reels", make_plant(resolved))
+    plant = blocks["reels"] = builder.AddNamedSystem("reels", make_plant(resolved))
 
     sensor_cfg = scenario.sensor
-    force_sensor = builder.AddNamedSystem("force_sensor", ForceSensorSource(
-        axial_axis=sensor_cfg.axial_axis, axial_range=sensor_cfg.axial_range,
-        transverse_range=sensor_cfg.transverse_range, window=sensor_cfg.filter_window,
-        time_step=T))
-    builder.Connect(plant.GetOutputPort("measured_force"),
-                    force_sensor.GetInputPort("measured_force"))
+    force_sensor = blocks["force_sensor"] = FlatBlock(
+        builder, "force_sensor", FORCE_SENSOR_MAIN, lambda b: build_force_sensor(
+            b, axial_axis=sensor_cfg.axial_axis, axial_range=sensor_cfg.axial_range,
+            transverse_range=sensor_cfg.transverse_range, window=sensor_cfg.filter_window,
+            time_step=T))
+    force_sensor.connect_input(plant.GetOutputPort("measured_force"), "measured_force")
 
-    fk = builder.AddNamedSystem("forward_kinematics", ForwardKinematicsEstimator(
-        robot, initial_position=p0, max_residual=resolved.fk_max_residual, time_step=T))
-    builder.Connect(plant.GetOutputPort("cable_lengths"), fk.GetInputPort("cable_lengths"))
+    fk = blocks["forward_kinematics"] = FlatBlock(
+        builder, "forward_kinematics", FORWARD_KINEMATICS_MAIN,
+        lambda b: build_forward_kinematics(b, robot, initial_position=p0,
+                                           max_residual=resolved.fk_max_residual,
+                                           time_step=T))
+    fk.connect_input(plant.GetOutputPort("cable_lengths"), "cable_lengths")
     p_WP = fk.GetOutputPort("p_WP")
 
     # eq. 22: F_d = F_H + F_int (+ F_wall, beyond the paper).
     forces = [force_sensor.GetOutputPort("F_H")]
     if resolved.interference is not None and options.interference:
-        interference = builder.AddNamedSystem("interference_force", InterferenceForce(
-            robot, resolved.interference, time_step=T))
-        builder.Connect(p_WP, interference.GetInputPort("p_WP"))
+        interference = blocks["interference_force"] = FlatBlock(
+            builder, "interference_force", INTERFERENCE_FORCE_MAIN,
+            lambda b: build_interference_force(b, robot, resolved.interference,
+                                               time_step=T))
+        interference.connect_input(p_WP, "p_WP")
         forces.append(interference.GetOutputPort("F_int"))
     wall = scenario.wall_force
     if wall.enabled:
-        wall_system = builder.AddNamedSystem("wall_force", WorkspaceWallForce(
-            lower=robot.workspace.lower, upper=robot.workspace.upper, margin=wall.margin,
-            max_force=wall.max_force))
+        wall_system = blocks["wall_force"] = builder.AddNamedSystem(
+            "wall_force", WorkspaceWallForce(
+                lower=robot.workspace.lower, upper=robot.workspace.upper, margin=wall.margin,
+                max_force=wall.max_force))
         builder.Connect(p_WP, wall_system.GetInputPort("p_WP"))
         forces.append(wall_system.GetOutputPort("F_wall"))
-    adder = builder.AddNamedSystem("F_d_adder", Adder(len(forces), 3))
+    adder = blocks["F_d_adder"] = builder.AddNamedSystem("F_d_adder", Adder(len(forces), 3))
     for k, port in enumerate(forces):
         builder.Connect(port, adder.get_input_port(k))
 
-    admittance = builder.AddNamedSystem("admittance", Admittance(
-        scenario.admittance.mass, scenario.admittance.damping, T))
-    builder.Connect(adder.get_output_port(), admittance.GetInputPort("F_d"))
+    admittance = blocks["admittance"] = FlatBlock(
+        builder, "admittance", ADMITTANCE_MAIN, lambda b: build_admittance(
+            b, scenario.admittance.mass, scenario.admittance.damping, T))
+    admittance.connect_input(adder.get_output_port(), "F_d")
 
-    limits = builder.AddNamedSystem("safety_limits", SafetyLimits(
-        lower=robot.workspace.lower, upper=robot.workspace.upper,
-        max_velocity=resolved.max_velocity, max_acceleration=resolved.max_acceleration,
-        virtual_wall=scenario.limits.virtual_wall, time_step=T))
-    builder.Connect(admittance.GetOutputPort("velocity"),
-                    limits.GetInputPort("velocity_desired"))
-    builder.Connect(p_WP, limits.GetInputPort("p_WP"))
+    limits = blocks["safety_limits"] = FlatBlock(
+        builder, "safety_limits", SAFETY_LIMITS_MAIN, lambda b: build_safety_limits(
+            b, lower=robot.workspace.lower, upper=robot.workspace.upper,
+            max_velocity=resolved.max_velocity, max_acceleration=resolved.max_acceleration,
+            virtual_wall=scenario.limits.virtual_wall, time_step=T))
+    limits.connect_input(admittance.GetOutputPort("velocity"), "velocity_desired")
+    limits.connect_input(p_WP, "p_WP")
     # Anti-windup: the admittance integrates from the velocity actually commanded.
-    builder.Connect(limits.GetOutputPort("velocity_command"),
-                    admittance.GetInputPort("velocity_command"))
+    admittance.connect_input(limits.GetOutputPort("velocity_command"), "velocity_command")
 
-    mapping = builder.AddNamedSystem("jacobian_mapping", JacobianVelocityMapping(robot))
+    mapping = blocks["jacobian_mapping"] = builder.AddNamedSystem(
+        "jacobian_mapping", JacobianVelocityMapping(robot))
     builder.Connect(p_WP, mapping.GetInputPort("p_WP"))
     builder.Connect(limits.GetOutputPort("velocity_command"),
                     mapping.GetInputPort("velocity_command"))
@@ -122,12 +137,26 @@ def build_diagram(scenario: Scenario | ResolvedScenario,
                     plant.GetInputPort("reel_velocity_command"))
 
     if options.loggers:
-        _add_loggers(builder, T)
+        _add_loggers(builder, blocks, T)
     if options.tick_log is not None:
-        _add_tick_log(builder, T, options.tick_log, robot, scenario)
+        _add_tick_log(builder, blocks, T, options.tick_log, robot, scenario)
     diagram = builder.Build()
     diagram.set_name("cdpm_controller")
+    # The flat blocks: which systems make each one and where its ports are
+    # (block_output_port; the overview draws each as one block).
+    diagram.flat_blocks = {name: block.layout() for name, block in blocks.items()
+                           if isinstance(block, FlatBlock)}
     return diagram
+
+
+def block_output_port(diagram, block: str, port_name: str):
+    """The output port `port_name` of the Fig. 5 block `block` of a diagram build_diagram
+    made, whether the block is one system, a sub-diagram or flat (FlatBlock)."""
+    flat = getattr(diagram, "flat_blocks", {}).get(block)
+    if flat is not None:
+        system_name, index = flat["outputs"][port_name]
+        return diagram.GetSubsystemByName(system_name).get_output_port(index)
+    return diagram.GetSubsystemByName(block).GetOutputPort(port_name)
 
 
 def make_plant(scenario: Scenario | ResolvedScenario, robot=None):
@@ -178,8 +207,8 @@ def build_simulated_plant(scenario: Scenario | ResolvedScenario, robot=None) -> 
     return plant
 
 
-def _add_loggers(builder, T):
-    ports = [port for _, port in _logged_ports(builder)]
+def _add_loggers(builder, blocks, T):
+    ports = [port for _, port in _logged_ports(blocks)]
     signals = builder.AddNamedSystem("log_signals", Multiplexer([p.size() for p in ports]))
     for k, port in enumerate(ports):
         builder.Connect(port, signals.get_input_port(k))
@@ -197,22 +226,22 @@ def logged_signals(diagram, context) -> tuple[np.ndarray, dict]:
     signals, k = {}, 0
     for key, system_name, port_name in LOGGED:
         if diagram.HasSubsystemNamed(system_name):
-            width = diagram.GetSubsystemByName(system_name).GetOutputPort(port_name).size()
+            width = block_output_port(diagram, system_name, port_name).size()
             signals[key] = rows[:, k:k + width].copy()
             k += width
     return log.sample_times().copy(), signals
 
 
-def _logged_ports(builder):
+def _logged_ports(blocks):
     for key, system_name, port_name in LOGGED:
-        if builder.HasSubsystemNamed(system_name):
-            yield key, builder.GetSubsystemByName(system_name).GetOutputPort(port_name)
+        if system_name in blocks:
+            yield key, blocks[system_name].GetOutputPort(port_name)
 
 
-def _add_tick_log(builder, T, path, robot, scenario):
+def _add_tick_log(builder, blocks, T, path, robot, scenario):
     from .hardware.tick_log_sink import TickLogSink
 
-    ports = dict(_logged_ports(builder))
+    ports = dict(_logged_ports(blocks))
     sink = builder.AddNamedSystem("tick_log", TickLogSink(
         path, {key: port.size() for key, port in ports.items()}, time_step=T,
         metadata={"robot": robot.name, "scenario": scenario.name, "time_step": T}))

@@ -217,8 +217,10 @@ class RecoverError(ValueError):
 
 
 def _output(diagram, context, system_name, port_name):
-    system = diagram.GetSubsystemByName(system_name)
-    return system.GetOutputPort(port_name).Eval(system.GetMyContextFromRoot(context))
+    from .diagram import block_output_port
+
+    port = block_output_port(diagram, system_name, port_name)
+    return port.Eval(port.get_system().GetMyContextFromRoot(context))
 
 
 def _status_line(diagram, context, reels, t) -> str:

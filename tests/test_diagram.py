@@ -13,7 +13,7 @@ import numpy as np
 import pytest
 from pydrake.systems.analysis import Simulator
 
-from cdpm_drake.diagram import LOGGED, PLANT_PORTS, BuildOptions, build_diagram
+from cdpm_drake.diagram import LOGGED, PLANT_PORTS, BuildOptions, block_output_port, build_diagram
 from cdpm_drake.kinematics import forward_kinematics
 from cdpm_drake.scenario import load_scenario, scenario_robot
 from cdpm_drake.simulation import collect_log, simulate
@@ -51,7 +51,7 @@ def test_system_names_follow_fig_5():
             "safety_limits", "jacobian_mapping", "forward_kinematics"} <= names
     # One logger, of every logged signal whose block exists (no wall force in exp2).
     assert {"log", "log_signals"} <= names
-    width = sum(diagram.GetSubsystemByName(system).GetOutputPort(port).size()
+    width = sum(block_output_port(diagram, system, port).size()
                 for _, system, port in LOGGED if system in names)
     assert diagram.GetSubsystemByName("log").get_input_port().size() == width
 

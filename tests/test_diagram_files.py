@@ -100,26 +100,34 @@ def test_overview_has_every_top_level_system_and_connection_with_short_names(pla
     dot = overview_graphviz(diagram)
     nodes = _nodes(dot)
     systems = diagram.GetSystems()
-    # One node per top-level system, named as in the diagram, with its class name only.
-    assert len(nodes) == len(systems)
-    for k, system in enumerate(systems):
-        assert system.get_name() in nodes[f"n{k}"].split()
+    # One node per block of Fig. 5 (a block whose systems were added flat is one node, see
+    # diagram.flat_blocks), named as in the diagram, with its class name only.
+    flat = diagram.flat_blocks
+    assert {"force_sensor", "forward_kinematics", "interference_force", "admittance",
+            "safety_limits"} <= flat.keys()
+    in_flat = {name: block for block, info in flat.items() for name in info["systems"]}
+    names = [s.get_name() for s in systems if s.get_name() not in in_flat] + list(flat)
+    node_names = {int(k[1:]): next(n for n in names if n in label.split())
+                  for k, label in nodes.items()}
+    assert sorted(node_names.values()) == sorted(names)
     assert "cdpm_drake." not in dot and "pydrake." not in dot and "drake::" not in dot
-    # One edge per connection of the diagram, from an output port cell to an input port cell.
+    # One edge per connection between blocks, from an output port cell to an input port cell;
+    # the connections inside a flat block are not drawn.
     edges = re.findall(r"^  n(\d+):o(\d+):s -> n(\d+):i(\d+):n;$", dot, flags=re.M)
-    assert len(edges) == len(diagram.connection_map())
-    index = {id(s): k for k, s in enumerate(systems)}
-    expected = {(index[id(src)], int(sk), index[id(dst)], int(dk))
-                for (dst, dk), (src, sk) in diagram.connection_map().items()}
-    assert {tuple(map(int, e)) for e in edges} == expected
+    between = [(src, dst) for (dst, _), (src, _) in diagram.connection_map().items()
+               if in_flat.get(src.get_name(), src.get_name())
+               != in_flat.get(dst.get_name(), dst.get_name())]
+    assert len(edges) == len(between)
+    assert ({(node_names[int(s)], node_names[int(d)]) for s, _, d, _ in edges}
+            == {(in_flat.get(src.get_name(), src.get_name()),
+                 in_flat.get(dst.get_name(), dst.get_name())) for src, dst in between})
+    index = {name: k for k, name in node_names.items()}
     # The adder's inputs carry the names of the forces it sums (eq. 22), not u0, u1, ...
-    adder = diagram.GetSubsystemByName("F_d_adder")
     assert re.search(r">u\d+<", dot) is None
-    label = nodes[f"n{index[id(adder)]}"].split()
+    label = nodes[f"n{index['F_d_adder']}"].split()
     assert {"F_H", "F_int"} <= set(label)
     # The simulated plant is a sub-diagram: one node that names what it holds.
-    reels = diagram.GetSubsystemByName("reels")
-    text = nodes[f"n{index[id(reels)]}"]
+    text = nodes[f"n{index['reels']}"]
     if isinstance(plant, SimulatedReels):
         # The reels' step (which also samples the simulated person) and its state.
         assert "simulated_reels" in text and "state" in text

@@ -27,3 +27,51 @@ def sub_diagram(target, build) -> None:
     builder = DiagramBuilder()
     build(builder)
     builder.BuildInto(target)
+
+
+class FlatBlock:
+    """A block's systems added straight into the parent's builder instead of a nested
+    sub-diagram (a level of diagram less per tick): `build(block)` gets this object as its
+    builder. The block's main system is named after the block (`name`), the others
+    `name_<their name>`; its exported ports become this object's ports, to be wired by
+    the parent with `connect_input` and `GetOutputPort`."""
+
+    def __init__(self, builder, name: str, main: str, build):
+        self.name, self._builder, self._main = name, builder, main
+        self.inputs: dict[str, list] = {}
+        self.outputs: dict[str, object] = {}
+        self.systems: list[str] = []
+        build(self)
+
+    # The builder calls a block's build function makes.
+    def AddNamedSystem(self, name, system):
+        full = self.name if name == self._main else f"{self.name}_{name}"
+        self.systems.append(full)
+        return self._builder.AddNamedSystem(full, system)
+
+    def Connect(self, source, destination):
+        self._builder.Connect(source, destination)
+
+    def ExportInput(self, port, name):
+        self.inputs.setdefault(name, []).append(port)
+
+    def ExportOutput(self, port, name):
+        self.outputs[name] = port
+
+    # The block's ports, for the parent.
+    def GetOutputPort(self, name):
+        return self.outputs[name]
+
+    def connect_input(self, source, name):
+        for port in self.inputs[name]:
+            self._builder.Connect(source, port)
+
+    def layout(self) -> dict:
+        """{"systems": names, "inputs": {port: [(system name, input index)]}, "outputs":
+        {port: (system name, output index)}}: the block in a built diagram, by names."""
+        def where(port):
+            return port.get_system().get_name(), int(port.get_index())
+
+        return {"systems": tuple(self.systems),
+                "inputs": {name: [where(p) for p in ports] for name, ports in self.inputs.items()},
+                "outputs": {name: where(port) for name, port in self.outputs.items()}}

@@ -61,14 +61,20 @@ class Admittance(Diagram):
 
     def __init__(self, mass: float, damping: float, time_step: float):
         super().__init__()
+        sub_diagram(self, lambda builder: build_admittance(builder, mass, damping, time_step))
 
-        def build(builder):
-            inputs = builder.AddNamedSystem("inputs", Multiplexer([3, 3]))
-            dynamics = builder.AddNamedSystem("dynamics", make_anti_windup_admittance(
-                mass, damping, time_step))
-            builder.Connect(inputs.get_output_port(), dynamics.get_input_port())
-            builder.ExportInput(inputs.get_input_port(0), "F_d")
-            builder.ExportInput(inputs.get_input_port(1), "velocity_command")
-            builder.ExportOutput(dynamics.get_output_port(), "velocity")
 
-        sub_diagram(self, build)
+# The system a flat build (FlatBlock) names after the block.
+ADMITTANCE_MAIN = "dynamics"
+
+
+def build_admittance(builder, mass: float, damping: float, time_step: float):
+    """Admittance's systems and exported ports, into `builder` (a DiagramBuilder or a
+    FlatBlock)."""
+    inputs = builder.AddNamedSystem("inputs", Multiplexer([3, 3]))
+    dynamics = builder.AddNamedSystem("dynamics", make_anti_windup_admittance(
+        mass, damping, time_step))
+    builder.Connect(inputs.get_output_port(), dynamics.get_input_port())
+    builder.ExportInput(inputs.get_input_port(0), "F_d")
+    builder.ExportInput(inputs.get_input_port(1), "velocity_command")
+    builder.ExportOutput(dynamics.get_output_port(), "velocity")

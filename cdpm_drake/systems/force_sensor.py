@@ -73,18 +73,25 @@ class ForceSensorSource(Diagram):
     def __init__(self, *, axial_axis, axial_range=100.0, transverse_range=80.0, window=10,
                  time_step=0.002):
         super().__init__()
+        sub_diagram(self, lambda builder: build_force_sensor(
+            builder, axial_axis=axial_axis, axial_range=axial_range,
+            transverse_range=transverse_range, window=window, time_step=time_step))
 
-        def build(builder):
-            clip = builder.AddNamedSystem("sensor_range", SensorRange(
-                axial_axis=axial_axis, axial_range=axial_range,
-                transverse_range=transverse_range))
-            builder.ExportInput(clip.GetInputPort("measured_force"), "measured_force")
-            out = clip.GetOutputPort("clipped_force")
-            if int(window) > 1:
-                fir = builder.AddNamedSystem("sliding_average",
-                                             sliding_average(window, time_step))
-                builder.Connect(out, fir.get_input_port())
-                out = fir.get_output_port()
-            builder.ExportOutput(out, "F_H")
 
-        sub_diagram(self, build)
+# The system a flat build (FlatBlock) names after the block.
+FORCE_SENSOR_MAIN = "sensor_range"
+
+
+def build_force_sensor(builder, *, axial_axis, axial_range=100.0, transverse_range=80.0,
+                       window=10, time_step=0.002):
+    """ForceSensorSource's systems and exported ports, into `builder` (a DiagramBuilder or
+    a FlatBlock)."""
+    clip = builder.AddNamedSystem("sensor_range", SensorRange(
+        axial_axis=axial_axis, axial_range=axial_range, transverse_range=transverse_range))
+    builder.ExportInput(clip.GetInputPort("measured_force"), "measured_force")
+    out = clip.GetOutputPort("clipped_force")
+    if int(window) > 1:
+        fir = builder.AddNamedSystem("sliding_average", sliding_average(window, time_step))
+        builder.Connect(out, fir.get_input_port())
+        out = fir.get_output_port()
+    builder.ExportOutput(out, "F_H")

@@ -61,17 +61,26 @@ class ForwardKinematicsEstimator(Diagram):
 
     def __init__(self, robot, *, initial_position, max_residual=1e-6, time_step=0.002):
         super().__init__()
+        sub_diagram(self, lambda builder: build_forward_kinematics(
+            builder, robot, initial_position=initial_position, max_residual=max_residual,
+            time_step=time_step))
 
-        def build(builder):
-            solve = builder.AddNamedSystem("solve", ForwardKinematicsSolve(
-                robot, max_residual=max_residual))
-            previous = builder.AddNamedSystem("previous", unit_delay(
-                3, time_step, np.asarray(initial_position, dtype=float)))
-            inputs = builder.AddNamedSystem("inputs", Multiplexer([robot.num_cables, 3]))
-            builder.Connect(solve.GetOutputPort("p_WP"), previous.get_input_port())
-            builder.Connect(previous.get_output_port(), inputs.get_input_port(1))
-            builder.Connect(inputs.get_output_port(), solve.GetInputPort("inputs"))
-            builder.ExportInput(inputs.get_input_port(0), "cable_lengths")
-            builder.ExportOutput(solve.GetOutputPort("p_WP"), "p_WP")
 
-        sub_diagram(self, build)
+# The system a flat build (FlatBlock) names after the block.
+FORWARD_KINEMATICS_MAIN = "solve"
+
+
+def build_forward_kinematics(builder, robot, *, initial_position, max_residual=1e-6,
+                             time_step=0.002):
+    """ForwardKinematicsEstimator's systems and exported ports, into `builder` (a
+    DiagramBuilder or a FlatBlock)."""
+    solve = builder.AddNamedSystem("solve", ForwardKinematicsSolve(
+        robot, max_residual=max_residual))
+    previous = builder.AddNamedSystem("previous", unit_delay(
+        3, time_step, np.asarray(initial_position, dtype=float)))
+    inputs = builder.AddNamedSystem("inputs", Multiplexer([robot.num_cables, 3]))
+    builder.Connect(solve.GetOutputPort("p_WP"), previous.get_input_port())
+    builder.Connect(previous.get_output_port(), inputs.get_input_port(1))
+    builder.Connect(inputs.get_output_port(), solve.GetInputPort("inputs"))
+    builder.ExportInput(inputs.get_input_port(0), "cable_lengths")
+    builder.ExportOutput(solve.GetOutputPort("p_WP"), "p_WP")

@@ -71,24 +71,30 @@ class InterferenceForce(Diagram):
 
     def __init__(self, robot, params, *, time_step=0.002):
         super().__init__()
-        P = robot.num_pairs
-        layout = result_layout(P)
-        sizes = [layout[name][1] - layout[name][0] for name in
-                 ("force", "distance", "active", "crossed", "side")]
-        sizes.append(3 + 13 * P - sum(sizes))  # s, t, intensities, gradients, directions
+        sub_diagram(self, lambda builder: build_interference_force(
+            builder, robot, params, time_step=time_step))
 
-        def build(builder):
-            pairs = builder.AddNamedSystem("pairs", InterferencePairs(robot, params))
-            split = builder.AddNamedSystem("split", Demultiplexer(sizes))
-            side = builder.AddNamedSystem("side_memory", unit_delay(P, time_step))
-            inputs = builder.AddNamedSystem("inputs", Multiplexer([3, P]))
-            builder.Connect(pairs.GetOutputPort("result"), split.get_input_port())
-            builder.Connect(split.get_output_port(OUTPUTS.index("side")),
-                            side.get_input_port())
-            builder.Connect(side.get_output_port(), inputs.get_input_port(1))
-            builder.Connect(inputs.get_output_port(), pairs.GetInputPort("inputs"))
-            builder.ExportInput(inputs.get_input_port(0), "p_WP")
-            for k, name in enumerate(OUTPUTS[:-1]):
-                builder.ExportOutput(split.get_output_port(k), name)
 
-        sub_diagram(self, build)
+# The system a flat build (FlatBlock) names after the block.
+INTERFERENCE_FORCE_MAIN = "pairs"
+
+
+def build_interference_force(builder, robot, params, *, time_step=0.002):
+    """InterferenceForce's systems and exported ports, into `builder` (a DiagramBuilder or
+    a FlatBlock)."""
+    P = robot.num_pairs
+    layout = result_layout(P)
+    sizes = [layout[name][1] - layout[name][0] for name in
+             ("force", "distance", "active", "crossed", "side")]
+    sizes.append(3 + 13 * P - sum(sizes))  # s, t, intensities, gradients, directions
+    pairs = builder.AddNamedSystem("pairs", InterferencePairs(robot, params))
+    split = builder.AddNamedSystem("split", Demultiplexer(sizes))
+    side = builder.AddNamedSystem("side_memory", unit_delay(P, time_step))
+    inputs = builder.AddNamedSystem("inputs", Multiplexer([3, P]))
+    builder.Connect(pairs.GetOutputPort("result"), split.get_input_port())
+    builder.Connect(split.get_output_port(OUTPUTS.index("side")), side.get_input_port())
+    builder.Connect(side.get_output_port(), inputs.get_input_port(1))
+    builder.Connect(inputs.get_output_port(), pairs.GetInputPort("inputs"))
+    builder.ExportInput(inputs.get_input_port(0), "p_WP")
+    for k, name in enumerate(OUTPUTS[:-1]):
+        builder.ExportOutput(split.get_output_port(k), name)

@@ -57,20 +57,29 @@ class SafetyLimits(Diagram):
     def __init__(self, *, lower, upper, max_velocity, max_acceleration, virtual_wall=True,
                  time_step=0.002):
         super().__init__()
+        sub_diagram(self, lambda builder: build_safety_limits(
+            builder, lower=lower, upper=upper, max_velocity=max_velocity,
+            max_acceleration=max_acceleration, virtual_wall=virtual_wall,
+            time_step=time_step))
 
-        def build(builder):
-            limit = builder.AddNamedSystem("limit", VelocityLimit(
-                lower=lower, upper=upper, max_velocity=max_velocity,
-                max_acceleration=max_acceleration, virtual_wall=virtual_wall,
-                time_step=time_step))
-            previous = builder.AddNamedSystem("previous", unit_delay(3, time_step))
-            inputs = builder.AddNamedSystem("inputs", Multiplexer([3, 3, 3]))
-            command = limit.GetOutputPort("velocity_command")
-            builder.Connect(command, previous.get_input_port())
-            builder.Connect(previous.get_output_port(), inputs.get_input_port(2))
-            builder.Connect(inputs.get_output_port(), limit.GetInputPort("inputs"))
-            builder.ExportInput(inputs.get_input_port(0), "velocity_desired")
-            builder.ExportInput(inputs.get_input_port(1), "p_WP")
-            builder.ExportOutput(command, "velocity_command")
 
-        sub_diagram(self, build)
+# The system a flat build (FlatBlock) names after the block.
+SAFETY_LIMITS_MAIN = "limit"
+
+
+def build_safety_limits(builder, *, lower, upper, max_velocity, max_acceleration,
+                        virtual_wall=True, time_step=0.002):
+    """SafetyLimits' systems and exported ports, into `builder` (a DiagramBuilder or a
+    FlatBlock)."""
+    limit = builder.AddNamedSystem("limit", VelocityLimit(
+        lower=lower, upper=upper, max_velocity=max_velocity,
+        max_acceleration=max_acceleration, virtual_wall=virtual_wall, time_step=time_step))
+    previous = builder.AddNamedSystem("previous", unit_delay(3, time_step))
+    inputs = builder.AddNamedSystem("inputs", Multiplexer([3, 3, 3]))
+    command = limit.GetOutputPort("velocity_command")
+    builder.Connect(command, previous.get_input_port())
+    builder.Connect(previous.get_output_port(), inputs.get_input_port(2))
+    builder.Connect(inputs.get_output_port(), limit.GetInputPort("inputs"))
+    builder.ExportInput(inputs.get_input_port(0), "velocity_desired")
+    builder.ExportInput(inputs.get_input_port(1), "p_WP")
+    builder.ExportOutput(command, "velocity_command")

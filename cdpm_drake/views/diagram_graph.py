@@ -89,57 +89,100 @@ def _port_row(names, prefix: str) -> str:
 def overview_graphviz(diagram, title: str | None = None) -> str:
     """A readable graphviz of a diagram's top level, derived from the built diagram: one node
     per top-level system (its name, its class without the module; a sub-diagram such as the
-    simulated plant collapsed into one node), its input ports on top and output ports below,
-    one edge per connection, numbered inputs (u0, u1 of an Adder) labelled with the signal
+    simulated plant collapsed into one node, and so is a block whose systems were added flat,
+    see `diagram.flat_blocks`), its input ports on top and output ports below, one edge per
+    connection between nodes, numbered inputs (u0, u1 of an Adder) labelled with the signal
     they receive. Laid out top to bottom so that it fits a page's width."""
     systems = list(diagram.GetSystems())
+    by_name = {s.get_name(): k for k, s in enumerate(systems)}
+    flat = getattr(diagram, "flat_blocks", {})
+    in_block = {by_name[name]: block for block, info in flat.items() for name in info["systems"]}
+    # Nodes: [name, kind, inputs, outputs, shaded]; where each system's ports land on them.
+    nodes, node_of, in_at, out_at = [], {}, {}, {}
+    for k, system in enumerate(systems):
+        block = in_block.get(k)
+        if block is None:
+            kind = _short_type(system)
+            if hasattr(system, "GetSystems"):  # a sub-diagram, collapsed: say what is inside
+                kind = _inside([s.get_name() for s in system.GetSystems()])
+            node_of[k] = len(nodes)
+            nodes.append([system.get_name(), kind,
+                          [None] * system.num_input_ports(),
+                          [system.get_output_port(p).get_name()
+                           for p in range(system.num_output_ports())],
+                          hasattr(system, "GetSystems")])
+            for p in range(system.num_input_ports()):
+                in_at[(k, p)] = (node_of[k], p)
+            for p in range(system.num_output_ports()):
+                out_at[(k, p)] = (node_of[k], p)
+        elif block not in (n[0] for n in nodes):
+            info = flat[block]
+            j = len(nodes)
+            # Its parts by their own names (the block's main system: by its class).
+            parts = [name[len(block) + 1:] if name != block else
+                     _short_type(systems[by_name[name]]) for name in info["systems"]]
+            nodes.append([block, _inside(parts), list(info["inputs"]),
+                          list(info["outputs"]), True])
+            for i, ports in enumerate(info["inputs"].values()):
+                for name, p in ports:
+                    in_at[(by_name[name], p)] = (j, i)
+            for i, (name, p) in enumerate(info["outputs"].values()):
+                out_at[(by_name[name], p)] = (j, i)
+            for name in info["systems"]:
+                node_of[by_name[name]] = j
     index = {id(s): k for k, s in enumerate(systems)}
-    connections = sorted(
-        ((index[id(src)], int(src_k), index[id(dst)], int(dst_k))
-         for (dst, dst_k), (src, src_k) in diagram.connection_map().items()))
+    edges = set()
+    for (dst, dst_k), (src, src_k) in diagram.connection_map().items():
+        s, d = (index[id(src)], int(src_k)), (index[id(dst)], int(dst_k))
+        if node_of[s[0]] == node_of[d[0]] or s not in out_at or d not in in_at:
+            continue  # inside one flat block
+        edges.add(out_at[s] + in_at[d])
+    connections = sorted(edges)
     source_of = {(d, dk): (s, sk) for s, sk, d, dk in connections}
-
-    def input_label(k: int, port: int) -> str:
-        name = systems[k].get_input_port(port).get_name()
-        if _NUMBERED_INPUT.match(name) and (k, port) in source_of:
-            s, sk = source_of[(k, port)]
-            return systems[s].get_output_port(sk).get_name()
-        return name
+    for j, node in enumerate(nodes):
+        for i, name in enumerate(node[2]):
+            if name is None:
+                k = next(k for k in node_of if node_of[k] == j)
+                name = systems[k].get_input_port(i).get_name()
+            if _NUMBERED_INPUT.match(name) and (j, i) in source_of:
+                s, sk = source_of[(j, i)]
+                name = nodes[s][3][sk]
+            node[2][i] = name
 
     lines = [f'digraph "{_html(title or diagram.get_name())}" {{',
              '  graph [rankdir=TB, nodesep=0.25, ranksep=0.35, fontname="Helvetica", '
              'fontsize=11];',
              '  node [shape=plaintext, fontname="Helvetica", fontsize=10, margin=0];',
              '  edge [fontname="Helvetica", fontsize=9, arrowsize=0.6, color="#444444"];']
-    for k, system in enumerate(systems):
+    for j, (name, kind, inputs, outputs, shaded) in enumerate(nodes):
         rows = []
-        inputs = [input_label(k, p) for p in range(system.num_input_ports())]
-        outputs = [system.get_output_port(p).get_name() for p in range(system.num_output_ports())]
         if inputs:
             rows.append(_port_row(inputs, "i"))
-        kind = _short_type(system)
-        if hasattr(system, "GetSystems"):  # a sub-diagram, collapsed: say what is inside
-            inside = [s.get_name() for s in system.GetSystems()]
-            kind = "of " + ", ".join(inside[:3]) + (f" +{len(inside) - 3}" if len(inside) > 3
-                                                     else "")
-        fill = ' BGCOLOR="#e8eef8"' if hasattr(system, "GetSystems") else ""
-        rows.append(f'<TR><TD{fill}><B>{_html(system.get_name())}</B><BR/>'
+        fill = ' BGCOLOR="#e8eef8"' if shaded else ""
+        rows.append(f'<TR><TD{fill}><B>{_html(name)}</B><BR/>'
                     f'<FONT POINT-SIZE="8" COLOR="#555555">{_html(kind)}</FONT></TD></TR>')
         if outputs:
             rows.append(_port_row(outputs, "o"))
-        lines.append(f'  n{k} [label=<<TABLE BORDER="0" CELLBORDER="1" CELLSPACING="0" '
+        lines.append(f'  n{j} [label=<<TABLE BORDER="0" CELLBORDER="1" CELLSPACING="0" '
                      f'CELLPADDING="3">{"".join(rows)}</TABLE>>];')
     # The diagram's own (exported) ports, when it has any.
     for p in range(diagram.num_input_ports()):
         lines.append(f'  in{p} [shape=cds, label="{_html(diagram.get_input_port(p).get_name())}"];')
         for system, port in diagram.GetInputPortLocators(diagram.get_input_port(p).get_index()):
-            lines.append(f'  in{p} -> n{index[id(system)]}:i{int(port)}:n;')
+            j, i = in_at[(index[id(system)], int(port))]
+            lines.append(f'  in{p} -> n{j}:i{i}:n;')
     for p in range(diagram.num_output_ports()):
         system, port = diagram.get_output_port_locator(diagram.get_output_port(p).get_index())
+        j, i = out_at[(index[id(system)], int(port))]
         lines.append(f'  out{p} [shape=cds, label="'
                      f'{_html(diagram.get_output_port(p).get_name())}"];')
-        lines.append(f'  n{index[id(system)]}:o{int(port)}:s -> out{p};')
+        lines.append(f'  n{j}:o{i}:s -> out{p};')
     for s, sk, d, dk in connections:
         lines.append(f"  n{s}:o{sk}:s -> n{d}:i{dk}:n;")
     lines.append("}")
     return "\n".join(lines) + "\n"
+
+
+def _inside(names) -> str:
+    """`of a, b, c +n`: what a collapsed node is made of."""
+    return "of " + ", ".join(names[:3]) + (f" +{len(names) - 3}" if len(names) > 3 else "")

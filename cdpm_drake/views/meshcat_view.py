@@ -537,7 +537,7 @@ def live_view_callback(view: CdpmMeshcatView):
     latest tick, from the loggers (log_<key>, diagram.LOGGED) where the diagram has them and
     from the blocks' output ports otherwise (a real-time run streams to disk instead);
     signals the diagram lacks are drawn as zero."""
-    from ..diagram import LOGGED
+    from ..diagram import LOGGED, block_output_port
 
     sources = {key: (system, port) for key, system, port in LOGGED}
 
@@ -556,8 +556,8 @@ def live_view_callback(view: CdpmMeshcatView):
             return None
         system_name, port_name = sources[key]
         if diagram.HasSubsystemNamed(system_name):
-            system = diagram.GetSubsystemByName(system_name)
-            return system.GetOutputPort(port_name).Eval(system.GetMyContextFromRoot(context))
+            port = block_output_port(diagram, system_name, port_name)
+            return port.Eval(port.get_system().GetMyContextFromRoot(context))
         return np.zeros(width)
 
     def on_chunk(diagram, context) -> None:
