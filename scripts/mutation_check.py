@@ -244,7 +244,7 @@ MUTANTS = [
       "if (book[MISSED] >= self._config.watchdog_ticks",
       "if (book[MISSED] > self._config.watchdog_ticks",
       "the watchdog waits one tick more than watchdog_ticks",
-      ("tests/test_hardware_reels.py",)),
+      ("tests/test_wiring_scenario.py", "tests/test_hardware_reels.py")),
     # --- the CLI -----------------------------------------------------------------------------
     M("simulate_out_ignored", "cdpm_drake/cli.py",
       'out_dir = Path(out_dir if out_dir is not None else Path("runs") / scenario.name)',
@@ -281,6 +281,87 @@ MUTANTS = [
       "bridge = ReelBridge(robot, lengths, force=force, time_constant=0.02)",
       "cdpm emulate --time-constant is ignored",
       ("tests/test_wiring_cli.py",)),
+    # --- second batch: the same kinds, written after the tests above -------------------------
+    M("speed_cap_per_axis", "cdpm_drake/limits.py",
+      "v = [x * (max_velocity / speed) for x in v]",
+      "v = [min(max(x, -max_velocity), max_velocity) for x in v]",
+      "the speed limit clips each axis instead of the norm (diagonal motion runs faster)",
+      ("tests/test_limits.py", "tests/test_wiring_scenario.py")),
+    M("wall_force_linear", "cdpm_drake/limits.py",
+      "push_lo = np.clip((margin - gap_lo) / margin, 0.0, 1.0) ** 2",
+      "push_lo = np.clip((margin - gap_lo) / margin, 0.0, 1.0)",
+      "the wall force rises linearly from the lower faces (not C1 at the margin)",
+      ("tests/test_wiring_scenario.py", "tests/test_limits.py")),
+    M("hand_cap_per_axis", "cdpm_drake/operators.py",
+      "return f * (self.F_max / n) if n > self.F_max else f",
+      "return np.clip(f, -self.F_max, self.F_max)",
+      "the hand's force cap clips each axis instead of the norm",
+      ("tests/test_wiring_scenario.py", "tests/test_operators.py")),
+    M("scripted_force_x_only", "cdpm_drake/operators.py",
+      "return np.array([np.interp(t, self.times, self.forces[:, k]) for k in range(3)])",
+      "return np.array([np.interp(t, self.times, self.forces[:, 0]) for k in range(3)])",
+      "every axis of a scripted force replays the x column",
+      ("tests/test_wiring_scenario.py", "tests/test_operators.py")),
+    M("overlay_resets_the_file", "cdpm_drake/scenario.py",
+      "scenario = yaml_load_typed(schema=Scenario, data=overlay_text, defaults=scenario)",
+      "scenario = yaml_load_typed(schema=Scenario, data=overlay_text, defaults=Scenario())",
+      "--scenario-text starts from the defaults instead of the scenario file",
+      ("tests/test_scenario.py", "tests/test_wiring_cli.py")),
+    M("F_max_default_smallest_F_u", "cdpm_drake/scenario.py",
+      'else (float(arrays["F_u"].max()) if P else 0.0)',
+      'else (float(arrays["F_u"].min()) if P else 0.0)',
+      "the default clip is the smallest F_u instead of the largest",
+      ("tests/test_wiring_scenario.py",)),
+    M("scenario_max_acceleration_ignored", "cdpm_drake/diagram.py",
+      "max_acceleration=_or(limits_cfg.max_acceleration, robot.limits.max_acceleration),",
+      "max_acceleration=robot.limits.max_acceleration,",
+      "the scenario's acceleration limit never overrides the robot file's",
+      ("tests/test_wiring_scenario.py",)),
+    M("sensor_axis_fixed", "cdpm_drake/diagram.py",
+      "axial_axis=sensor_cfg.axial_axis, axial_range=sensor_cfg.axial_range,",
+      "axial_axis=[0.0, 0.0, 1.0], axial_range=sensor_cfg.axial_range,",
+      "sensor.axial_axis never reaches the sensor",
+      ("tests/test_wiring_scenario.py",)),
+    M("sensor_axis_not_normalised", "cdpm_drake/systems/force_sensor.py",
+      "self._axis = axis / np.linalg.norm(axis)",
+      "self._axis = axis",
+      "a handle axis that is not a unit vector scales the axial force",
+      ("tests/test_wiring_scenario.py", "tests/test_systems.py")),
+    M("hardware_reel_speed_unlimited", "cdpm_drake/hardware/reels.py",
+      "self._vmax = float(robot.limits.max_reel_speed)",
+      "self._vmax = float('inf')",
+      "the real reels get commands above their speed limit",
+      ("tests/test_wiring_scenario.py", "tests/test_hardware_reels.py")),
+    M("run_duration_ignored", "cdpm_drake/realtime.py",
+      "end = np.floor(duration / T + 1e-9) * T",
+      "end = np.floor(scenario.duration / T + 1e-9) * T",
+      "run(duration=...) runs the scenario's duration on the robot",
+      ("tests/test_wiring_cli.py", "tests/test_realtime_run.py")),
+    M("run_force_always", "cdpm_drake/cli.py",
+      'if not force and ((out_dir / "ticks.bin").exists() or (out_dir / "log.npz").exists()):',
+      'if False and ((out_dir / "ticks.bin").exists() or (out_dir / "log.npz").exists()):',
+      "cdpm run overwrites an earlier run's log without --force",
+      ("tests/test_wiring_cli.py",)),
+    M("live_view_chunk_fixed", "cdpm_drake/cli.py",
+      "chunk=0.04 if args.meshcat else 0.5)",
+      "chunk=0.5)",
+      "the live view is drawn every 0.5 s of simulated time",
+      ("tests/test_wiring_cli.py",)),
+    M("run_meshcat_dropped", "cdpm_drake/cli.py",
+      "on_view = _live_meshcat(scenario) if args.meshcat else None",
+      "on_view = None",
+      "cdpm run --meshcat shows nothing",
+      ("tests/test_wiring_cli.py",)),
+    M("emulator_length_offset_off_by_one", "cdpm_drake/hardware/emulator.py",
+      "lengths[k - 1] += float(metres)",
+      "lengths[k % len(lengths)] += float(metres)",
+      "--length-offset CABLE uses the 1-based cable number as an index",
+      ("tests/test_wiring_cli.py", "tests/test_emulator.py")),
+    M("logistic_grid_below_zero", "cdpm_drake/views/plots.py",
+      "return np.linspace(max(0.0, d_l - w), d_u + w, num)",
+      "return np.linspace(d_l - w, d_u + w, num)",
+      "Fig. 8 is drawn over negative distances",
+      ("tests/test_wiring_cli.py", "tests/test_plots.py")),
     # --- the views: plots, Meshcat ------------------------------------------------------------
     M("plot_distance_in_metres", "cdpm_drake/views/plots.py",
       "ax.plot(t, 1000.0 * d[:, k], label=_pair_label(pairs[k]))",
@@ -368,12 +449,28 @@ def run_mutant(mutant: Mutant, copy: Path, python: str) -> dict:
             code, line = _pytest(copy, args, python)
             if code != 0:
                 where = f"{label}: {line}" if code != -1 else f"{label}: timeout"
-                return dict(name=mutant.name, result="killed", where=where[:110],
+                result = "killed"
+                node = _failed_test(line)
+                if node is not None:
+                    # A kill counts only if that test passes without the mutant: on a busy
+                    # host a timing test may fail by itself, which says nothing of the mutant.
+                    path.write_text(text)
+                    if _pytest(copy, [node], python)[0] != 0:
+                        result, where = "FLAKY", f"{node} fails without the mutant too"
+                return dict(name=mutant.name, result=result, where=where[:110],
                             seconds=time.perf_counter() - start)
         return dict(name=mutant.name, result="SURVIVED", where="the whole suite passed",
                     seconds=time.perf_counter() - start)
     finally:
         path.write_text(text)
+
+
+def _failed_test(line: str) -> str | None:
+    """The test node id of a pytest `FAILED path::name - message` line."""
+    if not line.startswith(("FAILED ", "ERROR ")):
+        return None
+    node = line.split(" ", 1)[1].split(" - ", 1)[0].strip()
+    return node if "::" in node else None
 
 
 def main(argv=None) -> int:
@@ -429,14 +526,17 @@ def main(argv=None) -> int:
     killed = sum(r["result"] == "killed" for r in rows)
     survived = [r["name"] for r in rows if r["result"] == "SURVIVED"]
     stale = [r["name"] for r in rows if r["result"] == "STALE"]
+    flaky = [r["name"] for r in rows if r["result"] == "FLAKY"]
     print()
     print(f"score: {killed}/{len(rows)} killed ({100.0 * killed / max(1, len(rows)):.0f} %), "
-          f"{len(survived)} survived, {len(stale)} stale; {total / 60:.1f} min with "
-          f"{args.jobs} job(s)")
+          f"{len(survived)} survived, {len(stale)} stale, {len(flaky)} flaky; "
+          f"{total / 60:.1f} min with {args.jobs} job(s)")
     if survived:
         print(f"survived: {survived}")
     if stale:
         print(f"stale (update the list): {stale}")
+    if flaky:
+        print(f"flaky (run them again with --only): {flaky}")
     return 0 if killed == len(rows) else 1
 
 

@@ -272,7 +272,7 @@ def bridge():
     server = ReelBridgeServer(ReelBridge(
         robot, cable_lengths(robot, np.array(scenario.initial_position)), time_constant=0.0),
         address=("127.0.0.1", 0)).start()
-    server.overlay = ("{plant: !HardwareReels {port: %d, watchdog_ticks: 25, ramp_time: 0.0}}"
+    server.overlay = ("{plant: !HardwareReels {port: %d, watchdog_ticks: 100, ramp_time: 0.0}}"
                       % server.address[1])
     yield server
     server.stop()
@@ -522,6 +522,19 @@ def test_plot_out_and_html_are_where_the_files_go(tmp_path, logged):
     assert len(list(out.glob("*.png"))) == 4
     assert not list(logged.glob("*.png"))
     assert html.stat().st_size > 10_000
+
+
+def test_plot_logistic_curve_spans_the_band_and_never_negative_distances(logged):
+    """Fig. 8 is drawn over [max(0, d_l - w), d_u + w] with w = d_u - d_l: for d_l = 10 mm,
+    d_u = 30 mm that is 0..50 mm (d_l - w would be -10 mm)."""
+    from cdpm_drake.views.plots import figure_logistic
+
+    log = run_log(logged)
+    for key, value in (("d_l", 0.010), ("d_u", 0.030)):
+        log[key] = np.full_like(log[key], value)
+    ax = figure_logistic(log).axes[0]
+    x = ax.lines[0].get_xdata()
+    assert x.min() == 0.0 and x.max() == pytest.approx(50.0)
 
 
 # --- diagram --------------------------------------------------------------------------------------

@@ -561,6 +561,38 @@ def test_robot_file_reel_speed_limit_reaches_the_reels(tmp_path, valid_spec):
     assert _reel_speeds(log).max() == pytest.approx(0.037, rel=1e-3)
 
 
+def test_robot_file_reel_speed_limit_scales_what_the_real_reels_are_sent(tmp_path):
+    """The same limit on the robot: paper_7cable with max_reel_speed 0.031 m/s and a 6 N push
+    (which asks for ~0.3 m/s of cable). Every velocity sent is scaled to the limit (the
+    emulated bridge, given the same robot, would latch OVERSPEED above it)."""
+    spec = _paper_spec()
+    spec["limits"] = {"max_reel_speed": 0.031}
+    path = tmp_path / "slow_reels.yaml"
+    path.write_text(to_yaml(spec) + "\n")
+    robot = load_robot(path)
+    bridge = ReelBridge(robot, cable_lengths(robot, np.array(P0)), time_constant=0.0,
+                        force=lambda t, p, v: np.array([6.0, 0.0, 0.0]))
+    server = ReelBridgeServer(bridge, address=("127.0.0.1", 0)).start()
+    try:
+        scenario = dataclasses.replace(_hw(server.address[1]), robot=str(path))
+        result = _run(tmp_path, scenario, duration=0.4)
+    finally:
+        server.stop()
+    assert result.ending == "completed", result.error
+    assert np.abs(result.log["reel_velocity"]).max() > 0.1  # the diagram asks for more
+    sent = max(np.abs(c.velocity).max() for c in server.commands)
+    assert sent == pytest.approx(0.031, rel=1e-9)
+
+
+def _paper_spec():
+    """paper_7cable's description as Python data (from the shipped file)."""
+    from pydrake.common.yaml import yaml_load
+
+    from cdpm_drake.robot import resolve_robot_path
+
+    return yaml_load(filename=str(resolve_robot_path("paper_7cable")))
+
+
 @covers("RobotSchema.workspace.lower", "RobotSchema.workspace.upper")
 @pytest.mark.parametrize("direction", [+1, -1])
 def test_robot_file_workspace_is_the_virtual_wall(tmp_path, valid_spec, direction):
@@ -613,9 +645,9 @@ def _bridge(address="127.0.0.1", offset=None, force=None, **server):
 
 
 def _hw(port, **fields):
-    """`base` with a !HardwareReels plant; the watchdog is widened (this host is shared) unless
+    """`base` with a !HardwareReels plant; the watchdog is widened to 0.2 s (this host is shared) unless
     the test sets it."""
-    cfg = dict(port=port, watchdog_ticks=25, ramp_time=0.0)
+    cfg = dict(port=port, watchdog_ticks=100, ramp_time=0.0)
     cfg.update(fields)
     return base(plant=HardwareReels(**cfg))
 
@@ -667,19 +699,29 @@ def test_hardware_startup_timeout_bounds_the_wait_for_a_silent_bridge(tmp_path):
 
 @covers("Scenario.plant!HardwareReels.watchdog_ticks")
 def test_hardware_watchdog_ticks_sets_the_silence_that_faults(tmp_path):
-    # The bridge stops sending 0.1 s after enabling; the fault names N >= 9 missed ticks.
-    server = _bridge(faults=FaultPlan(stop=True, after=0.1))
-    try:
-        result = _run(tmp_path, _hw(server.address[1], watchdog_ticks=9), duration=1.0)
-    finally:
-        server.stop()
-    assert result.ending == "fault"
-    message = str(result.error)
-    assert "watchdog_ticks = 9" in message
-    missed = int(message.split(" for ")[1].split(" ticks")[0])
-    assert missed >= 9
-    # It stopped long before the 1 s asked for (fault at ~0.1 s + 9 ticks + scheduling).
-    assert result.log["time"][-1] < 0.6
+    """The bridge stops sending 0.1 s after enabling: the fault comes on the 9th silent tick
+    (watchdog_ticks = 9; the default is 3). Exactly the 9th when the ticks ran at their
+    period: a catch-up burst after a host stall may delay it (the watchdog also waits
+    (N - 1) T of wall time), so a run whose last ticks came faster than T / 2 is repeated."""
+    for attempt in range(3):
+        server = _bridge(faults=FaultPlan(stop=True, after=0.1))
+        try:
+            result = _run(tmp_path, _hw(server.address[1], watchdog_ticks=9), duration=1.0,
+                          name=f"run{attempt}")
+        finally:
+            server.stop()
+        assert result.ending == "fault"
+        message = str(result.error)
+        assert "watchdog_ticks = 9" in message
+        missed = int(message.split(" for ")[1].split(" ticks")[0])
+        assert missed >= 9
+        # It stopped long before the 1 s asked for (fault at ~0.1 s + 9 ticks + scheduling).
+        assert result.log["time"][-1] < 0.6
+        if np.diff(result.log["wall"][-12:]).min() > 0.5 * T:
+            break
+    else:
+        pytest.skip("host too busy: every run had a catch-up burst at the fault")
+    assert missed == 9
 
 
 def _enabled_commands(server):
