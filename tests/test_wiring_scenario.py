@@ -572,10 +572,11 @@ def test_robot_file_reel_speed_limit_scales_what_the_real_reels_are_sent(tmp_pat
     robot = load_robot(path)
     bridge = ReelBridge(robot, cable_lengths(robot, np.array(P0)), time_constant=0.0,
                         force=lambda t, p, v: np.array([6.0, 0.0, 0.0]))
-    server = ReelBridgeServer(bridge, address=("127.0.0.1", 0)).start()
+    server = ReelBridgeServer(bridge, address=("127.0.0.1", 0), command_timeout=0.5).start()
     try:
         scenario = dataclasses.replace(_hw(server.address[1]), robot=str(path))
         result = _run(tmp_path, scenario, duration=0.4)
+        _settle(server)
     finally:
         server.stop()
     assert result.ending == "completed", result.error
@@ -641,6 +642,8 @@ def _bridge(address="127.0.0.1", offset=None, force=None, **server):
     if offset is not None:
         lengths = lengths + offset
     bridge = ReelBridge(robot, lengths, force=force, time_constant=0.0)
+    # The bridge's own command watchdog widened too: a stalled controller is not the point.
+    server.setdefault("command_timeout", 0.5)
     return ReelBridgeServer(bridge, address=(address, 0), **server).start()
 
 
@@ -664,6 +667,7 @@ def test_hardware_address_and_port_reach_the_link(tmp_path):
     try:
         host, port = server.address
         result = _run(tmp_path, _hw(port, address=host))
+        _settle(server)
     finally:
         server.stop()
     assert result.ending == "completed", result.error
@@ -679,6 +683,7 @@ def test_hardware_local_address_and_port_bind_the_controller(tmp_path):
     try:
         result = _run(tmp_path, _hw(server.address[1], local_address=local[0],
                                     local_port=local[1]))
+        _settle(server)
     finally:
         server.stop()
     assert result.ending == "completed", result.error
@@ -724,6 +729,20 @@ def test_hardware_watchdog_ticks_sets_the_silence_that_faults(tmp_path):
     assert missed == 9
 
 
+def _settle(server, quiet=0.1, timeout=3.0):
+    """Wait until the bridge has read every datagram sent to it (none new for `quiet` s): on a
+    busy host its thread may still be behind when the run returns."""
+    deadline = time.monotonic() + timeout
+    count, since = -1, time.monotonic()
+    while time.monotonic() < deadline:
+        n = server.counters["commands_received"] + server.counters["commands_dropped"]
+        if n != count:
+            count, since = n, time.monotonic()
+        elif time.monotonic() - since >= quiet:
+            return
+        time.sleep(0.01)
+
+
 def _enabled_commands(server):
     return [c for c in server.commands if c.enable]
 
@@ -735,6 +754,7 @@ def test_hardware_ramp_time_ramps_the_sent_velocity(tmp_path):
     server = _bridge(force=lambda t, p, v: np.array([3.0, 0.0, 0.0]))
     try:
         result = _run(tmp_path, _hw(server.address[1], ramp_time=0.12), duration=0.3)
+        _settle(server)
     finally:
         server.stop()
     assert result.ending == "completed", result.error
@@ -763,6 +783,7 @@ def test_hardware_max_length_residual_refuses_lengths_that_do_not_fit(tmp_path):
     server = _bridge(offset=offset)
     try:
         result = _run(tmp_path, _hw(server.address[1], max_length_residual=0.0021))
+        _settle(server)
     finally:
         server.stop()
     assert result.ending == "fault"
@@ -777,6 +798,7 @@ def test_hardware_shutdown_repeats_sets_the_final_zero_commands(tmp_path):
     server = _bridge()
     try:
         result = _run(tmp_path, _hw(server.address[1], shutdown_repeats=5))
+        _settle(server)
     finally:
         server.stop()
     assert result.ending == "completed", result.error
