@@ -20,7 +20,7 @@ import pytest
 from cdpm_drake.interference import (InterferenceParams, interference_force, logistic_intensity,
                                      segment_distance)
 from cdpm_drake.operators import ScriptedOperator
-from cdpm_drake.robot import Robot, Workspace, load_robot
+from cdpm_drake.robot import Robot, Workspace
 from cdpm_drake.scenario import (Admittance, Interference, Logistic, Scenario, Sensor,
                                  scenario_robot)
 from cdpm_drake.simulation import simulate

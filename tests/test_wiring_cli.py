@@ -27,8 +27,6 @@ from cdpm_drake.kinematics import cable_lengths
 from cdpm_drake.robot import load_robot
 from cdpm_drake.scenario import load_scenario, scenario_robot
 
-from conftest import to_yaml
-
 T = 0.002
 CASES: dict[str, str] = {}
 
@@ -507,7 +505,7 @@ def test_emulate_rt_priority_reaches_the_scheduler_call(monkeypatch):
     assert asked == [41]
 
 
-# --- plot ------------------------------------------------------------------------------------------
+# --- plot ----------------------------------------------------------------------------------
 
 
 @pytest.fixture(scope="module")

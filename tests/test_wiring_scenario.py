@@ -526,7 +526,7 @@ def test_plant_reel_speed_limit_scales_the_reels():
     assert _reel_speeds(log).max() == pytest.approx(0.043, rel=1e-3)
 
 
-# --- the robot file's optional fields ---------------------------------------------------------------
+# --- the robot file's optional fields ---------------------------------------------------
 
 
 def _robot_file(tmp_path, valid_spec, **extra):
@@ -648,8 +648,8 @@ def _bridge(address="127.0.0.1", offset=None, force=None, **server):
 
 
 def _hw(port, **fields):
-    """`base` with a !HardwareReels plant; the watchdog is widened to 0.2 s (this host is shared) unless
-    the test sets it."""
+    """`base` with a !HardwareReels plant; the watchdog is widened to 0.2 s (this host is
+    shared) unless the test sets it."""
     cfg = dict(port=port, watchdog_ticks=100, ramp_time=0.0)
     cfg.update(fields)
     return base(plant=HardwareReels(**cfg))
