@@ -283,8 +283,8 @@ def bridge():
     robot = scenario_robot(scenario)
     server = ReelBridgeServer(ReelBridge(
         robot, cable_lengths(robot, np.array(scenario.initial_position)), time_constant=0.0),
-        address=("127.0.0.1", 0), command_timeout=0.5).start()
-    server.overlay = ("{plant: !HardwareReels {port: %d, watchdog_ticks: 100, ramp_time: 0.0}}"
+        address=("127.0.0.1", 0), command_timeout=5.0).start()
+    server.overlay = ("{plant: !HardwareReels {port: %d, watchdog_ticks: 500, ramp_time: 0.0}}"
                       % server.address[1])
     yield server
     server.stop()
