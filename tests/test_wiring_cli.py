@@ -313,6 +313,8 @@ def test_run_duration_sets_the_run_length(tmp_path, bridge):
                 "--out", out) == 0
     log = run_log(out)
     assert len(log["time"]) == 66 and log["time"][-1] == pytest.approx(0.13)
+    # The resolved scenario beside the log records the duration that ran.
+    assert load_scenario(out / "scenario.yaml").duration == pytest.approx(0.13)
     settle(bridge)
     assert bridge.counters["commands_received"] < 200
 
@@ -382,6 +384,18 @@ def test_emulate_scenario_and_overlay_set_robot_start_and_operator(tmp_path):
                                    cable_lengths(robot, np.array([1.8, 3.6, 1.25])), atol=1e-12)
         np.testing.assert_allclose(server.bridge.force_fn(0.0, np.zeros(3), np.zeros(3)),
                                    [0.7, -0.2, 0.1])
+    finally:
+        server.stop()
+
+
+def test_emulate_listens_where_the_scenario_plant_says():
+    # No --address / --port: the scenario's !HardwareReels address and port are used, so
+    # `cdpm run` and `cdpm emulate` given the same scenario meet.
+    port = _free_port()
+    text = "{plant: !HardwareReels {address: 127.0.0.6, port: %d}}" % port
+    server = _server_from("--scenario", "exp1_no_interaction", "--scenario-text", text)
+    try:
+        assert server.address == ("127.0.0.6", port)
     finally:
         server.stop()
 
