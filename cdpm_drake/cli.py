@@ -247,6 +247,8 @@ def _cmd_run(args) -> int:
 def _cmd_plot(args) -> int:
     from .views.plots import LogError, load_log, plot_log
 
+    if _is_sweep_dir(args.log):
+        return _cmd_plot_sweep(args)
     try:
         log = load_log(args.log)
     except LogError as e:
@@ -290,6 +292,83 @@ def _cmd_diagram(args) -> int:
         raise CliError(f"--depth must be an integer >= 1, got {args.depth!r}")
     return diagram_main(scenario=_load_scenario_arg(args), out_dir=args.out, depth=args.depth,
                         svg=not args.no_svg)
+
+
+# --- sweep -----------------------------------------------------------------------------------
+
+
+def _is_sweep_dir(path: Path) -> bool:
+    return path.is_dir() and (path / "results.csv").is_file() and not (path / "log.npz").exists()
+
+
+def _cmd_plot_sweep(args) -> int:
+    from .sweep import SweepError, plot_main
+    from .views.sweep_plots import plot_sweep
+
+    try:
+        return plot_main(sweep_dir=args.log, plot=plot_sweep, out_dir=args.out)
+    except SweepError as e:
+        raise CliError(str(e)) from None
+
+
+def _cmd_sweep(args) -> int:
+    from .sweep import SweepError, sweep_main
+
+    if args.workers is not None and args.workers < 1:
+        raise CliError(f"--workers must be an integer >= 1, got {args.workers!r}")
+    if args.ray_chunk is not None and args.ray_chunk < 1:
+        raise CliError(f"--ray-chunk must be an integer >= 1, got {args.ray_chunk!r}")
+    if args.top < 1:
+        raise CliError(f"--top must be an integer >= 1, got {args.top!r}")
+    if args.out is not None:
+        _writable_dir(args.out, "--out")
+    plot = None
+    if args.plot:
+        from .views.sweep_plots import plot_sweep as plot
+    try:
+        return sweep_main(sweep=args.sweep, out_dir=args.out, workers=args.workers,
+                          ray=args.ray is not None, ray_address=args.ray or None,
+                          ray_chunk=args.ray_chunk, keep_logs=args.keep_logs,
+                          retry_errors=args.retry_errors, plot=plot, metric=args.metric,
+                          top=args.top, dry_run=args.dry_run, progress=not args.no_progress)
+    except SweepError as e:
+        raise CliError(str(e)) from None
+
+
+def _sweep_parser(sub) -> None:
+    from .sweep import NUMERIC_METRICS, sweep_names
+
+    p = sub.add_parser(
+        "sweep", help="run many variants of a scenario (a grid, random samples, seeds)",
+        description="Run every variant of a sweep file (docs/SWEEP_FORMAT.md) with the same "
+                    "diagram and Simulator as cdpm simulate, on local processes (one per core) "
+                    "or on Ray; write DIR/results.csv (one row per run) and each run's "
+                    "resolved scenario.yaml. Rerunning the same command resumes.")
+    p.add_argument("sweep", help=f"a shipped sweep ({', '.join(sweep_names())}) or a path to "
+                                 "a sweep YAML")
+    p.add_argument("--out", type=Path, metavar="DIR",
+                   help="output directory (default: runs/sweeps/<sweep name>)")
+    p.add_argument("--workers", type=int, metavar="N",
+                   help="local worker processes (default: one per core)")
+    p.add_argument("--ray", nargs="?", const="", metavar="ADDRESS",
+                   help="run on Ray: a local Ray, or the cluster at ADDRESS (e.g. "
+                        "ray://host:10001 or auto); needs pip install -e '.[ray]'")
+    p.add_argument("--ray-chunk", type=int, metavar="K",
+                   help="runs per Ray task (default: chosen so a task lasts ~2 s)")
+    p.add_argument("--keep-logs", action="store_true", help="also keep each run's log.npz")
+    p.add_argument("--retry-errors", action="store_true",
+                   help="rerun the rows that ended in an error (a resume skips them)")
+    p.add_argument("--plot", action="store_true",
+                   help="write the heatmap, metric-vs-axis and Pareto pictures")
+    p.add_argument("--metric", choices=NUMERIC_METRICS, metavar="NAME",
+                   help="metric of the pictures and the best-runs table (default: the sweep "
+                        f"file's, else min_distance): {', '.join(NUMERIC_METRICS)}")
+    p.add_argument("--top", type=int, default=5, metavar="K",
+                   help="rows in the best-runs table (default 5)")
+    p.add_argument("--dry-run", action="store_true",
+                   help="check and list the variants, run nothing")
+    p.add_argument("--no-progress", action="store_true", help="no progress bar")
+    p.set_defaults(func=_cmd_sweep)
 
 
 # --- main ------------------------------------------------------------------------------------
@@ -359,7 +438,8 @@ def _parser() -> argparse.ArgumentParser:
                                    "forces (Figs. 11, 13, 16), the 3D trajectory with "
                                    "interference events (Figs. 9, 15), the logistic curve "
                                    "(Fig. 8).")
-    p.add_argument("log", type=Path, help="a log.npz or the directory holding it")
+    p.add_argument("log", type=Path, help="a log.npz or the directory holding it (or a sweep's "
+                                          "directory: its pictures from results.csv)")
     p.add_argument("--out", type=Path, help="output directory (default: the log's directory)")
     p.add_argument("--html", type=Path, metavar="FILE",
                    help="also save a self-contained 3D replay of the log")
@@ -375,6 +455,8 @@ def _parser() -> argparse.ArgumentParser:
                    help="how many levels of sub-diagrams to expand (default: 1)")
     p.add_argument("--no-svg", action="store_true", help="write only the .dot files")
     p.set_defaults(func=_cmd_diagram)
+
+    _sweep_parser(sub)
     return parser
 
 

@@ -26,12 +26,16 @@ def logistic(d, d_l, d_u, F_u, eps):
 
 
 def synthetic_log(duration: float = 1.0, d13=(0.045, 0.070), d57=(0.066, 0.058),
-                  crossed_ticks: int = 5, interference: bool = True) -> dict:
+                  crossed_ticks: int = 5, interference: bool = True,
+                  fault_time: float | None = None, realtime: bool = False) -> dict:
     """A log of `duration` s: the platform moves on a straight line, the distance of pair (1,3)
     goes linearly from d13[0] to d13[1] (m), pair (5,7) from d57[0] to d57[1]; every other pair
     stays at >= 0.2 m. Pair (1,3) is flagged crossed for the first `crossed_ticks` ticks.
     interference=False writes NaN logistic parameters, as `cdpm simulate` does when the
-    interference block is disabled."""
+    interference block is disabled. fault_time (s) ends the run on a fault at that tick
+    (keys ending, fault_time, fault_message); realtime=True adds the columns of `cdpm run`:
+    tick, wall (a 2 ms clock with one 5 ms late tick at 0.2 s), compute (0.3 ms, 1.5 ms at
+    0.2 s) and watchdog_limit (3 ticks, 6 ms)."""
     robot = load_robot("paper_7cable").with_swapped_attachments(1, 3)
     T = int(round(duration / TICK)) + 1
     time = np.arange(T) * TICK
@@ -92,6 +96,21 @@ def synthetic_log(duration: float = 1.0, d13=(0.045, 0.070), d57=(0.066, 0.058),
         "robot_name": np.array(robot.name),
         "scenario_name": np.array("synthetic"),
     }
+    if fault_time is not None:
+        log["ending"] = np.array("fault")
+        log["fault_time"] = np.array(float(fault_time))
+        log["fault_message"] = np.array("bridge silent for 3 ticks")
+    if realtime:
+        period = np.full(T, TICK)
+        compute = np.full(T, 0.0003)
+        late = int(round(0.2 / TICK))
+        if late < T:
+            period[late] = 0.005
+            compute[late] = 0.0015
+        log["tick"] = np.arange(T)
+        log["wall"] = 1000.0 + np.cumsum(period) - period[0]
+        log["compute"] = compute
+        log["watchdog_limit"] = np.array(3 * TICK)
     if not interference:
         for key in ("d_l", "d_u", "F_u", "eps"):
             log[key] = np.full(P, np.nan)

@@ -3,21 +3,24 @@
 Regenerate with `cdpm diagram` when a block or a connection changes."""
 
 import dataclasses
+import re
 from pathlib import Path
 
+import pytest
 
 from cdpm_drake.cli import main
 from cdpm_drake.diagram import BuildOptions, PLANT_PORTS, build_diagram
 from cdpm_drake.hardware.config import HardwareReels
 from cdpm_drake.scenario import SimulatedReels, load_scenario
-from cdpm_drake.views.diagram_graph import stable_graphviz
+from cdpm_drake.views.diagram_graph import overview_graphviz, render_svg, stable_graphviz
 
 DIAGRAMS = Path(__file__).resolve().parent.parent / "diagrams"
 
 
 def test_committed_dot_files_are_up_to_date(tmp_path):
     assert main(["diagram", "--out", str(tmp_path), "--no-svg"]) == 0
-    for name in ("controller_simulated", "controller_hardware"):
+    for name in ("controller_simulated", "controller_hardware", "controller_simulated_overview",
+                 "controller_hardware_overview"):
         fresh = (tmp_path / f"{name}.dot").read_text()
         committed = (DIAGRAMS / f"{name}.dot").read_text()
         assert fresh == committed, (f"diagrams/{name}.dot is out of date: run `cdpm diagram` "
@@ -60,3 +63,93 @@ def test_simulated_and_hardware_diagrams_differ_only_in_the_plant():
     # The plant: same name, same ports, different implementation.
     assert set(sim_systems["reels"][0] + sim_systems["reels"][1]) == set(PLANT_PORTS)
     assert type(sim.GetSubsystemByName("reels")) is not type(hw.GetSubsystemByName("reels"))
+
+
+# The README's column is ~880 px wide on GitHub (its content width), 660 pt at 96 px/in: an
+# SVG up to that width shows at its natural size, text at the 10 pt (13 px) it was set in.
+README_WIDTH_PT = 660
+
+
+def _svg_size(svg: str) -> tuple[float, float]:
+    width, height = re.search(r'<svg width="([\d.]+)pt" height="([\d.]+)pt"', svg).groups()
+    return float(width), float(height)
+
+
+def _nodes(dot: str) -> dict:
+    """{node id: the text of its label} of overview_graphviz's output."""
+    return {m.group(1): re.sub(r"<[^>]+>", " ", m.group(2))
+            for m in re.finditer(r"^  (n\d+) \[label=<(.*)>\];$", dot, flags=re.M)}
+
+
+def test_committed_overview_fits_the_readme_and_is_shown_there():
+    readme = (DIAGRAMS.parent / "README.md").read_text()
+    for name in ("controller_simulated_overview", "controller_hardware_overview"):
+        width, height = _svg_size((DIAGRAMS / f"{name}.svg").read_text())
+        # Measured: 406 x 625 pt (the full-depth one: 3131 x 401 pt).
+        assert width <= README_WIDTH_PT, (name, width)
+        assert height <= 900, (name, height)
+    assert "](diagrams/controller_simulated_overview.svg)" in readme
+    assert "diagrams/controller_simulated.svg" in readme  # the full-depth one, linked beside
+
+
+@pytest.mark.parametrize("plant", [SimulatedReels(), HardwareReels()], ids=["sim", "hw"])
+def test_overview_has_every_top_level_system_and_connection_with_short_names(plant):
+    scenario = dataclasses.replace(load_scenario("exp3_two_pairs"), plant=plant)
+    diagram = build_diagram(scenario, BuildOptions(loggers=False))
+    dot = overview_graphviz(diagram)
+    nodes = _nodes(dot)
+    systems = diagram.GetSystems()
+    # One node per top-level system, named as in the diagram, with its class name only.
+    assert len(nodes) == len(systems)
+    for k, system in enumerate(systems):
+        assert system.get_name() in nodes[f"n{k}"].split()
+    assert "cdpm_drake." not in dot and "pydrake." not in dot and "drake::" not in dot
+    # One edge per connection of the diagram, from an output port cell to an input port cell.
+    edges = re.findall(r"^  n(\d+):o(\d+):s -> n(\d+):i(\d+):n;$", dot, flags=re.M)
+    assert len(edges) == len(diagram.connection_map())
+    index = {id(s): k for k, s in enumerate(systems)}
+    expected = {(index[id(src)], int(sk), index[id(dst)], int(dk))
+                for (dst, dk), (src, sk) in diagram.connection_map().items()}
+    assert {tuple(map(int, e)) for e in edges} == expected
+    # The adder's inputs carry the names of the forces it sums (eq. 22), not u0, u1, ...
+    adder = diagram.GetSubsystemByName("F_d_adder")
+    assert re.search(r">u\d+<", dot) is None
+    label = nodes[f"n{index[id(adder)]}"].split()
+    assert {"F_H", "F_int"} <= set(label)
+    # The simulated plant is a sub-diagram: one node that names what it holds.
+    reels = diagram.GetSubsystemByName("reels")
+    text = nodes[f"n{index[id(reels)]}"]
+    if isinstance(plant, SimulatedReels):
+        assert "simulated_reels" in text and "operator" in text
+    assert {"reel_velocity_command", "cable_lengths", "measured_force"} <= set(text.split())
+
+
+def test_overview_of_any_diagram_shows_exported_ports_and_collapses_subdiagrams():
+    # Independent of the controller: a diagram of Drake primitives, one of them a sub-diagram,
+    # with an exported input and output.
+    from pydrake.systems.framework import DiagramBuilder
+    from pydrake.systems.primitives import Adder, Gain
+
+    inner = DiagramBuilder()
+    gain = inner.AddNamedSystem("gain", Gain(2.0, 1))
+    inner.ExportInput(gain.get_input_port(), "x")
+    inner.ExportOutput(gain.get_output_port(), "y")
+    sub = inner.Build()
+    sub.set_name("doubler")
+    builder = DiagramBuilder()
+    doubler = builder.AddSystem(sub)
+    adder = builder.AddNamedSystem("sum", Adder(2, 1))
+    builder.Connect(doubler.get_output_port(), adder.get_input_port(1))
+    builder.ExportInput(doubler.get_input_port(), "command")
+    builder.ExportInput(adder.get_input_port(0), "offset")
+    builder.ExportOutput(adder.get_output_port(), "total")
+    dot = overview_graphviz(builder.Build())
+    nodes = _nodes(dot)
+    assert len(nodes) == 2
+    assert "doubler" in nodes["n0"] and "of gain" in nodes["n0"]
+    # Input 1 of the adder receives "y"; input 0 is exported, so it keeps its own name.
+    assert nodes["n1"].split()[:2] == ["u0", "y"]
+    assert 'in0 [shape=cds, label="command"]' in dot and "in0 -> n0:i0:n;" in dot
+    assert "in1 -> n1:i0:n;" in dot and "n1:o0:s -> out0;" in dot
+    width, _ = _svg_size(render_svg(dot))
+    assert 0 < width < README_WIDTH_PT

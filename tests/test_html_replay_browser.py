@@ -85,6 +85,23 @@ def green_pixels(rgb) -> int:
     return int(((g > 110) & (g > r + 50) & (g > b + 40)).sum())
 
 
+def blue_pixels(rgb) -> int:
+    """The measured-force arrow (0, 0.2, 1), shaded; background, grid and cables are near
+    grey, the (hidden) origin triad's z axis cyan."""
+    r, g, b = rgb[..., 0], rgb[..., 1], rgb[..., 2]
+    return int(((b > 100) & (r < 70) & (g < 80)).sum())
+
+
+def clock(rgb) -> np.ndarray:
+    """The top left corner of the default view, where the clock ("t = 0.38 s") is."""
+    return rgb[:70, :260]
+
+
+def dark_pixels(rgb) -> int:
+    """Text (0.08, 0.08, 0.12) on the light background."""
+    return int((rgb.max(axis=-1) < 80).sum())
+
+
 def variety(rgb) -> tuple[int, float]:
     """Number of distinct colours (5 bits per channel) and the share of the commonest one."""
     q = rgb // 8
@@ -95,8 +112,13 @@ def variety(rgb) -> tuple[int, float]:
 
 def test_replay_renders_and_animates_in_headless_chromium(tmp_path):
     # 1 s: cables 1 and 3 stay below d_l (red throughout); pair (5,7) closes from 70 mm to
-    # 50 mm, below its d_l of 57 mm, so cables 5 and 7 turn from grey to red.
+    # 50 mm, below its d_l of 57 mm, so cables 5 and 7 turn from grey to red. The hand pushes
+    # 2 N along y and the interference force cancels it (F_d = 0): a blue and a black arrow,
+    # no red one to mix with the red cables; the replay looks at them side-on, from -x.
     log = synthetic_log(1.0, d13=(0.045, 0.048), d57=(0.070, 0.050))
+    T = len(log["time"])
+    log.update(F_H=np.tile([0.0, 2.0, 0.0], (T, 1)), F_int=np.tile([0.0, -2.0, 0.0], (T, 1)),
+               F_d=np.zeros((T, 3)))
     html = mv.save_replay_html(log, tmp_path / "replay.html", fps=50)
     early = screenshot(html, tmp_path / "early.png", tmp_path / "profile_early", 100)
     late = screenshot(html, tmp_path / "late.png", tmp_path / "profile_late", 4000)
@@ -107,17 +129,25 @@ def test_replay_renders_and_animates_in_headless_chromium(tmp_path):
     (tmp_path / "empty.html").write_text(empty.StaticHtml())
     control = screenshot(tmp_path / "empty.html", tmp_path / "empty.png",
                          tmp_path / "profile_empty", 100)
-    # Measured: the empty scene has no red or green pixel and ~70 colours.
+    # Measured: the empty scene has no red, green, blue or text pixel and ~70 colours.
     assert red_pixels(control) < 60 and green_pixels(control) < 60
+    assert blue_pixels(control) < 30 and dark_pixels(clock(control)) < 30
     assert variety(control)[0] < 200
 
     for shot in (early, late):
         colours, commonest = variety(shot)
         assert colours > 200, colours  # shading, lines and spheres, not a flat page
         assert commonest < 0.5, commonest
-        # Measured: ~190 red (cables 1 and 3) and ~2600 green (workspace) pixels at the start.
+        # Measured: ~270 red (cables 1 and 3) and ~2500 green (workspace) pixels at the start.
         assert red_pixels(shot) > 120
         assert green_pixels(shot) > 1000
+        # The 2 N arrow is 0.5 m long at 0.25 m/N: measured ~95 blue pixels, where 2 N at
+        # the old 0.05 m/N (0.1 m, inside the 0.3 m platform) left none.
+        assert blue_pixels(shot) > 40, blue_pixels(shot)
+        # The clock's text (measured: ~360 dark pixels).
+        assert dark_pixels(clock(shot)) > 150, dark_pixels(clock(shot))
+    # The clock moved on between the two shots.
+    assert np.abs(clock(early) - clock(late)).sum() > 0
     # After the animation (1 s of log, well inside 4 s of page time) cables 5 and 7 are red
-    # too: about twice the red of the first frame (measured: ~200 -> ~480 pixels).
+    # too: about twice the red of the first frame (measured: ~270 -> ~630 pixels).
     assert red_pixels(late) > red_pixels(early) + 150, (red_pixels(early), red_pixels(late))

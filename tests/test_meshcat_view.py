@@ -4,6 +4,7 @@ messages, and what the HTML replay's recording holds. Meshcat listens on loopbac
 import base64
 import re
 import struct
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -212,6 +213,128 @@ def test_force_arrow_length_is_proportional_to_the_force(meshcat, view):
     np.testing.assert_allclose(tips[1] - P, 2.5 * (tips[0] - P), atol=1e-12)
 
 
+def test_default_arrows_reach_out_of_the_platform_at_the_documented_scale(meshcat):
+    from cdpm_drake.robot import load_robot, robot_names
+
+    view = mv.CdpmMeshcatView(meshcat, REELS, ATTACH, [1.0, 0.5, 0.5], [3.0, 2.5, 2.5], PAIRS)
+    view.draw(P, [0, 0, 0], [1.0, 0, 0], [1.0, 0, 0], [0.2, 0.2, 0.2])
+    # 1 N is drawn FORCE_SCALE m long; the README and the scene state that scale.
+    length = prop(meshcat, f"{view.force_path('F_int')}/scaled", "scale")[2]
+    assert length == mv.FORCE_SCALE == 0.25
+    readme = (Path(__file__).resolve().parent.parent / "README.md").read_text()
+    assert "0.25 m per N" in readme
+    assert meshcat.HasPath("/cdpm/clock/force_scale")
+    # On every built-in robot an arrow of 1 N (less than the F_u and hand forces of the shipped
+    # scenarios, 2-5 N) ends outside the platform box: its half-size is max |b_i| per axis.
+    for name in robot_names():
+        half = np.abs(load_robot(name).attachments).max()
+        assert mv.FORCE_SCALE * 1.0 > 1.5 * half, (name, half)
+
+
+def _look_at(eye, target):
+    """World-to-camera rotation of a camera at eye looking at target, z up (OpenGL: the camera
+    looks along its -z, y up), written out here independently of the view."""
+    forward = (target - eye) / np.linalg.norm(target - eye)
+    right = np.cross(forward, [0, 0, 1.0])
+    right /= np.linalg.norm(right)
+    up = np.cross(right, forward)
+    return np.stack([right, up, -forward])
+
+
+def _ndc(points, eye, target, fov_deg, aspect):
+    """Normalised device coordinates (x, y in [-1, 1] inside the view) of a pinhole camera."""
+    camera = (np.asarray(points) - eye) @ _look_at(eye, target).T
+    depth = -camera[:, 2]
+    assert np.all(depth > 0)  # in front of the camera
+    f = 1.0 / np.tan(np.radians(fov_deg) / 2)
+    return np.stack([camera[:, 0] * f / aspect / depth, camera[:, 1] * f / depth], axis=1)
+
+
+@pytest.mark.parametrize("robot_name", ["paper_7cable", "cube_8cable"])
+def test_the_default_camera_frames_the_whole_robot(meshcat, robot_name):
+    from cdpm_drake.robot import load_robot
+
+    robot = load_robot(robot_name)
+    view = mv.CdpmMeshcatView(meshcat, robot.reels, robot.attachments, robot.workspace.lower,
+                              robot.workspace.upper, robot.pairs)
+    eye, target = mv.camera_pose(robot.reels, direction=view.view_direction)
+    # Meshcat's default camera, whose field of view is in the meshcat.js that pydrake ships:
+    # `create_camera(){... new PerspectiveCamera(75, 1, .01, 100)`.
+    import pydrake
+
+    js = (Path(pydrake.__file__).parent / "share/drake/geometry/meshcat.js").read_text()
+    fov = float(re.search(r"create_camera\(\)\{.*?\((\d+(?:\.\d+)?),1,\.01,100\)", js).group(1))
+    assert fov == mv.CAMERA_FOV
+    # What Meshcat got: the camera's position (three.js is y up: (x, z, -y)).
+    x, y, z = prop(meshcat, "/Cameras/default/rotated/<object>", "position")
+    np.testing.assert_allclose([x, -z, y], eye - [0, 0, 0], atol=1e-9)
+    # The target is the centre of the reels' box: every corner of that box (so every reel,
+    # the workspace and the platform inside it) is in view, in a 4:3 and a 16:9 window...
+    lo, hi = robot.reels.min(axis=0), robot.reels.max(axis=0)
+    np.testing.assert_allclose(target, 0.5 * (lo + hi))
+    corners = np.array([[(hi if (n >> a) & 1 else lo)[a] for a in range(3)] for n in range(8)])
+    for aspect in (4 / 3, 16 / 9):
+        ndc = _ndc(corners, eye, target, fov, aspect)
+        assert np.all(np.abs(ndc) < 0.98), (aspect, ndc)
+        # ... and it fills the view: not a speck in the middle of it.
+        assert np.abs(ndc).max() > 0.6, ndc
+
+
+def test_cables_are_numbered_beside_their_reels_facing_the_camera(meshcat, view):
+    eye, target = mv.camera_pose(REELS, direction=view.view_direction)
+    height = mv._TEXT_HEIGHT * view.size
+    for i in range(1, 5):
+        path = view.label_path(i)
+        geometry = unpack(meshcat._GetPackedObject(path))["object"]["geometries"][0]
+        assert len(geometry["data"]["attributes"]["position"]["array"]) > 0
+        X = transform(meshcat, path)
+        # Within a text height of reel i, its face (z axis) along the camera's axis, towards
+        # the camera, and upright (x horizontal).
+        assert np.linalg.norm(X[:3, 3] - REELS[i - 1]) < 1.0 * height
+        np.testing.assert_allclose(X[:3, 2], (eye - target) / np.linalg.norm(eye - target),
+                                   atol=1e-12)
+        assert abs(X[2, 0]) < 1e-12
+    # Each number its own glyphs: the meshes of "1" .. "4" all differ.
+    shapes = {tuple(unpack(meshcat._GetPackedObject(view.label_path(i)))["object"]["geometries"]
+                    [0]["data"]["attributes"]["position"]["array"]) for i in range(1, 5)}
+    assert len(shapes) == 4
+
+
+def _clock(meshcat, view) -> str:
+    """The clock's text, read back from which glyph of each slot is visible."""
+    text = ""
+    for slot in range(mv.CLOCK_SLOTS):
+        shown = [g for g in mv.CLOCK_GLYPHS
+                 if prop(meshcat, view.clock_glyph_path(slot, g), "visible")]
+        assert len(shown) <= 1
+        text += shown[0] if shown else " "
+    return text
+
+
+def test_the_clock_shows_the_simulated_time(meshcat, view):
+    view.draw(P, [0, 0, 0], [0, 0, 0], [0, 0, 0], [0.2, 0.2, 0.2], sim_time=12.34)
+    assert _clock(meshcat, view) == "12.34 s  "
+    view.draw(P, [0, 0, 0], [0, 0, 0], [0, 0, 0], [0.2, 0.2, 0.2], sim_time=0.5)
+    assert _clock(meshcat, view) == "0.50 s   "
+    assert meshcat.HasPath("/cdpm/clock/prefix")  # "t ="
+
+
+def test_the_view_direction_sees_the_forces_side_on():
+    # Forces all along y: a camera beside the x axis sees them side-on, one in front (-y, the
+    # default's side) nearly end-on. Of the two sides (+x, -x) the one nearer the default
+    # (which looks from -x): (-cos 27 deg, 0, sin 27 deg) at the 27 deg elevation.
+    forces = np.tile([0.0, 2.0, 0.0], (10, 1))
+    d = mv.view_direction(forces)
+    np.testing.assert_allclose(d, [-np.cos(np.radians(27)), 0.0, np.sin(np.radians(27))],
+                               atol=1e-12)
+    # Along x instead: from the front (-y), like the default.
+    d = mv.view_direction(np.tile([3.0, 0.0, 0.0], (10, 1)))
+    np.testing.assert_allclose(d, [0.0, -np.cos(np.radians(27)), np.sin(np.radians(27))],
+                               atol=1e-12)
+    # No force at all: the default direction.
+    np.testing.assert_array_equal(mv.view_direction(np.zeros((5, 3))), mv.CAMERA_DIRECTION)
+
+
 def test_a_zero_force_hides_its_arrow(meshcat, view):
     view.draw(P, [1.0, 0, 0], [0, 0, 0], [1.0, 0, 0], [0.2, 0.2, 0.2])
     assert prop(meshcat, view.force_path("F_int"), "visible") is False
@@ -281,9 +404,12 @@ def test_live_view_callback_draws_the_latest_logged_tick(meshcat):
     mv.live_view_callback(view)(diagram, simulator.get_context())
     np.testing.assert_allclose(transform(meshcat, "/cdpm/platform")[:3, 3], log["p"][7])
     assert prop(meshcat, view.force_path("F_int"), "visible") is False
-    assert prop(meshcat, f"{view.force_path('F_H')}/scaled", "scale")[2] == pytest.approx(0.2)
+    # |F_H| = 4 N at the default FORCE_SCALE of 0.25 m/N: 1 m.
+    assert prop(meshcat, f"{view.force_path('F_H')}/scaled", "scale")[2] == pytest.approx(1.0)
     # Pair (1,3) at 45 mm < d_l = 50 mm: cables 1 and 3 red.
     assert visible_level(meshcat, view, 1) == 0 and visible_level(meshcat, view, 3) == 0
+    # The clock shows the diagram's time, 0.01 s.
+    assert _clock(meshcat, view) == "0.01 s   "
 
 
 def test_live_view_callback_reads_the_blocks_when_there_are_no_loggers(meshcat):
@@ -363,3 +489,10 @@ def test_replay_html_records_the_log(meshcat, tmp_path):
     # Cable lengths by eq. 2, independently of the view.
     np.testing.assert_allclose([key["value"][2] for key in scale],
                                cable_lengths(robot, log["p"][::20])[:, 4])
+    # The clock: frame k shows 0.04 k s, so the last slot is an "8" at frames 2 and 7 only
+    # ("0.08 s", "0.28 s"); the point stays in slot 1 throughout.
+    eight = tracks[view.clock_glyph_path(3, "8")][".visible"]["keys"]
+    assert [(key["time"], key["value"]) for key in eight] == [(0, False), (2, True), (3, False),
+                                                              (7, True), (8, False)]
+    point = tracks[view.clock_glyph_path(1, ".")][".visible"]["keys"]
+    assert [(key["time"], key["value"]) for key in point] == [(0, True)]

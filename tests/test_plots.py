@@ -18,13 +18,14 @@ def _lines(ax, prefix):
             if line.get_label().startswith(prefix)}
 
 
-def test_plot_log_writes_four_pngs(log, tmp_path):
+def test_plot_log_writes_the_pngs(log, tmp_path):
     import matplotlib.pyplot as plt  # only to see that plot_log left no pyplot figure open
 
     before = plt.get_fignums()
     paths = plots.plot_log(log, tmp_path / "out", dpi=50)
+    # A simulation's log has no tick clock: no timing figure.
     assert [p.name for p in paths] == ["distances.png", "forces.png", "trajectory.png",
-                                       "logistic.png"]
+                                       "logistic.png", "cables.png"]
     for path in paths:
         head = path.read_bytes()[:24]
         assert head[:8] == b"\x89PNG\r\n\x1a\n", path
@@ -35,6 +36,8 @@ def test_plot_log_writes_four_pngs(log, tmp_path):
     head = paths[0].read_bytes()[:24]
     assert (int.from_bytes(head[16:20], "big"), int.from_bytes(head[20:24], "big")) == (400, 225)
     assert plt.get_fignums() == before
+    realtime = plots.plot_log(synthetic_log(0.1, realtime=True), tmp_path / "rt", dpi=20)
+    assert realtime[-1].name == "timing.png" and len(realtime) == 6
 
 
 def test_distances_show_the_active_pairs_in_mm_with_their_bands(log):
@@ -81,6 +84,66 @@ def test_forces_plot_every_component_of_F_H_F_int_F_d(log):
     assert colors == {"F_H,x": "tab:blue", "F_int,x": "black", "F_d,x": "tab:red"}
 
 
+def test_force_axes_share_one_span_so_noise_reads_as_zero(log):
+    # F_y is numerical noise (1e-6 N) in every series; F_x of F_H swings +-8 N.
+    rng = np.random.default_rng(0)
+    noisy = dict(log)
+    for name in ("F_H", "F_int", "F_d"):
+        noisy[name] = log[name].copy()
+        noisy[name][:, 1] = 1e-6 * rng.standard_normal(len(log["time"]))
+    fig = plots.figure_forces(noisy)
+    spans = [np.diff(ax.get_ylim())[0] for ax in fig.axes]
+    # The largest component range over the series, from the data: F_x spans ~16 N (+-8 N sine
+    # plus F_int); each axis is 1.1 times that high (5 % margin on each side).
+    widest = max(np.ptp(np.concatenate([noisy[n][:, c] for n in ("F_H", "F_int", "F_d")]))
+                 for c in range(3))
+    assert widest > 15.0
+    np.testing.assert_allclose(spans, 1.1 * widest, rtol=1e-12)
+    # On that axis the noise fills less than 1e-6 of the height: drawn as the zero it is.
+    y = fig.axes[1].get_lines()[0].get_ydata()
+    assert np.ptp(y) / spans[1] < 1e-6
+    # A log where nothing pushes at all still gets the minimum span, not a zoom on zero.
+    still = dict(log, **{n: np.zeros_like(log[n]) for n in ("F_H", "F_int", "F_d")})
+    for ax in plots.figure_forces(still).axes:
+        assert np.diff(ax.get_ylim())[0] == pytest.approx(1.1 * plots.MIN_FORCE_SPAN)
+
+
+def _pixels(fig, ax, inset=4):
+    from matplotlib.backends.backend_agg import FigureCanvasAgg
+
+    canvas = FigureCanvasAgg(fig)
+    canvas.draw()
+    rgba = np.asarray(canvas.buffer_rgba())[..., :3].astype(int)
+    x0, y0, x1, y1 = ax.get_window_extent(canvas.get_renderer()).extents
+    height = rgba.shape[0]
+    # Inside the spines only (the legends are outside the axes).
+    return rgba[int(height - y1) + inset:int(height - y0) - inset, int(x0) + inset:int(x1) - inset]
+
+
+def test_coinciding_force_lines_all_stay_visible(log):
+    # Nobody pushes: F_H = 0 and F_d = F_int, the case where the red line hid the black one.
+    alone = dict(log, F_H=np.zeros_like(log["F_H"]), F_d=log["F_int"].copy())
+    fig = plots.figure_forces(alone)
+    styles = {(line.get_linestyle(), line.get_linewidth())
+              for line in fig.axes[0].get_lines()}
+    assert len(styles) == 3  # every series its own style or width
+    # Wider lines lie below narrower ones, so a narrower one never covers a wider one.
+    lines = sorted(fig.axes[0].get_lines(), key=lambda line: line.get_zorder())
+    widths = [line.get_linewidth() for line in lines]
+    assert widths == sorted(widths, reverse=True)
+    # Rendered: black (F_int) and red (F_d) pixels along the same curve, and the blue F_H
+    # along zero. Colours from matplotlib's tab palette: tab:red (214, 39, 40), tab:blue
+    # (31, 119, 180).
+    rgb = _pixels(fig, fig.axes[2])  # F_z: 0.8 * alpha of pair (1,3), clearly off zero
+    r, g, b = rgb[..., 0], rgb[..., 1], rgb[..., 2]
+    black = int(((r < 80) & (g < 80) & (b < 80)).sum())
+    red = int(((r > 180) & (g < 90) & (b < 90)).sum())
+    blue = int(((b > 150) & (r < 80) & (g > 90) & (g < 150)).sum())
+    # Measured: ~460 black, ~620 red, ~3400 blue pixels; on a red line drawn over the black one
+    # of the same width, no black pixel is left.
+    assert black > 150 and red > 300 and blue > 300, (black, red, blue)
+
+
 def test_forces_add_F_wall_when_the_wall_pushed(log):
     pushed = dict(log, F_wall=np.tile([0.0, 0.0, 1.5], (len(log["time"]), 1)))
     ax = plots.figure_forces(pushed).axes[2]
@@ -90,8 +153,8 @@ def test_forces_add_F_wall_when_the_wall_pushed(log):
 
 def test_trajectory_marks_events_crossings_reels_and_cables(log):
     fig = plots.figure_trajectory(log)
-    ax = fig.axes[0]
-    lines = {line.get_label(): line for line in ax.get_lines()}
+    zoom, robot = fig.axes[:2]
+    lines = {line.get_label(): line for line in zoom.get_lines()}
 
     def data(label):
         return np.array(lines[label].get_data_3d()).T
@@ -100,19 +163,71 @@ def test_trajectory_marks_events_crossings_reels_and_cables(log):
     np.testing.assert_array_equal(data("a pair within d_u"), log["p"][log["active"].any(axis=1)])
     # The synthetic log flags pair (1,3) crossed during its first 5 ticks.
     np.testing.assert_array_equal(data("a pair crossed"), log["p"][:5])
-    np.testing.assert_array_equal(data("reels A_i"), log["reels"])
-    texts = sorted(t.get_text().strip() for t in ax.texts)
+    reels = [line for line in robot.get_lines() if line.get_label() == "reels A_i"]
+    np.testing.assert_array_equal(np.array(reels[0].get_data_3d()).T, log["reels"])
+    texts = sorted(t.get_text().strip() for t in robot.texts)
     assert texts == [f"A{i}" for i in range(1, 8)]
     # Tick 0 is the first with interference (pair (1,3) at 45 mm < d_u): cables 1 and 3 red,
     # each from its reel a_i to p + b_i.
-    cables = {line.get_gid(): line for line in ax.get_lines() if line.get_gid()}
+    cables = {line.get_gid(): line for line in robot.get_lines()
+              if (line.get_gid() or "").startswith("cable ")}
     assert sorted(cables) == sorted(f"cable {i}" for i in range(1, 8))
     for i in range(1, 8):
         xyz = np.array(cables[f"cable {i}"].get_data_3d()).T
         np.testing.assert_allclose(xyz, [log["reels"][i - 1],
                                          log["p"][0] + log["attachments"][i - 1]])
         assert cables[f"cable {i}"].get_color() == ("red" if i in (1, 3) else "0.55")
-    assert (ax.get_xlabel(), ax.get_ylabel(), ax.get_zlabel()) == ("x (m)", "y (m)", "z (m)")
+    for ax in (zoom, robot):
+        assert (ax.get_xlabel(), ax.get_ylabel(), ax.get_zlabel()) == ("x (m)", "y (m)", "z (m)")
+
+
+def test_trajectory_zooms_to_the_motion_with_the_robot_as_context(log):
+    fig = plots.figure_trajectory(log)
+    zoom, robot = fig.axes[:2]
+    p = log["p"]
+    # The synthetic path spans 0.13, 0.10, 0.17 m (p0 -> p1 of the helper): the zoomed axes are
+    # one cube of 0.17 m x (1 + 2 x 15 %) = 0.221 m around it; the robot spans ~4.7 m.
+    extent = p.max(axis=0) - p.min(axis=0)
+    np.testing.assert_allclose(extent, [0.13, 0.10, 0.17], atol=1e-12)
+    for (lo, hi), a, b in zip((zoom.get_xlim(), zoom.get_ylim(), zoom.get_zlim()),
+                              p.min(axis=0), p.max(axis=0)):
+        assert lo <= a and b <= hi
+        assert hi - lo == pytest.approx(0.17 * 1.3)
+    # The context panel holds the whole robot and the workspace box, and outlines the zoom.
+    lines = {line.get_label(): line for line in robot.get_lines()}
+    box = np.array(lines["workspace (virtual wall)"].get_data_3d()).T
+    np.testing.assert_allclose(np.nanmin(box, axis=0), log["workspace_lower"])
+    np.testing.assert_allclose(np.nanmax(box, axis=0), log["workspace_upper"])
+    region = [line for line in robot.get_lines() if line.get_gid() == "zoomed region"][0]
+    np.testing.assert_allclose(np.nanmax(np.array(region.get_data_3d()).T, axis=0),
+                               [zoom.get_xlim()[1], zoom.get_ylim()[1], zoom.get_zlim()[1]])
+    for get, k in ((robot.get_xlim, 0), (robot.get_ylim, 1), (robot.get_zlim, 2)):
+        lo, hi = get()
+        assert lo <= log["reels"][:, k].min() and log["reels"][:, k].max() <= hi
+
+
+def test_trajectory_path_above_the_event_dots_and_legend_off_the_data(log):
+    fig = plots.figure_trajectory(log)
+    zoom = fig.axes[0]
+    lines = {line.get_label(): line for line in zoom.get_lines()}
+    # Depth sorting off in the zoomed panel, so zorder decides: the path above the dots.
+    assert zoom.computed_zorder is False
+    assert lines["platform path p"].get_zorder() > lines["a pair within d_u"].get_zorder()
+    from matplotlib.backends.backend_agg import FigureCanvasAgg
+    canvas = FigureCanvasAgg(fig)
+    canvas.draw()
+    renderer = canvas.get_renderer()
+    legend = fig.legends[0].get_window_extent(renderer)
+    for ax in fig.axes:
+        assert not legend.overlaps(ax.get_window_extent(renderer)), ax.get_title()
+    # Only what is present: this log has crossings; one without lists none.
+    labels = [t.get_text() for t in fig.legends[0].get_texts()]
+    assert "a pair crossed" in labels and len(labels) == len(set(labels))
+    quiet = plots.figure_trajectory(synthetic_log(0.2, crossed_ticks=0, interference=False))
+    labels = [t.get_text() for t in quiet.legends[0].get_texts()]
+    assert "a pair crossed" not in labels and "a pair within d_u" not in labels
+    assert "cables of the active pairs" not in labels and "platform path p" in labels
+    assert not any(line.get_label() == "a pair crossed" for line in quiet.axes[0].get_lines())
 
 
 def test_logistic_curves_follow_eqs_26_28_for_each_parameter_set(log):
@@ -168,3 +283,104 @@ def test_figures_name_missing_or_misshapen_keys(log):
         plots.figure_forces({k: v for k, v in log.items() if k != "F_d"})
     with pytest.raises(plots.LogError, match="'F_H' has shape"):
         plots.figure_forces(dict(log, F_H=log["F_H"][:-1]))
+
+
+def test_a_fault_is_marked_in_every_figure(tmp_path):
+    # The synthetic run ends on a fault at 0.3 s (helper: "bridge silent for 3 ticks").
+    log = synthetic_log(0.5, fault_time=0.3, realtime=True)
+    note = "fault at t = 0.300 s: bridge silent for 3 ticks"
+    time_axes = 0
+    for name, make in plots.FIGURES.items():
+        fig = make(log)
+        assert note in fig.get_suptitle().replace("\n", " "), name
+        for ax in fig.axes:
+            if ax.name == "3d":
+                continue
+            marks = [line for line in ax.get_lines() if line.get_gid() == "fault"]
+            if name == "logistic":
+                assert marks == []  # distance on x, no time axis
+                continue
+            assert len(marks) == 1, (name, ax.get_ylabel())
+            assert list(marks[0].get_xdata()) == [0.3, 0.3]
+            time_axes += 1
+        if name == "trajectory":
+            for ax in fig.axes[:2]:
+                star = [line for line in ax.get_lines() if line.get_gid() == "fault"][0]
+                # The pose logged at the fault's tick (0.3 s / 2 ms = tick 150).
+                np.testing.assert_allclose(np.array(star.get_data_3d()).ravel(), log["p"][150])
+    # distances 1 + forces 3 + cables 2 + timing 2.
+    assert time_axes == 8
+    # Older logs and completed runs: nothing marked.
+    for quiet in (synthetic_log(0.2), dict(synthetic_log(0.2), ending=np.array("completed"),
+                                            fault_time=np.array(np.nan),
+                                            fault_message=np.array(""))):
+        fig = plots.figure_forces(quiet)
+        assert "fault" not in fig.get_suptitle()
+        assert not any(line.get_gid() == "fault" for ax in fig.axes for line in ax.get_lines())
+    # A long message (a ReelFault's names the bridge, the watchdog and the link counts) is
+    # wrapped, not cut before its reason.
+    long = dict(log, fault_message=np.array(
+        "ReelFault: reel fault at t = 0.300 s: no valid status from the reel bridge at "
+        "127.0.0.1:47100 for 3 ticks (6 ms; watchdog_ticks = 3); zero reel velocity sent."))
+    title = plots.figure_cables(long).get_suptitle()
+    assert "zero reel velocity sent." in title
+    assert max(len(line) for line in title.split("\n")) <= 100
+
+
+def test_timing_figure_shows_tick_period_compute_and_the_limits():
+    log = synthetic_log(0.5, realtime=True)
+    fig = plots.figure_timing(log)
+    period_ax, compute_ax = fig.axes
+    period = _lines(period_ax, "tick period")["tick period"]
+    # diff(wall) in ms against the time of the later tick: 2 ms, 5 ms at the late tick (0.2 s,
+    # tick 100, helper).
+    np.testing.assert_allclose(period.get_xdata(), log["time"][1:])
+    np.testing.assert_allclose(period.get_ydata(), 1000 * np.diff(log["wall"]))
+    assert period.get_ydata()[99] == pytest.approx(5.0)
+    compute = _lines(compute_ax, "compute")["compute time per tick"]
+    np.testing.assert_allclose(compute.get_ydata(), 1000 * log["compute"])
+    for ax in (period_ax, compute_ax):
+        marks = {line.get_gid(): line.get_ydata()[0] for line in ax.get_lines()
+                 if line.get_gid() in ("period", "watchdog")}
+        # The 2 ms period of the log's time column, the 3-tick (6 ms) watchdog limit.
+        assert marks == pytest.approx({"period": 2.0, "watchdog": 6.0})
+    assert "p50 2.00 ms" in fig.get_suptitle() and "max 5.00 ms" in fig.get_suptitle()
+    with pytest.raises(plots.LogError, match=r"needs log key\(s\) \['wall'\]"):
+        plots.figure_timing(synthetic_log(0.1))
+    # A log of an older cdpm run (tick and wall only): the period, and a note for compute.
+    older = {k: v for k, v in log.items() if k not in ("compute", "watchdog_limit")}
+    fig = plots.figure_timing(older)
+    assert _lines(fig.axes[0], "tick period")
+    assert not _lines(fig.axes[1], "compute")
+    assert any("not recorded" in t.get_text() for t in fig.axes[1].texts)
+    assert not any(line.get_gid() == "watchdog" for ax in fig.axes for line in ax.get_lines())
+
+
+def test_cables_figure_shows_lengths_and_reel_speeds_numbered_from_1(log):
+    fig = plots.figure_cables(log)
+    top, bottom = fig.axes
+    for ax, key in ((top, "lengths"), (bottom, "reel_velocity")):
+        lines = _lines(ax, "cable ")
+        assert sorted(lines) == sorted(f"cable {i}" for i in range(1, 8))
+        for i in range(1, 8):
+            np.testing.assert_array_equal(lines[f"cable {i}"].get_xdata(), log["time"])
+            np.testing.assert_array_equal(lines[f"cable {i}"].get_ydata(), log[key][:, i - 1])
+        styles = {(line.get_color(), line.get_linestyle()) for line in lines.values()}
+        assert len(styles) == 7
+    assert "(m)" in top.get_ylabel() and "(m/s)" in bottom.get_ylabel()
+
+
+def test_views_benchmark_prints_its_table():
+    import subprocess
+    import sys
+    from pathlib import Path
+
+    script = Path(__file__).resolve().parent.parent / "scripts" / "bench_views.py"
+    done = subprocess.run([sys.executable, str(script), "--duration", "0.2", "--fps", "10"],
+                          capture_output=True, text=True, timeout=300)
+    assert done.returncode == 0, done.stderr
+    # 0.2 s of 2 ms ticks: 101 ticks; at 10 frames/s, 3 frames (0, 0.1, 0.2 s).
+    assert "101 ticks" in done.stdout and "3 frames" in done.stdout
+    for row in ("simulation (reference)", "figure forces", "figure cables", "HTML replay",
+                "live view: one frame"):
+        assert row in done.stdout, done.stdout

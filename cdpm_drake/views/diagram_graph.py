@@ -1,4 +1,5 @@
-"""The controller diagram as graphviz: .dot from Drake's GetGraphvizString, .svg via pygraphviz."""
+"""The controller diagram as graphviz, .svg via pygraphviz: the full-depth picture from Drake's
+GetGraphvizString (NAME.dot) and a readable overview of the top level (NAME_overview.dot)."""
 
 import re
 from pathlib import Path
@@ -43,17 +44,101 @@ def render_svg(dot_text: str) -> str:
 
 
 def write_diagrams(diagrams: dict, out_dir, *, svg: bool = True, max_depth: int = 1) -> list[Path]:
-    """Write NAME.dot (and NAME.svg) for each {NAME: diagram}; returns the paths."""
+    """Write NAME.dot and NAME_overview.dot (and their .svg) for each {NAME: diagram}: Drake's
+    full-depth graphviz and the readable top level (overview_graphviz); returns the paths."""
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     paths = []
     for name, diagram in diagrams.items():
-        dot = stable_graphviz(diagram, max_depth=max_depth)
-        path = out / f"{name}.dot"
-        path.write_text(dot)
-        paths.append(path)
-        if svg:
-            svg_path = out / f"{name}.svg"
-            svg_path.write_text(render_svg(dot))
-            paths.append(svg_path)
+        for stem, dot in ((name, stable_graphviz(diagram, max_depth=max_depth)),
+                          (f"{name}_overview", overview_graphviz(diagram))):
+            path = out / f"{stem}.dot"
+            path.write_text(dot)
+            paths.append(path)
+            if svg:
+                svg_path = out / f"{stem}.svg"
+                svg_path.write_text(render_svg(dot))
+                paths.append(svg_path)
     return paths
+
+
+# --- The readable overview -------------------------------------------------------------------
+
+# Drake's primitives name their inputs u0, u1, ... (Adder, Multiplexer): the overview labels
+# such an input with the signal it receives instead.
+_NUMBERED_INPUT = re.compile(r"^u\d+$")
+
+
+def _html(text: str) -> str:
+    return text.replace("&", "&amp;").replace("<", "&lt;").replace(">", "&gt;")
+
+
+def _short_type(system) -> str:
+    """The class name without its module, e.g. `Adder` for pydrake's Adder_[float]."""
+    name = type(system).__name__
+    return re.sub(r"_\[.*\]$", "", name)
+
+
+def _port_row(names, prefix: str) -> str:
+    cells = "".join(f'<TD PORT="{prefix}{k}">{_html(n)}</TD>' for k, n in enumerate(names))
+    return ('<TR><TD BORDER="0" CELLPADDING="0"><TABLE BORDER="0" CELLBORDER="1" '
+            f'CELLSPACING="0" CELLPADDING="2"><TR>{cells}</TR></TABLE></TD></TR>')
+
+
+def overview_graphviz(diagram, title: str | None = None) -> str:
+    """A readable graphviz of a diagram's top level, derived from the built diagram: one node
+    per top-level system (its name, its class without the module; a sub-diagram such as the
+    simulated plant collapsed into one node), its input ports on top and output ports below,
+    one edge per connection, numbered inputs (u0, u1 of an Adder) labelled with the signal
+    they receive. Laid out top to bottom so that it fits a page's width."""
+    systems = list(diagram.GetSystems())
+    index = {id(s): k for k, s in enumerate(systems)}
+    connections = sorted(
+        ((index[id(src)], int(src_k), index[id(dst)], int(dst_k))
+         for (dst, dst_k), (src, src_k) in diagram.connection_map().items()))
+    source_of = {(d, dk): (s, sk) for s, sk, d, dk in connections}
+
+    def input_label(k: int, port: int) -> str:
+        name = systems[k].get_input_port(port).get_name()
+        if _NUMBERED_INPUT.match(name) and (k, port) in source_of:
+            s, sk = source_of[(k, port)]
+            return systems[s].get_output_port(sk).get_name()
+        return name
+
+    lines = [f'digraph "{_html(title or diagram.get_name())}" {{',
+             '  graph [rankdir=TB, nodesep=0.25, ranksep=0.35, fontname="Helvetica", '
+             'fontsize=11];',
+             '  node [shape=plaintext, fontname="Helvetica", fontsize=10, margin=0];',
+             '  edge [fontname="Helvetica", fontsize=9, arrowsize=0.6, color="#444444"];']
+    for k, system in enumerate(systems):
+        rows = []
+        inputs = [input_label(k, p) for p in range(system.num_input_ports())]
+        outputs = [system.get_output_port(p).get_name() for p in range(system.num_output_ports())]
+        if inputs:
+            rows.append(_port_row(inputs, "i"))
+        kind = _short_type(system)
+        if hasattr(system, "GetSystems"):  # a sub-diagram, collapsed: say what is inside
+            inside = [s.get_name() for s in system.GetSystems()]
+            kind = "of " + ", ".join(inside[:3]) + (f" +{len(inside) - 3}" if len(inside) > 3
+                                                     else "")
+        fill = ' BGCOLOR="#e8eef8"' if hasattr(system, "GetSystems") else ""
+        rows.append(f'<TR><TD{fill}><B>{_html(system.get_name())}</B><BR/>'
+                    f'<FONT POINT-SIZE="8" COLOR="#555555">{_html(kind)}</FONT></TD></TR>')
+        if outputs:
+            rows.append(_port_row(outputs, "o"))
+        lines.append(f'  n{k} [label=<<TABLE BORDER="0" CELLBORDER="1" CELLSPACING="0" '
+                     f'CELLPADDING="3">{"".join(rows)}</TABLE>>];')
+    # The diagram's own (exported) ports, when it has any.
+    for p in range(diagram.num_input_ports()):
+        lines.append(f'  in{p} [shape=cds, label="{_html(diagram.get_input_port(p).get_name())}"];')
+        for system, port in diagram.GetInputPortLocators(diagram.get_input_port(p).get_index()):
+            lines.append(f'  in{p} -> n{index[id(system)]}:i{int(port)}:n;')
+    for p in range(diagram.num_output_ports()):
+        system, port = diagram.get_output_port_locator(diagram.get_output_port(p).get_index())
+        lines.append(f'  out{p} [shape=cds, label="'
+                     f'{_html(diagram.get_output_port(p).get_name())}"];')
+        lines.append(f'  n{index[id(system)]}:o{int(port)}:s -> out{p};')
+    for s, sk, d, dk in connections:
+        lines.append(f"  n{s}:o{sk}:s -> n{d}:i{dk}:n;")
+    lines.append("}")
+    return "\n".join(lines) + "\n"

@@ -5,7 +5,10 @@ workspace box (wireframe), the platform (a box), one cylinder per cable from its
 attachment p + b_i coloured by the distance to its nearest cable (red at or below d_l, red to
 orange inside the band (d_l, d_u], grey above d_u: the interfering pair is red, as in the paper's
 Fig. 9), and the forces from the platform as arrows (blue measured F_H, black interference F_int,
-red resultant F_d, as in Fig. 12), `force_scale` m long per N.
+red resultant F_d, as in Fig. 12), FORCE_SCALE = 0.25 m long per N by default (1 N reaches out of
+the paper's 0.3 m platform); the scale is written in the scene. Each reel carries its cable's
+number (1..m) and a clock shows the simulated time (s). The text is flat geometry facing the
+default camera, which frames the whole robot (camera_pose).
 
 Everything that moves is posed by a transform, a scale or a visibility flag, never by
 re-sending geometry, because those three are what a Meshcat recording can animate; the same
@@ -14,8 +17,10 @@ cylinder along z, posed at its reel and scaled along z to its length; each cable
 cylinder per colour level and only the one of its current level is visible. `draw` only sends
 what changed and costs a few dozen Meshcat messages.
 
-Scene paths use 1-based cable numbers (`/cdpm/cables/cable_3`).
+Scene paths use 1-based cable numbers (`/cdpm/cables/cable_3`, `/cdpm/labels/cable_3`).
 """
+
+import functools
 
 from collections.abc import Mapping
 from pathlib import Path
@@ -41,6 +46,23 @@ DEFAULT_D_U = 0.061  # m
 _TINY = 1e-9
 # An arrow is a unit-length shaft + head along z, scaled along z to its length.
 _HEAD_FRACTION = 0.2
+# m of arrow per N of force: 1 N is 0.25 m, longer than the paper's platform half-size (0.15 m),
+# so an arrow of the forces these scenarios use (F_u 2-3 N, a hand's 1-5 N) reaches well out.
+FORCE_SCALE = 0.25
+# The default camera: Meshcat's own (its meshcat.js creates a perspective camera of 75 deg
+# vertical field of view), and the narrowest window (width / height) it must frame the robot
+# in.
+CAMERA_FOV = 75.0
+CAMERA_MIN_ASPECT = 4.0 / 3.0
+# From the robot's centre towards the camera: in front (-y), to the left (-x), above (+z).
+CAMERA_DIRECTION = np.array([-0.45, -1.0, 0.5]) / np.linalg.norm([-0.45, -1.0, 0.5])
+# Text height as a share of the robot's size (the diagonal of the reels' box).
+_TEXT_HEIGHT = 0.035
+TEXT_RGBA = (0.08, 0.08, 0.12, 1.0)
+# The clock: "t = " then CLOCK_SLOTS characters, each slot able to show any of CLOCK_GLYPHS
+# (visibility flags, which a recording can animate), left-aligned: "t = 12.34 s".
+CLOCK_GLYPHS = "0123456789.s"
+CLOCK_SLOTS = 9  # "9999.99 s"
 
 
 # --- Pure math (numpy) ------------------------------------------------------------------------
@@ -96,6 +118,125 @@ def _box_segments(lower, upper) -> tuple[np.ndarray, np.ndarray]:
     return np.array(starts).T.copy(), np.array(ends).T.copy()
 
 
+def view_direction(forces=None, elevation: float = 27.0, azimuths: int = 16) -> np.ndarray:
+    """Unit vector from the robot towards the camera. With forces (N, (T, 3), e.g. the F_H,
+    F_int, F_d of a log) the one of `azimuths` directions (every 360 / azimuths deg from +x)
+    at `elevation` (deg) that sees them most side-on (largest mean projected length |F x c|),
+    so that the arrows show their length; of equally good ones the nearest in azimuth to
+    CAMERA_DIRECTION. Without forces, CAMERA_DIRECTION."""
+    f = None if forces is None else np.asarray(forces, dtype=float).reshape(-1, 3)
+    if f is not None:
+        f = f[np.all(np.isfinite(f), axis=1)]
+    if f is None or not np.any(f):
+        return CAMERA_DIRECTION.copy()
+    e = np.radians(elevation)
+    usual = np.arctan2(CAMERA_DIRECTION[1], CAMERA_DIRECTION[0])
+    angles = 2 * np.pi * np.arange(azimuths) / azimuths
+    # Nearest to the usual view first, so that argmax keeps it among ties.
+    angles = sorted(angles, key=lambda a: abs(np.angle(np.exp(1j * (a - usual)))))
+    candidates = [np.array([np.cos(e) * np.cos(a), np.cos(e) * np.sin(a), np.sin(e)])
+                  for a in angles]
+    seen = [np.linalg.norm(np.cross(f, c), axis=1).mean() for c in candidates]
+    return candidates[int(np.argmax(np.round(seen, 9)))]
+
+
+def camera_pose(reels, fov: float = CAMERA_FOV, aspect: float = CAMERA_MIN_ASPECT,
+                direction=CAMERA_DIRECTION) -> tuple[np.ndarray, np.ndarray]:
+    """Camera position and target (m, base frame) that frame the whole robot: the target is
+    the centre of the reels' box, and the camera is as far along `direction` as it takes for
+    the box's bounding sphere to fit, with 5 % to spare, in a perspective view of vertical
+    field of view `fov` (deg) in a window `aspect` (width / height) or wider."""
+    reels = np.asarray(reels, dtype=float).reshape(-1, 3)
+    lo, hi = reels.min(axis=0), reels.max(axis=0)
+    target = 0.5 * (lo + hi)
+    radius = max(0.5 * float(np.linalg.norm(hi - lo)), 1e-3)
+    half_v = np.radians(fov) / 2.0
+    half = min(half_v, np.arctan(aspect * np.tan(half_v)))
+    direction = np.asarray(direction, dtype=float) / np.linalg.norm(direction)
+    return target + 1.05 * radius / np.sin(half) * direction, target
+
+
+def facing_rotation(eye, target) -> RotationMatrix:
+    """Orientation of flat text seen from eye looking at target: x to the viewer's right, y up
+    (as close to +z as the view allows), z towards the viewer."""
+    view = np.asarray(target, dtype=float) - np.asarray(eye, dtype=float)
+    view /= np.linalg.norm(view)
+    right = np.cross(view, [0.0, 0.0, 1.0])
+    if np.linalg.norm(right) < 1e-9:  # looking straight down or up
+        right = np.array([1.0, 0.0, 0.0])
+    right /= np.linalg.norm(right)
+    up = np.cross(right, view)
+    return RotationMatrix(np.column_stack([right, up, -view]))
+
+
+# Text: DejaVu Sans Mono (shipped with matplotlib) rasterised once per string, each run of lit
+# pixels a rectangle, so that Meshcat draws it with a plain triangle mesh (which the HTML
+# replay keeps and a recording can show or hide).
+_TEXT_ROWS = 24            # pixel rows per line of text
+_MONO_ADVANCE = 0.6021     # DejaVu Sans Mono's advance width, em (1233 / 2048)
+_EM = 0.75 * _TEXT_ROWS    # px: the em of the cells (advance = _MONO_ADVANCE em)
+
+
+@functools.lru_cache(maxsize=256)
+def text_bitmap(text: str) -> np.ndarray:
+    """(rows, cols) bool pixels of a line of text in the monospaced font, cell k spanning
+    columns [k, k + 1) * _cell_px()."""
+    from matplotlib.backends.backend_agg import FigureCanvasAgg
+    from matplotlib.figure import Figure
+
+    cols = max(1, int(np.ceil(len(text) * _MONO_ADVANCE * _EM * 1.25)) + 1)
+    fig = Figure(figsize=(cols / 100.0, _TEXT_ROWS / 100.0), dpi=100)
+    fig.text(0.0, 0.22, text, fontsize=_EM * 0.9, family="DejaVu Sans Mono", ha="left",
+             va="baseline", color="black")
+    canvas = FigureCanvasAgg(fig)
+    canvas.draw()
+    gray = np.asarray(canvas.buffer_rgba())[..., :3].mean(axis=2)
+    return gray < 128
+
+
+def text_mesh(text: str, height: float) -> tuple[np.ndarray, np.ndarray]:
+    """A flat triangle mesh of a line of text `height` m high in its own x-y plane (x along the
+    text, y up, origin at its left end, halfway up): vertices (3, N) m and faces (3, M)."""
+    lit = text_bitmap(text)
+    rows, _ = lit.shape
+    pixel = height / rows
+    rects, open_runs = [], {}
+    for r in range(rows + 1):
+        runs = set()
+        if r < rows:
+            row = np.concatenate([[False], lit[r], [False]])
+            edges = np.flatnonzero(np.diff(row.astype(int)))
+            runs = set(zip(edges[::2], edges[1::2]))
+        # A run that continues from the row above extends its rectangle downwards.
+        for run in list(open_runs):
+            if run not in runs:
+                rects.append((*run, open_runs.pop(run), r))
+        for run in runs:
+            open_runs.setdefault(run, r)
+    vertices, faces = [], []
+    for c0, c1, r0, r1 in rects:
+        n = len(vertices)
+        x0, x1 = c0 * pixel, c1 * pixel
+        y0, y1 = (rows / 2 - r1) * pixel, (rows / 2 - r0) * pixel
+        vertices += [(x0, y0, 0.0), (x1, y0, 0.0), (x1, y1, 0.0), (x0, y1, 0.0)]
+        faces += [(n, n + 1, n + 2), (n, n + 2, n + 3)]
+    if not vertices:
+        return np.zeros((3, 0)), np.zeros((3, 0), dtype=np.int32)
+    return (np.asarray(vertices, dtype=float).T.copy(order="F"),
+            np.asarray(faces, dtype=np.int32).T.copy(order="F"))
+
+
+def _cell_px() -> float:
+    """Width of one character of text_bitmap, px (the font is drawn at 1.25 _EM)."""
+    return _MONO_ADVANCE * _EM * 1.25
+
+
+def clock_text(sim_time: float) -> str:
+    """What the clock shows after "t = " for sim_time (s): e.g. "12.34 s", clipped to
+    0 .. 9999.99 s."""
+    return f"{min(max(float(sim_time), 0.0), 9999.99):.2f} s"
+
+
 # --- The view ---------------------------------------------------------------------------------
 
 
@@ -131,14 +272,14 @@ class CdpmMeshcatView:
 
     reels (m, 3) a_i and workspace corners (3,) in the base frame, m; attachments (m, 3) b_i in
     the platform frame, m; pairs (P, 2) the 1-based cable pairs of the pair_distances columns;
-    force_scale in m of arrow per N; d_l, d_u (m, scalars or one per pair) the default colour
-    band, overridden per call by draw's d_l, d_u.
+    force_scale in m of arrow per N (FORCE_SCALE); d_l, d_u (m, scalars or one per pair) the
+    default colour band, overridden per call by draw's d_l, d_u.
     """
 
     def __init__(self, meshcat: Meshcat, reels, attachments, workspace_lower, workspace_upper,
-                 pairs, force_scale: float = 0.05, d_l=DEFAULT_D_L, d_u=DEFAULT_D_U,
+                 pairs, force_scale: float = FORCE_SCALE, d_l=DEFAULT_D_L, d_u=DEFAULT_D_U,
                  prefix: str = "/cdpm", cable_radius: float = 0.01,
-                 set_camera: bool = True):
+                 set_camera: bool = True, view_direction=CAMERA_DIRECTION):
         self.meshcat = meshcat
         self.reels = _points(reels, "reels")
         m = self.reels.shape[0]
@@ -160,6 +301,10 @@ class CdpmMeshcatView:
                              f"{prefix!r}")
         self.prefix = prefix.rstrip("/")
         self.cable_radius = float(cable_radius)
+        direction = _vector(view_direction, "view_direction")
+        if not np.linalg.norm(direction) > 0:
+            raise ValueError(f"view_direction must be a non-zero 3-vector, got {view_direction!r}")
+        self.view_direction = direction / np.linalg.norm(direction)
         self._visible: dict[str, bool] = {}
         self._build()
         if set_camera:
@@ -168,12 +313,17 @@ class CdpmMeshcatView:
     @classmethod
     def from_log(cls, meshcat: Meshcat, log: Mapping, **kwargs) -> "CdpmMeshcatView":
         """A view of the robot a log.npz describes (docs/LOG_FORMAT.md); the colour band is the
-        log's d_l, d_u where finite, the defaults elsewhere."""
+        log's d_l, d_u where finite, the defaults elsewhere; the camera looks from where the
+        log's forces are seen most side-on (view_direction)."""
         d_l = np.asarray(log["d_l"], dtype=float)
         d_u = np.asarray(log["d_u"], dtype=float)
         ok = np.isfinite(d_l) & np.isfinite(d_u)
         kwargs.setdefault("d_l", np.where(ok, d_l, DEFAULT_D_L))
         kwargs.setdefault("d_u", np.where(ok, d_u, DEFAULT_D_U))
+        forces = [np.asarray(log[k], dtype=float).reshape(-1, 3)
+                  for k in ("F_H", "F_int", "F_d") if k in log]
+        kwargs.setdefault("view_direction", view_direction(np.vstack(forces) if forces
+                                                           else None))
         return cls(meshcat, log["reels"], log["attachments"], log["workspace_lower"],
                    log["workspace_upper"], log["pairs"], **kwargs)
 
@@ -191,6 +341,20 @@ class CdpmMeshcatView:
     def force_path(self, name: str) -> str:
         """Scene path of the arrow of force `name` in F_H, F_int, F_d."""
         return f"{self.prefix}/forces/{name}"
+
+    def label_path(self, i: int) -> str:
+        """Scene path of cable i's number (1-based), beside its reel."""
+        return f"{self.prefix}/labels/cable_{i}"
+
+    def clock_glyph_path(self, slot: int, glyph: str) -> str:
+        """Scene path of character `glyph` (one of CLOCK_GLYPHS) in slot 0..CLOCK_SLOTS-1."""
+        name = {".": "point"}.get(glyph, glyph)
+        return f"{self.prefix}/clock/slot_{slot}/{name}"
+
+    @property
+    def size(self) -> float:
+        """The robot's size, m: the diagonal of the reels' box."""
+        return float(np.linalg.norm(self.reels.max(axis=0) - self.reels.min(axis=0))) or 1.0
 
     # -- static scene --
 
@@ -229,14 +393,54 @@ class CdpmMeshcatView:
             mc.SetObject(f"{scaled}/head", head, Rgba(*rgba))
             mc.SetTransform(f"{scaled}/head", RigidTransform(RollPitchYaw(np.pi, 0, 0),
                                                              [0.0, 0.0, 1.0]))
-        self._visible.clear()
+        self._build_text()
+        self.forget_drawn_state()
+
+    def _text(self, path: str, text: str, height: float) -> None:
+        vertices, faces = text_mesh(text, height)
+        if faces.shape[1]:
+            self.meshcat.SetTriangleMesh(path, vertices, faces, Rgba(*TEXT_RGBA))
+
+    def _build_text(self) -> None:
+        """Cable numbers beside the reels, the clock and the force scale, facing the default
+        camera."""
+        mc, pre = self.meshcat, self.prefix
+        eye, target = camera_pose(self.reels, direction=self.view_direction)
+        R = facing_rotation(eye, target)
+        right, up, normal = (R.matrix()[:, k] for k in range(3))
+        height = _TEXT_HEIGHT * self.size
+        centre = 0.5 * (self.reels.min(axis=0) + self.reels.max(axis=0))
+        for i, a in enumerate(self.reels, start=1):
+            # Beside the reel as seen from the camera, away from the robot's centre, so that
+            # neither the reel nor its cable covers the number.
+            out = a - centre
+            out -= (out @ normal) * normal
+            out = out / np.linalg.norm(out) if np.linalg.norm(out) > 1e-9 else right
+            self._text(self.label_path(i), str(i), height)
+            mc.SetTransform(self.label_path(i), RigidTransform(R, a + 0.7 * height * out))
+        # The clock and the scale in the top left corner of the default view, in the plane
+        # through the target.
+        distance = float(np.linalg.norm(eye - target))
+        half_h = distance * np.tan(np.radians(CAMERA_FOV) / 2.0)
+        half_w = CAMERA_MIN_ASPECT * half_h
+        corner = target - 0.92 * half_w * right + 0.85 * half_h * up
+        mc.SetTransform(f"{pre}/clock", RigidTransform(R, corner))
+        cell = _cell_px() * height / _TEXT_ROWS  # m per character
+        self._text(f"{pre}/clock/prefix", "t =", height)
+        for slot in range(CLOCK_SLOTS):
+            for glyph in CLOCK_GLYPHS:
+                path = self.clock_glyph_path(slot, glyph)
+                self._text(path, glyph, height)
+                mc.SetTransform(path, RigidTransform([(4 + slot) * cell, 0.0, 0.0]))
+                mc.SetProperty(path, "visible", False)
+        scale = f"{pre}/clock/force_scale"
+        self._text(scale, f"arrows: 1 N = {self.force_scale:g} m", 0.7 * height)
+        mc.SetTransform(scale, RigidTransform([0.0, -1.4 * height, 0.0]))
 
     def set_camera(self) -> None:
-        """Look at the workspace centre from the front, left and above."""
-        lo, hi = self.reels.min(axis=0), self.reels.max(axis=0)
-        target = 0.5 * (self.workspace_lower + self.workspace_upper)
-        span = float(np.linalg.norm(hi - lo)) or 1.0
-        eye = target + span * np.array([-0.3, -0.65, 0.3])
+        """Frame the whole robot from view_direction (camera_pose) with Meshcat's default
+        camera (CAMERA_FOV)."""
+        eye, target = camera_pose(self.reels, direction=self.view_direction)
         self.meshcat.SetCameraPose(eye, target)
         # The origin triad would be confused with the force arrows.
         self.meshcat.SetProperty("/Axes", "visible", False)
@@ -244,6 +448,7 @@ class CdpmMeshcatView:
     def forget_drawn_state(self) -> None:
         """Make the next draw send everything (e.g. at the first frame of a recording)."""
         self._visible.clear()
+        self._clock = [None] * CLOCK_SLOTS
 
     # -- per-frame drawing --
 
@@ -262,12 +467,21 @@ class CdpmMeshcatView:
         return length
 
     def draw(self, p, F_H, F_int, F_d, pair_distances, *, d_l=None, d_u=None,
-             time: float | None = None) -> None:
+             sim_time: float | None = None, time: float | None = None) -> None:
         """Draw the platform at p (m), the cables, and the forces F_H, F_int, F_d (N), base
-        frame; pair_distances (m) in the order of `pairs`. d_l, d_u (m) override the colour
-        band. With `time` (s, from the start of the recording) the frame goes into the
-        current Meshcat recording."""
+        frame; pair_distances (m) in the order of `pairs`; the clock shows sim_time (s) when
+        given. d_l, d_u (m) override the colour band. With `time` (s, from the start of the
+        recording) the frame goes into the current Meshcat recording."""
         mc = self.meshcat
+        if sim_time is not None:
+            text = clock_text(sim_time).ljust(CLOCK_SLOTS)
+            for slot in range(CLOCK_SLOTS):
+                if self._clock[slot] == text[slot]:
+                    continue
+                for glyph in CLOCK_GLYPHS:
+                    self._set_visible(self.clock_glyph_path(slot, glyph), glyph == text[slot],
+                                      time)
+                self._clock[slot] = text[slot]
         p = _vector(p, "p")
         mc.SetTransform(f"{self.prefix}/platform", RigidTransform(p), time)
         levels = cable_levels(pair_distances, self.pairs, self.num_cables,
@@ -292,7 +506,7 @@ class CdpmMeshcatView:
     def draw_row(self, log: Mapping, k: int, time: float | None = None) -> None:
         """Draw tick k of a log.npz dictionary (docs/LOG_FORMAT.md)."""
         self.draw(log["p"][k], log["F_H"][k], log["F_int"][k], log["F_d"][k],
-                  log["pair_distances"][k], time=time)
+                  log["pair_distances"][k], sim_time=float(log["time"][k]), time=time)
 
 
 # --- Live view and replay ---------------------------------------------------------------------
@@ -322,7 +536,8 @@ def live_view_callback(view: CdpmMeshcatView):
         row = {key: latest(diagram, context, key, width)
                for key, width in (("p", 3), ("F_H", 3), ("F_int", 3), ("F_d", 3),
                                   ("pair_distances", len(view.pairs)))}
-        view.draw(row["p"], row["F_H"], row["F_int"], row["F_d"], row["pair_distances"])
+        view.draw(row["p"], row["F_H"], row["F_int"], row["F_d"], row["pair_distances"],
+                  sim_time=context.get_time())
 
     return on_chunk
 
@@ -339,7 +554,7 @@ def replay_frames(time, fps: float) -> tuple[np.ndarray, np.ndarray]:
 
 
 def save_replay_html(log: Mapping, path, meshcat: Meshcat | None = None, fps: float = 50.0,
-                     force_scale: float = 0.05) -> Path:
+                     force_scale: float = FORCE_SCALE) -> Path:
     """Write a self-contained HTML replay of a log (docs/LOG_FORMAT.md): a Meshcat recording
     at `fps` frames per second of log time, saved with Meshcat's StaticHtml, which opens in a
     browser with no server. Uses (and clears under /cdpm) `meshcat`, or a private loopback

@@ -4,8 +4,16 @@ Each `figure_*` function returns a `matplotlib.figure.Figure` built without pypl
 figure state leaks between calls and tests can read the plotted data back from the artists;
 `plot_log` writes them all as PNGs. Distances are shown in mm (as in the paper), forces in N,
 positions in m, time in s; cables are numbered 1..m.
+
+A run that ended on a fault (log keys `ending`, `fault_time`, `fault_message`) has the fault
+marked in every figure: a vertical line with its label on every time axis, a marker on the
+trajectory, a note under the figure. Logs without those keys (older logs) read as completed.
+Figures that need keys only some logs have (`timing`: the tick clock of `cdpm run`) are listed
+in OPTIONAL and skipped by `plot_log` when a log lacks them.
 """
 
+import textwrap
+import warnings
 from collections.abc import Mapping
 from pathlib import Path
 
@@ -20,7 +28,14 @@ _NEEDS = {
     "forces": ("time", "F_H", "F_int", "F_d"),
     "trajectory": ("time", "p", "active", "crossed", "reels", "attachments", "pairs"),
     "logistic": ("pairs", "d_l", "d_u", "F_u", "eps"),
+    "cables": ("time", "lengths", "reel_velocity"),
+    "timing": ("time", "wall"),
 }
+# Figures drawn only for logs that hold their keys.
+OPTIONAL = ("timing",)
+# Keys with one row per tick.
+_PER_TICK = ("time", "p", "F_H", "F_int", "F_d", "pair_distances", "active", "crossed",
+             "lengths", "reel_velocity", "wall")
 LOG_KEYS = ("time", "p", "F_H", "F_int", "F_wall", "F_d", "velocity_admittance", "velocity",
             "reel_velocity", "lengths", "pair_distances", "active", "crossed", "pairs", "d_l",
             "d_u", "F_u", "eps", "F_max", "reels", "attachments", "workspace_lower",
@@ -29,7 +44,19 @@ LOG_KEYS = ("time", "p", "F_H", "F_int", "F_wall", "F_d", "velocity_admittance",
 # Fig. 12's colour code, used for the force plots too.
 FORCE_COLORS = {"F_H": "tab:blue", "F_int": "black", "F_d": "tab:red", "F_wall": "tab:green"}
 FIGURE_FILES = {"distances": "distances.png", "forces": "forces.png",
-                "trajectory": "trajectory.png", "logistic": "logistic.png"}
+                "trajectory": "trajectory.png", "logistic": "logistic.png",
+                "cables": "cables.png", "timing": "timing.png"}
+# Every force plot axis spans at least this much (N), so a component that is numerical noise
+# (1e-6 N) reads as the flat zero it is.
+MIN_FORCE_SPAN = 0.5
+# Line style per force, widest first and drawn first: when two series coincide (F_int = F_d
+# when nobody pushes) the narrower one on top leaves the wider one visible on both sides, and
+# the dashes let the one below show through.
+FORCE_STYLES = {"F_H": dict(linestyle="-", linewidth=3.4, zorder=2.0),
+                "F_wall": dict(linestyle="-.", linewidth=2.7, zorder=2.1),
+                "F_int": dict(linestyle="--", linewidth=2.1, zorder=2.2),
+                "F_d": dict(linestyle="-", linewidth=1.0, zorder=2.3)}
+FAULT_COLOR = "crimson"
 
 
 class LogError(ValueError):
@@ -62,6 +89,11 @@ def load_log(path) -> dict:
     return log
 
 
+def has_keys(log: Mapping, figure: str) -> bool:
+    """Whether the log holds every key the figure needs."""
+    return all(k in log for k in _NEEDS[figure])
+
+
 def _check(log: Mapping, figure: str) -> None:
     missing = [k for k in _NEEDS[figure] if k not in log]
     if missing:
@@ -71,8 +103,7 @@ def _check(log: Mapping, figure: str) -> None:
         T = len(log["time"])
         for key in _NEEDS[figure]:
             arr = np.asarray(log[key])
-            if key in ("time", "p", "F_H", "F_int", "F_d", "pair_distances", "active",
-                       "crossed") and (arr.ndim == 0 or arr.shape[0] != T):
+            if key in _PER_TICK and (arr.ndim == 0 or arr.shape[0] != T):
                 raise LogError(f"log key {key!r} has shape {arr.shape!r}; expected one row per "
                                f"tick ({T} rows, as 'time')")
 
@@ -85,6 +116,49 @@ def _title(log: Mapping) -> str:
 
 def _pair_label(pair) -> str:
     return f"cables {int(pair[0])}-{int(pair[1])}"
+
+
+# --- how the run ended ----------------------------------------------------------------------------
+
+
+def run_fault(log: Mapping) -> tuple[float, str] | None:
+    """(fault time in s, NaN when unknown; message) when the log's run ended on a fault, else
+    None; logs without the `ending` key ended normally."""
+    if "ending" not in log or str(log["ending"]) != "fault":
+        return None
+    when = float(log["fault_time"]) if "fault_time" in log else float("nan")
+    message = str(log["fault_message"]) if "fault_message" in log else ""
+    return when, message or "fault"
+
+
+def _fault_label(fault, width: int = 100, lines: int = 3) -> str:
+    """"fault at t = ... s: message", wrapped to `width` characters, at most `lines` lines."""
+    when, message = fault
+    at = f" at t = {when:.3f} s" if np.isfinite(when) else ""
+    wrapped = textwrap.wrap(f"fault{at}: {message}", width)
+    if len(wrapped) > lines:
+        wrapped = wrapped[:lines]
+        wrapped[-1] = wrapped[-1][:width - 3] + "..."
+    return "\n".join(wrapped)
+
+
+def _mark_fault_time(ax, log: Mapping) -> None:
+    """A vertical line at the fault on a time axis, labelled at its top."""
+    fault = run_fault(log)
+    if fault is None or not np.isfinite(fault[0]):
+        return
+    line = ax.axvline(fault[0], color=FAULT_COLOR, linestyle="-", linewidth=1.4, zorder=5)
+    line.set_gid("fault")
+    # Left of the line: a run ends at its fault, so the right is usually empty axis margin.
+    ax.text(fault[0], 0.97, "fault ", color=FAULT_COLOR, fontsize="small", ha="right",
+            va="top", transform=ax.get_xaxis_transform(), gid="fault label")
+
+
+def _suptitle(fig: Figure, log: Mapping, text: str) -> None:
+    """The figure's title, with the fault's time and message as its last line when the run
+    ended on one (every figure, with a time axis or not)."""
+    fault = run_fault(log)
+    fig.suptitle(text + (f"\n{_fault_label(fault)}" if fault is not None else ""))
 
 
 # --- Fig. 10: distances -------------------------------------------------------------------------
@@ -118,35 +192,57 @@ def figure_distances(log: Mapping) -> Figure:
     ax.set_ylabel("distance between cables (mm)")
     ax.set_title(f"{heading} (Fig. 10)", fontsize="medium")
     ax.grid(True, alpha=0.3)
+    _mark_fault_time(ax, log)
     if ax.get_legend_handles_labels()[0]:
-        ax.legend(loc="best")
-    fig.suptitle(_title(log))
+        ax.legend(loc="upper left", bbox_to_anchor=(1.01, 1.0), fontsize="small")
+    _suptitle(fig, log, _title(log))
     return fig
 
 
 # --- Figs. 11, 13, 16: forces -------------------------------------------------------------------
 
 
+def force_spans(log: Mapping, names) -> tuple[np.ndarray, float]:
+    """Centre of each component's data (3,) and the one y span (N) every force axis gets: the
+    largest component range, at least MIN_FORCE_SPAN, so equal heights mean equal forces."""
+    data = np.stack([np.asarray(log[n], dtype=float).reshape(-1, 3) for n in names])
+    finite = np.where(np.isfinite(data), data, np.nan)
+    if finite.size == 0 or np.all(np.isnan(finite)):
+        return np.zeros(3), MIN_FORCE_SPAN
+    with warnings.catch_warnings():  # a component with no finite value: drawn around 0
+        warnings.simplefilter("ignore", RuntimeWarning)
+        lo, hi = np.nanmin(finite, axis=(0, 1)), np.nanmax(finite, axis=(0, 1))
+    lo, hi = np.where(np.isfinite(lo), lo, 0.0), np.where(np.isfinite(hi), hi, 0.0)
+    return 0.5 * (lo + hi), max(float(np.max(hi - lo)), MIN_FORCE_SPAN)
+
+
 def figure_forces(log: Mapping) -> Figure:
     """x, y, z components (N) of F_H, F_int and F_d vs time (s), one axis per component
-    (Figs. 11, 13, 16); F_wall too when the virtual wall pushed at some tick."""
+    (Figs. 11, 13, 16); F_wall too when the virtual wall pushed at some tick. Every axis spans
+    the same number of newtons (force_spans), and the series differ in style and width
+    (FORCE_STYLES) so that coinciding ones stay visible."""
     _check(log, "forces")
     t = np.asarray(log["time"], dtype=float)
     names = ["F_H", "F_int", "F_d"]
     if "F_wall" in log and np.any(np.asarray(log["F_wall"]) != 0):
         names.insert(2, "F_wall")
+    centre, span = force_spans(log, names)
     fig = Figure(figsize=(9, 7), layout="constrained")
     axes = fig.subplots(3, 1, sharex=True)
     for c, (ax, axis) in enumerate(zip(axes, "xyz")):
         for name in names:
             ax.plot(t, np.asarray(log[name], dtype=float)[:, c], color=FORCE_COLORS[name],
-                    label=f"{name},{axis}", linewidth=1.0)
+                    label=f"{name},{axis}", **FORCE_STYLES[name])
+        half = 0.55 * span  # 5 % margin above and below
+        ax.set_ylim(centre[c] - half, centre[c] + half)
         ax.set_ylabel(f"F_{axis} (N)")
         ax.grid(True, alpha=0.3)
+        _mark_fault_time(ax, log)
         # Beside the axes, so it never hides the end of a curve.
         ax.legend(loc="upper left", bbox_to_anchor=(1.01, 1.0), fontsize="small")
     axes[-1].set_xlabel("time (s)")
-    fig.suptitle(f"{_title(log)}\nForces on the platform (Figs. 11, 13, 16)")
+    _suptitle(fig, log, f"{_title(log)}\nForces on the platform (Figs. 11, 13, 16), "
+              f"every axis {1.1 * span:.3g} N high")
     return fig
 
 
@@ -165,10 +261,26 @@ def _box_edges(lower, upper) -> np.ndarray:
     return np.array(rows)
 
 
+def motion_limits(p, min_span: float = 0.05, margin: float = 0.15) -> np.ndarray:
+    """Axis limits (3, 2), m, of a cube around the path p (T, 3): the largest extent of the
+    motion plus `margin` of it on each side, at least `min_span` m, centred on the motion;
+    one span for all three axes so that the zoomed view keeps the path's true shape."""
+    p = np.asarray(p, dtype=float).reshape(-1, 3)
+    p = p[np.all(np.isfinite(p), axis=1)]
+    if len(p) == 0:
+        return np.array([[-0.5, 0.5]] * 3) * min_span
+    lo, hi = p.min(axis=0), p.max(axis=0)
+    span = max(float(np.max(hi - lo)) * (1.0 + 2.0 * margin), min_span)
+    centre = 0.5 * (lo + hi)
+    return np.stack([centre - 0.5 * span, centre + 0.5 * span], axis=1)
+
+
 def figure_trajectory(log: Mapping) -> Figure:
-    """Platform path p (m) in 3D with the reels A_i, the ticks where a pair was active (dots) or
-    crossed (crosses), and the cables at the first interference tick, the cables of the active
-    pairs in red (Figs. 9, 15)."""
+    """Platform path p (m) in 3D (Figs. 9, 15), two panels: the motion, zoomed to the path,
+    with the ticks where a pair was within d_u (dots, under the path) or crossed (crosses); and
+    the robot as context: reels A_i, workspace box, the path, the zoomed region and the cables
+    at the first interference tick, those of the active pairs in red. One legend below the
+    panels lists only what was drawn."""
     _check(log, "trajectory")
     t = np.asarray(log["time"], dtype=float)
     p = np.asarray(log["p"], dtype=float).reshape(-1, 3)
@@ -177,47 +289,98 @@ def figure_trajectory(log: Mapping) -> Figure:
     pairs = np.asarray(log["pairs"]).reshape(-1, 2)
     active = np.asarray(log["active"], dtype=bool).reshape(len(t), -1)
     crossed = np.asarray(log["crossed"], dtype=bool).reshape(len(t), -1)
+    events, cross = active.any(axis=1), crossed.any(axis=1)
+    fault = run_fault(log)
+    k_fault = (int(np.clip(np.searchsorted(t, fault[0]), 0, len(t) - 1))
+               if fault is not None and np.isfinite(fault[0]) and len(t) else None)
 
-    fig = Figure(figsize=(8, 7), layout="constrained")
-    ax = fig.add_subplot(projection="3d")
-    ax.plot(p[:, 0], p[:, 1], p[:, 2], color="tab:blue", label="platform path p")
-    events = active.any(axis=1)
-    ax.plot(p[events, 0], p[events, 1], p[events, 2], linestyle="none", marker="o",
-            markersize=3, color="tab:orange", label="a pair within d_u")
-    cross = crossed.any(axis=1)
-    ax.plot(p[cross, 0], p[cross, 1], p[cross, 2], linestyle="none", marker="x",
-            markersize=7, color="tab:red", label="a pair crossed")
+    fig = Figure(figsize=(13, 6.8), layout="constrained")
+    zoom = fig.add_subplot(1, 2, 1, projection="3d")
+    robot = fig.add_subplot(1, 2, 2, projection="3d")
+    handles = {}
+
+    def keep(label, artist):
+        handles.setdefault(label, artist)
+
+    # The zoomed panel: artists drawn in the zorder given, not by depth, so the path stays
+    # above the event dots it runs through.
+    zoom.computed_zorder = False
+    if events.any():
+        dots, = zoom.plot(*p[events].T, linestyle="none", marker="o", markersize=6,
+                          color="tab:orange", alpha=0.35, markeredgewidth=0, zorder=1,
+                          label="a pair within d_u")
+        keep(dots.get_label(), dots)
+    path, = zoom.plot(*p.T, color="tab:blue", linewidth=1.8, zorder=3, label="platform path p")
+    keep(path.get_label(), path)
+    if cross.any():
+        marks, = zoom.plot(*p[cross].T, linestyle="none", marker="x", markersize=7,
+                           color="tab:red", zorder=4, label="a pair crossed")
+        keep(marks.get_label(), marks)
     if len(p):
-        ax.plot(*p[0], linestyle="none", marker="s", color="tab:green", label="start")
-        ax.plot(*p[-1], linestyle="none", marker="D", color="tab:purple", label="end")
-    ax.plot(reels[:, 0], reels[:, 1], reels[:, 2], linestyle="none", marker="^",
-            color="black", label="reels A_i")
+        for ax in (zoom, robot):
+            start, = ax.plot(*p[0], linestyle="none", marker="s", color="tab:green", zorder=5,
+                             label="start")
+            end, = ax.plot(*p[-1], linestyle="none", marker="D", color="tab:purple",
+                           zorder=5, label="end")
+        keep("start", start)
+        keep("end", end)
+    if k_fault is not None:
+        for ax in (zoom, robot):
+            at, = ax.plot(*p[k_fault], linestyle="none", marker="*", markersize=13,
+                          color=FAULT_COLOR, zorder=6, label=f"fault (t = {t[k_fault]:.3f} s)")
+            at.set_gid("fault")
+        keep(at.get_label(), at)
+    limits = motion_limits(p)
+    zoom.set(xlim=limits[0], ylim=limits[1], zlim=limits[2])
+    zoom.set_box_aspect((1, 1, 1))
+    zoom.set_title(f"The motion ({1000 * (limits[0, 1] - limits[0, 0]):.0f} mm cube)",
+                   fontsize="medium")
+
+    # The robot panel: the whole robot as context.
+    robot.plot(*p.T, color="tab:blue", linewidth=1.2)
+    a_i, = robot.plot(*reels.T, linestyle="none", marker="^", color="black", label="reels A_i")
+    keep(a_i.get_label(), a_i)
     for i, a in enumerate(reels):
-        ax.text(*a, f" A{i + 1}", fontsize="small")
+        robot.text(*a, f" A{i + 1}", fontsize="small")
     if "workspace_lower" in log and "workspace_upper" in log:
         box = _box_edges(log["workspace_lower"], log["workspace_upper"])
-        ax.plot(box[:, 0], box[:, 1], box[:, 2], color="tab:green", alpha=0.4,
-                linewidth=0.8, label="workspace (virtual wall)")
-
+        wall, = robot.plot(*box.T, color="tab:green", alpha=0.5, linewidth=0.8,
+                           label="workspace (virtual wall)")
+        keep(wall.get_label(), wall)
+    region = _box_edges(limits[:, 0], limits[:, 1])
+    shown, = robot.plot(*region.T, color="tab:blue", alpha=0.6, linewidth=0.8, linestyle=":",
+                        label="zoomed region (left)")
+    shown.set_gid("zoomed region")
+    keep(shown.get_label(), shown)
     # The posture of Figs. 9 and 15: the first tick with interference, else the start.
     if len(p):
         k = int(np.argmax(events)) if events.any() else 0
         hot = {int(c) for pair in pairs[active[k]] for c in pair}
         for i in range(len(reels)):
-            end = p[k] + b[i]
-            line, = ax.plot(*np.stack([reels[i], end]).T, linewidth=1.2 if i + 1 in hot else 0.7,
-                            color="red" if i + 1 in hot else "0.55")
+            line, = robot.plot(*np.stack([reels[i], p[k] + b[i]]).T,
+                               linewidth=1.2 if i + 1 in hot else 0.7,
+                               color="red" if i + 1 in hot else "0.55")
             line.set_gid(f"cable {i + 1}")
-        ax.plot([], [], color="red", label=f"cables of active pairs at t = {t[k]:.2f} s")
-
-    ax.set_xlabel("x (m)")
-    ax.set_ylabel("y (m)")
-    ax.set_zlabel("z (m)")
+        cable, = robot.plot([], [], color="0.55", linewidth=0.7,
+                            label=f"cables at t = {t[k]:.2f} s")
+        keep(cable.get_label(), cable)
+        if hot:
+            red, = robot.plot([], [], color="red", linewidth=1.2,
+                              label="cables of the active pairs")
+            keep(red.get_label(), red)
     span = np.ptp(np.vstack([reels, p]) if len(p) else reels, axis=0)
-    ax.set_box_aspect(np.maximum(span, 1e-3))
-    ax.set_title("Platform trajectory, interference events and reels (Figs. 9, 15)")
-    ax.legend(loc="upper left", fontsize="small")
-    fig.suptitle(_title(log))
+    robot.set_box_aspect(np.maximum(span, 1e-3))
+    robot.set_title("The robot: reels, workspace and cables", fontsize="medium")
+
+    for ax in (zoom, robot):
+        ax.set_xlabel("x (m)")
+        ax.set_ylabel("y (m)")
+        ax.set_zlabel("z (m)")
+    # Below both panels, never over the data.
+    fig.legend(list(handles.values()), list(handles.keys()), loc="outside lower center",
+               ncol=min(5, len(handles)), fontsize="small")
+    _suptitle(fig, log, f"{_title(log)}\nPlatform trajectory, interference events and reels "
+              "(Figs. 9, 15)")
     return fig
 
 
@@ -278,22 +441,124 @@ def figure_logistic(log: Mapping) -> Figure:
                      ha="center", transform=axes[0].transAxes)
         axes[0].set_xlabel("distance between cables $d_{ij}$ (mm)")
     axes[0].set_ylabel(r"force intensity $\alpha_{ij}$ (N)")
-    fig.suptitle(f"{_title(log)}\nInterference force intensity, logistic function "
-                 "(eqs. 26-28, Fig. 8)")
+    _suptitle(fig, log, f"{_title(log)}\nInterference force intensity, logistic function "
+              "(eqs. 26-28, Fig. 8)")
+    return fig
+
+
+# --- cable lengths and reel speeds ----------------------------------------------------------------
+
+# Cable i's colour and style: ten colours, then the same colours dashed, so up to 20 cables
+# stay distinguishable.
+_CABLE_COLORS = ("tab:blue", "tab:orange", "tab:green", "tab:red", "tab:purple", "tab:brown",
+                 "tab:pink", "tab:gray", "tab:olive", "tab:cyan")
+
+
+def cable_style(i: int) -> dict:
+    """Line colour and style of cable i (1-based)."""
+    return dict(color=_CABLE_COLORS[(i - 1) % 10],
+                linestyle=("-", "--", ":")[min((i - 1) // 10, 2)])
+
+
+def figure_cables(log: Mapping) -> Figure:
+    """Cable lengths l_i (m) and reel speed commands l_dot_i (m/s, docs/LOG_FORMAT.md's
+    reel_velocity) vs time (s), cables numbered 1..m."""
+    _check(log, "cables")
+    t = np.asarray(log["time"], dtype=float)
+    lengths = np.asarray(log["lengths"], dtype=float).reshape(len(t), -1)
+    speeds = np.asarray(log["reel_velocity"], dtype=float).reshape(len(t), -1)
+    fig = Figure(figsize=(9, 6.5), layout="constrained")
+    top, bottom = fig.subplots(2, 1, sharex=True)
+    for i in range(1, lengths.shape[1] + 1):
+        top.plot(t, lengths[:, i - 1], label=f"cable {i}", linewidth=1.2, **cable_style(i))
+    for i in range(1, speeds.shape[1] + 1):
+        bottom.plot(t, speeds[:, i - 1], label=f"cable {i}", linewidth=1.0, **cable_style(i))
+    top.set_ylabel("cable length l_i (m)")
+    bottom.set_ylabel("reel speed command (m/s)")
+    bottom.set_xlabel("time (s)")
+    for ax in (top, bottom):
+        ax.grid(True, alpha=0.3)
+        _mark_fault_time(ax, log)
+    if lengths.shape[1]:
+        top.legend(loc="upper left", bbox_to_anchor=(1.01, 1.0), fontsize="small",
+                   ncol=1 if lengths.shape[1] <= 10 else 2)
+    _suptitle(fig, log, f"{_title(log)}\nCable lengths and reel speeds")
+    return fig
+
+
+# --- tick timing of a real-time run ---------------------------------------------------------------
+
+
+def tick_periods(log: Mapping) -> tuple[np.ndarray, np.ndarray]:
+    """Log time (s) of each tick after the first and the wall-clock time since the tick
+    before it (s): the tick period of a `cdpm run` log."""
+    t = np.asarray(log["time"], dtype=float).reshape(-1)
+    wall = np.asarray(log["wall"], dtype=float).reshape(-1)
+    return t[1:], np.diff(wall)
+
+
+def _nominal_period(log: Mapping) -> float:
+    t = np.asarray(log["time"], dtype=float).reshape(-1)
+    return float(np.median(np.diff(t))) if t.size > 1 else float("nan")
+
+
+def figure_timing(log: Mapping) -> Figure:
+    """Tick period (ms, wall-clock time between consecutive ticks) and compute time per tick
+    (ms) vs log time (s) of a real-time run, with the nominal period and the watchdog limit
+    (`watchdog_limit`, s) drawn; only logs of `cdpm run` have these columns (`wall`; older
+    ones lack `compute` and `watchdog_limit`, which are then left out)."""
+    _check(log, "timing")
+    t = np.asarray(log["time"], dtype=float).reshape(-1)
+    t_p, period = tick_periods(log)
+    compute = np.asarray(log.get("compute", np.full(len(t), np.nan)), dtype=float).reshape(-1)
+    nominal = _nominal_period(log)
+    limit = float(log["watchdog_limit"]) if "watchdog_limit" in log else float("nan")
+    fig = Figure(figsize=(9, 6.5), layout="constrained")
+    top, bottom = fig.subplots(2, 1, sharex=True)
+    top.plot(t_p, 1000.0 * period, color="tab:blue", linewidth=0.8, label="tick period")
+    if np.any(np.isfinite(compute)):
+        bottom.plot(t, 1000.0 * compute, color="tab:purple", linewidth=0.8,
+                    label="compute time per tick")
+    else:
+        bottom.text(0.5, 0.5, "compute time not recorded in this log", ha="center",
+                    transform=bottom.transAxes)
+    for ax in (top, bottom):
+        if np.isfinite(nominal):
+            ax.axhline(1000.0 * nominal, color="0.2", linestyle="--", linewidth=1.0,
+                       label=f"period {1000.0 * nominal:g} ms").set_gid("period")
+        if np.isfinite(limit):
+            ax.axhline(1000.0 * limit, color=FAULT_COLOR, linestyle=":", linewidth=1.2,
+                       label=f"watchdog limit {1000.0 * limit:g} ms").set_gid("watchdog")
+        ax.set_ylim(bottom=0.0)
+        ax.grid(True, alpha=0.3)
+        _mark_fault_time(ax, log)
+        ax.legend(loc="upper left", bbox_to_anchor=(1.01, 1.0), fontsize="small")
+    top.set_ylabel("tick period (ms)")
+    bottom.set_ylabel("compute per tick (ms)")
+    bottom.set_xlabel("time (s)")
+    stats = ""
+    if period.size:
+        p50, p99 = np.percentile(1000.0 * period, [50, 99])
+        stats = (f": period p50 {p50:.2f} ms, p99 {p99:.2f} ms, "
+                 f"max {1000.0 * period.max():.2f} ms")
+    _suptitle(fig, log, f"{_title(log)}\nTick timing of the real-time run{stats}")
     return fig
 
 
 FIGURES = {"distances": figure_distances, "forces": figure_forces,
-           "trajectory": figure_trajectory, "logistic": figure_logistic}
+           "trajectory": figure_trajectory, "logistic": figure_logistic,
+           "cables": figure_cables, "timing": figure_timing}
 
 
 def plot_log(log: Mapping[str, np.ndarray], out_dir, dpi: int = 120) -> list[Path]:
-    """Write the four figures as PNGs in out_dir (created if needed); returns their paths in the
-    order distances, forces, trajectory, logistic."""
+    """Write the figures as PNGs in out_dir (created if needed); returns their paths in the
+    order of FIGURES, leaving out the OPTIONAL ones whose keys the log lacks."""
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     paths = []
     for name, make in FIGURES.items():
+        if name in OPTIONAL and not has_keys(log, name):
+            continue
         path = out / FIGURE_FILES[name]
         make(log).savefig(path, dpi=dpi)
         paths.append(path)

@@ -1,0 +1,459 @@
+"""cdpm sweep: the sweep file, field paths, metrics, local runs, resume, failures, signals.
+
+Runs are 0.1-0.2 s of simulated time with few variants, to keep the suite fast.
+"""
+
+import csv
+import functools
+import math
+import re
+import signal
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+from scipy.integrate import quad
+
+import sweep_hooks
+from cdpm_drake import sweep as sw
+from cdpm_drake.cli import main
+from cdpm_drake.scenario import Interference, Logistic, PairLogistic, Scenario, load_scenario
+from helpers_synthetic_log import TICK, synthetic_log
+
+TESTS = Path(__file__).resolve().parent
+REPO = TESTS.parent
+
+SMALL = """\
+name: small
+base: exp2_interaction
+overlay: {duration: 0.2}
+axes:
+  - {field: interference.default.F_u, values: [2.0, 4.0]}
+  - {field: admittance.damping, linspace: [5.0, 7.0, 2]}
+"""
+
+
+def write(tmp_path, text, name="sweep.yaml") -> Path:
+    path = tmp_path / name
+    path.write_text(text)
+    return path
+
+
+def csv_rows(path):
+    with open(path, newline="") as f:
+        return list(csv.DictReader(f))
+
+
+def without_timing(rows):
+    return [{k: v for k, v in r.items() if k not in ("wall_s", "rtf")} for r in rows]
+
+
+# --- The sweep file and its variants ---------------------------------------------------------
+
+
+def test_grid_expands_to_the_product_in_order(tmp_path):
+    s = sw.load_sweep(write(tmp_path, SMALL))
+    # 2 values x linspace(5, 7, 2) = [5, 7]: four variants, the last axis fastest.
+    assert [tuple(v.values.values()) for v in s.variants] == [
+        (2.0, 5.0), (2.0, 7.0), (4.0, 5.0), (4.0, 7.0)]
+    for v in s.variants:
+        assert v.scenario.interference.default.F_u == v.values["interference.default.F_u"]
+        assert v.scenario.admittance.damping == v.values["admittance.damping"]
+        assert v.scenario.duration == 0.2  # the overlay reached every variant
+        assert v.scenario.admittance.mass == 6.25  # untouched fields keep the base's
+    assert len({v.run for v in s.variants}) == 4
+
+
+def test_run_ids_follow_the_values_not_the_position(tmp_path):
+    """Adding an axis value keeps the ids (and hashes) of the variants that were there."""
+    a = sw.load_sweep(write(tmp_path, SMALL))
+    b = sw.load_sweep(write(tmp_path, SMALL.replace("[2.0, 4.0]", "[1.0, 2.0, 4.0]"), "b.yaml"))
+    ids_a = {v.run: v.scenario_hash for v in a.variants}
+    ids_b = {v.run: v.scenario_hash for v in b.variants}
+    assert len(ids_b) == 6 and all(ids_b[r] == h for r, h in ids_a.items())
+
+
+def test_pair_override_path_creates_or_edits_the_override(tmp_path):
+    base = tmp_path / "base.yaml"
+    base.write_text("""\
+name: with_pairs
+swaps: [[1, 3]]
+initial_position: [1.56, 3.24, 1.22]
+duration: 0.2
+interference:
+  default: {d_l: 0.060, d_u: 0.062, F_u: 3.0, eps: 0.1}
+  pairs: [{pair: [5, 7], d_u: 0.07}]
+""")
+    s = sw.load_sweep(write(tmp_path, """\
+base: base.yaml
+axes:
+  - {field: "interference.pairs[1,3].d_u", values: [0.063, 0.064]}
+  - {field: "interference.pairs[7,5].F_u", values: [2.5]}
+"""))
+    for v, d_u in zip(s.variants, (0.063, 0.064)):
+        pairs = {tuple(p.pair): p for p in v.scenario.interference.pairs}
+        assert pairs[(1, 3)].d_u == d_u and pairs[(1, 3)].F_u is None  # created
+        # (5, 7) edited in place ([7,5] names the same pair): its d_u override is kept.
+        assert pairs[(5, 7)].d_u == 0.07 and pairs[(5, 7)].F_u == 2.5
+        assert v.scenario.interference.default.d_u == 0.062
+
+
+def test_union_and_list_paths_keep_what_the_base_has(tmp_path):
+    """operator.max_force edits the base's SpringHandOperator (an untagged overlay would
+    replace it by the first operator type); initial_position[2] edits one coordinate; an
+    integer field takes a linspace of whole numbers."""
+    s = sw.load_sweep(write(tmp_path, """\
+base: exp2_interaction
+overlay: {duration: 0.2}
+axes:
+  - {field: operator.max_force, values: [4.0]}
+  - {field: "initial_position[2]", values: [1.25]}
+  - {field: sensor.filter_window, linspace: [4, 8, 2]}
+"""))
+    base = load_scenario("exp2_interaction")
+    for v, window in zip(s.variants, (4, 8)):
+        op = v.scenario.operator
+        assert type(op).__name__ == "SpringHandOperator" and op.max_force == 4.0
+        assert op.waypoints == base.operator.waypoints
+        assert v.scenario.initial_position == [1.56, 3.24, 1.25]
+        assert v.scenario.sensor.filter_window == window
+        assert isinstance(v.scenario.sensor.filter_window, int)
+
+
+def test_random_samples_are_seeded_and_in_range(tmp_path):
+    text = """\
+base: exp2_interaction
+overlay: {duration: 0.2}
+random: {count: 6, seed: 3, ranges: {admittance.mass: [2.0, 10.0], sensor.filter_window: [2, 5]}}
+seeds: [1, 2]
+"""
+    a = sw.load_sweep(write(tmp_path, text))
+    b = sw.load_sweep(write(tmp_path, text, "again.yaml"))
+    assert len(a.variants) == 12  # 6 samples x 2 seeds
+    assert [v.values for v in a.variants] == [v.values for v in b.variants]
+    for v in a.variants:
+        assert 2.0 <= v.scenario.admittance.mass <= 10.0
+        assert v.scenario.sensor.filter_window in (2, 3, 4, 5)
+    assert [v.random_seed for v in a.variants[:4]] == [1, 2, 1, 2]
+
+
+def test_explicit_variants_cross_the_grid(tmp_path):
+    s = sw.load_sweep(write(tmp_path, """\
+base: exp2_interaction
+overlay: {duration: 0.2}
+axes: [{field: interference.default.F_u, values: [2.0, 3.0]}]
+variants: [{admittance: {damping: 3.0}}, {limits: {max_velocity: 0.2}}]
+"""))
+    assert len(s.variants) == 4
+    assert s.variants[0].scenario.admittance.damping == 3.0
+    assert s.variants[1].scenario.limits.max_velocity == 0.2
+    assert "variant" in sw.columns_for(s)
+
+
+@pytest.mark.parametrize("text, expected", [
+    (SMALL + "colour: red\n", "unknown field 'colour'"),
+    (SMALL.replace("admittance.damping", "admittance.dampnig"),
+     "unknown field 'dampnig'; valid fields there: ['mass', 'damping']"),
+    (SMALL.replace("linspace: [5.0, 7.0, 2]", "values: [5.0], linspace: [5.0, 7.0, 2]"),
+     "needs exactly one of values, linspace, geomspace"),
+    (SMALL.replace("[2.0, 4.0]", "[2.0, 2.0]"), "lists 2.0 twice"),
+    (SMALL.replace("base: exp2_interaction", "base: exp9"), "unknown scenario 'exp9'"),
+    (SMALL + "metric: speed\n", "metric 'speed' is not a metric"),
+    (SMALL.replace("{duration: 0.2}", "{duration: 0.2, plant: !HardwareReels {}}"),
+     "plant is !HardwareReels; a sweep simulates"),
+    (SMALL + "metric: min_distance_pair\n", "valid metrics: ['min_distance', "),
+    (SMALL + "seeds: [a]\n", "seeds[0] must be an integer, got 'a'"),
+    (SMALL.replace("linspace: [5.0, 7.0, 2]", "linspace: [5.0, 7.0, 2.5]"),
+     "must be [start, stop, count] with an integer count >= 1"),
+])
+def test_bad_sweep_file_is_reported(tmp_path, text, expected):
+    with pytest.raises(sw.SweepError) as e:
+        sw.load_sweep(write(tmp_path, text))
+    assert expected in str(e.value)
+
+
+def test_rejected_value_names_the_variant_before_any_run(tmp_path, capsys):
+    # F_u = -1 is rejected by the scenario's own check (InterferenceParams), for variant 2 only.
+    path = write(tmp_path, SMALL.replace("[2.0, 4.0]", "[2.0, -1.0]"))
+    out = tmp_path / "out"
+    assert main(["sweep", str(path), "--out", str(out), "--no-progress"]) == 2
+    err = capsys.readouterr().err
+    assert "variant 3 (run r" in err
+    assert "interference.default.F_u=-1.0, admittance.damping=5.0" in err
+    assert "F_u" in err and "-1" in err
+    assert not (out / "runs").exists() and not (out / "results.csv").exists()
+
+
+def test_unknown_pair_names_the_robot_pairs(tmp_path):
+    with pytest.raises(sw.SweepError) as e:
+        sw.load_sweep(write(tmp_path, SMALL.replace(
+            "admittance.damping, linspace: [5.0, 7.0, 2]",
+            '"interference.pairs[1,9].d_u", values: [0.07]')))
+    assert "[1, 9]" in str(e.value) and "not a cable pair of robot" in str(e.value)
+    assert "variant 1" in str(e.value)
+
+
+def test_shipped_sweep_is_valid_and_resolves_by_name():
+    s = sw.load_sweep("exp2_du_Fu")
+    assert s.fields == ["interference.default.d_u", "interference.default.F_u"]
+    assert len(s.variants) >= 25
+    assert (REPO / "sweeps" / "exp2_du_Fu.yaml").resolve() == s.path.resolve()
+
+
+# --- Metrics ---------------------------------------------------------------------------------
+
+
+def _synthetic_scenario():
+    """The interference parameters of helpers_synthetic_log: EXP1 everywhere, EXP3 on (5,7)."""
+    return Scenario(swaps=[[1, 3]], interference=Interference(
+        default=Logistic(d_l=0.050, d_u=0.061, F_u=2.0, eps=0.1),
+        pairs=[PairLogistic(pair=[5, 7], d_l=0.057, d_u=0.062, F_u=2.0, eps=0.1)]))
+
+
+@pytest.mark.parametrize("interference", [True, False])
+def test_metrics_of_a_closed_form_log(interference):
+    # d13 goes linearly from 45.1 mm to 70.1 mm over 1 s, so it is below d_l = 50 mm for
+    # t < 0.196 s: ticks 0..97, 98 ticks of 2 ms (left sums). (5,7) stays above its 57 mm.
+    log = synthetic_log(duration=1.0, d13=(0.0451, 0.0701), crossed_ticks=5,
+                        interference=interference)
+    log["velocity_admittance"][100:150] *= 2.0  # a limit "acts" on ticks 100..149
+    m = sw.run_metrics(log, _synthetic_scenario())
+    assert m["min_distance"] == pytest.approx(0.0451, abs=1e-15)
+    assert m["min_distance_pair"] == "1-3"
+    assert m["time_below_d_l"] == pytest.approx(98 * TICK, rel=1e-12)
+    assert m["limit_time"] == pytest.approx(50 * TICK, rel=1e-12)
+    # |F_H| = sqrt(45 + 28 sin^2(2 pi t)) N over one period; the left sum of a smooth periodic
+    # function over whole periods is exact to round-off, so quad is the reference.
+    effort, _ = quad(lambda t: math.sqrt(45.0 + 28.0 * math.sin(2 * math.pi * t) ** 2), 0, 1,
+                     epsabs=1e-13)
+    assert m["operator_effort"] == pytest.approx(effort, rel=1e-10)
+    # The platform moves from [1.77, 3.65, 1.22] to [1.90, 3.55, 1.05] in 1 s at constant speed.
+    assert m["peak_speed"] == pytest.approx(np.linalg.norm([0.13, -0.10, -0.17]), rel=1e-9)
+    assert m["sim_s"] == pytest.approx(1.0)
+    if interference:
+        assert m["crossings"] == 1
+    else:
+        assert math.isnan(m["crossings"])  # no interference block: no crossing flags
+
+
+# --- Running ---------------------------------------------------------------------------------
+
+
+def test_rows_equal_cdpm_simulate_of_their_resolved_scenario(tmp_path, capsys):
+    path = write(tmp_path, SMALL)
+    out = tmp_path / "out"
+    assert sw.sweep_main(sweep=path, out_dir=out, workers=2, progress=False,
+                         keep_logs=True) == 0
+    rows = csv_rows(out / "results.csv")
+    assert [r["status"] for r in rows] == ["ok"] * 4
+    for row in rows[::3]:
+        run_dir = out / "runs" / row["run"]
+        sim_dir = tmp_path / f"sim_{row['run']}"
+        assert main(["simulate", str(run_dir / "scenario.yaml"), "--out", str(sim_dir),
+                     "--no-progress"]) == 0
+        with np.load(sim_dir / "log.npz") as f:
+            log = {k: f[k] for k in f.files}
+        # Independent of run_metrics: the definitions of docs/SWEEP_FORMAT.md written out.
+        dt = np.diff(log["time"])
+        assert float(row["min_distance"]) == float(log["pair_distances"].min())
+        assert float(row["peak_F_int"]) == float(np.linalg.norm(log["F_int"], axis=1).max())
+        assert float(row["peak_F_d"]) == float(np.linalg.norm(log["F_d"], axis=1).max())
+        assert float(row["peak_speed"]) == float(np.linalg.norm(log["velocity"], axis=1).max())
+        assert float(row["operator_effort"]) == pytest.approx(
+            float(np.sum(np.linalg.norm(log["F_H"], axis=1)[:-1] * dt)), rel=1e-12)
+        below = np.any(log["pair_distances"] < log["d_l"], axis=1)[:-1]
+        assert float(row["time_below_d_l"]) == pytest.approx(float(np.sum(below * dt)),
+                                                             abs=1e-12)
+        assert int(row["crossings"]) == int(np.any(log["crossed"], axis=0).sum())
+        # And every metric is what run_metrics gives for the simulate log, to the last bit.
+        scenario = load_scenario(run_dir / "scenario.yaml")
+        expected = sw.run_metrics(log, scenario)
+        for key in ("min_distance", "time_below_d_l", "peak_F_int", "peak_F_d", "peak_speed",
+                    "operator_effort", "limit_time", "sim_s"):
+            assert float(row[key]) == expected[key], key
+        assert row["min_distance_pair"] == expected["min_distance_pair"]
+        # The kept log is the same log.
+        with np.load(run_dir / "log.npz") as f:
+            np.testing.assert_array_equal(f["p"], log["p"])
+
+
+def test_resume_skips_done_rows_and_reruns_what_changed(tmp_path):
+    path = write(tmp_path, SMALL)
+    out = tmp_path / "out"
+    first = sw.run_sweep(sw.load_sweep(path), out, workers=2, progress=False)
+    assert (first.ran, first.skipped) == (4, 0)
+    again = sw.run_sweep(sw.load_sweep(path), out, workers=2, progress=False)
+    assert (again.ran, again.skipped) == (0, 4)
+    assert without_timing(again.rows) == without_timing(first.rows)
+    # One more F_u value: only its two runs are new.
+    path.write_text(SMALL.replace("[2.0, 4.0]", "[2.0, 3.0, 4.0]"))
+    grown = sw.run_sweep(sw.load_sweep(path), out, workers=2, progress=False)
+    assert (grown.ran, grown.skipped) == (2, 4)
+    assert [r["interference.default.F_u"] for r in csv_rows(out / "results.csv")] == [
+        "2.0", "2.0", "3.0", "3.0", "4.0", "4.0"]
+    # A changed overlay changes every resolved scenario: all rerun.
+    path.write_text(SMALL.replace("duration: 0.2", "duration: 0.1"))
+    changed = sw.run_sweep(sw.load_sweep(path), out, workers=2, progress=False)
+    assert (changed.ran, changed.skipped) == (4, 0)
+    assert {r["sim_s"] for r in changed.rows} == {"0.1"}
+
+
+def test_failing_and_dying_variants_are_error_rows_and_the_rest_finish(tmp_path):
+    path = write(tmp_path, SMALL.replace("[2.0, 4.0]", "[2.0, 3.0, 4.0]"))
+    s = sw.load_sweep(path)
+    out = tmp_path / "out"
+
+    # F_u = 3 kills its worker process outright; damping = 7 with F_u = 2 raises.
+    kill = functools.partial(sweep_hooks.kill_worker_if, "interference.default.F_u", 3.0)
+    outcome = sw.run_sweep(s, out, workers=2, progress=False, before_run=kill)
+    rows = {(r["interference.default.F_u"], r["admittance.damping"]): r for r in outcome.rows}
+    assert len(rows) == 6
+    for key, r in rows.items():
+        if key[0] == "3.0":
+            assert r["status"] == "error"
+            assert "worker process died (killed by SIGKILL)" in r["error"]
+            assert r["min_distance"] == ""
+        else:
+            assert r["status"] == "ok" and float(r["min_distance"]) > 0
+    # A resume does not rerun error rows unless asked; --retry-errors does (no hook now).
+    again = sw.run_sweep(s, out, workers=2, progress=False)
+    assert again.ran == 0
+    fixed = sw.run_sweep(s, out, workers=2, progress=False, retry_errors=True,
+                         before_run=functools.partial(sweep_hooks.raise_if,
+                                                      "admittance.damping", 7.0))
+    assert fixed.ran == 2
+    by = {(r["interference.default.F_u"], r["admittance.damping"]): r for r in fixed.rows}
+    assert by[("3.0", "5.0")]["status"] == "ok"
+    assert by[("3.0", "7.0")]["status"] == "error"
+    assert "RuntimeError: injected failure" in by[("3.0", "7.0")]["error"]
+
+
+INTERRUPTED = SMALL.replace("[2.0, 4.0]", "[2.0, 3.0]")
+
+
+@pytest.fixture(scope="module")
+def uninterrupted(tmp_path_factory):
+    """results.csv rows of the INTERRUPTED sweep run in one go."""
+    tmp = tmp_path_factory.mktemp("whole")
+    sw.run_sweep(sw.load_sweep(write(tmp, INTERRUPTED)), tmp / "out", workers=2,
+                 progress=False)
+    return csv_rows(tmp / "out" / "results.csv")
+
+
+@pytest.mark.parametrize("signum, code", [(signal.SIGTERM, 143), (signal.SIGINT, 130),
+                                          (signal.SIGKILL, -signal.SIGKILL)])
+def test_signal_mid_sweep_keeps_finished_rows_and_resume_completes(tmp_path, signum, code,
+                                                                   uninterrupted):
+    path = write(tmp_path, INTERRUPTED)
+    out = tmp_path / "out"
+    # The third run (F_u = 3, damping = 5) signals the parent as it starts; one worker, so
+    # runs go in order and exactly the first two are finished.
+    script = (
+        "import functools, sys\n"
+        f"sys.path.insert(0, {str(TESTS)!r})\n"
+        "import sweep_hooks\n"
+        "from cdpm_drake.sweep import sweep_main\n"
+        f"hook = functools.partial(sweep_hooks.signal_parent_if, "
+        f"'interference.default.F_u', 3.0, {int(signum)})\n"
+        f"sys.exit(sweep_main(sweep={str(path)!r}, out_dir={str(out)!r}, workers=1, "
+        "progress=False, before_run=hook))\n")
+    proc = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True,
+                          timeout=120)
+    assert proc.returncode == code, proc.stderr
+    if signum != signal.SIGKILL:
+        assert "rerun the same command to resume" in proc.stderr
+        kept = csv_rows(out / "results.csv")
+        assert [(r["interference.default.F_u"], r["admittance.damping"]) for r in kept] == [
+            ("2.0", "5.0"), ("2.0", "7.0")]
+    # Killed outright, results.csv may lag by up to a second; each run's row.json does not.
+    resumed = sw.run_sweep(sw.load_sweep(path), out, workers=2, progress=False)
+    assert (resumed.ran, resumed.skipped) == (2, 2)
+    assert without_timing(csv_rows(out / "results.csv")) == without_timing(uninterrupted)
+
+
+# --- CLI and pictures ------------------------------------------------------------------------
+
+
+def test_cli_sweep_plot_and_best_table(tmp_path, capsys):
+    path = write(tmp_path, SMALL)
+    out = tmp_path / "out"
+    assert main(["sweep", str(path), "--out", str(out), "--workers", "1", "--no-progress",
+                 "--plot", "--metric", "operator_effort", "--top", "2"]) == 0
+    text = capsys.readouterr().out
+    assert "best runs by operator_effort (N s, smallest first)" in text
+    rows = csv_rows(out / "results.csv")
+    best = min(rows, key=lambda r: float(r["operator_effort"]))
+    table = text.split("smallest first):")[1]
+    assert table.splitlines()[3].startswith(best["run"])  # header, rule, then the best
+    assert len([ln for ln in table.splitlines() if re.match(r"r[0-9a-f]{10} ", ln)]) == 2
+    for name in ("heatmap.png", "pareto.png", "operator_effort_vs_admittance_damping.png"):
+        assert (out / name).stat().st_size > 1000
+    for png in out.glob("*.png"):
+        png.unlink()
+    assert main(["plot", str(out)]) == 0
+    assert (out / "heatmap.png").is_file() and "best runs by min_distance" in \
+        capsys.readouterr().out
+
+
+def test_cli_errors(tmp_path, capsys):
+    assert main(["sweep", str(tmp_path / "nope.yaml")]) == 2
+    assert "sweep file" in capsys.readouterr().err
+    assert main(["sweep", "exp2_du_Fu", "--workers", "0"]) == 2
+    assert "--workers must be an integer >= 1, got 0" in capsys.readouterr().err
+    assert main(["sweep", "exp2_du_Fu", "--dry-run"]) == 0
+    assert "25 runs of 'exp2_interaction'" in capsys.readouterr().out
+
+
+def test_the_readme_sweep_example_loads(tmp_path):
+    """The README's sweep block, verbatim: 3 x 3 x 2 grid points x 2 seeds, the pair (1,3)
+    override created on a base that has none."""
+    readme = (REPO / "README.md").read_text()
+    block = next(b for b in re.findall(r"```yaml\n(.*?)```", readme, re.DOTALL)
+                 if b.startswith("name: my_sweep"))
+    s = sw.load_sweep(write(tmp_path, block))
+    assert len(s.variants) == 36
+    last = s.variants[-1].scenario
+    assert [(p.pair, p.d_l) for p in last.interference.pairs] == [([1, 3], 0.060)]
+    assert last.random_seed == 2 and last.duration == 5.0
+
+
+def test_a_run_that_stops_part_way_is_an_error_row_with_how_far_it_got(tmp_path, monkeypatch):
+    """simulate() returns the log up to a failure with the exception in `error` (as when the
+    forward kinematics finds no pose): the row says error, where, and why."""
+    from cdpm_drake import simulation
+
+    real = simulation.simulate
+
+    def stops_at_0_1(*, scenario, **kw):
+        result = real(scenario=scenario, duration=0.1)
+        result.error = RuntimeError("no platform pose fits the cable lengths")
+        return result
+
+    monkeypatch.setattr(simulation, "simulate", stops_at_0_1)
+    v = sw.load_sweep(write(tmp_path, SMALL)).variants[0]
+    row = sw.execute_run(sw.tasks_for([v])[0])
+    assert row["status"] == "error"
+    assert row["error"] == ("the run stopped at t = 0.100 s: RuntimeError: no platform pose "
+                            "fits the cable lengths")
+    assert row["sim_s"] == pytest.approx(0.1) and "min_distance" not in row
+
+
+def test_spaced_axes():
+    # np.linspace / np.geomspace, both ends included, rounded to 12 significant digits.
+    assert sw.axis_values(sw.Axis(field="x", linspace=[0.06, 0.062, 3])) == [0.06, 0.061, 0.062]
+    assert sw.axis_values(sw.Axis(field="x", geomspace=[1.0, 100.0, 3])) == [1.0, 10.0, 100.0]
+
+
+def test_a_second_sweep_on_the_same_directory_is_refused(tmp_path):
+    import fcntl
+
+    s = sw.load_sweep(write(tmp_path, SMALL))
+    out = tmp_path / "out"
+    out.mkdir()
+    with open(out / ".sweep.lock", "a+") as held:  # as another cdpm sweep would hold it
+        fcntl.flock(held.fileno(), fcntl.LOCK_EX)
+        with pytest.raises(sw.SweepError, match="is in use by another cdpm sweep"):
+            sw.run_sweep(s, out, workers=1, progress=False)
+    assert not (out / "results.csv").exists()

@@ -1,0 +1,65 @@
+"""Sweep pictures from hand-written results rows: the plotted numbers are read back from the
+artists and compared with means, spreads and the Pareto front worked out by hand."""
+
+import numpy as np
+import pytest
+
+from cdpm_drake.views import sweep_plots as sp
+
+COLUMNS = ["run", "a", "b", "random_seed", "status", "error", "min_distance",
+           "operator_effort"]
+
+
+def row(run, a, b, seed, d=None, effort=None):
+    ok = d is not None
+    return {"run": run, "a": a, "b": b, "random_seed": str(seed),
+            "status": "ok" if ok else "error", "error": "" if ok else "boom",
+            "min_distance": "" if d is None else repr(d),
+            "operator_effort": "" if effort is None else repr(effort)}
+
+
+# a in {1, 2} x b in {10, 20} x seeds {1, 2}; cell (a=2, b=20) failed for both seeds.
+ROWS = [row("r1", "1", "10", 1, 0.050, 1.0), row("r2", "1", "10", 2, 0.054, 1.0),
+        row("r3", "1", "20", 1, 0.060, 2.0), row("r4", "1", "20", 2, 0.062, 2.0),
+        row("r5", "2", "10", 1, 0.040, 3.0), row("r6", "2", "10", 2, 0.044, 3.0),
+        row("r7", "2", "20", 1), row("r8", "2", "20", 2)]
+
+
+def test_heatmap_cells_are_means_over_seeds_in_mm():
+    fig = sp.figure_heatmap(COLUMNS, ROWS, "min_distance")
+    image = fig.axes[0].images[0].get_array()
+    # rows: b = 10, 20 (y); columns: a = 1, 2 (x); means of the two seeds, in mm.
+    expected = np.array([[52.0, 42.0], [61.0, np.nan]])
+    np.testing.assert_allclose(image.filled(np.nan), expected, rtol=1e-12)
+    texts = [t.get_text() for t in fig.axes[0].texts]
+    assert texts.count("error") == 1 and "52" in texts
+
+
+def test_metric_against_an_axis_has_the_spread_over_seeds():
+    fig = sp.figure_metric_vs_axis(COLUMNS, ROWS, "min_distance", "a")
+    ax = fig.axes[0]
+    lines = {ln.get_label(): ln for ln in ax.get_lines()}
+    # One line per value of b: b = 10 has a = 1, 2 -> 52, 42 mm; b = 20 only a = 1 -> 61 mm.
+    np.testing.assert_allclose(lines["b = 10"].get_ydata(), [52.0, 42.0])
+    np.testing.assert_allclose(lines["b = 20"].get_ydata(), [61.0])
+    band = ax.collections[0].get_paths()[0].vertices[:, 1]
+    assert band.min() == pytest.approx(40.0) and band.max() == pytest.approx(54.0)
+
+
+def test_pareto_front_keeps_the_non_dominated_runs():
+    # (effort, distance): A(1, 1) B(2, 3) C(3, 2) D(4, 4) E(2, 1): C is dominated by B (less
+    # effort, more distance), E by A (less effort, same distance).
+    pts = {"A": (1, 1), "B": (2, 3), "C": (3, 2), "D": (4, 4), "E": (2, 1)}
+    rows = [row(k, "1", "1", 0, d, e) for k, (e, d) in pts.items()]
+    assert [r["run"] for r in sp.pareto_front(rows)] == ["A", "B", "D"]
+    fig = sp.figure_pareto(COLUMNS, rows)
+    front = [ln for ln in fig.axes[0].get_lines() if ln.get_label() == "Pareto front"][0]
+    np.testing.assert_allclose(front.get_xdata(), [1, 2, 4])
+    np.testing.assert_allclose(front.get_ydata(), [1000, 3000, 4000])  # m -> mm
+
+
+def test_plot_sweep_writes_the_pictures(tmp_path):
+    paths = sp.plot_sweep(COLUMNS, ROWS, tmp_path, metric="operator_effort")
+    assert [p.name for p in paths] == ["heatmap.png", "operator_effort_vs_a.png",
+                                       "operator_effort_vs_b.png", "pareto.png"]
+    assert all(p.stat().st_size > 1000 for p in paths)
