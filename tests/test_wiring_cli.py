@@ -28,6 +28,8 @@ from cdpm_drake.robot import load_robot
 from cdpm_drake.scenario import load_scenario, scenario_robot
 
 T = 0.002
+# The figures every log gets (views/plots.py may add more).
+PAPER_FIGURES = {"distances.png", "forces.png", "trajectory.png", "logistic.png"}
 CASES: dict[str, str] = {}
 
 
@@ -267,8 +269,8 @@ def test_simulate_plot_writes_the_figures_beside_the_log(tmp_path):
     out = tmp_path / "o"
     assert cdpm("simulate", _scenario_file(tmp_path, duration=0.02), "--plot", "--out", out,
                 "--no-progress") == 0
-    pngs = sorted(p.name for p in out.glob("*.png"))
-    assert len(pngs) == 4
+    pngs = {p.name for p in out.glob("*.png")}
+    assert PAPER_FIGURES <= pngs
     assert all((out / p).stat().st_size > 1000 for p in pngs)
 
 
@@ -538,7 +540,7 @@ def test_plot_writes_the_figures_beside_the_log(tmp_path, logged, as_file):
     folder = tmp_path / "copy"
     shutil.copytree(logged, folder)
     assert cdpm("plot", folder / "log.npz" if as_file else folder) == 0
-    assert len(list(folder.glob("*.png"))) == 4
+    assert PAPER_FIGURES <= {p.name for p in folder.glob("*.png")}
     assert not list(tmp_path.glob("*.png"))
 
 
@@ -547,7 +549,7 @@ def test_plot_out_and_html_are_where_the_files_go(tmp_path, logged):
     out = tmp_path / "figs"
     html = tmp_path / "replay.html"
     assert cdpm("plot", logged, "--out", out, "--html", html) == 0
-    assert len(list(out.glob("*.png"))) == 4
+    assert PAPER_FIGURES <= {p.name for p in out.glob("*.png")}
     assert not list(logged.glob("*.png"))
     assert html.stat().st_size > 10_000
 
@@ -578,8 +580,7 @@ def test_diagram_draws_the_scenario_given_into_out(tmp_path):
                               (plain, "--scenario-text", "{wall_force: {enabled: true}}")]):
         out = tmp_path / f"d{k}"
         assert cdpm("diagram", *args, "--out", out, "--no-svg") == 0
-        dots = sorted(out.glob("*.dot"))
-        assert [p.name for p in dots] == ["controller_hardware.dot", "controller_simulated.dot"]
+        dots = [out / "controller_simulated.dot", out / "controller_hardware.dot"]
         assert all(("wall_force" in p.read_text()) == (k > 0) for p in dots), k
 
 
@@ -592,8 +593,86 @@ def test_diagram_depth_expands_the_plant_and_no_svg_skips_svg(tmp_path):
     shallow = (tmp_path / "d1" / "controller_simulated.dot").read_text()
     deep = (tmp_path / "d2" / "controller_simulated.dot").read_text()
     assert "simulated_reels" not in shallow and "simulated_reels" in deep
-    assert not list((tmp_path / "d1").glob("*.svg"))
-    assert len(list((tmp_path / "d2").glob("*.svg"))) == 2
+    assert list((tmp_path / "d1").glob("*.dot")) and not list((tmp_path / "d1").glob("*.svg"))
+    assert {p.stem for p in (tmp_path / "d2").glob("*.svg")} == {
+        p.stem for p in (tmp_path / "d2").glob("*.dot")}
+
+
+# --- sweep ---------------------------------------------------------------------------------
+
+
+def _sweep_file(tmp_path, name="wire_sweep"):
+    """Two runs of a 0.02 s scenario, admittance.damping 3.0 and 4.5 N s/m."""
+    base = _scenario_file(tmp_path, name="sweep_base", duration=0.02)
+    path = tmp_path / f"{name}.yaml"
+    path.write_text(f"name: {name}\nbase: {base}\n"
+                    "axes:\n  - {field: admittance.damping, values: [3.0, 4.5]}\n")
+    return path
+
+
+def _results(out):
+    import csv
+
+    with open(out / "results.csv", newline="") as fh:
+        return list(csv.DictReader(fh))
+
+
+@covers("sweep <sweep>", "sweep --out", "sweep --keep-logs", "sweep --plot", "sweep --metric",
+        "sweep --top", "sweep --no-progress")
+def test_sweep_writes_rows_logs_and_pictures_where_asked(tmp_path, monkeypatch, capsys):
+    """The sweep given runs its two variants into exactly --out (nothing under runs/), keeps
+    each run's log, draws the metric asked for, lists --top 1 best run, without a bar; the
+    same sweep run without --no-progress shows the bar."""
+    monkeypatch.chdir(tmp_path)
+    out = tmp_path / "exact"
+    args = ("sweep", _sweep_file(tmp_path), "--out", out, "--workers", 1, "--keep-logs",
+            "--plot", "--metric", "peak_speed", "--top", 1)
+    assert cdpm(*args, "--no-progress") == 0
+    printed = capsys.readouterr()
+    rows = _results(out)
+    assert [float(r["admittance.damping"]) for r in rows] == [3.0, 4.5]
+    assert all(r["status"] == "ok" for r in rows)
+    assert not (tmp_path / "runs").exists()
+    for r in rows:
+        log = run_log(out / "runs" / r["run"])
+        assert len(log["time"]) == 11  # 0.02 s at 2 ms
+    assert (out / "peak_speed_vs_admittance_damping.png").stat().st_size > 1000
+    assert not list(out.glob("min_distance_vs_*.png"))
+    best = [ln for ln in printed.out.splitlines() if ln.startswith(tuple(r["run"] for r in rows))]
+    assert len(best) == 1
+    assert "%|" not in printed.err
+    # The contrast: the same sweep into another folder, without --no-progress, shows a bar.
+    assert cdpm("sweep", _sweep_file(tmp_path), "--out", tmp_path / "other",
+                "--workers", 1) == 0
+    assert "%|" in capsys.readouterr().err
+
+
+@covers("sweep --dry-run")
+def test_sweep_dry_run_runs_nothing(tmp_path):
+    out = tmp_path / "o"
+    assert cdpm("sweep", _sweep_file(tmp_path), "--out", out, "--dry-run") == 0
+    assert not (out / "results.csv").exists() and not (out / "runs").exists()
+
+
+@covers("sweep --workers", "sweep --ray", "sweep --ray-chunk", "sweep --retry-errors")
+def test_sweep_runner_options_reach_the_sweep(tmp_path, monkeypatch):
+    """Where the runs go (local workers, a Ray address, runs per Ray task) and whether error
+    rows rerun: handed to cdpm_drake.sweep.sweep_main as given (Ray itself and error rows are
+    exercised in test_sweep.py and test_sweep_ray.py)."""
+    from cdpm_drake import sweep
+
+    seen = []
+    monkeypatch.setattr(sweep, "sweep_main", lambda **kw: seen.append(kw) or 0)
+    path = _sweep_file(tmp_path)
+    assert cdpm("sweep", path, "--workers", 3, "--retry-errors") == 0
+    assert cdpm("sweep", path, "--ray", "ray://head:10001", "--ray-chunk", 4) == 0
+    assert cdpm("sweep", path, "--ray") == 0
+    local, cluster, here = seen
+    assert (local["workers"], local["retry_errors"], local["ray"]) == (3, True, False)
+    assert (cluster["ray"], cluster["ray_address"], cluster["ray_chunk"]) == (
+        True, "ray://head:10001", 4)
+    assert not cluster["retry_errors"]
+    assert here["ray"] and not here["ray_address"]
 
 
 # --- info ----------------------------------------------------------------------------------------
