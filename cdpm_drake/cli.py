@@ -9,7 +9,7 @@ from pathlib import Path
 
 import numpy as np
 
-from .text import format_table
+from .text import format_table, prefixed_log_records
 
 
 class CliError(Exception):
@@ -57,6 +57,31 @@ def info(*, robot: str, out=None) -> None:
     print(format_table(["pair", "distance (mm)", "largest (mm)"], rows), file=out)
     print("(the two are equal where the closest points are the attachment points; d_u must "
           "stay below 'largest' or that pair's force never switches off)", file=out)
+    _print_wrench_feasibility(r, out)
+
+
+# Hand forces (N) and tension floors (N) of the feasibility table, and its grid per axis.
+FEASIBILITY_FORCES = (0.0, 5.0, 10.0, 20.0)
+FEASIBILITY_FLOORS = (0.0, 5.0)
+FEASIBILITY_GRID = 5
+
+
+def _print_wrench_feasibility(r, out) -> None:
+    from .tension import wrench_feasibility
+
+    d = r.dynamics
+    n = FEASIBILITY_GRID
+    rows = []
+    for force in FEASIBILITY_FORCES:
+        shares = [wrench_feasibility(r, mass=d.mass, hand_force=force, handle=d.handle,
+                                     min_tension=floor, n=n).share
+                  for floor in FEASIBILITY_FLOORS]
+        rows.append((f"{force:g}", *(f"{100 * share:.1f}" for share in shares)))
+    print(f"wrench feasibility: share of a {n}x{n}x{n} grid of the workspace box where the "
+          f"cables hold the level platform ({d.mass:g} kg, moments about its centre) plus a "
+          f"hand force at the handle {_fmt(d.handle, 2)} m in each of 26 directions:", file=out)
+    print(format_table(["hand force (N)"] + [f"all cables >= {floor:g} N (%)"
+                                             for floor in FEASIBILITY_FLOORS], rows), file=out)
 
 
 def _cmd_info(args) -> int:
@@ -67,6 +92,15 @@ def _cmd_info(args) -> int:
 # --- simulate --------------------------------------------------------------------------------
 
 
+def _print_dynamic_summary(log, out) -> None:
+    slack = [f"{i + 1} ({int(n)} ticks)" for i, n in enumerate(log["slack"].sum(axis=0)) if n]
+    error = 1000 * np.linalg.norm(log["p"] - log["p_true"], axis=1).max()
+    rotation = np.degrees(np.abs(log["rpy_true"]).max())
+    print(f"tensions {log['tensions'].min():.2f} to {log['tensions'].max():.1f} N; slack "
+          f"cables: {', '.join(slack) or 'none'}; largest rotation {rotation:.2f} deg; largest "
+          f"FK error {error:.2f} mm", file=out)
+
+
 def _load_scenario_arg(args):
     from .scenario import load_scenario
 
@@ -75,18 +109,29 @@ def _load_scenario_arg(args):
 
 def simulate_main(*, scenario, duration=None, out_dir=None, progress=True, out=None,
                   on_chunk=None, html=None, plots=False, realtime_rate=None,
-                  chunk=0.5) -> int:
-    """Simulate, write DIR/log.npz and DIR/scenario.yaml, print a summary. Returns an exit
-    code: 0, or 1 when the run ended early (the log up to then is written all the same)."""
+                  chunk=0.5, force=False, runs_root=None) -> int:
+    """Simulate, write DIR/log.npz and DIR/scenario.yaml, print a summary. DIR is `out_dir`
+    if given (it must be empty, or hold a run and `force` be set), else a new
+    runs/<name>/<UTC timestamp>/ (run_folder.py). Returns an exit code: 0; 1 when the run
+    ended on an error; 130 / 143 after Ctrl-C / SIGTERM (the log up to then is written all the
+    same, and the plots and replay asked for)."""
+    from .run_folder import RUNS_DIR, RunFolder
     from .simulation import save_log, simulate, summary_rows
 
     out = sys.stdout if out is None else out
-    out_dir = Path(out_dir if out_dir is not None else Path("runs") / scenario.name)
-    _writable_dir(out_dir, "--out")  # before the run: a long run's log must have a place
-    result = simulate(scenario=scenario, duration=duration, progress=progress,
-                      on_chunk=on_chunk, realtime_rate=realtime_rate, chunk=chunk)
+    folder = RunFolder(scenario.name, out_dir, force=force,
+                       root=RUNS_DIR if runs_root is None else runs_root)
+    _run_folder_step(folder.plan)
+    out_dir = _run_folder_step(folder.create)  # before the run: a long run's log needs a place
+    try:
+        result = simulate(scenario=scenario, duration=duration, progress=progress,
+                          on_chunk=on_chunk, realtime_rate=realtime_rate, chunk=chunk)
+    except BaseException:
+        folder.discard()  # an early error (bad scenario, bad plant) leaves no folder
+        raise
     log = result.log
     path = save_log(log, out_dir, scenario)
+    folder.finish()
     T = log["time"].size
     print(f"scenario {scenario.name!r}: {T} ticks, {log['time'][-1] if T else 0:.3f} s simulated "
           f"in {result.wall_time:.2f} s wall ({result.realtime_factor:.1f}x real time)", file=out)
@@ -101,18 +146,29 @@ def simulate_main(*, scenario, duration=None, out_dir=None, progress=True, out=N
           file=out)
     crossings = int(np.any(log["crossed"], axis=0).sum()) if T else 0
     print(f"pairs that crossed: {crossings}", file=out)
+    if T and "tensions" in log:  # the dynamic plant's ground truth
+        _print_dynamic_summary(log, out)
     print(f"log: {path}", file=out)
-    if plots:
-        from .views.plots import plot_log
-        for png in plot_log(log, out_dir):
-            print(f"plot: {png}", file=out)
-    if html is not None:
-        print(f"3D replay: {_save_replay(log, html)} (open it in a browser)", file=out)
+    # A second Ctrl-C / SIGTERM while the outputs are written must not lose them: the first
+    # one already decided the exit code.
+    with _signals_ignored(result.error is not None):
+        if plots:
+            from .views.plots import LogError, plot_log
+            try:
+                for png in plot_log(log, out_dir):
+                    print(f"plot: {png}", file=out)
+            except LogError as e:  # the log is written; say why the figures are not
+                print(f"cdpm simulate: error: plots: {e}", file=sys.stderr)
+                return 1
+        if html is not None:
+            print(f"3D replay: {_save_replay(log, html)} (open it in a browser)", file=out)
     stopped = f"t = {log['time'][-1] if T else 0:.3f} s"
     if isinstance(result.error, KeyboardInterrupt):
-        print(f"cdpm simulate: interrupted at {stopped}; the log up to there is written",
-              file=sys.stderr)
-        return 130
+        from .interrupt import Terminated, exit_code
+        what = "SIGTERM" if isinstance(result.error, Terminated) else "Ctrl-C"
+        print(f"cdpm simulate: interrupted at {stopped} ({what}); the log up to there is "
+              "written", file=sys.stderr)
+        return exit_code(result.error)
     if result.error is not None:
         print(f"cdpm simulate: error: the run stopped at {stopped}: {result.error}",
               file=sys.stderr)
@@ -120,13 +176,43 @@ def simulate_main(*, scenario, duration=None, out_dir=None, progress=True, out=N
     return 0
 
 
+def _run_folder_step(action):
+    from .run_folder import RunFolderError
+
+    try:
+        return action()
+    except RunFolderError as e:
+        raise CliError(str(e)) from None
+
+
+class _signals_ignored:
+    """Ignore SIGINT and SIGTERM within the block, if `active` (and in the main thread)."""
+
+    def __init__(self, active: bool):
+        self._active = active
+        self._previous = {}
+
+    def __enter__(self):
+        import signal
+        import threading
+        if self._active and threading.current_thread() is threading.main_thread():
+            for sig in (signal.SIGINT, signal.SIGTERM):
+                self._previous[sig] = signal.signal(sig, signal.SIG_IGN)
+        return self
+
+    def __exit__(self, *exc):
+        import signal
+        for sig, handler in self._previous.items():
+            signal.signal(sig, handler)
+
+
 def _cmd_simulate(args) -> int:
     _check_duration(args.duration)
-    scenario = _load_scenario_arg(args)
     on_chunk = None
     realtime = args.realtime
     if realtime is not None and not (realtime > 0 and np.isfinite(realtime)):
         raise CliError(f"--realtime must be a rate > 0 (1: real time), got {realtime!r}")
+    scenario = _load_scenario_arg(args)
     if args.meshcat:
         on_chunk = _live_meshcat(scenario)
         # Something to watch: paced at real time unless told otherwise.
@@ -134,7 +220,7 @@ def _cmd_simulate(args) -> int:
     code = simulate_main(scenario=scenario, duration=args.duration, out_dir=args.out,
                          progress=not args.no_progress, on_chunk=on_chunk,
                          html=args.html, plots=args.plot, realtime_rate=realtime,
-                         chunk=0.04 if args.meshcat else 0.5)
+                         chunk=0.04 if args.meshcat else 0.5, force=args.force)
     if args.meshcat and not args.no_wait and sys.stdin.isatty():
         try:
             input("Meshcat is still serving the last frame; press Enter to quit. ")
@@ -196,17 +282,19 @@ def _live_meshcat(scenario):
 
 
 def run_main(*, scenario, duration=None, out_dir=None, out=None, on_status=None,
-             on_view=None, force=False) -> int:
-    """Run on the reels in real time; print live status and the end report. Exit code 0 when
-    the run completed or was stopped by Ctrl-C/SIGTERM, 1 on a fault."""
+             on_view=None, force=False, runs_root=None) -> int:
+    """Run on the reels in real time; print live status and the end report. The folder
+    policy is simulate_main's. Exit code 0 when the run completed, 1 on a fault or when it
+    never enabled the reels, 130 / 143 when Ctrl-C / SIGTERM stopped it."""
+    from .interrupt import exit_code
     from .realtime import report_lines, run
+    from .run_folder import RUNS_DIR, RunFolder
 
     out = sys.stdout if out is None else out
-    out_dir = Path(out_dir if out_dir is not None else Path("runs") / f"{scenario.name}_robot")
-    _writable_dir(out_dir, "--out")
-    if not force and ((out_dir / "ticks.bin").exists() or (out_dir / "log.npz").exists()):
-        raise CliError(f"--out {str(out_dir)!r} already holds the log of a run; give another "
-                       "--out, or --force to overwrite it")
+    folder = RunFolder(scenario.name, out_dir, force=force,
+                       root=RUNS_DIR if runs_root is None else runs_root)
+    _run_folder_step(folder.plan)
+    out_dir = _run_folder_step(folder.create)
     tty = sys.stderr.isatty()
 
     def status(line):
@@ -215,15 +303,36 @@ def run_main(*, scenario, duration=None, out_dir=None, out=None, on_status=None,
         print(("\r" + line) if tty else line, end="" if tty else "\n", file=sys.stderr,
               flush=True)
 
-    result = run(scenario=scenario, out_dir=out_dir, duration=duration, status=status,
-                 on_view=on_view)
+    try:
+        result = run(scenario=scenario, out_dir=out_dir, duration=duration, status=status,
+                     on_view=on_view)
+    except BaseException:
+        folder.discard()
+        raise
+    if result.log_path is None:
+        folder.discard()  # it never enabled: nothing on disk, nothing in the way of the next
+    else:
+        folder.finish()
     if tty:
         print(file=sys.stderr)
     for line in report_lines(result):
         print(line, file=out)
     if result.ending == "fault":
         print(f"cdpm run: error: {result.error}", file=sys.stderr)
+        if not result.enabled and "do not fit robot" in str(result.error):
+            from .scenario import scenario_names
+            which = (scenario.name if scenario.name in scenario_names()
+                     else "<this run's scenario file>")
+            print("cdpm run: hint: against cdpm emulate, the emulator may be playing another "
+                  "scenario or robot (other start, swaps or cables); start it with this run's: "
+                  f"cdpm emulate --scenario {which} ...", file=sys.stderr)
+        if not result.enabled and "fault bits" in str(result.error):
+            print("cdpm run: hint: fault bits stay set until the bridge is reset (power "
+                  "cycle; restart cdpm emulate); COMMAND_TIMEOUT is the bridge's own watchdog "
+                  "after a controller that stopped while enabled (killed)", file=sys.stderr)
         return 1
+    if result.ending == "interrupted":
+        return exit_code(result.signal)
     return 0
 
 
@@ -245,16 +354,22 @@ def _cmd_run(args) -> int:
 
 
 def _cmd_plot(args) -> int:
+    from .run_folder import resolve_latest
     from .views.plots import LogError, load_log, plot_log
 
     if _is_sweep_dir(args.log):
         return _cmd_plot_sweep(args)
+    target = resolve_latest(args.log)
+    if target.is_dir() and not (target / "log.npz").exists() and (target / "ticks.bin").exists():
+        print(f"cdpm plot: {str(target)!r} has ticks.bin but no log.npz (the run was killed "
+              "before converting it): recovering first", file=sys.stderr)
+        _recover(target)
     try:
-        log = load_log(args.log)
+        log = load_log(target)
     except LogError as e:
         raise CliError(str(e)) from None
     out_dir = args.out if args.out is not None else (
-        args.log if args.log.is_dir() else args.log.parent)
+        target if target.is_dir() else target.parent)
     for png in plot_log(log, out_dir):
         print(f"plot: {png}")
     if args.html is not None:
@@ -262,16 +377,97 @@ def _cmd_plot(args) -> int:
     return 0
 
 
+# --- recover ---------------------------------------------------------------------------------
+
+
+def _recover(run_dir, out=None) -> None:
+    from .realtime import RecoverError, recover
+
+    out = sys.stderr if out is None else out
+    try:
+        path, tail = recover(run_dir)
+    except RecoverError as e:
+        raise CliError(str(e)) from None
+    cut = (f"the tail was cut: a partial last row of {tail['cut_bytes']} bytes left out"
+           if tail["cut_bytes"] else "the tail was whole (no partial row)")
+    print(f"recovered {tail['ticks']} ticks of {tail['expected']} ({tail['ending']}); {cut}; "
+          f"log: {path}", file=out)
+
+
+def _cmd_recover(args) -> int:
+    from .run_folder import resolve_latest
+
+    _recover(resolve_latest(args.run_dir), out=sys.stdout)
+    return 0
+
+
+# --- list ------------------------------------------------------------------------------------
+
+
+def list_main(out=None) -> int:
+    """Print the built-in robots, scenarios and sweeps, one line each."""
+    from .robot import ROBOTS_DIR
+    from .scenario import SCENARIOS_DIR
+
+    out = sys.stdout if out is None else out
+    sweeps_dir = Path(__file__).resolve().parent / "sweeps"
+    for title, directory in (("robots", ROBOTS_DIR), ("scenarios", SCENARIOS_DIR),
+                             ("sweeps", sweeps_dir)):
+        files = sorted(directory.glob("*.yaml")) if directory.is_dir() else []
+        if title == "sweeps" and not files:
+            continue
+        print(f"{title} ({directory}):", file=out)
+        rows = [(f.stem, _one_line(f)) for f in files]
+        width = max((len(n) for n, _ in rows), default=0)
+        for name, line in rows:
+            print(f"  {name:<{width}}  {line}", file=out)
+    return 0
+
+
+def _one_line(path: Path) -> str:
+    """A YAML file's `description`, else its first comment line."""
+    from pydrake.common.yaml import yaml_load
+
+    try:
+        raw = yaml_load(filename=str(path))
+    except Exception as e:  # listed all the same: say why there is no description
+        return f"(not readable: {type(e).__name__})"
+    description = raw.get("description") if isinstance(raw, dict) else None
+    if isinstance(description, str) and description.strip():
+        return _first_sentence(" ".join(description.split()))
+    comment = []  # the file's leading comment block, as one paragraph
+    for line in path.read_text().splitlines():
+        if not line.startswith("#"):
+            if comment or line.strip():
+                break
+            continue
+        comment.append(line.lstrip("#").strip())
+    return _first_sentence(" ".join(w for w in comment if w))
+
+
+def _first_sentence(text: str, limit: int = 110) -> str:
+    import re
+
+    # A sentence ends at ". " before a capital ("Fig. 7" does not end one).
+    end = re.search(r"[.:;](?=\s+[A-Z])", text)
+    text = text if end is None else text[:end.start() + 1]
+    return text if len(text) <= limit else text[:limit - 3].rstrip() + "..."
+
+
+def _cmd_list(args) -> int:
+    return list_main()
+
+
 # --- diagram ---------------------------------------------------------------------------------
 
 
 def diagram_main(*, scenario, out_dir, depth=1, svg=True, out=None) -> int:
-    """Write the controller diagram, with the simulated and with the hardware plant."""
+    """Write the controller diagram, with the simulated, the hardware and the dynamic plant."""
     import dataclasses
 
     from .diagram import BuildOptions, build_diagram
     from .hardware.config import HardwareReels
-    from .scenario import SimulatedReels
+    from .scenario import DynamicReels, ScenarioError, SimulatedReels
     from .views.diagram_graph import write_diagrams
 
     out = sys.stdout if out is None else out
@@ -282,6 +478,14 @@ def diagram_main(*, scenario, out_dir, depth=1, svg=True, out=None) -> int:
         "controller_hardware": build_diagram(
             dataclasses.replace(scenario, plant=HardwareReels()), options),
     }
+    dynamic = scenario.plant if isinstance(scenario.plant, DynamicReels) else DynamicReels()
+    try:
+        diagrams["controller_dynamic"] = build_diagram(
+            dataclasses.replace(scenario, plant=dynamic), options)
+        # Inside the dynamic plant: the MultibodyPlant, drives, encoders, cables, loggers.
+        diagrams["plant_dynamic"] = diagrams["controller_dynamic"].GetSubsystemByName("reels")
+    except ScenarioError as e:  # a start the cables cannot hold level: say so, draw the rest
+        print(f"skipped controller_dynamic: {e}", file=out)
     for path in write_diagrams(diagrams, out_dir, svg=svg, max_depth=depth):
         print(f"wrote {path}", file=out)
     return 0
@@ -307,8 +511,9 @@ def _cmd_plot_sweep(args) -> int:
 
     try:
         return plot_main(sweep_dir=args.log, plot=plot_sweep, out_dir=args.out)
-    except SweepError as e:
-        raise CliError(str(e)) from None
+    except SweepError as e:  # a bad sweep file or results: an error (1), as for scenarios
+        print(f"cdpm plot: error: {e}", file=sys.stderr)
+        return 1
 
 
 def _cmd_sweep(args) -> int:
@@ -331,8 +536,9 @@ def _cmd_sweep(args) -> int:
                           ray_chunk=args.ray_chunk, keep_logs=args.keep_logs,
                           retry_errors=args.retry_errors, plot=plot, metric=args.metric,
                           top=args.top, dry_run=args.dry_run, progress=not args.no_progress)
-    except SweepError as e:
-        raise CliError(str(e)) from None
+    except SweepError as e:  # a bad sweep file or variant: an error (1), as for scenarios
+        print(f"cdpm sweep: error: {e}", file=sys.stderr)
+        return 1
 
 
 def _sweep_parser(sub) -> None:
@@ -374,9 +580,35 @@ def _sweep_parser(sub) -> None:
 # --- main ------------------------------------------------------------------------------------
 
 
+EXIT_CODES = """\
+exit codes (every command):
+  0    done
+  1    error: the scenario or robot cannot be loaded or is invalid, the run failed or
+       faulted, cdpm run never enabled the reels
+  2    bad usage: an unknown option, a missing or malformed argument, an option value
+       out of range (--duration, --realtime, --out, ...)
+  130  interrupted by Ctrl-C (SIGINT); whatever was logged is written
+  143  stopped by SIGTERM (e.g. `timeout`, a batch scheduler); as for Ctrl-C
+"""
+
+
+class _Parser(argparse.ArgumentParser):
+    """An argument error in a sub-command shows that sub-command's usage, not the top one."""
+
+    def parse_args(self, args=None, namespace=None):
+        args, extras = self.parse_known_args(args, namespace)
+        if extras:
+            sub = getattr(args, "_subparser", None) or self
+            sub.error(f"unrecognized arguments: {' '.join(extras)}")
+        return args
+
+
 def _parser() -> argparse.ArgumentParser:
-    parser = argparse.ArgumentParser(prog="cdpm", description=__doc__,
-                                     formatter_class=argparse.RawDescriptionHelpFormatter)
+    from . import __version__
+
+    parser = _Parser(prog="cdpm", description=__doc__, epilog=EXIT_CODES,
+                     formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser.add_argument("--version", action="version", version=f"cdpm {__version__}")
     sub = parser.add_subparsers(dest="command", metavar="COMMAND", required=True)
 
     p = sub.add_parser("info", help="print a robot description: cables, Jacobian, workspace",
@@ -391,7 +623,10 @@ def _parser() -> argparse.ArgumentParser:
                                    "at 500 Hz; write DIR/log.npz and DIR/scenario.yaml.")
     _scenario_args(p)
     p.add_argument("--duration", type=float, help="simulated time, s (default: the scenario's)")
-    p.add_argument("--out", type=Path, help="output directory (default: runs/<scenario name>)")
+    p.add_argument("--out", type=Path,
+                   help="output directory, used exactly; must be empty unless --force "
+                        "(default: a new runs/<scenario name>/<UTC time>/, with "
+                        "runs/<scenario name>/latest pointing at it)")
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
     p.add_argument("--meshcat", action="store_true",
                    help="show the robot live in Meshcat (prints the URL to open); the "
@@ -405,6 +640,8 @@ def _parser() -> argparse.ArgumentParser:
                    help="also save a self-contained 3D replay (opens in a browser, no server)")
     p.add_argument("--plot", action="store_true",
                    help="also write the paper's figures as PNGs next to the log")
+    p.add_argument("--force", action="store_true",
+                   help="empty a non-empty --out that holds an earlier run, then write there")
     p.set_defaults(func=_cmd_simulate)
 
     p = sub.add_parser("run", help="run a scenario in real time against the reels",
@@ -416,7 +653,9 @@ def _parser() -> argparse.ArgumentParser:
     _scenario_args(p, default=None)
     p.add_argument("--duration", type=float, help="run time, s (default: the scenario's)")
     p.add_argument("--out", type=Path,
-                   help="output directory (default: runs/<scenario name>_robot)")
+                   help="output directory, used exactly; must be empty unless --force "
+                        "(default: a new runs/<scenario name>/<UTC time>/, with "
+                        "runs/<scenario name>/latest pointing at it)")
     p.add_argument("--rt-priority", type=int, default=0, metavar="N",
                    help="run under SCHED_FIFO at priority N (1..99; needs root or "
                         "CAP_SYS_NICE): keeps a busy host from delaying ticks past the "
@@ -424,7 +663,7 @@ def _parser() -> argparse.ArgumentParser:
     p.add_argument("--meshcat", action="store_true",
                    help="show the robot live in Meshcat (prints the URL to open)")
     p.add_argument("--force", action="store_true",
-                   help="overwrite the log of an earlier run in --out")
+                   help="empty a non-empty --out that holds an earlier run, then write there")
     p.set_defaults(func=_cmd_run)
 
     p = sub.add_parser("emulate", help="play the reel bridge on loopback (cdpm-reel-emulator)",
@@ -438,8 +677,10 @@ def _parser() -> argparse.ArgumentParser:
                                    "forces (Figs. 11, 13, 16), the 3D trajectory with "
                                    "interference events (Figs. 9, 15), the logistic curve "
                                    "(Fig. 8).")
-    p.add_argument("log", type=Path, help="a log.npz or the directory holding it (or a sweep's "
-                                          "directory: its pictures from results.csv)")
+    p.add_argument("log", type=Path,
+                   help="a log.npz, the run folder holding it (or only ticks.bin: recovered "
+                        "first), runs/<name> (its latest run), or a sweep's directory (its "
+                        "pictures from results.csv)")
     p.add_argument("--out", type=Path, help="output directory (default: the log's directory)")
     p.add_argument("--html", type=Path, metavar="FILE",
                    help="also save a self-contained 3D replay of the log")
@@ -457,6 +698,24 @@ def _parser() -> argparse.ArgumentParser:
     p.set_defaults(func=_cmd_diagram)
 
     _sweep_parser(sub)
+
+    p = sub.add_parser("recover", help="turn a killed run's ticks.bin into log.npz",
+                       description="Convert the tick stream of a `cdpm run` that was killed "
+                                   "before it wrote log.npz (SIGKILL, power loss) into "
+                                   "DIR/log.npz, using DIR/scenario.yaml; says how many ticks "
+                                   "it kept and whether the tail was cut.")
+    p.add_argument("run_dir", type=Path, metavar="RUN_DIR",
+                   help="the run's folder (holding ticks.bin and scenario.yaml), or "
+                        "runs/<name> for its latest run")
+    p.set_defaults(func=_cmd_recover)
+
+    p = sub.add_parser("list", help="list the built-in robots, scenarios and sweeps",
+                       description="List the robots, scenarios and sweeps shipped with the "
+                                   "package, one line each; use them by name from any "
+                                   "directory.")
+    p.set_defaults(func=_cmd_list)
+    for name, choice in sub.choices.items():
+        choice.set_defaults(_subparser=choice)
     return parser
 
 
@@ -478,6 +737,7 @@ def _scenario_args(p, default="exp2_interaction"):
 
 def main(argv=None) -> int:
     from .hardware.tick_log import TickLogError
+    from .interrupt import Terminated, exit_code, terminate_raises
     from .kinematics import KinematicsError
     from .operators import OperatorError
     from .robot import RobotError
@@ -490,16 +750,23 @@ def main(argv=None) -> int:
         from .hardware.emulator import main as emulator_main
         return emulator_main(argv[1:])
     args = _parser().parse_args(argv)
-    try:
-        return int(args.func(args) or 0)
-    except (CliError, RobotError, KinematicsError, ScenarioError, OperatorError,
-            TickLogError) as e:
-        print(f"cdpm {args.command}: error: {e}", file=sys.stderr)
-        return 2
-    except BrokenPipeError:
-        # `cdpm info | head`: the reader left; not an error of ours.
-        sys.stderr.close()
-        return 0
+    with prefixed_log_records(), terminate_raises():
+        try:
+            return int(args.func(args) or 0)
+        except CliError as e:
+            print(f"cdpm {args.command}: error: {e}", file=sys.stderr)
+            return 2
+        except (RobotError, KinematicsError, ScenarioError, OperatorError, TickLogError) as e:
+            print(f"cdpm {args.command}: error: {e}", file=sys.stderr)
+            return 1
+        except KeyboardInterrupt as e:
+            what = "SIGTERM" if isinstance(e, Terminated) else "Ctrl-C"
+            print(f"cdpm {args.command}: interrupted ({what})", file=sys.stderr)
+            return exit_code(e)
+        except BrokenPipeError:
+            # `cdpm info | head`: the reader left; not an error of ours.
+            sys.stderr.close()
+            return 0
 
 
 if __name__ == "__main__":

@@ -11,8 +11,9 @@ import numpy as np
 from pydrake.systems.framework import Diagram, DiagramBuilder
 from pydrake.systems.primitives import Adder, VectorLogSink
 
-from .scenario import (Scenario, SimulatedReels as SimulatedReelsConfig, check_scenario,
-                       interference_params, scenario_operator)
+from .scenario import (DynamicReels as DynamicReelsConfig, Scenario,
+                       SimulatedReels as SimulatedReelsConfig, check_dynamic_reels,
+                       check_scenario, interference_params, scenario_operator)
 from .systems import (ForceSensorSource, ForwardKinematicsEstimator, InterferenceForce,
                       JacobianVelocityMapping, SafetyLimits, SensorNoise, SimulatedOperator,
                       SimulatedReels, WorkspaceWallForce, Admittance)
@@ -128,6 +129,10 @@ def make_plant(scenario: Scenario, robot):
     cfg = scenario.plant
     if isinstance(cfg, SimulatedReelsConfig):
         return build_simulated_plant(scenario, robot)
+    if isinstance(cfg, DynamicReelsConfig):
+        from .systems.dynamic_plant import build_dynamic_plant
+        return build_dynamic_plant(scenario, robot, scenario_operator(scenario),
+                                   check_dynamic_reels(scenario, robot).tensions)
     from .hardware.config import HardwareReels
     from .hardware.reels import HardwareReelsSystem
 

@@ -16,12 +16,14 @@ import numpy as np
 from pydrake.systems.analysis import Simulator
 
 from .diagram import LOGGED, BuildOptions, build_diagram
-from .scenario import Scenario, ScenarioError, SimulatedReels, check_scenario, scenario_to_yaml
-from .simulation import assemble_log
+from .scenario import (DynamicReels, Scenario, ScenarioError, SimulatedReels, check_scenario,
+                       scenario_to_yaml)
+from .simulation import assemble_log, mark_ending, tick_targets
 
 
 @dataclasses.dataclass
 class RunResult:
+    # The log (docs/LOG_FORMAT.md); empty ({}) when the run never enabled the reels.
     log: dict
     # Tick timing from the tick log (hardware.tick_log.realtime_stats), s.
     timing: dict
@@ -31,8 +33,14 @@ class RunResult:
     error: Exception | None
     # "completed", "interrupted" (Ctrl-C / SIGTERM) or "fault".
     ending: str
-    log_path: Path
-    tick_log_path: Path
+    # DIR/log.npz and DIR/ticks.bin, or None when the run wrote none (it never enabled).
+    log_path: Path | None
+    tick_log_path: Path | None
+    # The signal that interrupted the run ("SIGINT", "SIGTERM"), or None.
+    signal: str | None = None
+    # False when the run ended before the reels were enabled (no bridge, lengths that do not
+    # fit): such a run writes nothing but its report.
+    enabled: bool = True
 
 
 class _StopRequest:
@@ -67,12 +75,12 @@ def run(*, scenario: Scenario, out_dir, duration: float | None = None, status=No
     The loop advances `step` s at a time, so Ctrl-C / SIGTERM stop it within that.
     """
     from .hardware.reels import ReelFault, start_realtime
-    from .hardware.tick_log import read_tick_log, realtime_stats
 
     robot = check_scenario(scenario)
-    if isinstance(scenario.plant, SimulatedReels):
+    if isinstance(scenario.plant, (SimulatedReels, DynamicReels)):
         raise ScenarioError(
-            f"scenario {scenario.name!r} has plant: !SimulatedReels; `cdpm run` drives real "
+            f"scenario {scenario.name!r} has plant: !{type(scenario.plant).__name__}; `cdpm "
+            "run` drives real "
             "reels and needs plant: !HardwareReels {address: ..., port: ...} (use `cdpm "
             "simulate` for a simulation, or --scenario-text 'plant: !HardwareReels {}')")
     duration = scenario.duration if duration is None else float(duration)
@@ -83,33 +91,37 @@ def run(*, scenario: Scenario, out_dir, duration: float | None = None, status=No
     for stale in ("ticks.bin", "log.npz"):
         # An earlier run's files would otherwise be reported as this run's if it fails early.
         (out / stale).unlink(missing_ok=True)
-    (out / "scenario.yaml").write_text(scenario_to_yaml(
-        dataclasses.replace(scenario, duration=duration)))
     tick_path = out / "ticks.bin"
     diagram = build_diagram(scenario, BuildOptions(loggers=False, tick_log=str(tick_path)))
     reels = diagram.GetSubsystemByName("reels")
     sink = diagram.GetSubsystemByName("tick_log")
     simulator = Simulator(diagram)
     context = simulator.get_context()
+    # Written before the run (`cdpm recover` needs it after a kill), once nothing can fail early.
+    scenario_path = out / "scenario.yaml"
+    scenario_path.write_text(scenario_to_yaml(dataclasses.replace(scenario, duration=duration)))
     T = scenario.time_step
-    end = np.floor(duration / T + 1e-9) * T
-    error, ending = None, "completed"
+    error, ending, enabled = None, "completed", False
     with _StopRequest() as stop:
         try:
             start_realtime(simulator, 1.0)
+            enabled = True  # initialisation enables the reels or raises
             t, next_status, next_view = 0.0, 0.0, 0.0
-            while t < end - 1e-12:
+            # Whole ticks counted in integers, so the last tick (D * 500 + 1 rows) is reached.
+            for target in tick_targets(duration, T, step):
                 if stop.signal is not None:
                     ending = "interrupted"
                     break
-                t = min(t + step, end)
-                simulator.AdvanceTo(t)
+                simulator.AdvanceTo(target)
+                t = target
                 if status is not None and t >= next_status:
                     status(_status_line(diagram, context, reels, t))
                     next_status += status_period
                 if on_view is not None and t >= next_view:
                     on_view(diagram, context)
                     next_view += view_period
+            if stop.signal is not None:
+                ending = "interrupted"  # also when it came during the last step
         except ReelFault as e:
             error, ending = e, "fault"
         except Exception as e:  # KinematicsError, a bad packet path, ...: stop the reels
@@ -130,16 +142,73 @@ def run(*, scenario: Scenario, out_dir, duration: float | None = None, status=No
                     cleanup_errors.append(f"{step_name}: {type(e).__name__}: {e}")
             if cleanup_errors and error is None:
                 error, ending = RuntimeError("; ".join(cleanup_errors)), "fault"
+    if not enabled:
+        # Nothing happened on the robot: no log to keep, nothing to block the next run.
+        for path in (tick_path, scenario_path):
+            path.unlink(missing_ok=True)
+        return RunResult(log={}, timing={}, link=link, error=error, ending=ending,
+                         log_path=None, tick_log_path=None, signal=stop.signal, enabled=False)
+    log, timing, _ = log_from_tick_log(tick_path, scenario, robot)
+    mark_ending(log, ending, error)
+    log_path = out / "log.npz"
+    np.savez_compressed(log_path, **log)
+    return RunResult(log=log, timing=timing, link=link, error=error, ending=ending,
+                     log_path=log_path, tick_log_path=tick_path, signal=stop.signal)
+
+
+def log_from_tick_log(tick_path, scenario: Scenario, robot) -> tuple[dict, dict, dict]:
+    """docs/LOG_FORMAT.md from a run's ticks.bin: (log without the ending keys, timing,
+    {"ticks": whole rows read, "cut_bytes": bytes of a partial last row left out})."""
+    from .hardware.tick_log import read_tick_log, realtime_stats, tick_log_tail
+
+    tick_path = Path(tick_path)
     raw = read_tick_log(tick_path) if tick_path.exists() else {}
+    tail = tick_log_tail(tick_path) if tick_path.exists() else {"ticks": 0, "cut_bytes": 0}
+    T = scenario.time_step
     timing = realtime_stats(raw, T) if raw else {}
     signals = {key: raw[key] for key, _, _ in LOGGED if key in raw}
     log = assemble_log(raw.get("time", np.zeros(0)), signals, scenario, robot)
     log["tick"] = raw.get("tick", np.zeros(0, dtype=int))
     log["wall"] = raw.get("wall", np.zeros(0))
-    log_path = out / "log.npz"
+    compute = raw.get("compute", np.full((len(log["time"]), 1), np.nan))
+    log["compute"] = np.asarray(compute, dtype=float).reshape(-1)
+    plant = scenario.plant
+    log["watchdog_limit"] = np.array(getattr(plant, "watchdog_ticks", np.nan) * T)
+    return log, timing, tail
+
+
+def recover(run_dir) -> tuple[Path, dict]:
+    """Turn a run folder's ticks.bin (a run killed before it converted it) into log.npz, with
+    the run's scenario.yaml. Returns (the log's path, {"ticks", "cut_bytes", "ending"}).
+    The ending is "completed" when every tick of the scenario's duration is there, else
+    "interrupted"."""
+    from .scenario import load_scenario
+
+    run_dir = Path(run_dir)
+    tick_path = run_dir / "ticks.bin"
+    scenario_path = run_dir / "scenario.yaml"
+    for path in (tick_path, scenario_path):
+        if not path.is_file():
+            raise RecoverError(f"{str(run_dir)!r} has no {path.name} (a `cdpm run` folder "
+                               "holds ticks.bin and scenario.yaml)")
+    if (run_dir / "log.npz").exists():
+        # The run converted its stream itself, with how it ended: never replace that.
+        raise RecoverError(f"{str(run_dir)!r} already has its log.npz; nothing to recover "
+                           "(remove it to convert ticks.bin again)")
+    scenario = load_scenario(scenario_path)
+    robot = check_scenario(scenario)
+    log, _, tail = log_from_tick_log(tick_path, scenario, robot)
+    # Ticks 0..n of the duration the run was asked for (scenario.yaml records it).
+    expected = int(np.floor(scenario.duration / scenario.time_step + 1e-9)) + 1
+    ending = "completed" if len(log["time"]) >= expected else "interrupted"
+    mark_ending(log, ending, None)
+    log_path = run_dir / "log.npz"
     np.savez_compressed(log_path, **log)
-    return RunResult(log=log, timing=timing, link=link, error=error, ending=ending,
-                     log_path=log_path, tick_log_path=tick_path)
+    return log_path, dict(tail, ending=ending, expected=expected)
+
+
+class RecoverError(ValueError):
+    """A folder that cannot be recovered; the message names it and what is missing."""
 
 
 def _output(diagram, context, system_name, port_name):
@@ -176,15 +245,25 @@ def _link_report(reels, context) -> dict:
 
 
 def report_lines(result: RunResult) -> list[str]:
-    """The end-of-run summary: tick period percentiles, overruns, lost packets, faults."""
+    """The end-of-run summary: tick period and compute time percentiles, overruns, lost
+    packets, faults."""
     t = result.timing
-    lines = [f"run ended: {result.ending}"
+    why = f" by {result.signal}" if result.ending == "interrupted" and result.signal else ""
+    lines = [f"run ended: {result.ending}{why}"
              + (f" ({type(result.error).__name__}: {result.error})" if result.error else "")]
     if t:
         ms = {k: 1e3 * t[k] for k in ("p50", "p99", "max")}
         lines.append(f"ticks logged {t['ticks']}, missing {t['missing_ticks']}, overruns "
                      f"{t['overruns']}; tick period p50 {ms['p50']:.3f} ms, p99 "
                      f"{ms['p99']:.3f} ms, max {ms['max']:.3f} ms")
+        compute = np.asarray(result.log.get("compute", []), dtype=float)
+        compute = compute[np.isfinite(compute)]
+        if compute.size:
+            c = 1e3 * np.percentile(compute, [50, 99, 100])
+            period = 1e3 * float(result.log["time"][1] - result.log["time"][0]) \
+                if len(result.log["time"]) > 1 else float("nan")
+            lines.append(f"compute per tick p50 {c[0]:.3f} ms, p99 {c[1]:.3f} ms, max "
+                         f"{c[2]:.3f} ms of the {period:g} ms tick")
     k = result.link
     if k:
         rejected = {r: n for r, n in k.get("rejected", {}).items() if n}
@@ -192,6 +271,17 @@ def report_lines(result: RunResult) -> list[str]:
             f"packets: commands sent {k.get('sent', 0)}, lost before the bridge "
             f"{k.get('commands_lost_at_bridge')}; statuses received {k.get('received', 0)}, "
             f"accepted {k.get('accepted', 0)}, lost {k.get('lost', 0)}, rejected "
-            f"{rejected or 0}, foreign {k.get('foreign', 0)}")
-    lines.append(f"log: {result.log_path} (stream: {result.tick_log_path})")
+            f"{count_by_reason(rejected)}, foreign {k.get('foreign', 0)}")
+    if result.log_path is not None:
+        lines.append(f"log: {result.log_path} (stream: {result.tick_log_path})")
+    else:
+        lines.append("no log written: the reels were never enabled")
     return lines
+
+
+def count_by_reason(counts: dict) -> str:
+    """{'value': 3, 'crc': 1} -> '4 (value 3, crc 1)'; {} -> '0'."""
+    total = sum(counts.values())
+    if not total:
+        return "0"
+    return f"{total} (" + ", ".join(f"{r} {n}" for r, n in counts.items() if n) + ")"

@@ -11,6 +11,7 @@ Cables are numbered 1..m in everything a user sees (files, messages); arrays are
 
 import dataclasses
 import logging
+import os
 import math
 from pathlib import Path
 
@@ -22,9 +23,9 @@ _log = logging.getLogger(__name__)
 # above round-off for coordinates of a few metres.
 SAME_POINT_TOL = 1e-9
 
-# Shipped robot descriptions live at the top of the repository (hardware/robots), next to the
-# reel link protocol, so integrators find them; the package is installed in editable mode.
-ROBOTS_DIR = Path(__file__).resolve().parent.parent / "hardware" / "robots"
+# Shipped robot descriptions are package data, so a wheel (not only an editable install) has
+# them; the repository's hardware/robots, next to the reel link protocol, links here.
+ROBOTS_DIR = Path(__file__).resolve().parent / "robots"
 
 
 class RobotError(ValueError):
@@ -52,6 +53,57 @@ class LimitsSchema:
     max_reel_speed: float = 1.0
 
 
+# Dynamic-plant sections (optional; only `plant: !DynamicReels` reads them). The defaults are
+# for the paper's robot, whose paper gives none of these numbers: each is an estimate for a
+# robot of its class, with where it comes from.
+_CUBE = 0.30  # m: the attachment points span a 0.3 m cube (hardware/robots/paper_7cable.yaml)
+
+
+@dataclasses.dataclass
+class PlatformSchema:
+    # Platform mass, kg. Estimate: a 0.3 m cube frame of 20 mm aluminium profile (12 edges x
+    # 0.3 m x ~0.4 kg/m = 1.5 kg) plus the FSE103 sensor, handle and seven tension limiters
+    # (~1 kg) near the centre.
+    mass: float = 2.5
+    # Rotational inertia about the platform centre, platform frame, kg m^2 (3 x 3, symmetric).
+    # Estimate: the 1.5 kg frame as 12 thin edges of a 0.3 m cube, 7/18 m_f s^2 per axis
+    # (0.0525); the 1 kg at the centre adds nothing.
+    inertia: list[list[float]] = dataclasses.field(default_factory=lambda: [
+        [0.0525, 0.0, 0.0], [0.0, 0.0525, 0.0], [0.0, 0.0, 0.0525]])
+    # The handle point, where the operator's force acts, platform frame, m. Assumed: under
+    # the sensor, at the centre of the cube's bottom face.
+    handle: list[float] = dataclasses.field(default_factory=lambda: [0.0, 0.0, -0.15])
+
+
+@dataclasses.dataclass
+class CablesSchema:
+    # Axial stiffness E A of every cable, N (k_i = EA / L0_i). The robot file's 1.5 mm
+    # polyethylene (UHMWPE) braid: area 1.77e-6 m^2 times an effective braid modulus of
+    # ~40 GPa (fibre 100 GPa; a braid's is 30-50 GPa) = 70 kN.
+    EA: float = 70000.0
+    # Viscous damping of each cable's stretch rate, N s/m. Chosen for ~5% of critical damping
+    # of the platform's translation on 7 cables of k ~ 28 kN/m (2.5 m long) with 2.5 kg:
+    # 0.05 * 2 sqrt(7/3 * 28e3 * 2.5) / (7/3) = 17 N s/m, rounded to 20.
+    damping: float = 20.0
+
+
+@dataclasses.dataclass
+class ReelDrivesSchema:
+    # Closed-loop bandwidth of each reel's velocity loop, rad/s (first order: time constant
+    # 1/bandwidth). 100 rad/s (10 ms) is a typical servo drive's velocity loop (500 Hz command
+    # rate); the emulator's default lag is of the same order.
+    bandwidth: float = 100.0
+    # Reel, gearbox and motor inertia seen at the cable, kg (J / r^2: ~1e-4 kg m^2 reflected
+    # through the drum of r = 0.02 m); it turns the loop's bandwidth into a gain K = bandwidth
+    # * inertia (N per m/s) that friction acts against.
+    inertia: float = 0.25
+    # Viscous friction at the cable, N s/m: 1% of the loop gain.
+    viscous_friction: float = 0.25
+    # Coulomb friction at the cable, N (drum bearings, cable guide). The paper calls the reels'
+    # friction considerable; 0.125 N against K = 25 N s/m is a dead band of 5 mm/s.
+    coulomb_friction: float = 0.125
+
+
 @dataclasses.dataclass
 class RobotSchema:
     # A short identifier, e.g. paper_7cable.
@@ -69,6 +121,10 @@ class RobotSchema:
     # Cable pairs [i, j] (1-based) that the interference block must skip, e.g. cables that
     # leave one reel exit point and so can never separate.
     ignore_pairs: list[list[int]] = dataclasses.field(default_factory=list)
+    # Dynamic-plant sections (plant: !DynamicReels); defaults documented in each schema.
+    platform: PlatformSchema = dataclasses.field(default_factory=PlatformSchema)
+    cables: CablesSchema = dataclasses.field(default_factory=CablesSchema)
+    reel_drives: ReelDrivesSchema = dataclasses.field(default_factory=ReelDrivesSchema)
 
 
 _REQUIRED = ("name", "reels", "attachments", "workspace")
@@ -104,6 +160,64 @@ class Limits:
 
 
 @dataclasses.dataclass(frozen=True, eq=False)
+class Dynamics:
+    """What only the dynamic plant needs (defaults and sources: PlatformSchema, CablesSchema,
+    ReelDrivesSchema). Platform: mass kg, inertia (3, 3) kg m^2 about the centre and handle
+    (3,) m, platform frame. Cables: EA N, damping N s/m. Reel drives: bandwidth rad/s,
+    inertia kg, viscous_friction N s/m, coulomb_friction N (all at the cable)."""
+
+    mass: float = PlatformSchema.mass
+    inertia: np.ndarray = dataclasses.field(
+        default_factory=lambda: np.array(PlatformSchema().inertia))
+    handle: np.ndarray = dataclasses.field(
+        default_factory=lambda: np.array(PlatformSchema().handle))
+    EA: float = CablesSchema.EA
+    damping: float = CablesSchema.damping
+    bandwidth: float = ReelDrivesSchema.bandwidth
+    reel_inertia: float = ReelDrivesSchema.inertia
+    viscous_friction: float = ReelDrivesSchema.viscous_friction
+    coulomb_friction: float = ReelDrivesSchema.coulomb_friction
+
+
+def _validate_dynamics(d: Dynamics, src: str) -> Dynamics:
+    """The checked Dynamics (arrays as float arrays); RobotError naming field and value."""
+    def positive(value, field, unit, allow_zero=False):
+        if not _finite(value) or (float(value) < 0 if allow_zero else float(value) <= 0):
+            bound = ">= 0" if allow_zero else "> 0"
+            raise RobotError(f"{src}: {field} must be a finite value {bound} {unit}, "
+                             f"got {_show(value)!r}")
+
+    positive(d.mass, "platform.mass", "kg")
+    I = d.inertia
+    if not (_is_sequence(I) and len(I) == 3 and all(_is_sequence(r) and len(r) == 3 for r in I)
+            and all(_finite(c) for r in I for c in r)):
+        raise RobotError(f"{src}: platform.inertia must be a 3 x 3 matrix of finite numbers "
+                         f"in kg m^2, got {_show(I)!r}")
+    I = np.array(I, dtype=float)
+    if np.max(np.abs(I - I.T)) > 1e-9 * max(1.0, np.max(np.abs(I))):
+        raise RobotError(f"{src}: platform.inertia must be symmetric, got {I.tolist()!r}")
+    moments = np.linalg.eigvalsh(I)
+    if not moments[0] > 1e-12 * max(1.0, moments[-1]):
+        raise RobotError(f"{src}: platform.inertia {I.tolist()!r} kg m^2 is singular or not "
+                         f"positive definite (principal moments {moments.tolist()!r}); a rigid "
+                         "platform's are all > 0")
+    if moments[0] + moments[1] < moments[2] * (1 - 1e-9):
+        raise RobotError(f"{src}: platform.inertia {I.tolist()!r} kg m^2 is not a rigid "
+                         f"body's: its principal moments {moments.tolist()!r} break the "
+                         "triangle inequality I1 + I2 >= I3")
+    handle = _as_vector(d.handle, "platform.handle", src)
+    positive(d.EA, "cables.EA", "N")
+    positive(d.damping, "cables.damping", "N s/m", allow_zero=True)
+    positive(d.bandwidth, "reel_drives.bandwidth", "rad/s")
+    positive(d.reel_inertia, "reel_drives.inertia", "kg")
+    positive(d.viscous_friction, "reel_drives.viscous_friction", "N s/m", allow_zero=True)
+    positive(d.coulomb_friction, "reel_drives.coulomb_friction", "N", allow_zero=True)
+    I.flags.writeable = False
+    handle.flags.writeable = False
+    return dataclasses.replace(d, inertia=I, handle=handle)
+
+
+@dataclasses.dataclass(frozen=True, eq=False)
 class Robot:
     """A translational cable robot.
 
@@ -119,6 +233,8 @@ class Robot:
     cable_diameter: float = 0.0
     ignore_pairs: tuple[tuple[int, int], ...] = ()
     source: str = "<code>"
+    # Mass, inertia, cable and reel-drive parameters of the dynamic plant.
+    dynamics: Dynamics = Dynamics()
 
     def __post_init__(self):
         reels = _as_points(self.reels, "reels", self.source)
@@ -140,6 +256,7 @@ class Robot:
         ignore = tuple(tuple(int(k) for k in pair) for pair in self.ignore_pairs)
         object.__setattr__(self, "ignore_pairs", ignore)
         _validate(self)
+        object.__setattr__(self, "dynamics", _validate_dynamics(self.dynamics, self.source))
         for arr in (reels, attachments, lower, upper):
             arr.flags.writeable = False
         excluded, reasons = _never_separating(self)
@@ -330,13 +447,25 @@ def robot_names() -> list[str]:
     return sorted(p.stem for p in ROBOTS_DIR.glob("*.yaml"))
 
 
+def is_path_like(name_or_path) -> bool:
+    """A .yaml/.yml name or one with a folder in it is a path; anything else is a name."""
+    text = str(name_or_path)
+    return Path(text).suffix in (".yaml", ".yml") or "/" in text or os.sep in text
+
+
 def resolve_named_yaml(name_or_path, directory: Path, what: str, error=ValueError) -> Path:
     """A YAML file given by path, or by the name of one shipped in `directory` ("paper_7cable"
-    for directory/paper_7cable.yaml). `error` is raised naming the `what` and the choices."""
+    for directory/paper_7cable.yaml). A name resolves to a file (given as a path, or an
+    existing file) or to the shipped one, never to a folder: a folder `exp2_interaction/` in
+    the current directory does not hide the shipped scenario. `error` is raised naming the
+    `what`, the full path tried and the choices."""
     path = Path(name_or_path)
-    if path.suffix in (".yaml", ".yml") or path.exists():
+    if is_path_like(name_or_path) or path.is_file():
         if not path.is_file():
-            raise error(f"{what} file {str(path)!r} does not exist")
+            where = "a folder" if path.is_dir() else "does not exist"
+            raise error(f"{what} file {str(path)!r} {'is ' if path.is_dir() else ''}{where}"
+                        + (f" (tried {str(path.absolute())!r})" if not path.is_absolute()
+                           else ""))
         return path
     candidate = directory / f"{name_or_path}.yaml"
     if candidate.is_file():
@@ -380,8 +509,16 @@ def load_robot(path: str | Path) -> Robot:
         if k not in raw["workspace"]:
             raise RobotError(f"{src}: missing required field workspace.{k}")
     _check_keys(raw["workspace"], WorkspaceSchema, "workspace.", src)
-    if isinstance(raw.get("limits"), dict):
-        _check_keys(raw["limits"], LimitsSchema, "limits.", src)
+    for key, section in (("limits", LimitsSchema), ("platform", PlatformSchema),
+                         ("cables", CablesSchema), ("reel_drives", ReelDrivesSchema)):
+        if key in raw and not isinstance(raw[key], dict):
+            raise RobotError(f"{src}: {key} must be a mapping with fields "
+                             f"{[f.name for f in dataclasses.fields(section)]}, got "
+                             f"{raw[key]!r}")
+        if isinstance(raw.get(key), dict):
+            _check_keys(raw[key], section, f"{key}.", src)
+    # The dynamic-plant sections likewise (a scalar inertia, a string mass).
+    _validate_dynamics(_raw_dynamics(raw), src)
     # Check the geometry on the raw data first: Drake's messages for a non-number or a scalar
     # row do not say which field or cable is wrong.
     _as_points(raw["reels"], "reels", src)
@@ -405,6 +542,20 @@ def load_robot(path: str | Path) -> Robot:
     return robot
 
 
+def _raw_dynamics(raw: dict) -> Dynamics:
+    """Dynamics from a robot file's raw YAML (defaults where a field is absent), to check."""
+    platform, cables, drives = (raw.get(k) or {} for k in ("platform", "cables", "reel_drives"))
+    d = Dynamics()
+    return dataclasses.replace(
+        d, mass=platform.get("mass", d.mass), inertia=platform.get("inertia", d.inertia),
+        handle=platform.get("handle", d.handle), EA=cables.get("EA", d.EA),
+        damping=cables.get("damping", d.damping),
+        bandwidth=drives.get("bandwidth", d.bandwidth),
+        reel_inertia=drives.get("inertia", d.reel_inertia),
+        viscous_friction=drives.get("viscous_friction", d.viscous_friction),
+        coulomb_friction=drives.get("coulomb_friction", d.coulomb_friction))
+
+
 def _check_keys(raw: dict, schema, prefix: str, src: str) -> None:
     valid = [f.name for f in dataclasses.fields(schema)]
     unknown = [k for k in raw if k not in valid]
@@ -424,4 +575,10 @@ def robot_from_schema(schema: RobotSchema, source: str = "<code>") -> Robot:
         cable_diameter=schema.cable_diameter,
         ignore_pairs=tuple(tuple(p) for p in schema.ignore_pairs),
         source=source,
+        dynamics=Dynamics(
+            mass=schema.platform.mass, inertia=schema.platform.inertia,
+            handle=schema.platform.handle, EA=schema.cables.EA, damping=schema.cables.damping,
+            bandwidth=schema.reel_drives.bandwidth, reel_inertia=schema.reel_drives.inertia,
+            viscous_friction=schema.reel_drives.viscous_friction,
+            coulomb_friction=schema.reel_drives.coulomb_friction),
     )

@@ -138,12 +138,39 @@ class SimulatedReels:
     max_reel_speed: typing.Optional[float] = None
 
 
+@dataclasses.dataclass
+class DynamicReels:
+    """A dynamic plant (systems/dynamic_plant.py): the platform as a rigid body on elastic,
+    tension-only cables paid out by reel drives with friction. Mass, inertia, cable and drive
+    parameters come from the robot file (platform:, cables:, reel_drives:)."""
+
+    # Time step of the discrete MultibodyPlant and the reel drives, s; must divide the
+    # control period (1 ms: two steps per 2 ms tick; the default cables allow up to ~4 ms).
+    time_step: float = 0.001
+    # Floor of the start tension distribution, N: every cable at least this taut at t = 0.
+    min_tension: float = 5.0
+    # The platform's start orientation [roll, pitch, yaw], rad; the start position is the
+    # scenario's initial_position. A robot whose cables cannot hold the platform level at the
+    # start pose needs a tilt (the refusal says which one would do).
+    initial_rpy: list[float] = dataclasses.field(default_factory=lambda: [0.0, 0.0, 0.0])
+    # True holds the platform at its start orientation (three prismatic joints take the
+    # cables' moments): the translation-only model of the paper and of !SimulatedReels, for
+    # comparing with it. False: the platform rotates freely, as the real one does.
+    lock_rotation: bool = False
+    # Reel speed limit, m/s of cable; None takes the robot file's max_reel_speed.
+    max_reel_speed: typing.Optional[float] = None
+    # Largest residual of the controller's forward kinematics on the encoder lengths, m: the
+    # cables stretch and the platform rotates, so the lengths never fit a translating rigid
+    # platform exactly. Above it the controller stops the run, as on the robot.
+    max_length_residual: float = 0.02
+
+
 def _plant_types():
     try:
         from .hardware.config import HardwareReels
     except ImportError:  # the hardware package is optional for pure simulation
-        return (SimulatedReels,)
-    return (SimulatedReels, HardwareReels)
+        return (SimulatedReels, DynamicReels)
+    return (SimulatedReels, HardwareReels, DynamicReels)
 
 
 _PLANTS = _plant_types()
@@ -178,7 +205,7 @@ class Scenario:
     # The person at the handle (simulation and the emulator; on the robot, a real person).
     operator: OperatorConfig = dataclasses.field(default_factory=NoOperator)
     sensor: Sensor = dataclasses.field(default_factory=Sensor)
-    # The reel plant: `!SimulatedReels {...}` or `!HardwareReels {...}`.
+    # The reel plant: `!SimulatedReels {...}`, `!DynamicReels {...}` or `!HardwareReels {...}`.
     plant: PlantConfig = dataclasses.field(default_factory=SimulatedReels)
     # Seed of every random number generator (sensor noise), for repeatable runs.
     random_seed: int = 0
@@ -199,18 +226,31 @@ def load_scenario(name_or_path="exp2_interaction", overlay_text: str | None = No
     """Load a scenario by name or path, apply a YAML overlay, and check it."""
     from pydrake.common.yaml import yaml_load_typed
 
+    from pydrake.common.yaml import yaml_load
+
     path = resolve_scenario_path(name_or_path)
     _check_yaml_text(f"{path}", filename=str(path))
     try:
         scenario = yaml_load_typed(schema=Scenario, filename=str(path))
     except Exception as e:
         raise ScenarioError(f"{path}: {_explain(e)}") from None
+    # Every path resolves against the file it appears in, so a scenario means the same from
+    # every directory; an overlay's, typed on the command line, against the current one.
+    source = f"--scenario-text {overlay_text!r}"
+    raw = {}
     if overlay_text:
-        _check_yaml_text(f"--scenario-text {overlay_text!r}", data=overlay_text)
+        _check_yaml_text(source, data=overlay_text)
+        raw = yaml_load(data=overlay_text) or {}
+    _resolve_paths(scenario, path.parent.resolve(), f"scenario {str(path)!r}",
+                   "the scenario file's folder", robot="robot" not in raw,
+                   operator="operator" not in raw)
+    if overlay_text:
         try:
             scenario = yaml_load_typed(schema=Scenario, data=overlay_text, defaults=scenario)
         except Exception as e:
-            raise ScenarioError(f"--scenario-text {overlay_text!r}: {_explain(e)}") from None
+            raise ScenarioError(f"{source}: {_explain(e)}") from None
+        _resolve_paths(scenario, Path.cwd(), source, "the current directory for an overlay",
+                       robot="robot" in raw, operator="operator" in raw)
     # Absolute, so the resolved scenario written beside a log (which records base_dir) finds
     # the same robot and CSV files when loaded back from elsewhere.
     scenario.base_dir = str((path.parent / scenario.base_dir).resolve())
@@ -219,6 +259,37 @@ def load_scenario(name_or_path="exp2_interaction", overlay_text: str | None = No
         _warn_unreachable_d_u(robot, interference_params(scenario, robot))
     _warn_reel_saturation(scenario, robot)
     return scenario
+
+
+def _resolve_paths(scenario: Scenario, base: Path, source: str, base_what: str, *,
+                   robot: bool, operator: bool) -> None:
+    """Make the scenario's robot file and CSV operator path absolute, relative to `base`
+    (the folder of the file they appear in), with no fallback; a robot name must be a
+    built-in one. ScenarioError names the `source` and the full path tried."""
+    from .robot import ROBOTS_DIR, is_path_like, robot_names
+
+    if robot:
+        ref = scenario.robot
+        if is_path_like(ref):
+            full = Path(ref) if Path(ref).is_absolute() else base / ref
+            if not full.is_file():
+                raise ScenarioError(
+                    f"{source}: robot file {ref!r} does not exist: tried {str(full)!r}"
+                    + ("" if Path(ref).is_absolute() else
+                       f" (relative paths are relative to {base_what})"))
+            scenario.robot = str(full)
+        elif not (ROBOTS_DIR / f"{ref}.yaml").is_file():
+            raise ScenarioError(f"{source}: unknown robot {ref!r}; built-in robots: "
+                                f"{robot_names()} (or give a path to a .yaml file)")
+    if operator and isinstance(scenario.operator, CsvOperator) and scenario.operator.path:
+        ref = scenario.operator.path
+        full = Path(ref) if Path(ref).is_absolute() else base / ref
+        if not full.is_file():
+            raise ScenarioError(
+                f"{source}: operator.path {ref!r} does not exist: tried {str(full)!r}"
+                + ("" if Path(ref).is_absolute() else
+                   f" (relative paths are relative to {base_what})"))
+        scenario.operator.path = str(full)
 
 
 def _warn_reel_saturation(scenario, robot):
@@ -295,8 +366,7 @@ def _check_yaml(value, schema, field: str) -> None:
             try:  # an untagged entry is the first member, as yaml_load_typed reads it
                 return _check_yaml(value, args[0], field)
             except ScenarioError as e:
-                raise ScenarioError(f"{e} (an untagged {field} is {tags[0]}; valid {field} "
-                                    f"types: {tags})") from None
+                raise ScenarioError(_untagged_hint(e, value, args, tags, field)) from None
         if tag not in tags:
             raise ScenarioError(f"{field}: unknown type {tag!r}; valid {field} types: {tags}")
         return _check_yaml(value, args[tags.index(tag)], field)
@@ -316,6 +386,33 @@ def _check_yaml(value, schema, field: str) -> None:
         raise ScenarioError(f"{name} must be a string, got {value!r}")
 
 
+def _untagged_hint(e: ScenarioError, value, args, tags, field: str) -> str:
+    """The message for an untagged mapping that does not fit the union's first member: name
+    the tag it needs, with the members that have its fields (a scenario whose operator is a
+    !SpringHandOperator still needs the tag in an overlay: untagged means the first member)."""
+    text = f"{e} (an untagged {field} is {tags[0]}; valid {field} types: {tags})"
+    if not isinstance(value, dict) or not value:
+        return text
+    keys = [k for k in value if k != "_tag"]
+    fits = [tag for tag, member in zip(tags, args) if dataclasses.is_dataclass(member)
+            and set(keys) <= {f.name for f in dataclasses.fields(member)}]
+    if not fits:
+        return text
+    flow = ", ".join(f"{k}: {_flow_yaml(value[k])}" for k in keys)
+    article = "an" if field[:1] in "aeiou" else "a"
+    return (f"{e}; a mapping without a tag is read as {tags[0]}, so {article} {field} needs "
+            f"its tag, e.g. `{field}: {fits[0]} {{{flow}}}` (types with these fields: "
+            f"{fits}; valid {field} types: {tags})")
+
+
+def _flow_yaml(v) -> str:
+    if isinstance(v, list):
+        return "[" + ", ".join(_flow_yaml(x) for x in v) + "]"
+    if isinstance(v, dict):
+        return "{" + ", ".join(f"{k}: {_flow_yaml(x)}" for k, x in v.items()) + "}"
+    return str(v)
+
+
 def _explain(e: Exception) -> str:
     msg = str(e)
     if "did not match any of the allowed type options" in msg:
@@ -328,12 +425,15 @@ def _explain(e: Exception) -> str:
 
 def scenario_robot(scenario: Scenario) -> Robot:
     """The scenario's robot with its cable swaps applied."""
+    from .robot import ROBOTS_DIR, is_path_like
+
     ref = scenario.robot
-    base = Path(scenario.base_dir) if scenario.base_dir else None
-    if base is not None and (ref.endswith((".yaml", ".yml"))) and not Path(ref).is_absolute():
-        candidate = base / ref
-        if candidate.exists():
-            ref = str(candidate)
+    if is_path_like(ref):
+        # Loaded scenarios hold absolute paths; one built in code resolves against base_dir.
+        if scenario.base_dir and not Path(ref).is_absolute():
+            ref = str(Path(scenario.base_dir) / ref)
+    elif (ROBOTS_DIR / f"{ref}.yaml").is_file():
+        ref = str(ROBOTS_DIR / f"{ref}.yaml")  # a name is a built-in robot, wherever we are
     try:
         robot = load_robot(ref)
     except RobotError as e:
@@ -426,7 +526,9 @@ def check_scenario(scenario: Scenario, source: str = "<scenario>") -> Robot:
     if scenario.wall_force.enabled:
         _positive(scenario.wall_force.margin, "wall_force.margin")
         _positive(scenario.wall_force.max_force, "wall_force.max_force")
-    if not isinstance(scenario.plant, SimulatedReels):
+    if isinstance(scenario.plant, DynamicReels):
+        check_dynamic_reels(scenario, robot)
+    elif not isinstance(scenario.plant, SimulatedReels):
         from .hardware.config import check_hardware_reels
         try:
             check_hardware_reels(scenario.plant)
@@ -442,6 +544,68 @@ def check_scenario(scenario: Scenario, source: str = "<scenario>") -> Robot:
     if scenario.interference.enabled and robot.num_pairs:
         interference_params(scenario, robot)
     return robot
+
+
+def check_dynamic_reels(scenario: Scenario, robot: Robot):
+    """Check a !DynamicReels plant and its start; returns the start tension distribution
+    (tension.Distribution). A start pose no positive tension distribution holds is refused,
+    naming the pose and the cables that would go slack."""
+    from .rotation import rotation_from_rpy
+    from .tension import (balancing_rotation, gravity_wrench, stable_time_step,
+                          tension_distribution, wrench_matrix)
+
+    cfg = scenario.plant
+    _positive(cfg.time_step, "plant.time_step")
+    ticks = scenario.time_step / cfg.time_step
+    if abs(ticks - round(ticks)) > 1e-9 * ticks:
+        raise ScenarioError(f"plant.time_step {cfg.time_step!r} s must divide the control "
+                            f"period time_step {scenario.time_step!r} s (e.g. "
+                            f"{scenario.time_step / max(1, math.ceil(ticks)):g} s)")
+    if not (isinstance(cfg.min_tension, (int, float)) and math.isfinite(cfg.min_tension)
+            and cfg.min_tension >= 0):
+        raise ScenarioError(f"plant.min_tension must be a finite number >= 0 N, got "
+                            f"{cfg.min_tension!r}")
+    rpy = cfg.initial_rpy
+    if len(rpy) != 3 or not all(math.isfinite(a) for a in rpy):
+        raise ScenarioError(f"plant.initial_rpy must be [roll, pitch, yaw] in rad, got {rpy!r}")
+    if cfg.max_reel_speed is not None:
+        _positive(cfg.max_reel_speed, "plant.max_reel_speed")
+    _positive(cfg.max_length_residual, "plant.max_length_residual")
+    p0 = np.asarray(scenario.initial_position, dtype=float)
+    dyn = robot.dynamics
+    W, wrench = wrench_matrix(robot, p0, rotation_from_rpy(rpy)), gravity_wrench(dyn.mass)
+    if cfg.lock_rotation:  # the lock takes the moments; the cables balance the force
+        W, wrench = W[:3], wrench[:3]
+    dist = tension_distribution(W, wrench, cfg.min_tension)
+    if not dist.feasible:
+        cables = [k + 1 for k in dist.slack]
+        msg = (f"initial_position {scenario.initial_position!r} m with plant.initial_rpy "
+               f"{list(rpy)!r} rad: no tension distribution of robot {robot.name!r} holds the "
+               f"platform's {dyn.mass:g} kg with every cable >= plant.min_tension = "
+               f"{cfg.min_tension:g} N; cable(s) {cables} would go slack (the best "
+               f"distribution leaves them at {dist.best_min:.2f} N)")
+        if dist.residual > 1e-6:
+            msg = (f"initial_position {scenario.initial_position!r} m with plant.initial_rpy "
+                   f"{list(rpy)!r} rad: the cables of robot {robot.name!r} cannot balance the "
+                   f"platform's weight at all (force/moment residual {dist.residual:.3g}): "
+                   f"their {robot.num_cables} lines of action leave a moment unbalanced; "
+                   "plant.lock_rotation: true models the platform as only translating")
+        elif not any(rpy) and not cfg.lock_rotation:
+            tilt = balancing_rotation(robot, p0, mass=dyn.mass, min_tension=cfg.min_tension)
+            if tilt is not None:
+                msg += (f"; the cables hold it tilted by plant.initial_rpy "
+                        f"{np.round(tilt, 3).tolist()!r} rad")
+        raise ScenarioError(msg)
+    h_max = stable_time_step(robot, p0, rotation_from_rpy(rpy), dist.tensions,
+                             locked=cfg.lock_rotation)
+    if cfg.time_step > 0.5 * h_max:
+        raise ScenarioError(
+            f"plant.time_step {cfg.time_step!r} s is too long for the cables of robot "
+            f"{robot.name!r} (cables.EA {dyn.EA:g} N, platform.mass {dyn.mass:g} kg): their "
+            f"stiffest mode is stable up to {h_max:.3g} s and accurate to half of that; use "
+            f"plant.time_step <= {0.5 * h_max:.2g} s (dividing time_step "
+            f"{scenario.time_step:g} s)")
+    return dist
 
 
 def _warn_unreachable_d_u(robot, params):

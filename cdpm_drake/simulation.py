@@ -13,7 +13,7 @@ import numpy as np
 from pydrake.systems.analysis import Simulator
 
 from .diagram import LOGGED, build_diagram
-from .scenario import (Scenario, ScenarioError, SimulatedReels, check_scenario,
+from .scenario import (DynamicReels, Scenario, ScenarioError, SimulatedReels, check_scenario,
                        interference_params, scenario_to_yaml)
 
 
@@ -42,10 +42,11 @@ def simulate(*, scenario: Scenario, duration: float | None = None, progress: boo
     in `error` with the log up to that point.
     """
     robot = check_scenario(scenario)
-    if diagram is None and not isinstance(scenario.plant, SimulatedReels):
+    if diagram is None and not isinstance(scenario.plant, (SimulatedReels, DynamicReels)):
         raise ScenarioError(
             f"scenario {scenario.name!r} has plant: !{type(scenario.plant).__name__}; a "
-            "simulation needs plant: !SimulatedReels {} (use `cdpm run` to drive real reels)")
+            "simulation needs plant: !SimulatedReels {} or !DynamicReels {} (use `cdpm run` "
+            "to drive real reels)")
     duration = scenario.duration if duration is None else float(duration)
     if not (duration > 0 and np.isfinite(duration)):
         raise ValueError(f"duration must be a finite number > 0 s, got {duration!r}")
@@ -64,14 +65,14 @@ def simulate(*, scenario: Scenario, duration: float | None = None, progress: boo
     start = time.perf_counter()
     t = 0.0
     try:
-        # Step to the last whole tick inside the duration: one log row per tick.
-        end = np.floor(duration / scenario.time_step + 1e-9) * scenario.time_step
-        while t < end - 1e-12:
-            t_next = min(t + chunk, end)
-            simulator.AdvanceTo(t_next)
+        # Step to the last whole tick inside the duration: one log row per tick, ticks 0..n.
+        # Targets are whole ticks counted in integers: summing a chunk such as 0.04 s in
+        # floating point ends a hair short of the last tick, which then is never logged.
+        for target in tick_targets(duration, scenario.time_step, chunk):
+            simulator.AdvanceTo(target)
             if bar is not None:
-                bar.update(round(t_next - t, 6))
-            t = t_next
+                bar.update(round(target - t, 6))
+            t = target
             if on_chunk is not None:
                 on_chunk(diagram, context)
     except (Exception, KeyboardInterrupt) as e:  # keep what was logged; the caller reports
@@ -81,21 +82,68 @@ def simulate(*, scenario: Scenario, duration: float | None = None, progress: boo
         if bar is not None:
             bar.close()
     log = collect_log(diagram, context, scenario, robot)
+    mark_ending(log, "completed" if error is None else
+                "interrupted" if isinstance(error, KeyboardInterrupt) else "fault", error)
     return SimulationResult(log=log, wall_time=wall, error=error)
+
+
+def tick_targets(duration: float, time_step: float, chunk: float) -> list[float]:
+    """The times to advance to, every `chunk` s (rounded to whole ticks, at least one), ending
+    exactly at the last whole tick n * time_step <= duration (the log then has n + 1 rows)."""
+    n = int(np.floor(duration / time_step + 1e-9))
+    per = max(1, int(round(chunk / time_step)))
+    ticks = list(range(per, n, per)) + [n]
+    return [k * time_step for k in ticks if k > 0]
+
+
+def mark_ending(log: dict, ending: str, error: BaseException | None) -> dict:
+    """Add how the run ended (docs/LOG_FORMAT.md): `ending` "completed", "interrupted" or
+    "fault"; for a fault, `fault_time` (the last logged tick, s) and `fault_message`."""
+    if ending not in ("completed", "interrupted", "fault"):
+        raise ValueError(f"ending must be 'completed', 'interrupted' or 'fault', got {ending!r}")
+    t = log["time"]
+    fault = ending == "fault"
+    log["ending"] = np.array(ending)
+    log["fault_time"] = np.array(float(t[-1]) if fault and len(t) else np.nan)
+    message = "" if not fault else (f"{type(error).__name__}: {error}" if error is not None
+                                    else "unknown fault")
+    log["fault_message"] = np.array(message)
+    return log
 
 
 def collect_log(diagram, context, scenario: Scenario, robot) -> dict:
     """The loggers' contents as named arrays, one row per tick (docs/LOG_FORMAT.md)."""
-    signals = {}
-    time_column = np.zeros(0)
+    columns = {}
     for key, _, _ in LOGGED:
         name = f"log_{key}"
         if not diagram.HasSubsystemNamed(name):
             continue
         data = diagram.GetSubsystemByName(name).FindLog(context)
-        signals[key] = data.data().T.copy()
-        time_column = data.sample_times().copy()
+        columns[key] = (data.sample_times().copy(), data.data().T.copy())
+    time_column, signals = whole_ticks(columns)
+    # The dynamic plant's ground truth, logged inside the plant (no ports for it), one row per
+    # tick like the rest: cut to the same whole ticks.
+    from .systems.dynamic_plant import ground_truth_log
+    truth = ground_truth_log(diagram, context)
+    if truth:
+        n = min([len(time_column)] + [len(rows) for rows in truth.values()])
+        time_column = time_column[:n]
+        signals = {key: rows[:n] for key, rows in {**signals, **truth}.items()}
     return assemble_log(time_column, signals, scenario, robot)
+
+
+def whole_ticks(columns: dict) -> tuple[np.ndarray, dict]:
+    """(time, {key: rows}) from {key: (sample times, rows)}, cut to the ticks every logger
+    logged: Ctrl-C or SIGTERM can stop the run between two loggers' publishes of one tick,
+    which leaves that tick in some of them only."""
+    if not columns:
+        return np.zeros(0), {}
+    n = min(len(times) for times, _ in columns.values())
+    times = next(iter(columns.values()))[0][:n]
+    for key, (t, _) in columns.items():
+        if not np.array_equal(t[:n], times):
+            raise RuntimeError(f"logger {key!r} sampled other times than the others")
+    return times, {key: rows[:n] for key, (_, rows) in columns.items()}
 
 
 def assemble_log(time_column, signals: dict, scenario: Scenario, robot) -> dict:
@@ -112,8 +160,9 @@ def assemble_log(time_column, signals: dict, scenario: Scenario, robot) -> dict:
     for key, width in (("F_int", 3), ("F_wall", 3), ("pair_distances", P), ("active", P),
                        ("crossed", P)):
         log.setdefault(key, np.zeros((T, width)))
-    for key in ("active", "crossed"):
-        log[key] = np.asarray(log[key]) > 0.5
+    for key in ("active", "crossed", "slack"):
+        if key in log:
+            log[key] = np.asarray(log[key]) > 0.5
     log["pairs"] = np.array(robot.pairs, dtype=int).reshape(P, 2)
     if scenario.interference.enabled and P:
         params = interference_params(scenario, robot)

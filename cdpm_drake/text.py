@@ -1,4 +1,9 @@
-"""Plain-text tables for the CLI's summaries and the benchmark scripts."""
+"""Plain text for the command line: tables for the summaries and the benchmark scripts, and
+log records printed as `warning: ...`."""
+
+import contextlib
+import logging
+import sys
 
 
 def format_table(headers, rows) -> str:
@@ -10,3 +15,24 @@ def format_table(headers, rows) -> str:
                        for k, (c, w) in enumerate(zip(r, widths))) for r in cells]
     lines.insert(1, "  ".join("-" * w for w in widths))
     return "\n".join(lines)
+
+
+class _LevelPrefix(logging.Formatter):
+    def format(self, record):
+        return f"{record.levelname.lower()}: {record.getMessage()}"
+
+
+@contextlib.contextmanager
+def prefixed_log_records(stream=None):
+    """Within the block, warnings and errors logged by the package and by Drake print as
+    `warning: ...` / `error: ...` on stderr (like the commands' `error:` lines), not as a bare
+    message."""
+    handler = logging.StreamHandler(sys.stderr if stream is None else stream)
+    handler.setFormatter(_LevelPrefix())
+    handler.setLevel(logging.WARNING)
+    root = logging.getLogger()
+    root.addHandler(handler)
+    try:
+        yield
+    finally:
+        root.removeHandler(handler)

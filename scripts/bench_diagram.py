@@ -1,4 +1,4 @@
-"""Benchmark of the Fig. 5 diagram (issue 5, item 5): real-time factor of a scenario
+"""Benchmark of the Fig. 5 diagram: real-time factor of a scenario
 (experiment 2 by default, 60 s of simulated time) for the full diagram, without the
 interference block and without the loggers, and the share of the full diagram's time spent in
 each block, in one table measured in one run. Ratios are against the full diagram.
@@ -36,7 +36,7 @@ from cdpm_drake.diagram import BuildOptions, build_diagram
 from cdpm_drake.scenario import load_scenario
 from cdpm_drake.text import format_table
 
-GOAL = 100.0  # issue 5: >= 100x real time for the full diagram on one core
+GOAL = 100.0  # the target: >= 100x real time for the full diagram on one core
 
 VARIANTS = (
     ("full diagram", BuildOptions()),

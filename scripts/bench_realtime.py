@@ -1,4 +1,4 @@
-"""Benchmark of real-time runs (issue 6, item 6): tick-period distribution (p50, p99, p99.9,
+"""Benchmark of real-time runs: tick-period distribution (p50, p99, p99.9,
 max), overruns and lost samples of the scenario's Fig. 5 diagram at real-time rate 1 with the
 hardware plant against cdpm-reel-emulator (a separate process on loopback), in one table.
 

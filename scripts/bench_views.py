@@ -1,4 +1,4 @@
-"""Benchmark of the views (issue 10, points 12-16): what looking at a run costs next to making
+"""Benchmark of the views (figures, replay, Meshcat): what looking at a run costs next to making
 it. One scenario (experiment 2 by default, its full 30 s) is simulated once; then, in the same
 process, each view is made from its log: every figure of `cdpm plot` (PNG at 120 dpi), the
 HTML replay at 50 frames/s (its size too), the live Meshcat view's construction (the static

@@ -8,9 +8,9 @@ d13 = 57 mm at p = [1.77, 3.65, 1.22], 61 mm at [1.56, 3.24, 1.22], 59 mm at [1.
 Separation. Under pure translation a pair can never be farther apart than its translation bound
 g_ij (`interference.translation_distance_bound`); gradient ascent of d_ij ends on a ridge at
 d_ij = g_ij. The experiments switch the force off at d_u = 62 mm, so the swapped pairs 1-3 and
-5-7 must have g >= G_MIN = 64 mm (d_u plus 2 mm), or the force never fades (issue 4, lead's
-finding). That requirement pulls against the reported distances (d <= g everywhere, and the
-paper's 57..61 mm spread must then come from points farther below the ridge).
+5-7 must have g >= G_MIN = 64 mm (d_u plus 2 mm), or the force never fades. That requirement
+pulls against the reported distances (d <= g everywhere, and the paper's 57..61 mm spread must
+then come from points farther below the ridge).
 
 Two stages, each a fixed, seeded computation:
 1. Fit: bounded least squares (scipy) on the six distance residuals, weighted 1 / 0.1 mm, plus a

@@ -86,9 +86,10 @@ def test_info_robot_file_by_path(capsys):
     assert str(HAND_ROBOT) in out and "'garage_4cable'" in out
 
 
-def test_info_unknown_robot_exits_2_listing_builtins(capsys):
+def test_info_unknown_robot_exits_1_listing_builtins(capsys):
+    # 1, an error (the robot cannot be loaded); 2 is kept for a malformed command line.
     code, out, err = run_info(capsys, "nonexistent")
-    assert code == 2
+    assert code == 1
     assert out == ""
     assert err.startswith("cdpm info: error:")
     for part in ("'nonexistent'", "paper_7cable", "cube_8cable"):
@@ -96,11 +97,11 @@ def test_info_unknown_robot_exits_2_listing_builtins(capsys):
     assert "Traceback" not in err
 
 
-def test_info_invalid_robot_file_exits_2_naming_the_field(capsys, write_robot, valid_spec):
+def test_info_invalid_robot_file_exits_1_naming_the_field(capsys, write_robot, valid_spec):
     valid_spec["reels"][1][2] = float("nan")
     path = write_robot(valid_spec)
     code, out, err = run_info(capsys, str(path))
-    assert code == 2
+    assert code == 1
     assert str(path) in err and "reels of cable 2" in err and "nan" in err
 
 
@@ -115,4 +116,85 @@ def test_installed_console_script():
     assert numbers == list(range(1, 9))
     bad = subprocess.run([str(exe), "info", "nonexistent"], capture_output=True, text=True,
                          timeout=120)
-    assert bad.returncode == 2 and "'nonexistent'" in bad.stderr
+    assert bad.returncode == 1 and "'nonexistent'" in bad.stderr
+
+
+# --- the command line as a whole (issue 10, points 8 and 10) ----------------------------------
+
+
+def test_a_wrong_flag_shows_the_subcommands_usage(capsys):
+    with pytest.raises(SystemExit) as info:
+        cli.main(["simulate", "--bogus"])
+    assert info.value.code == 2
+    err = capsys.readouterr().err
+    assert err.startswith("usage: cdpm simulate ")
+    assert "cdpm simulate: error: unrecognized arguments: --bogus" in err
+
+
+def test_version(capsys):
+    from cdpm_drake import __version__
+
+    with pytest.raises(SystemExit) as info:
+        cli.main(["--version"])
+    assert info.value.code == 0
+    assert capsys.readouterr().out.strip() == f"cdpm {__version__}"
+
+
+def test_help_documents_the_exit_codes(capsys):
+    with pytest.raises(SystemExit):
+        cli.main(["--help"])
+    out = capsys.readouterr().out
+    for code in ("0    done", "1    error", "2    bad usage", "130  interrupted by Ctrl-C",
+                 "143  stopped by SIGTERM"):
+        assert code in out
+
+
+def test_list_shows_the_built_in_robots_scenarios_and_sweeps(capsys, tmp_path, monkeypatch):
+    from cdpm_drake.robot import robot_names
+    from cdpm_drake.scenario import scenario_names
+
+    monkeypatch.chdir(tmp_path)  # by name from any directory
+    assert cli.main(["list"]) == 0
+    out = capsys.readouterr().out
+    lines = out.splitlines()
+    for name in robot_names() + scenario_names():
+        (line,) = [x for x in lines if x.split()[:1] == [name]]
+        assert len(line.split()) > 1, line  # a one-line description follows the name
+    # A scenario's line is its description's first sentence.
+    exp2 = next(x for x in lines if x.split()[:1] == ["exp2_interaction"])
+    assert "Section 5.2: a hand moves the platform" in exp2
+    paper = next(x for x in lines if x.split()[:1] == ["paper_7cable"])
+    assert paper.split(None, 1)[1] == ("The seven-cable CDPM of Meziane, Cardou and Otis "
+                                       "(section 5, Fig. 7).")
+
+
+def test_list_includes_sweeps_when_the_package_ships_them(capsys, tmp_path, monkeypatch):
+    # The sweeps live in cdpm_drake/sweeps/ (issue 12); a stand-in package directory here.
+    fake = tmp_path / "cdpm_drake"
+    (fake / "sweeps").mkdir(parents=True)
+    (fake / "sweeps" / "d_u_grid.yaml").write_text(
+        "# Sweep d_u over five values. More text here.\nname: d_u_grid\n")
+    monkeypatch.setattr(cli, "__file__", str(fake / "cli.py"))
+    assert cli.list_main() == 0
+    out = capsys.readouterr().out
+    assert "sweeps (" in out and "d_u_grid  Sweep d_u over five values." in out
+
+
+def test_warnings_start_with_warning(capsys, tmp_path):
+    code = cli.main(["simulate", "exp1_no_interaction", "--duration", "0.02", "--no-progress",
+                     "--out", str(tmp_path), "--scenario-text", "{limits: {max_velocity: 5}}"])
+    assert code == 0
+    err = capsys.readouterr().err
+    assert ("warning: the platform speed limit 5 m/s is above the reel speed limit 1 m/s"
+            in err), err
+
+
+def test_the_run_report_counts_rejected_packets():
+    from cdpm_drake.realtime import RunResult, count_by_reason, report_lines
+
+    assert count_by_reason({}) == "0"
+    assert count_by_reason({"value": 3, "crc": 0, "sequence": 1}) == "4 (value 3, sequence 1)"
+    result = RunResult(log={}, timing={}, link={"sent": 10, "rejected": {"value": 3, "crc": 0}},
+                       error=None, ending="completed", log_path=None, tick_log_path=None)
+    (packets,) = [x for x in report_lines(result) if x.startswith("packets:")]
+    assert "rejected 3 (value 3)," in packets and "{" not in packets

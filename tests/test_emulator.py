@@ -334,7 +334,7 @@ def test_cli_takes_robot_start_and_operator_from_a_scenario():
 def test_cli_errors_name_the_flag(capsys):
     assert E.main(["--robot", "paper_7cable", "--length-offset", "9", "0.1", "--port", "0"]) == 2
     assert "--length-offset cable '9': cables are numbered 1..7" in capsys.readouterr().err
-    assert E.main(["--robot", "no_such_robot", "--port", "0"]) == 2
+    assert E.main(["--robot", "no_such_robot", "--port", "0"]) == 1  # an error, not usage
     assert "unknown robot 'no_such_robot'" in capsys.readouterr().err
 
 
@@ -400,3 +400,109 @@ def test_a_new_session_is_accepted_only_with_enable_clear_and_the_reels_at_rest(
     finally:
         client.close()
         server.stop()
+
+
+# --- what the emulator says (issue 10, point 9) ----------------------------------------------
+
+
+def _wait(condition, timeout=2.0):
+    deadline = time.monotonic() + timeout
+    while not condition():
+        if time.monotonic() > deadline:
+            return False
+        time.sleep(0.005)
+    return True
+
+
+def test_sessions_are_reported_as_they_open_and_close(robot, p0):
+    said = []
+    server = ReelBridgeServer(ReelBridge(robot, cable_lengths(robot, p0), time_constant=0),
+                              log=said.append, session_timeout=0.1).start()
+    first, second = Controller(server), Controller(server)
+    try:
+        for _ in range(5):
+            first.send(np.zeros(7), enable=False)
+        assert _wait(lambda: any("session 1 closed" in s for s in said))
+        second.send(np.zeros(7), enable=False)  # a new controller, from sequence 1 again
+        assert _wait(lambda: any("session 2 opened" in s for s in said))
+    finally:
+        first.close()
+        second.close()
+        server.stop()
+    opened = [s for s in said if "opened" in s]
+    assert opened[0].startswith("session 1 opened by 127.0.0.1:")
+    closed = next(s for s in said if s.startswith("session 1 closed"))
+    assert "no command for 0.1 s" in closed and "5 commands accepted" in closed
+    assert server.session == 2
+
+
+def test_rejected_commands_are_reported_by_reason(capsys):
+    # A 7-cable controller talking to an 8-cable emulator: every command has the wrong size.
+    said = []
+    robot8 = load_robot("cube_8cable")
+    server = ReelBridgeServer(ReelBridge(robot8, cable_lengths(robot8, robot8.workspace.center),
+                                         time_constant=0), log=said.append).start()
+    ctl = Controller(server)
+    try:
+        for _ in range(5):
+            ctl.send(np.zeros(7), enable=False)
+        assert _wait(lambda: sum(server.counters["rejected"].values()) == 5)
+    finally:
+        ctl.close()
+        server.stop()
+    rejected = {r: n for r, n in server.counters["rejected"].items() if n}
+    (reason,) = rejected  # one reason, counted 5 times, said once
+    assert rejected[reason] == 5
+    lines = [s for s in said if s.startswith("rejected a command")]
+    assert len(lines) == 1 and f"({reason})" in lines[0], said
+    assert E._count_by_reason(rejected) == f"5 ({reason} 5)"
+
+
+def test_a_port_in_use_is_named(capsys):
+    holder = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+    holder.bind(("127.0.0.1", 0))
+    port = holder.getsockname()[1]
+    try:
+        assert E.main(["--robot", "paper_7cable", "--port", str(port), "--duration", "0.1"]) == 1
+    finally:
+        holder.close()
+    err = capsys.readouterr().err
+    assert f"cannot listen on UDP 127.0.0.1:{port}" in err and "--port" in err
+
+
+def test_a_fault_plan_applies_to_one_session(robot, p0):
+    # --stop --fault-after 0: the first session that enables loses its statuses; the next
+    # controller session gets a working bridge again.
+    said = []
+    # A long command timeout: this test sends single commands, not a 500 Hz stream.
+    server = ReelBridgeServer(ReelBridge(robot, cable_lengths(robot, p0), time_constant=0),
+                              faults=FaultPlan(stop=True), log=said.append,
+                              command_timeout=10.0).start()
+    first = Controller(server)
+    try:
+        first.send(np.zeros(7), enable=True)
+        assert _wait(lambda: server.fault_onset is not None)
+        for _ in range(3):
+            first.send(np.zeros(7), enable=False)  # the controller's shutdown burst
+        time.sleep(0.05)
+        first.latest()  # drop what came before the onset
+        time.sleep(0.05)
+        first.sock.setblocking(False)
+        with pytest.raises(BlockingIOError):
+            first.sock.recvfrom(4096)  # stopped: nothing more
+        second = Controller(server)
+        try:
+            second.send(np.zeros(7), enable=False)
+            assert _wait(lambda: server.session == 2)
+            status = decode_status(second.receive(1)[0], 7)
+            assert status.faults == 0
+            second.send(np.zeros(7), enable=True)
+            time.sleep(0.05)
+            assert server.fault_onset is None and server.bridge.enabled
+        finally:
+            second.close()
+    finally:
+        first.close()
+        server.stop()
+    assert any("session 2: no faults injected (the fault plan applied to session 1)" in s
+               for s in said), said

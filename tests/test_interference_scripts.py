@@ -37,7 +37,7 @@ def test_benchmark_prints_one_table_with_every_row():
 
 
 def test_calibration_reproduces_the_shipped_points():
-    # The script's result (rounded to 0.1 mm) is what hardware/robots/paper_7cable.yaml holds.
+    # The script's result (rounded to 0.1 mm) is what cdpm_drake/robots/paper_7cable.yaml holds.
     out = run("calibrate_attachments.py", "--starts", "1")
     assert out.returncode == 0, out.stderr
     rows = [line.split("[")[1].split("]")[0] for line in out.stdout.splitlines()

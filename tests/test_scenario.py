@@ -8,7 +8,9 @@ import pytest
 
 from cdpm_drake.diagram import build_diagram
 from cdpm_drake.operators import ScriptedOperator, SpringHandOperator
+from cdpm_drake.robot import ROBOTS_DIR
 from cdpm_drake.scenario import (Scenario, ScenarioError, SimulatedReels, load_scenario,
+                                 scenario_operator,
                                  scenario_names, scenario_robot, scenario_to_yaml)
 
 SHIPPED = ("exp1_no_interaction", "exp2_interaction", "exp3_two_pairs")
@@ -105,6 +107,70 @@ def test_robot_path_in_a_scenario_file_is_relative_to_that_file(tmp_path, monkey
     monkeypatch.chdir(elsewhere)
     s = load_scenario("../run.yaml")
     assert scenario_robot(s).name == "tetra_4cable"
+
+
+def _push_in_a(tmp_path):
+    (tmp_path / "a").mkdir()
+    path = tmp_path / "a" / "my_push.yaml"
+    path.write_text("name: my_push\nrobot: my_robot.yaml\ninitial_position: [2.0, 1.5, 1.5]\n"
+                    "interference: {enabled: false}\n")
+    return path
+
+
+@pytest.mark.parametrize("cwd", [".", "elsewhere"])
+def test_a_scenario_means_the_same_from_every_directory(tmp_path, monkeypatch, write_robot,
+                                                        valid_spec, cwd):
+    # Issue 10, point 6: the robot file sits in the current directory, not beside the
+    # scenario. From every directory the scenario fails the same way, naming the scenario and
+    # the full path tried: no fallback to the current directory.
+    write_robot(valid_spec, "my_robot.yaml")  # tmp_path/my_robot.yaml
+    scenario = _push_in_a(tmp_path)
+    (tmp_path / "elsewhere").mkdir()
+    monkeypatch.chdir(tmp_path / cwd)
+    with pytest.raises(ScenarioError) as info:
+        load_scenario(scenario)
+    msg = str(info.value)
+    assert str(scenario) in msg
+    assert f"tried {str(tmp_path / 'a' / 'my_robot.yaml')!r}" in msg
+    assert "relative to the scenario file's folder" in msg
+
+
+def test_a_robot_path_in_an_overlay_is_relative_to_the_current_directory(
+        tmp_path, monkeypatch, write_robot, valid_spec):
+    write_robot(valid_spec, "my_robot.yaml")
+    scenario = _push_in_a(tmp_path)
+    monkeypatch.chdir(tmp_path)
+    s = load_scenario(scenario, overlay_text="{robot: my_robot.yaml}")
+    assert s.robot == str(tmp_path / "my_robot.yaml")
+    assert scenario_robot(s).name == "tetra_4cable"
+    (tmp_path / "b").mkdir()
+    monkeypatch.chdir(tmp_path / "b")
+    with pytest.raises(ScenarioError, match=r"--scenario-text .* robot file 'my_robot.yaml' "
+                                            r"does not exist: tried '.*/b/my_robot.yaml' "
+                                            r"\(relative paths are relative to the current"):
+        load_scenario(scenario, overlay_text="{robot: my_robot.yaml}")
+
+
+def test_a_csv_operator_path_is_relative_to_the_scenario_file(tmp_path, monkeypatch):
+    (tmp_path / "a").mkdir()
+    (tmp_path / "a" / "push.csv").write_text("t,fx,fy,fz\n0,1,2,3\n")
+    (tmp_path / "a" / "csv.yaml").write_text("operator: !CsvOperator {path: push.csv}\n")
+    monkeypatch.chdir(tmp_path)
+    s = load_scenario("a/csv.yaml")
+    assert s.operator.path == str(tmp_path / "a" / "push.csv")
+    np.testing.assert_allclose(scenario_operator(s).force(0.0, None, None), [1, 2, 3])
+
+
+def test_a_folder_named_like_a_shipped_scenario_does_not_shadow_it(tmp_path, monkeypatch):
+    # The natural --out of a run: a folder exp2_interaction/ in the current directory.
+    (tmp_path / "exp2_interaction").mkdir()
+    (tmp_path / "paper_7cable").mkdir()
+    monkeypatch.chdir(tmp_path)
+    s = load_scenario("exp2_interaction")
+    assert s.name == "exp2_interaction"
+    assert scenario_robot(s).source == str(ROBOTS_DIR / "paper_7cable.yaml")
+    with pytest.raises(ScenarioError, match=r"scenario file 'exp2_interaction' is a folder"):
+        load_scenario("exp2_interaction/")
 
 
 # --- errors -----------------------------------------------------------------------------------
@@ -253,3 +319,17 @@ def test_default_scenario_is_valid():
 def test_a_negative_random_seed_is_refused_at_load():
     with pytest.raises(ScenarioError, match=r"random_seed must be an integer >= 0, got -1"):
         load_scenario("exp1_no_interaction", overlay_text="random_seed: -1")
+
+
+def test_an_untagged_operator_overlay_says_the_operator_needs_its_tag():
+    # Issue 10, point 10: exp1 has no operator; an untagged mapping is the union's first
+    # member (!NoOperator), which has no max_force: say which tag is meant.
+    msg = error_of("{operator: {max_force: 3}}")
+    assert "an operator needs its tag, e.g. `operator: !SpringHandOperator {max_force: 3}`" \
+        in msg, msg
+    # The same on a scenario whose operator already is a !SpringHandOperator.
+    msg = error_of("{operator: {max_force: 3}}", name="exp2_interaction")
+    assert "`operator: !SpringHandOperator {max_force: 3}`" in msg
+    # A field no operator has: the plain unknown-field message with the valid types.
+    msg = error_of("{operator: {bogus: 3}}")
+    assert "unknown field 'operator.bogus'" in msg and "'!SpringHandOperator'" in msg

@@ -1,5 +1,6 @@
 """`cdpm simulate`: the log.npz contract of docs/LOG_FORMAT.md, the resolved scenario beside
-it, the summary, every shipped scenario through the CLI, and exit code 2 on bad arguments."""
+it, the summary, every shipped scenario through the CLI, the run-folder policy, exit codes and
+signals."""
 
 import re
 import subprocess
@@ -125,13 +126,71 @@ def test_scenario_text_overlay_reaches_the_run(capsys, tmp_path):
         assert np.isnan(log["d_u"]).all()
 
 
-def test_default_output_directory_is_runs_slash_the_scenario_name(capsys, tmp_path,
-                                                                  monkeypatch):
+def test_each_default_run_gets_its_own_folder_and_latest_points_at_the_newest(
+        capsys, tmp_path, monkeypatch):
+    # Issue 10, point 4: a second run never overwrites the first one's log nor shares its
+    # folder (the first one's PNGs stay with the first log only).
     monkeypatch.chdir(tmp_path)
-    code, _, err = simulate_cli(capsys, "exp1_no_interaction", "--duration", "0.05",
-                                "--no-progress")
+    code, out1, err = simulate_cli(capsys, "exp1_no_interaction", "--duration", "0.05",
+                                   "--no-progress", "--plot")
     assert code == 0, err
-    assert (tmp_path / "runs" / "exp1_no_interaction" / "log.npz").is_file()
+    code, out2, err = simulate_cli(capsys, "exp1_no_interaction", "--duration", "0.1",
+                                   "--no-progress")
+    assert code == 0, err
+    parent = tmp_path / "runs" / "exp1_no_interaction"
+    runs = sorted(p for p in parent.iterdir() if p.name != "latest")
+    assert len(runs) == 2
+    first, second = runs  # UTC timestamps sort in time order
+    assert f"log: {Path('runs', 'exp1_no_interaction', first.name, 'log.npz')}" in out1
+    assert f"log: {Path('runs', 'exp1_no_interaction', second.name, 'log.npz')}" in out2
+    with np.load(first / "log.npz") as a, np.load(second / "log.npz") as b:
+        assert len(a["time"]) == 26 and len(b["time"]) == 51  # 0.05 s, 0.1 s at 500 Hz
+    assert list(first.glob("*.png")) and not list(second.glob("*.png"))
+    latest = parent / "latest"
+    assert latest.is_symlink() and latest.resolve() == second.resolve()
+    # `cdpm plot runs/<name>` plots the latest run.
+    assert cli.main(["plot", str(parent)]) == 0
+    assert list(second.glob("*.png"))
+
+
+def test_a_non_empty_out_needs_force_which_empties_it(capsys, tmp_path):
+    out_dir = tmp_path / "mine"
+    code, _, err = simulate_cli(capsys, "exp1_no_interaction", "--duration", "0.05",
+                                "--no-progress", "--out", str(out_dir), "--plot")
+    assert code == 0, err
+    assert list(out_dir.glob("*.png"))
+    code, _, err = simulate_cli(capsys, "exp1_no_interaction", "--duration", "0.1",
+                                "--no-progress", "--out", str(out_dir))
+    assert code == 2
+    assert f"--out {str(out_dir)!r} is not empty" in err and "--force" in err
+    with np.load(out_dir / "log.npz") as log:
+        assert len(log["time"]) == 26  # untouched
+    code, _, err = simulate_cli(capsys, "exp1_no_interaction", "--duration", "0.1",
+                                "--no-progress", "--out", str(out_dir), "--force")
+    assert code == 0, err
+    with np.load(out_dir / "log.npz") as log:
+        assert len(log["time"]) == 51
+    assert not list(out_dir.glob("*.png"))  # the earlier run's plots went with it
+    # --force empties a run's folder only, never an unrelated one.
+    other = tmp_path / "notes"
+    other.mkdir()
+    (other / "thesis.tex").write_text("precious")
+    code, _, err = simulate_cli(capsys, "exp1_no_interaction", "--duration", "0.05",
+                                "--no-progress", "--out", str(other), "--force")
+    assert code == 2 and "holds no run" in err
+    assert (other / "thesis.tex").read_text() == "precious"
+
+
+@pytest.mark.parametrize("args", [
+    ("--scenario-text", "plant: !HardwareReels {}"),          # fails inside simulate()
+    ("--scenario-text", "{admittance: {mas: 1}}"),             # fails loading
+    ("--duration", "-1"),                                      # a bad flag
+])
+def test_an_early_error_leaves_no_run_folder(capsys, tmp_path, monkeypatch, args):
+    monkeypatch.chdir(tmp_path)
+    code, _, err = simulate_cli(capsys, "exp1_no_interaction", "--no-progress", *args)
+    assert code in (1, 2) and "error:" in err
+    assert not (tmp_path / "runs").exists(), list((tmp_path / "runs").rglob("*"))
 
 
 @pytest.mark.parametrize("duration", ["-1", "0", "nan", "inf"])
@@ -143,20 +202,21 @@ def test_bad_duration_exits_2_with_a_clear_message(capsys, tmp_path, duration):
     assert not (tmp_path / "log.npz").exists()
 
 
-def test_unknown_scenario_exits_2_listing_the_built_in_ones(capsys, tmp_path):
+def test_unknown_scenario_exits_1_listing_the_built_in_ones(capsys, tmp_path):
+    # Exit 1: an error (the scenario cannot be loaded), not a malformed command line (2).
     code, out, err = simulate_cli(capsys, "exp7_teleport", "--out", str(tmp_path),
                                   "--no-progress")
-    assert code == 2
+    assert code == 1
     assert "unknown scenario 'exp7_teleport'" in err
     for name in ("exp1_no_interaction", "exp2_interaction", "exp3_two_pairs"):
         assert name in err
     assert "Traceback" not in err
 
 
-def test_bad_overlay_exits_2_naming_the_field(capsys, tmp_path):
+def test_bad_overlay_exits_1_naming_the_field(capsys, tmp_path):
     code, _, err = simulate_cli(capsys, "exp1_no_interaction", "--out", str(tmp_path),
                                 "--no-progress", "--scenario-text", "{admittance: {mas: 1}}")
-    assert code == 2
+    assert code == 1
     assert "unknown field 'admittance.mas'" in err
 
 
@@ -202,3 +262,69 @@ def test_ctrl_c_during_a_simulation_keeps_the_log(tmp_path, capsys):
     assert 0.0 < log["time"][-1] < 5.0
     # The scenario written beside it says how long the log is, so it reproduces the run.
     assert f"duration: {log['time'][-1]}" in (tmp_path / "scenario.yaml").read_text()
+
+
+def test_meshcat_runs_log_the_last_tick_too(capsys, tmp_path):
+    # Issue 10, point 7: --meshcat advances in 0.04 s chunks; summed in floating point they
+    # ended a hair short of 10 s and the last tick was never logged (5000 rows, not 5001).
+    code, out, err = simulate_cli(capsys, "exp1_no_interaction", "--meshcat", "--no-wait",
+                                  "--realtime", "1000", "--duration", "10", "--out",
+                                  str(tmp_path), "--no-progress")
+    assert code == 0, err
+    assert "Meshcat: open http://" in err
+    assert "5001 ticks" in out  # ticks 0..5000
+    with np.load(tmp_path / "log.npz") as log:
+        assert log["time"].size == 5001 and log["time"][-1] == pytest.approx(10.0, abs=1e-12)
+
+
+@pytest.mark.parametrize("duration, chunk", [(25.0, 0.04), (5.0, 0.02), (10.0, 0.5),
+                                             (0.0031, 0.5)])
+def test_tick_targets_end_exactly_on_the_last_whole_tick(duration, chunk):
+    from cdpm_drake.simulation import tick_targets
+
+    targets = tick_targets(duration, T, chunk)
+    n = int(np.floor(duration / T + 1e-9))  # the last whole tick inside the duration
+    assert targets[-1] == n * T  # exactly: Drake then handles tick n's events
+    assert np.all(np.diff(targets) > 0)
+    assert np.allclose(np.diff(targets)[:-1], max(1, round(chunk / T)) * T)
+
+
+def test_a_tick_some_loggers_missed_is_cut_from_the_log():
+    # A signal can stop the run between two loggers' publishes of the same tick (seen with
+    # `timeout -s TERM`: F_H had 778 rows, time 777): keep the ticks every logger has.
+    from cdpm_drake.simulation import whole_ticks
+
+    t = np.arange(5) * T
+    columns = {"p": (t, np.ones((5, 3))), "F_H": (t[:4], 2 * np.ones((4, 3))),
+               "lengths": (t, np.zeros((5, 7)))}
+    times, signals = whole_ticks(columns)
+    np.testing.assert_array_equal(times, t[:4])
+    assert {k: v.shape for k, v in signals.items()} == {"p": (4, 3), "F_H": (4, 3),
+                                                        "lengths": (4, 7)}
+    assert whole_ticks({})[0].size == 0
+    with pytest.raises(RuntimeError, match="logger 'F_H' sampled other times"):
+        whole_ticks({"p": (t, np.ones((5, 3))), "F_H": (t + T, np.ones((5, 3)))})
+
+
+def test_latest_points_at_a_run_as_it_starts_and_back_if_it_writes_nothing(tmp_path):
+    from cdpm_drake.run_folder import RunFolder
+
+    root = tmp_path / "runs"
+    first = RunFolder("exp", root=root)
+    a = first.create()
+    (a / "log.npz").write_bytes(b"x")
+    latest = root / "exp" / "latest"
+    assert latest.resolve() == a.resolve()
+    second = RunFolder("exp", root=root)
+    b = second.create()
+    # While it runs (and if it is killed), the newest run is the latest.
+    assert latest.resolve() == b.resolve() and a != b
+    second.discard()  # it wrote nothing
+    assert not b.exists() and latest.resolve() == a.resolve()
+    first.discard()  # wrote a log: kept
+    assert a.is_dir()
+    # A lone run that writes nothing leaves no runs/ at all.
+    lone = RunFolder("other", root=tmp_path / "fresh")
+    lone.create()
+    lone.discard()
+    assert not (tmp_path / "fresh").exists()

@@ -178,7 +178,8 @@ def test_rejected_value_names_the_variant_before_any_run(tmp_path, capsys):
     # F_u = -1 is rejected by the scenario's own check (InterferenceParams), for variant 2 only.
     path = write(tmp_path, SMALL.replace("[2.0, 4.0]", "[2.0, -1.0]"))
     out = tmp_path / "out"
-    assert main(["sweep", str(path), "--out", str(out), "--no-progress"]) == 2
+    # Exit 1: an error in the sweep file (2 is for a malformed command line).
+    assert main(["sweep", str(path), "--out", str(out), "--no-progress"]) == 1
     err = capsys.readouterr().err
     assert "variant 3 (run r" in err
     assert "interference.default.F_u=-1.0, admittance.damping=5.0" in err
@@ -398,7 +399,7 @@ def test_cli_sweep_plot_and_best_table(tmp_path, capsys):
 
 
 def test_cli_errors(tmp_path, capsys):
-    assert main(["sweep", str(tmp_path / "nope.yaml")]) == 2
+    assert main(["sweep", str(tmp_path / "nope.yaml")]) == 1  # an error, as for a scenario
     assert "sweep file" in capsys.readouterr().err
     assert main(["sweep", "exp2_du_Fu", "--workers", "0"]) == 2
     assert "--workers must be an integer >= 1, got 0" in capsys.readouterr().err

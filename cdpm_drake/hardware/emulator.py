@@ -15,6 +15,7 @@ Examples:
 import argparse
 import collections
 import dataclasses
+import errno
 import gc
 import math
 import socket
@@ -185,11 +186,18 @@ class ReelBridgeServer:
     def __init__(self, bridge: ReelBridge, address: tuple[str, int] = ("127.0.0.1", 0),
                  faults: FaultPlan = FaultPlan(), period: float = 0.002, seed: int = 0,
                  controller: tuple[str, int] | None = None, command_timeout: float = 0.05,
-                 record: int = 100_000):
+                 record: int = 100_000, log=None, session_timeout: float = 1.0):
         """`record`: how many received commands to keep in `commands` (tests read them; the
-        command-line emulator keeps none)."""
+        command-line emulator keeps none). `log(text)` is told what the bridge sees: each
+        controller session opened and closed, the first rejected datagram of each reason per
+        session (None: silent). A session closes when a new one starts or after
+        `session_timeout` s without a valid command. The fault plan applies to one session:
+        the first in which it takes effect; later sessions run without faults."""
         if not (math.isfinite(period) and period > 0):
             raise ValueError(f"period must be a finite number > 0 s, got {period!r}")
+        if not (math.isfinite(session_timeout) and session_timeout > 0):
+            raise ValueError(f"session_timeout must be a finite number > 0 s, got "
+                             f"{session_timeout!r}")
         self.bridge = bridge
         self.period = float(period)
         self.command_timeout = float(command_timeout)
@@ -200,9 +208,21 @@ class ReelBridgeServer:
                                   else (resolve_ipv4(controller[0], "controller"),
                                         int(controller[1])))
         self._controller = self._fixed_controller
+        self._log = log
+        self.session_timeout = float(session_timeout)
+        host, port = resolve_ipv4(address[0], "address"), int(address[1])
         self._sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
         self._sock.setblocking(False)
-        self._sock.bind((resolve_ipv4(address[0], "address"), int(address[1])))
+        try:
+            self._sock.bind((host, port))
+        except OSError as e:
+            self._sock.close()
+            hint = (" (another cdpm emulate or bridge is listening there? choose another "
+                    "--port)" if e.errno == errno.EADDRINUSE else
+                    " (not an address of this machine? see --address)"
+                    if e.errno == errno.EADDRNOTAVAIL else "")
+            raise OSError(e.errno, f"cannot listen on UDP {host}:{port}: "
+                                   f"{e.strerror or e}{hint}") from None
         self._tracker = SequenceTracker()
         self._last_command = None
         self._last_command_wall = None
@@ -219,6 +239,13 @@ class ReelBridgeServer:
         self.fault_onset_tick = None
         self.tick = 0
         self.commands = collections.deque(maxlen=record)
+        # Controller sessions, numbered from 1 (0: none yet); `session_open` while one runs.
+        self.session = 0
+        self.session_open = False
+        self._session_start = 0.0
+        self._session_commands = 0
+        self._session_rejected = {}
+        self._fault_session = None   # the session in which the fault plan took effect
         self.counters = {"statuses_sent": 0, "statuses_dropped": 0, "commands_received": 0,
                          "commands_dropped": 0, "commands_foreign": 0, "late_ticks": 0,
                          "sessions": 0,
@@ -243,6 +270,7 @@ class ReelBridgeServer:
         """Replace the fault plan while running; its `after` counts from now."""
         with self._lock:
             self._faults = faults
+            self._fault_session = None
             self.fault_onset = None
             self.fault_onset_tick = None
             if self.start_wall is not None:
@@ -261,6 +289,9 @@ class ReelBridgeServer:
                 break
             with self._lock:
                 command = self._drain(now)
+                if (self.session_open and self._last_command_wall is not None
+                        and now - self._last_command_wall > self.session_timeout):
+                    self._close_session(now, f"no command for {self.session_timeout:g} s")
                 self.bridge.step(now - last)
                 last = now
                 if command is not None:
@@ -290,6 +321,10 @@ class ReelBridgeServer:
             if now < self.first_enable_time + plan.after:
                 return False
             self.fault_onset, self.fault_onset_tick = now, self.tick
+            # Before any command (inject() at start-up), the faults belong to the first session.
+            self._fault_session = max(self.session, 1)
+            self._say(f"session {self.session}: injecting faults now ({now:.3f} s): "
+                      f"{_plan_text(plan)}")
             if plan.fault_bits:
                 self.bridge.raise_fault(plan.fault_bits)
         return True
@@ -310,11 +345,15 @@ class ReelBridgeServer:
                 continue
             try:
                 command = decode_command(data, self._m)
-                self._accept_sequence(command)
+                self._accept_sequence(command, now, sender)
             except ProtocolError as e:
                 self.counters["rejected"][e.reason] += 1
+                self._note_rejection(e, sender)
                 continue
+            if not self.session_open:
+                self._open_session(now, sender)
             self.counters["commands_received"] += 1
+            self._session_commands += 1
             self._controller = sender
             self._last_command = command
             self._last_command_wall = now
@@ -323,7 +362,7 @@ class ReelBridgeServer:
                                                  command.enable, command.velocity, active))
         return newest
 
-    def _accept_sequence(self, command) -> None:
+    def _accept_sequence(self, command, now: float = 0.0, sender=None) -> None:
         """Order the command stream. A controller that starts again (a new `cdpm run`) greets
         with enable-clear commands from sequence 1; while the reels are at rest, such a
         command opens a new session instead of being dropped as old (hardware/PROTOCOL.md)."""
@@ -335,6 +374,57 @@ class ReelBridgeServer:
             self._tracker = SequenceTracker()
             self._tracker.accept(command.sequence)
             self.counters["sessions"] += 1
+            if self.session_open:
+                self._close_session(now, "a new controller session began")
+            self._open_session(now, sender)
+
+    # --- sessions ----------------------------------------------------------------------------
+
+    def _say(self, text: str) -> None:
+        if self._log is not None:
+            self._log(text)
+
+    def _open_session(self, now: float, sender) -> None:
+        self.session += 1
+        self.session_open = True
+        self._session_start = now
+        self._session_commands = 0
+        self._session_rejected = {}
+        where = f" by {sender[0]}:{sender[1]}" if sender else ""
+        self._say(f"session {self.session} opened{where} at {now:.3f} s")
+        if (self._fault_session is not None and self._fault_session < self.session
+                and self._faults.any):
+            # The plan was spent on an earlier session: this one runs clean. The bits the plan
+            # raised are cleared (the operator reset the e-stop between runs); the bits the
+            # bridge raised itself (COMMAND_TIMEOUT, OVERSPEED) stay, as on a real bridge.
+            injected = self.bridge.faults & self._faults.fault_bits
+            self._say(f"session {self.session}: no faults injected (the fault plan applied "
+                      f"to session {self._fault_session})"
+                      + (f"; injected fault bits {injected:#06x} cleared" if injected else ""))
+            self.bridge.faults &= ~self._faults.fault_bits
+            self._faults = FaultPlan()
+        if self.session > 1:
+            # The fault plan's clock restarts with each session (`after` counts from its first
+            # enabling command); the first session keeps what inject() set.
+            self.first_enable_time = None
+            self.fault_onset = self.fault_onset_tick = None
+            self._frozen, self._held = None, None
+            self._delayed.clear()
+
+    def _close_session(self, now: float, why: str) -> None:
+        self.session_open = False
+        rejected = _count_by_reason(self._session_rejected)
+        self._say(f"session {self.session} closed at {now:.3f} s ({why}): "
+                  f"{self._session_commands} commands accepted, rejected {rejected}, reels "
+                  f"{'enabled' if self.bridge.enabled else 'at rest'}, faults "
+                  f"{self.bridge.faults:#06x}")
+
+    def _note_rejection(self, e: ProtocolError, sender) -> None:
+        n = self._session_rejected.get(e.reason, 0)
+        self._session_rejected[e.reason] = n + 1
+        if n == 0:  # the first of each reason per session; the rest are counted
+            self._say(f"rejected a command from {sender[0]}:{sender[1]} ({e.reason}): {e}; "
+                      f"further '{e.reason}' rejections are counted, not shown")
 
     def _send_status(self, now: float, active: bool) -> None:
         plan = self._faults if active else FaultPlan()
@@ -410,12 +500,36 @@ class ReelBridgeServer:
         self.stop()
 
 
+def _count_by_reason(counts: dict) -> str:
+    """{'value': 3, 'crc': 1} -> '4 (value 3, crc 1)'; {} -> '0'."""
+    total = sum(counts.values())
+    if not total:
+        return "0"
+    return f"{total} (" + ", ".join(f"{r} {n}" for r, n in counts.items() if n) + ")"
+
+
+def _plan_text(plan: FaultPlan) -> str:
+    """The fault plan's active settings, e.g. 'stop, drop 0.01'."""
+    parts = []
+    for f in dataclasses.fields(plan):
+        value = getattr(plan, f.name)
+        if f.name == "after" or value == f.default:
+            continue
+        parts.append(f.name if value is True else
+                     f"{f.name} {value:#06x}" if f.name == "fault_bits" else f"{f.name} {value:g}")
+    return ", ".join(parts) or "none"
+
+
 # --- command line ----------------------------------------------------------------------------
 
 
 def _parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(prog="cdpm-reel-emulator", description=__doc__,
-                                formatter_class=argparse.RawDescriptionHelpFormatter)
+                                formatter_class=argparse.RawDescriptionHelpFormatter,
+                                epilog="exit codes: 0 done (--duration), 1 error (robot, "
+                                       "scenario, cannot listen), 2 bad usage, 130 after "
+                                       "Ctrl-C, 143 after SIGTERM (the summary is printed "
+                                       "first)")
     g = p.add_argument_group("robot and operator")
     g.add_argument("--scenario", help="take robot, cable swaps, start position, operator and "
                    "bridge address/port from this scenario (name or path)")
@@ -467,8 +581,8 @@ def _parser() -> argparse.ArgumentParser:
     return p
 
 
-def build_server(args) -> ReelBridgeServer:
-    """The server described by parsed command-line arguments."""
+def build_server(args, log=None) -> ReelBridgeServer:
+    """The server described by parsed command-line arguments; `log` as ReelBridgeServer's."""
     from ..robot import load_robot
 
     force = None
@@ -515,18 +629,39 @@ def build_server(args) -> ReelBridgeServer:
                                              args.port if args.port is not None else port),
                             faults=faults, period=args.period, seed=args.seed,
                             controller=controller, command_timeout=args.command_timeout,
-                            record=0)
+                            record=0, log=log)
 
 
 def main(argv=None) -> int:
+    """Exit codes as `cdpm`'s: 0 done (--duration), 1 error (robot, scenario, cannot bind),
+    2 bad usage, 130 / 143 after Ctrl-C / SIGTERM (the summary is printed first)."""
+    from ..text import prefixed_log_records
+
+    with prefixed_log_records():
+        return _main(argv)
+
+
+def _main(argv) -> int:
+    from ..interrupt import exit_code, terminate_raises
+    from ..robot import RobotError
+    from ..scenario import ScenarioError
+
     parser = _parser()
     args = parser.parse_args(argv)
     if args.duration is not None and not (args.duration > 0 and math.isfinite(args.duration)):
         parser.error(f"--duration must be a number of seconds > 0, got {args.duration!r}")
+
+    def say(text):
+        print(f"cdpm-reel-emulator: {text}", flush=True)
+
     try:
         set_realtime_priority(args.rt_priority)
-        server = build_server(args)
-    except (ValueError, OSError) as e:  # RobotError, ScenarioError are ValueErrors
+        server = build_server(args, log=say)
+    except (RobotError, ScenarioError, OSError) as e:
+        why = e.strerror if isinstance(e, OSError) and e.strerror else e
+        print(f"cdpm-reel-emulator: error: {why}", file=sys.stderr)
+        return 1
+    except ValueError as e:  # a flag's value
         print(f"cdpm-reel-emulator: error: {e}", file=sys.stderr)
         return 2
     # A full garbage collection scans every object alive, modules included (19 ms measured
@@ -535,22 +670,28 @@ def main(argv=None) -> int:
     gc.freeze()
     host, port = server.address
     robot = server.bridge.robot
-    print(f"cdpm-reel-emulator: robot {robot.name!r} ({robot.num_cables} cables) on "
-          f"{host}:{port}, period {server.period * 1e3:g} ms"
-          + (f", faults {server.faults}" if server.faults.any else ""), flush=True)
-    try:
-        server.run(duration=args.duration)
-    except KeyboardInterrupt:
-        pass
-    finally:
-        server.stop()
-        c = server.counters
-        rejected = {r: n for r, n in c["rejected"].items() if n}
-        print(f"cdpm-reel-emulator: {c['commands_received']} commands received "
-              f"({c['sessions'] + 1 if c['commands_received'] else 0} controller session(s)), "
-              f"rejected {rejected or 0}, {c['statuses_sent']} statuses sent, commands lost "
-              f"{server.commands_lost}, faults {server.bridge.faults:#06x}", flush=True)
-    return 0
+    say(f"robot {robot.name!r} ({robot.num_cables} cables) on {host}:{port}, period "
+        f"{server.period * 1e3:g} ms"
+        + (f", faults {_plan_text(server.faults)} from {server.faults.after:g} s after the "
+           "first enable (one session)" if server.faults.any else ""))
+    code = 0
+    with terminate_raises():
+        try:
+            server.run(duration=args.duration)
+        except KeyboardInterrupt as e:
+            code = exit_code(e)
+        finally:
+            server.stop()
+            now = time.monotonic() - server.start_wall if server.start_wall else 0.0
+            if server.session_open:
+                server._close_session(now, "the emulator stopped")
+            c = server.counters
+            rejected = {r: n for r, n in c["rejected"].items() if n}
+            say(f"{c['commands_received']} commands received ({server.session} controller "
+                f"session(s)), rejected {_count_by_reason(rejected)}, {c['statuses_sent']} "
+                f"statuses sent, commands lost {server.commands_lost}, faults "
+                f"{server.bridge.faults:#06x}")
+    return code
 
 
 if __name__ == "__main__":

@@ -99,6 +99,9 @@ class HardwareReelsSystem(LeafSystem):
         # trip it, while a silent bridge still trips it on the N-th tick.
         self._silence = (config.watchdog_ticks - 1) * self._T
         self._link: ReelLink | None = None
+        # link.counters.sent right after the last shutdown's copies (None: not stopped yet):
+        # like the socket, a fact about the link, not about the controller's state.
+        self._stopped_at: int | None = None
 
         self._command = self.DeclareVectorInputPort("reel_velocity_command", m)
         # Placeholders until the initialisation event reads the bridge.
@@ -130,12 +133,15 @@ class HardwareReelsSystem(LeafSystem):
 
     def shutdown(self) -> None:
         """Send zero velocity with enable off (`shutdown_repeats` copies). Safe to call at any
-        time and more than once, e.g. from the CLI's Ctrl-C / SIGTERM handling."""
+        time and more than once, e.g. from the CLI's Ctrl-C / SIGTERM handling: the copies go
+        out once per stop (a fault stops from the update, the publish and the run's clean-up),
+        and again only after another command was sent (hardware/PROTOCOL.md)."""
         link = self._link
-        if link is None or link.closed:
+        if link is None or link.closed or self._stopped_at == link.counters.sent:
             return
         for _ in range(self._config.shutdown_repeats):
             link.send_command(np.zeros(self._m), enable=False, echo_sequence=None)
+        self._stopped_at = link.counters.sent
 
     def close(self) -> None:
         """shutdown(), then release the socket."""

@@ -221,6 +221,15 @@ def read_tick_log(path) -> dict[str, np.ndarray]:
     return {name: np.array(table[name]) for name in dtype.names}
 
 
+def tick_log_tail(path) -> dict:
+    """{'ticks': whole rows in the file, 'cut_bytes': bytes of a partial last row (a writer
+    killed mid-write), which read_tick_log leaves out}."""
+    header = tick_log_header(path)
+    size = os.path.getsize(path) - header["data_offset"]
+    rows, cut = divmod(max(0, size), header["dtype"].itemsize)
+    return {"ticks": int(rows), "cut_bytes": int(cut)}
+
+
 def realtime_stats(log: dict, time_step: float) -> dict:
     """Tick timing of a real-time run from its log: period percentiles (s), overruns (ticks
     that started more than one period behind the schedule set by the first tick) and missing

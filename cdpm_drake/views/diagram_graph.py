@@ -5,8 +5,9 @@ import re
 from pathlib import Path
 
 # Drake names graphviz nodes and clusters after system ids, which depend on how many systems
-# the process built before; renumbering them in order of appearance makes the text stable.
-_ID = re.compile(r"\b(s|cluster|_)(\d+)")
+# the process built before (a sub-diagram drawn alone also names its port clusters
+# `clusters<id>in`); renumbering them in order of appearance makes the text stable.
+_ID = re.compile(r"\b(s|clusters|cluster|_)(\d+)")
 
 
 def stable_graphviz(diagram, max_depth: int = 1) -> str:

@@ -36,6 +36,8 @@ LEVELS = 6
 RED = (1.0, 0.0, 0.0)
 ORANGE = (1.0, 0.6, 0.0)
 GREY = (0.55, 0.55, 0.55)
+# A slack cable (dynamic plant): light, translucent grey, thinner, over any distance colour.
+SLACK_RGBA = (0.85, 0.85, 0.85, 0.35)
 FORCE_RGBA = {"F_H": (0.0, 0.2, 1.0, 1.0), "F_int": (0.05, 0.05, 0.05, 1.0),
               "F_d": (0.9, 0.0, 0.0, 1.0)}
 # Used when a log has no logistic parameters (interference disabled): the paper's experiment 1
@@ -338,6 +340,9 @@ class CdpmMeshcatView:
     def cable_level_path(self, i: int, level: int) -> str:
         return f"{self.cable_path(i)}/length/level_{level}"
 
+    def cable_slack_path(self, i: int) -> str:
+        return f"{self.cable_path(i)}/length/slack"
+
     def force_path(self, name: str) -> str:
         """Scene path of the arrow of force `name` in F_H, F_int, F_d."""
         return f"{self.prefix}/forces/{name}"
@@ -381,6 +386,10 @@ class CdpmMeshcatView:
                 mc.SetObject(path, Cylinder(self.cable_radius, 1.0), Rgba(*level_rgb(k), 1.0))
                 mc.SetTransform(path, centre)
                 mc.SetProperty(path, "visible", False)
+            path = self.cable_slack_path(i)
+            mc.SetObject(path, Cylinder(0.5 * self.cable_radius, 1.0), Rgba(*SLACK_RGBA))
+            mc.SetTransform(path, centre)
+            mc.SetProperty(path, "visible", False)
         shaft_radius = 0.003 * size
         head = MeshcatCone(_HEAD_FRACTION, 3.0 * shaft_radius, 3.0 * shaft_radius)
         for name, rgba in FORCE_RGBA.items():
@@ -467,11 +476,14 @@ class CdpmMeshcatView:
         return length
 
     def draw(self, p, F_H, F_int, F_d, pair_distances, *, d_l=None, d_u=None,
-             sim_time: float | None = None, time: float | None = None) -> None:
+             sim_time: float | None = None, time: float | None = None, rpy=None,
+             slack=None) -> None:
         """Draw the platform at p (m), the cables, and the forces F_H, F_int, F_d (N), base
         frame; pair_distances (m) in the order of `pairs`; the clock shows sim_time (s) when
         given. d_l, d_u (m) override the colour band. With `time` (s, from the start of the
-        recording) the frame goes into the current Meshcat recording."""
+        recording) the frame goes into the current Meshcat recording. A dynamic plant's log
+        adds the platform's rotation `rpy` (rad; p is then its true position) and which
+        cables are `slack` (drawn light grey)."""
         mc = self.meshcat
         if sim_time is not None:
             text = clock_text(sim_time).ljust(CLOCK_SLOTS)
@@ -483,17 +495,21 @@ class CdpmMeshcatView:
                                       time)
                 self._clock[slot] = text[slot]
         p = _vector(p, "p")
-        mc.SetTransform(f"{self.prefix}/platform", RigidTransform(p), time)
+        R = RotationMatrix() if rpy is None else RotationMatrix(RollPitchYaw(_vector(rpy, "rpy")))
+        mc.SetTransform(f"{self.prefix}/platform", RigidTransform(R, p), time)
         levels = cable_levels(pair_distances, self.pairs, self.num_cables,
                               self.d_l if d_l is None else d_l, self.d_u if d_u is None else d_u)
+        b = self.attachments @ R.matrix().T
+        slack = np.zeros(self.num_cables, bool) if slack is None else np.asarray(slack) > 0.5
         for i in range(1, self.num_cables + 1):
             a = self.reels[i - 1]
-            length = self._pose_along(self.cable_path(i), a, p + self.attachments[i - 1] - a,
-                                      time)
+            length = self._pose_along(self.cable_path(i), a, p + b[i - 1] - a, time)
             mc.SetProperty(f"{self.cable_path(i)}/length", "scale",
                            [1.0, 1.0, max(length, _TINY)], time)
             for k in range(LEVELS):
-                self._set_visible(self.cable_level_path(i, k), k == levels[i - 1], time)
+                self._set_visible(self.cable_level_path(i, k),
+                                  k == levels[i - 1] and not slack[i - 1], time)
+            self._set_visible(self.cable_slack_path(i), slack[i - 1], time)
         for name, force in (("F_H", F_H), ("F_int", F_int), ("F_d", F_d)):
             path = self.force_path(name)
             magnitude = self._pose_along(path, p, _vector(force, name), time)
@@ -504,9 +520,13 @@ class CdpmMeshcatView:
             self._set_visible(path, shown, time)
 
     def draw_row(self, log: Mapping, k: int, time: float | None = None) -> None:
-        """Draw tick k of a log.npz dictionary (docs/LOG_FORMAT.md)."""
-        self.draw(log["p"][k], log["F_H"][k], log["F_int"][k], log["F_d"][k],
-                  log["pair_distances"][k], sim_time=float(log["time"][k]), time=time)
+        """Draw tick k of a log.npz dictionary (docs/LOG_FORMAT.md); a dynamic plant's log
+        shows the true pose (p_true, rpy_true) and the slack cables."""
+        dynamic = all(key in log for key in ("p_true", "rpy_true", "slack"))
+        self.draw(log["p_true"][k] if dynamic else log["p"][k], log["F_H"][k], log["F_int"][k],
+                  log["F_d"][k], log["pair_distances"][k], sim_time=float(log["time"][k]),
+                  time=time, rpy=log["rpy_true"][k] if dynamic else None,
+                  slack=log["slack"][k] if dynamic else None)
 
 
 # --- Live view and replay ---------------------------------------------------------------------
@@ -526,6 +546,14 @@ def live_view_callback(view: CdpmMeshcatView):
         if diagram.HasSubsystemNamed(name):
             data = diagram.GetSubsystemByName(name).FindLog(context).data()
             return data[:, -1] if data.shape[1] else np.zeros(width)
+        if key in ("p_true", "rpy_true", "slack"):  # the dynamic plant's, logged inside it
+            plant = (diagram.GetSubsystemByName("reels")
+                     if diagram.HasSubsystemNamed("reels") else None)
+            if plant is not None and hasattr(plant, "HasSubsystemNamed") and (
+                    plant.HasSubsystemNamed(name)):
+                data = plant.GetSubsystemByName(name).FindLog(context).data()
+                return data[:, -1] if data.shape[1] else None
+            return None
         system_name, port_name = sources[key]
         if diagram.HasSubsystemNamed(system_name):
             system = diagram.GetSubsystemByName(system_name)
@@ -535,9 +563,12 @@ def live_view_callback(view: CdpmMeshcatView):
     def on_chunk(diagram, context) -> None:
         row = {key: latest(diagram, context, key, width)
                for key, width in (("p", 3), ("F_H", 3), ("F_int", 3), ("F_d", 3),
-                                  ("pair_distances", len(view.pairs)))}
-        view.draw(row["p"], row["F_H"], row["F_int"], row["F_d"], row["pair_distances"],
-                  sim_time=context.get_time())
+                                  ("pair_distances", len(view.pairs)), ("p_true", 3),
+                                  ("rpy_true", 3), ("slack", view.num_cables))}
+        dynamic = row["p_true"] is not None
+        view.draw(row["p_true"] if dynamic else row["p"], row["F_H"], row["F_int"], row["F_d"],
+                  row["pair_distances"], sim_time=context.get_time(), rpy=row["rpy_true"],
+                  slack=row["slack"])
 
     return on_chunk
 

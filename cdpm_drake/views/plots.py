@@ -8,8 +8,9 @@ positions in m, time in s; cables are numbered 1..m.
 A run that ended on a fault (log keys `ending`, `fault_time`, `fault_message`) has the fault
 marked in every figure: a vertical line with its label on every time axis, a marker on the
 trajectory, a note under the figure. Logs without those keys (older logs) read as completed.
-Figures that need keys only some logs have (`timing`: the tick clock of `cdpm run`) are listed
-in OPTIONAL and skipped by `plot_log` when a log lacks them.
+Figures that need keys only some logs have (`timing`: the tick clock of `cdpm run`; `tensions`,
+`pose_error`: the dynamic plant's ground truth) are listed in OPTIONAL and skipped by `plot_log`
+when a log lacks them.
 """
 
 import textwrap
@@ -30,12 +31,15 @@ _NEEDS = {
     "logistic": ("pairs", "d_l", "d_u", "F_u", "eps"),
     "cables": ("time", "lengths", "reel_velocity"),
     "timing": ("time", "wall"),
+    # The dynamic plant's ground truth (plant: !DynamicReels).
+    "tensions": ("time", "tensions", "slack"),
+    "pose_error": ("time", "p", "p_true", "rpy_true"),
 }
 # Figures drawn only for logs that hold their keys.
-OPTIONAL = ("timing",)
+OPTIONAL = ("timing", "tensions", "pose_error")
 # Keys with one row per tick.
 _PER_TICK = ("time", "p", "F_H", "F_int", "F_d", "pair_distances", "active", "crossed",
-             "lengths", "reel_velocity", "wall")
+             "lengths", "reel_velocity", "wall", "tensions", "slack", "p_true", "rpy_true")
 LOG_KEYS = ("time", "p", "F_H", "F_int", "F_wall", "F_d", "velocity_admittance", "velocity",
             "reel_velocity", "lengths", "pair_distances", "active", "crossed", "pairs", "d_l",
             "d_u", "F_u", "eps", "F_max", "reels", "attachments", "workspace_lower",
@@ -45,7 +49,8 @@ LOG_KEYS = ("time", "p", "F_H", "F_int", "F_wall", "F_d", "velocity_admittance",
 FORCE_COLORS = {"F_H": "tab:blue", "F_int": "black", "F_d": "tab:red", "F_wall": "tab:green"}
 FIGURE_FILES = {"distances": "distances.png", "forces": "forces.png",
                 "trajectory": "trajectory.png", "logistic": "logistic.png",
-                "cables": "cables.png", "timing": "timing.png"}
+                "cables": "cables.png", "timing": "timing.png", "tensions": "tensions.png",
+                "pose_error": "pose_error.png"}
 # Every force plot axis spans at least this much (N), so a component that is numerical noise
 # (1e-6 N) reads as the flat zero it is.
 MIN_FORCE_SPAN = 0.5
@@ -545,14 +550,70 @@ def figure_timing(log: Mapping) -> Figure:
     return fig
 
 
+# --- The dynamic plant: tensions and pose error ---------------------------------------------
+
+
+def figure_tensions(log: Mapping) -> Figure:
+    """Each cable's tension (N) vs time (s), with the ticks where it was slack marked (a dynamic
+    plant's log)."""
+    _check(log, "tensions")
+    t = np.asarray(log["time"], dtype=float)
+    tensions = np.asarray(log["tensions"], dtype=float).reshape(len(t), -1)
+    slack = np.asarray(log["slack"]).reshape(len(t), -1) > 0.5
+    fig = Figure(figsize=(9, 4.5), layout="constrained")
+    ax = fig.add_subplot()
+    for i in range(1, tensions.shape[1] + 1):
+        style = cable_style(i)
+        ax.plot(t, tensions[:, i - 1], linewidth=1.0, label=f"cable {i}", **style)
+        if slack[:, i - 1].any():
+            ax.plot(t[slack[:, i - 1]], np.zeros(int(slack[:, i - 1].sum())), "|",
+                    color=style["color"], markersize=8,
+                    label=f"cable {i} slack ({int(slack[:, i - 1].sum())} ticks)")
+    ax.set_xlabel("time (s)")
+    ax.set_ylabel("tension (N)")
+    ax.grid(True, alpha=0.3)
+    _mark_fault_time(ax, log)
+    ax.legend(loc="upper left", bbox_to_anchor=(1.01, 1.0), fontsize="small")
+    _suptitle(fig, log, f"{_title(log)}\nCable tensions (dynamic plant)")
+    return fig
+
+
+def figure_pose_error(log: Mapping) -> Figure:
+    """The controller's position estimate minus the true position (mm, per axis and its norm),
+    and the platform's true roll, pitch, yaw (deg), vs time (s) (a dynamic plant's log)."""
+    _check(log, "pose_error")
+    t = np.asarray(log["time"], dtype=float)
+    error = 1000.0 * (np.asarray(log["p"], float) - np.asarray(log["p_true"], float))
+    rpy = np.degrees(np.asarray(log["rpy_true"], dtype=float))
+    fig = Figure(figsize=(9, 6), layout="constrained")
+    top, bottom = fig.subplots(2, 1, sharex=True)
+    for c, axis in enumerate("xyz"):
+        top.plot(t, error[:, c], linewidth=1.0, label=f"p_{axis} - p_true,{axis}")
+    top.plot(t, np.linalg.norm(error, axis=1), color="black", linewidth=1.2, label="|p - p_true|")
+    top.set_ylabel("FK estimate error (mm)")
+    for c, name in enumerate(("roll", "pitch", "yaw")):
+        bottom.plot(t, rpy[:, c], linewidth=1.0, label=name)
+    bottom.set_ylabel("platform rotation (deg)")
+    bottom.set_xlabel("time (s)")
+    for ax in (top, bottom):
+        ax.grid(True, alpha=0.3)
+        _mark_fault_time(ax, log)
+        ax.legend(loc="upper left", bbox_to_anchor=(1.01, 1.0), fontsize="small")
+    _suptitle(fig, log, f"{_title(log)}\nThe controller's forward kinematics (translating "
+              "platform, rigid cables) against the true platform")
+    return fig
+
+
 FIGURES = {"distances": figure_distances, "forces": figure_forces,
            "trajectory": figure_trajectory, "logistic": figure_logistic,
-           "cables": figure_cables, "timing": figure_timing}
+           "cables": figure_cables, "timing": figure_timing, "tensions": figure_tensions,
+           "pose_error": figure_pose_error}
 
 
 def plot_log(log: Mapping[str, np.ndarray], out_dir, dpi: int = 120) -> list[Path]:
     """Write the figures as PNGs in out_dir (created if needed); returns their paths in the
-    order of FIGURES, leaving out the OPTIONAL ones whose keys the log lacks."""
+    order of FIGURES, leaving out the OPTIONAL ones whose keys the log lacks (tensions and
+    pose_error need a dynamic plant's log)."""
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     paths = []

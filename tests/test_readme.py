@@ -1,0 +1,53 @@
+"""The README says what a new user needs (issue 10, point 11): the supported platforms, every
+command, the exit codes `cdpm --help` prints, what the run report's figures mean; the scripts'
+docstrings speak of the project only (not of its issue tracker)."""
+
+import ast
+import re
+from pathlib import Path
+
+from cdpm_drake import cli
+
+REPO = Path(__file__).resolve().parent.parent
+README = (REPO / "README.md").read_text()
+FLAT = " ".join(README.split())  # line breaks fall anywhere in prose
+
+
+def test_the_readme_states_the_supported_platforms():
+    # Drake 1.51's wheels on PyPI: manylinux_2_34_x86_64 for cp310..cp314, macosx_15_0_arm64
+    # for cp313 and cp314 (nothing for Windows, Linux arm64 or Intel Macs).
+    for fact in ("Linux x86_64", "glibc 2.34", "CPython 3.10 to 3.14", "macOS 15",
+                 "Apple silicon (arm64)", "CPython 3.13 or 3.14", "Not Windows"):
+        assert fact in FLAT, fact
+
+
+def test_the_readme_lists_every_command():
+    parser = cli._parser()
+    commands = next(a for a in parser._actions if a.dest == "command").choices
+    for name in commands:
+        assert re.search(rf"^\| `cdpm {name}\b", README, re.MULTILINE), name
+
+
+def test_the_readme_and_help_give_the_same_exit_codes():
+    for code in ("0", "1", "2", "130", "143"):
+        assert f"`{code}`" in README
+        assert re.search(rf"^  {code}\s+\S", cli.EXIT_CODES, re.MULTILINE), code
+    assert "143` after SIGTERM" in FLAT and "143  stopped by SIGTERM" in cli.EXIT_CODES
+
+
+def test_the_readme_defines_the_run_reports_figures():
+    for term in ("**tick period**", "**compute time per tick**", "**overruns**"):
+        assert term in FLAT, term
+    assert "more than one period (2 ms) behind the schedule set by the first tick" in FLAT
+
+
+def test_script_docstrings_speak_of_the_project_only():
+    for path in sorted((REPO / "scripts").glob("*.py")):
+        tree = ast.parse(path.read_text())
+        texts = [ast.get_docstring(tree) or ""]
+        texts += [n.value.value for n in ast.walk(tree) if isinstance(n, ast.Expr)
+                  and isinstance(n.value, ast.Constant) and isinstance(n.value.value, str)]
+        comments = [line for line in path.read_text().splitlines() if "#" in line]
+        for text in texts + comments:
+            assert not re.search(r"\bissue \d|\bitem \d|\blead'?s?\b", text, re.IGNORECASE), (
+                path.name, text[:120])
