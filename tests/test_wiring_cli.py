@@ -172,6 +172,20 @@ def test_simulate_out_is_the_folder_written(tmp_path, monkeypatch):
     assert not (tmp_path / "runs").exists()
 
 
+@covers("simulate --force")
+def test_simulate_force_replaces_an_earlier_run_in_out(tmp_path):
+    # A second run into the same --out is refused (exit 2, the first log kept) unless --force,
+    # which gives the second run's log (0.03 s: 16 rows instead of 11).
+    scenario = _scenario_file(tmp_path, duration=0.02)
+    out = tmp_path / "o"
+    assert cdpm("simulate", scenario, "--out", out, "--no-progress") == 0
+    assert cdpm("simulate", scenario, "--out", out, "--duration", 0.03, "--no-progress") == 2
+    assert len(run_log(out)["time"]) == 11
+    assert cdpm("simulate", scenario, "--out", out, "--duration", 0.03, "--no-progress",
+                "--force") == 0
+    assert len(run_log(out)["time"]) == 16
+
+
 @covers("simulate --no-progress")
 def test_simulate_no_progress_removes_the_progress_bar(tmp_path, capsys):
     scenario = _scenario_file(tmp_path, duration=0.02)
@@ -297,7 +311,7 @@ def test_run_drives_the_bridge_named_in_the_overlay(tmp_path, monkeypatch, bridg
     monkeypatch.chdir(tmp_path)
     scenario = _scenario_file(tmp_path, name="cli_run", duration=0.1)
     assert cdpm("run", scenario, "--scenario-text", bridge.overlay) == 0
-    folder = run_folder(tmp_path, "cli_run_robot")
+    folder = run_folder(tmp_path, "cli_run")
     log = run_log(folder)
     assert str(log["scenario_name"]) == "cli_run"
     assert len(log["time"]) == 51
@@ -673,6 +687,34 @@ def test_sweep_runner_options_reach_the_sweep(tmp_path, monkeypatch):
         True, "ray://head:10001", 4)
     assert not cluster["retry_errors"]
     assert here["ray"] and not here["ray_address"]
+
+
+# --- recover, --version ------------------------------------------------------------------------
+
+
+@covers("recover <run_dir>")
+def test_recover_rebuilds_the_log_from_the_tick_stream(tmp_path, bridge):
+    """A run whose log.npz is lost (killed before writing it): `cdpm recover DIR` writes it
+    again from DIR/ticks.bin, row for row."""
+    out = tmp_path / "o"
+    assert cdpm("run", _scenario_file(tmp_path, duration=0.06), "--scenario-text",
+                bridge.overlay, "--out", out) == 0
+    before = run_log(out)
+    (out / "log.npz").unlink()
+    assert cdpm("recover", out) == 0
+    after = run_log(out)
+    assert len(after["time"]) == len(before["time"]) == 31
+    np.testing.assert_array_equal(after["p"], before["p"])
+
+
+@covers("cdpm --version")
+def test_version_is_the_package_version(capsys):
+    import cdpm_drake
+
+    with pytest.raises(SystemExit) as done:
+        cdpm("--version")
+    assert done.value.code == 0
+    assert capsys.readouterr().out.strip() == f"cdpm {cdpm_drake.__version__}"
 
 
 # --- info ----------------------------------------------------------------------------------------
