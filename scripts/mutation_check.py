@@ -14,8 +14,8 @@ the code moved and the list must be updated (a STALE mutant counts as a failure)
     python scripts/mutation_check.py --only admittance_mass_damping_swapped
 
 Prints a table (mutant, result, where it was killed, seconds) and the score killed / total.
-Exit code 0 when every mutant is killed, 1 otherwise. The lead refreshes stale mutants when
-code moves (issue 11 rewires the blocks): keep the snippets short and on lines likely to stay.
+Exit code 0 when every mutant is killed, 1 otherwise. Refresh a stale mutant when its code
+moves: keep the snippets short and on lines likely to stay.
 """
 
 import argparse

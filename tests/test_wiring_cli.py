@@ -4,8 +4,8 @@ run: each is asserted from its effect (the log's length for --duration, the fold
 command prints. `test_every_cli_option_has_a_case` walks the argparse parsers and fails on an
 option with no case here.
 
-Where a run's files land is found by the helpers `run_folder` / `run_log` only, so that a
-change of the folder layout (issue 10: runs/<name>/<UTC timestamp>/ with a `latest` link) is
+Where a run's files land is found by the helpers `run_folder` / `run_log` only (today
+runs/<name>/<UTC timestamp>/ with a `latest` link), so that a change of the folder layout is
 adapted in one place.
 """
 

@@ -48,8 +48,8 @@ P0 = [1.77, 2.4, 1.3]
 P_EXP1 = [1.77, 3.65, 1.22]
 
 CASES: dict[str, str] = {}
-# Fields that came with the dynamic plant (issue 13, merged after these tests were written)
-# and have no wiring case here yet. NOT a case: listed so the suite runs while their owner
+# Fields that came with the dynamic plant (merged after these tests were written) and have
+# no wiring case here yet. NOT a case: listed so the suite runs while their owner
 # adds the cases; the walk fails if one of them gets a case (then remove it here) or is gone.
 NO_CASE_YET = {
     "Scenario.plant!DynamicReels.time_step", "Scenario.plant!DynamicReels.max_reel_speed",
