@@ -2,7 +2,8 @@
 
 Layout (imports point down only):
   cli.py -> diagram.py / scenario.py -> systems/, hardware/ -> robot.py, kinematics.py,
-  interference.py (numpy only).
+  interference.py, limits.py, sensor.py, operators.py (numpy and numba, no Drake; the per-tick
+  kernels are compiled once and cached by numba).
 """
 
 __version__ = "0.1.0"

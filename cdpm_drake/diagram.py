@@ -9,14 +9,14 @@ import dataclasses
 
 import numpy as np
 from pydrake.systems.framework import Diagram, DiagramBuilder
-from pydrake.systems.primitives import Adder, VectorLogSink
+from pydrake.systems.primitives import Adder, Multiplexer, VectorLogSink
 
-from .scenario import (DynamicReels as DynamicReelsConfig, Scenario,
+from .scenario import (DynamicReels as DynamicReelsConfig, ResolvedScenario, Scenario,
                        SimulatedReels as SimulatedReelsConfig, check_dynamic_reels,
-                       check_scenario, interference_params, scenario_operator)
+                       resolve_scenario)
 from .systems import (ForceSensorSource, ForwardKinematicsEstimator, InterferenceForce,
-                      JacobianVelocityMapping, SafetyLimits, SensorNoise, SimulatedOperator,
-                      SimulatedReels, WorkspaceWallForce, Admittance)
+                      JacobianVelocityMapping, SafetyLimits, SensorNoise, WorkspaceWallForce,
+                      Admittance, add_simulated_world)
 
 # Logged signals: (logger name suffix, system name, output port name). Every signal of the
 # paper's Figs. 10, 11, 13, 14 and 16, and what the limits and reels did with them.
@@ -37,12 +37,17 @@ LOGGED = (
 
 PLANT_PORTS = ("reel_velocity_command", "cable_lengths", "measured_force")
 
+# The logger: every logged signal of the diagram, in LOGGED order, multiplexed into one C++
+# VectorLogSink (one publish event per tick instead of one per signal); `logged_signals`
+# splits its rows again.
+LOG_SINK = "log"
+
 
 @dataclasses.dataclass(frozen=True)
 class BuildOptions:
     """Switches for benchmarks and tests; the defaults are the product."""
 
-    # Add a VectorLogSink per logged signal.
+    # Log every signal of LOGGED (one VectorLogSink of them all, see LOG_SINK).
     loggers: bool = True
     # Overrides scenario.interference.enabled when False (benchmark without the block).
     interference: bool = True
@@ -51,14 +56,17 @@ class BuildOptions:
     tick_log: str | None = None
 
 
-def build_diagram(scenario: Scenario, options: BuildOptions = BuildOptions()) -> Diagram:
-    """The Fig. 5 controller around the scenario's plant, with loggers."""
-    robot = check_scenario(scenario)
+def build_diagram(scenario: Scenario | ResolvedScenario,
+                  options: BuildOptions = BuildOptions()) -> Diagram:
+    """The Fig. 5 controller around the scenario's plant, with loggers. Takes a scenario or,
+    to resolve it only once, its `resolve_scenario`; the builder only wires."""
+    resolved = resolve_scenario(scenario)
+    scenario, robot = resolved.scenario, resolved.robot
     T = scenario.time_step
     p0 = np.asarray(scenario.initial_position, dtype=float)
     builder = DiagramBuilder()
 
-    plant = builder.AddNamedSystem("reels", make_plant(scenario, robot))
+    plant = builder.AddNamedSystem("reels", make_plant(resolved))
 
     sensor_cfg = scenario.sensor
     force_sensor = builder.AddNamedSystem("force_sensor", ForceSensorSource(
@@ -69,15 +77,15 @@ def build_diagram(scenario: Scenario, options: BuildOptions = BuildOptions()) ->
                     force_sensor.GetInputPort("measured_force"))
 
     fk = builder.AddNamedSystem("forward_kinematics", ForwardKinematicsEstimator(
-        robot, initial_position=p0, max_residual=_fk_residual(scenario), time_step=T))
+        robot, initial_position=p0, max_residual=resolved.fk_max_residual, time_step=T))
     builder.Connect(plant.GetOutputPort("cable_lengths"), fk.GetInputPort("cable_lengths"))
     p_WP = fk.GetOutputPort("p_WP")
 
     # eq. 22: F_d = F_H + F_int (+ F_wall, beyond the paper).
     forces = [force_sensor.GetOutputPort("F_H")]
-    if scenario.interference.enabled and options.interference and robot.num_pairs > 0:
+    if resolved.interference is not None and options.interference:
         interference = builder.AddNamedSystem("interference_force", InterferenceForce(
-            robot, interference_params(scenario, robot), time_step=T))
+            robot, resolved.interference, time_step=T))
         builder.Connect(p_WP, interference.GetInputPort("p_WP"))
         forces.append(interference.GetOutputPort("F_int"))
     wall = scenario.wall_force
@@ -95,12 +103,10 @@ def build_diagram(scenario: Scenario, options: BuildOptions = BuildOptions()) ->
         scenario.admittance.mass, scenario.admittance.damping, T))
     builder.Connect(adder.get_output_port(), admittance.GetInputPort("F_d"))
 
-    limits_cfg = scenario.limits
     limits = builder.AddNamedSystem("safety_limits", SafetyLimits(
         lower=robot.workspace.lower, upper=robot.workspace.upper,
-        max_velocity=_or(limits_cfg.max_velocity, robot.limits.max_velocity),
-        max_acceleration=_or(limits_cfg.max_acceleration, robot.limits.max_acceleration),
-        virtual_wall=limits_cfg.virtual_wall, time_step=T))
+        max_velocity=resolved.max_velocity, max_acceleration=resolved.max_acceleration,
+        virtual_wall=scenario.limits.virtual_wall, time_step=T))
     builder.Connect(admittance.GetOutputPort("velocity"),
                     limits.GetInputPort("velocity_desired"))
     builder.Connect(p_WP, limits.GetInputPort("p_WP"))
@@ -124,38 +130,41 @@ def build_diagram(scenario: Scenario, options: BuildOptions = BuildOptions()) ->
     return diagram
 
 
-def make_plant(scenario: Scenario, robot):
-    """The scenario's reel plant, with the ports in PLANT_PORTS."""
-    cfg = scenario.plant
+def make_plant(scenario: Scenario | ResolvedScenario, robot=None):
+    """The scenario's reel plant, with the ports in PLANT_PORTS. (`robot`: unused, the
+    resolved scenario's robot is taken; kept for callers that pass one.)"""
+    resolved = resolve_scenario(scenario)
+    cfg = resolved.scenario.plant
     if isinstance(cfg, SimulatedReelsConfig):
-        return build_simulated_plant(scenario, robot)
+        return build_simulated_plant(resolved)
     if isinstance(cfg, DynamicReelsConfig):
         from .systems.dynamic_plant import build_dynamic_plant
-        return build_dynamic_plant(scenario, robot, scenario_operator(scenario),
-                                   check_dynamic_reels(scenario, robot).tensions)
+        return build_dynamic_plant(resolved.scenario, resolved.robot, resolved.operator,
+                                   check_dynamic_reels(resolved.scenario, resolved.robot).tensions)
     from .hardware.config import HardwareReels
     from .hardware.reels import HardwareReelsSystem
 
     if isinstance(cfg, HardwareReels):
-        return HardwareReelsSystem(robot, cfg, time_step=scenario.time_step)
+        return HardwareReelsSystem(resolved.robot, cfg, time_step=resolved.time_step)
     raise TypeError(f"unknown plant {type(cfg).__name__!r}")
 
 
-def build_simulated_plant(scenario: Scenario, robot) -> Diagram:
+def build_simulated_plant(scenario: Scenario | ResolvedScenario, robot=None) -> Diagram:
     """Simulated reels, the simulated person and sensor noise: the world, with the same ports
     as the real reels."""
+    resolved = resolve_scenario(scenario)
+    scenario, robot = resolved.scenario, resolved.robot
     cfg = scenario.plant
     T = scenario.time_step
     builder = DiagramBuilder()
-    reels = builder.AddNamedSystem("simulated_reels", SimulatedReels(
-        robot, initial_position=scenario.initial_position, time_step=T,
-        time_constant=cfg.time_constant, max_reel_speed=cfg.max_reel_speed))
-    operator = builder.AddNamedSystem("operator", SimulatedOperator(scenario_operator(scenario)))
-    builder.Connect(reels.GetOutputPort("p_WP_true"), operator.GetInputPort("p_WP_true"))
-    builder.Connect(reels.GetOutputPort("v_WP_true"), operator.GetInputPort("v_WP_true"))
-    builder.ExportInput(reels.GetInputPort("reel_velocity_command"), "reel_velocity_command")
-    builder.ExportOutput(reels.GetOutputPort("cable_lengths"), "cable_lengths")
-    force = operator.GetOutputPort("hand_force")
+    # The reels and the person added here directly (not as a nested diagram): one level of
+    # diagram less per tick.
+    command, world = add_simulated_world(
+        builder, robot, resolved.operator, initial_position=scenario.initial_position,
+        time_step=T, time_constant=cfg.time_constant, max_reel_speed=resolved.max_reel_speed)
+    builder.ExportInput(command, "reel_velocity_command")
+    builder.ExportOutput(world["cable_lengths"], "cable_lengths")
+    force = world["hand_force"]
     if scenario.sensor.noise_std > 0:
         noise = builder.AddNamedSystem("sensor_noise", SensorNoise(
             std=scenario.sensor.noise_std, seed=scenario.random_seed, time_step=T))
@@ -170,9 +179,28 @@ def build_simulated_plant(scenario: Scenario, robot) -> Diagram:
 
 
 def _add_loggers(builder, T):
-    for key, port in list(_logged_ports(builder)):
-        logger = builder.AddNamedSystem(f"log_{key}", VectorLogSink(port.size(), T))
-        builder.Connect(port, logger.get_input_port())
+    ports = [port for _, port in _logged_ports(builder)]
+    signals = builder.AddNamedSystem("log_signals", Multiplexer([p.size() for p in ports]))
+    for k, port in enumerate(ports):
+        builder.Connect(port, signals.get_input_port(k))
+    sink = builder.AddNamedSystem(LOG_SINK, VectorLogSink(signals.get_output_port().size(), T))
+    builder.Connect(signals.get_output_port(), sink.get_input_port())
+
+
+def logged_signals(diagram, context) -> tuple[np.ndarray, dict]:
+    """The logger's rows as (sample times (T,) s, {LOGGED key: (T, width)}) for the signals
+    the diagram logs; (empty, {}) for a diagram built without loggers."""
+    if not diagram.HasSubsystemNamed(LOG_SINK):
+        return np.zeros(0), {}
+    log = diagram.GetSubsystemByName(LOG_SINK).FindLog(context)
+    rows = log.data().T
+    signals, k = {}, 0
+    for key, system_name, port_name in LOGGED:
+        if diagram.HasSubsystemNamed(system_name):
+            width = diagram.GetSubsystemByName(system_name).GetOutputPort(port_name).size()
+            signals[key] = rows[:, k:k + width].copy()
+            k += width
+    return log.sample_times().copy(), signals
 
 
 def _logged_ports(builder):
@@ -190,15 +218,3 @@ def _add_tick_log(builder, T, path, robot, scenario):
         metadata={"robot": robot.name, "scenario": scenario.name, "time_step": T}))
     for key, port in ports.items():
         builder.Connect(port, sink.GetInputPort(key))
-
-
-def _or(value, default):
-    return default if value is None else value
-
-
-def _fk_residual(scenario) -> float:
-    """How far measured lengths may disagree with the geometry (m): the simulated plant keeps
-    them consistent to round-off; real encoders and cable stretch do not."""
-    if isinstance(scenario.plant, SimulatedReelsConfig):
-        return 1e-6
-    return float(getattr(scenario.plant, "max_length_residual", 0.005))

@@ -1,6 +1,6 @@
 """Cable-cable interference: exact segment distance, its gradient, the repulsive force.
 
-Plain numpy, no Drake import (the Drake `InterferenceForce` system is a thin wrapper). Paper
+numpy and numba, no Drake import (the Drake `InterferenceForce` block calls `interference_tick`). Paper
 sections 3.3 and 4, eqs. 8-30. All positions are in the base frame A, in m; forces in N.
 
 Cable i is the segment from its platform point B_i = p + b_i (parameter 0) to its reel exit
@@ -71,6 +71,7 @@ import dataclasses
 import math
 import weakref
 
+import numba
 import numpy as np
 
 # A cable direction is "parallel" to another when sin(angle) <= this: the side is undefined.
@@ -96,16 +97,18 @@ class SegmentDistance:
     t: float
 
 
-# --- the vectorised kernel ------------------------------------------------------------------
+# --- the compiled kernel ----------------------------------------------------------------------
+# One implementation, numba-compiled once (cached next to this module, or in numba's user cache
+# when that is read-only), serves the scalar API, the batch calls and the control loop's tick.
+# error_model="numpy": a float division by zero gives inf/nan as numpy does, never an exception.
 
-# Index rows for cross products of stacked (k, 3, ...) arrays: (x cross y)_r uses rows r+1, r+2.
-_R1 = np.array([1, 2, 0])
-_R2 = np.array([2, 0, 1])
+_jit = numba.njit(cache=True, error_model="numpy")
 
 
-def _kernel(u, v, w):
+@_jit
+def _closest(ux, uy, uz, vx, vy, vz, wx, wy, wz):
     """Closest points of cable i, B_i + s u, and cable j, B_j + t v (s, t in [0, 1]), with
-    u = A_i - B_i, v = A_j - B_j, w = B_i - B_j; arrays of shape (3, ...), m.
+    u = A_i - B_i, v = A_j - B_j, w = B_i - B_j (m).
 
     Ericson's clamped solution (Real-Time Collision Detection, 5.1.9): s0 = clamp of the line
     optimum, t = the optimum for s0, clamped, then s = the optimum for that t, clamped. It
@@ -118,61 +121,196 @@ def _kernel(u, v, w):
     cables, where the Gram form loses half the digits. Parallel cables (n == 0) get s0 = 0, a
     valid choice; a cable of zero length is a point; no 0/0 or overflow occurs.
 
-    Returns (dist, s, t, diff = C_i - C_j, n = u x v, D = |n|^2, a = |u|^2, c = |v|^2) with
-    diff, n of shape (3, ...) and the rest of shape (...).
+    Returns (dist, s, t, diff = C_i - C_j (3 floats), n = u x v (3 floats), D = |n|^2,
+    a = |u|^2, c = |v|^2).
     """
-    Z = np.stack(np.broadcast_arrays(u, v, w))  # (3 vectors, 3 components, ...)
-    Z1, Z2 = Z[:, _R1], Z[:, _R2]
-    nm = Z1[:2] * Z2[1:] - Z2[:2] * Z1[1:]  # (2, 3, ...): u x v, v x w
-    G = (Z[:, None] * Z[None, :2]).sum(axis=2)  # G[k, l] = Z_k . Z_l for l in (u, v)
-    return _solve(G[0, 0], G[0, 1], G[1, 1], G[2, 0], G[2, 1], nm, Z[0], Z[1], Z[2])
-
-
-def _solve(a, b, c, d, e, nm, u, v, w):
-    """The clamped solution from the products a = u.u, b = u.v, c = v.v, d = u.w, e = v.w and
-    nm = (u x v, v x w) stacked (2, 3, ...); see `_kernel`."""
-    n = nm[0]
-    Dn = (nm * n).sum(axis=1)  # |n|^2, (v x w) . n
-    D, num = Dn[0], Dn[1]
+    a = ux * ux + uy * uy + uz * uz
+    b = ux * vx + uy * vy + uz * vz
+    c = vx * vx + vy * vy + vz * vz
+    d = ux * wx + uy * wy + uz * wz
+    e = vx * wx + vy * wy + vz * wz
+    nx, ny, nz = uy * vz - uz * vy, uz * vx - ux * vz, ux * vy - uy * vx
+    mx, my, mz = vy * wz - vz * wy, vz * wx - vx * wz, vx * wy - vy * wx  # v x w
+    D = nx * nx + ny * ny + nz * nz
+    num = mx * nx + my * ny + mz * nz
     # Guarded reciprocals: x + (x <= TINY) is x, or ~1 where x is zero or subnormal (whose
-    # reciprocal would overflow); cheaper than np.where. A cable with |u|^2 <= TINY is a point.
-    c0 = c <= _TINY
-    inv_a = 1.0 / (a + (a <= _TINY))
+    # reciprocal would overflow). A cable with |u|^2 <= TINY is a point.
+    c0 = 1.0 if c <= _TINY else 0.0
+    inv_a = 1.0 / (a + (1.0 if a <= _TINY else 0.0))
     inv_c = 1.0 / (c + c0)
     # D <= TINY: n == 0 (parallel: any s is optimal, s_L = num = 0) or |n| so small that num is
     # as negligible; s_L stays finite. Otherwise s_L may be +-inf (clamped below), never NaN.
-    s_L = num / (D + (D <= _TINY))
-    s = np.minimum(np.maximum(s_L, 0.0), 1.0)
+    s_L = num / (D + (1.0 if D <= _TINY else 0.0))
+    s = min(max(s_L, 0.0), 1.0)
     # Cable j a point (c == 0): t = -1 sends it to the edge branch, which clamps t to 0 and
     # takes the point-segment optimum for s.
-    t = (b * s + e) * inv_c - c0
-    tc = np.minimum(np.maximum(t, 0.0), 1.0)
+    t = min(max((b * s + e) * inv_c - c0, 0.0), 1.0)
     # Then s = argmin of f(., t): Ericson's edge step where t was clamped. Where it was not,
     # (s, t) is already optimal and this returns the same s in exact arithmetic, but it also
     # repairs s where the line optimum is round-off: a cable j of (nearly) zero length, whose
     # tiny n and v leave s_L and t meaningless while (b t - d) / a ~ -d / a stays exact.
-    s = np.minimum(np.maximum((b * tc - d) * inv_a, 0.0), 1.0)
-    diff = w + s * u - tc * v
-    dist = np.sqrt((diff * diff).sum(axis=0))
-    return dist, s, tc, diff, n, D, a, c
+    s = min(max((b * t - d) * inv_a, 0.0), 1.0)
+    dx, dy, dz = wx + s * ux - t * vx, wy + s * uy - t * vy, wz + s * uz - t * vz
+    dist = math.sqrt(dx * dx + dy * dy + dz * dz)
+    return dist, s, t, dx, dy, dz, nx, ny, nz, D, a, c
 
 
-def _gradient(dist, s, t, diff):
-    """(t - s) (C_i - C_j) / d, zero where d == 0; (3, ...). Dividing diff by d (never
-    multiplying by 1 / d) keeps it finite for subnormal d."""
-    return diff / (dist + (dist == 0.0)) * (t - s)
+@_jit
+def _sign(x):
+    return 1.0 if x > 0.0 else (-1.0 if x < 0.0 else 0.0)
 
 
-def _line_side(s, t, diff, n, D, a, c):
+@_jit
+def _line_side(dx, dy, dz, nx, ny, nz, D, a, c):
     """Sign of the line signed distance sigma = (C_i - C_j) . n / |n| (any points of the two
     lines give the same value as u, v are normal to n), 0 where the cables are parallel
-    (sin angle <= PARALLEL_SIN) or the lines touch; and whether the segments straddle (both
-    closest points strictly inside their cables)."""
-    sigma = (diff * n).sum(axis=0)
-    defined = D > (PARALLEL_SIN * PARALLEL_SIN) * a * c
-    side = np.sign(sigma * defined).astype(np.int8)
-    straddle = (np.minimum(s, t) > 0.0) & (np.maximum(s, t) < 1.0)
-    return side, straddle
+    (sin angle <= PARALLEL_SIN) or the lines touch."""
+    if not D > (PARALLEL_SIN * PARALLEL_SIN) * a * c:
+        return 0
+    sigma = dx * nx + dy * ny + dz * nz
+    return 1 if sigma > 0.0 else (-1 if sigma < 0.0 else 0)
+
+
+@_jit
+def _side_rule(q, line_side, can_cross):
+    """One pair's memory transition (the table in the module docstring); can_cross: the
+    segments straddle each other and d <= d_u."""
+    o = (q > 0) - (q < 0)
+    if line_side == 0:
+        return q
+    if o == 0:
+        return line_side
+    if abs(q) == 2:  # crossed: released only by the return to the remembered side
+        return o if line_side == o else q
+    if line_side == o:
+        return q
+    return 2 * o if can_cross else line_side
+
+
+@_jit
+def _segment_kernel(u, v, w, out):
+    """`_closest` for one pair of WORLD segments: out (13,) = dist, s, t, the gradient
+    (t - s) (C_i - C_j) / d (3; zero where d == 0), C_i - C_j (3), n (3), side."""
+    dist, s, t, dx, dy, dz, nx, ny, nz, D, a, c = _closest(
+        u[0], u[1], u[2], v[0], v[1], v[2], w[0], w[1], w[2])
+    # Dividing diff by d (never multiplying by 1 / d) keeps it finite for subnormal d.
+    k = t - s
+    den = dist + (1.0 if dist == 0.0 else 0.0)
+    out[0], out[1], out[2] = dist, s, t
+    out[3], out[4], out[5] = dx / den * k, dy / den * k, dz / den * k
+    out[6], out[7], out[8] = dx, dy, dz
+    out[9], out[10], out[11] = nx, ny, nz
+    out[12] = _line_side(dx, dy, dz, nx, ny, nz, D, a, c)
+
+
+@_jit
+def _pairs_kernel(geo, p, dist_out, side_out):
+    """Distances (N, P) and line sides (N, P) of every watched pair at each row of p (N, 3).
+    geo (P, 12): per pair U = a_i - b_i, V = a_j - b_j, W = b_i - b_j, (U - V) x W; only p
+    moves: u = U - p, v = V - p, w = W."""
+    for k in range(p.shape[0]):
+        px, py, pz = p[k, 0], p[k, 1], p[k, 2]
+        for j in range(geo.shape[0]):
+            g = geo[j]
+            dist, s, t, dx, dy, dz, nx, ny, nz, D, a, c = _closest(
+                g[0] - px, g[1] - py, g[2] - pz, g[3] - px, g[4] - py, g[5] - pz,
+                g[6], g[7], g[8])
+            dist_out[k, j] = dist
+            side_out[k, j] = _line_side(dx, dy, dz, nx, ny, nz, D, a, c)
+
+
+# Offsets of the fields in `interference_tick`'s flat output of 3 + 13 P floats; the Drake
+# block exports the first five as its ports.
+def result_layout(P: int) -> dict:
+    """{field: (start, stop)} in the flat result vector of a robot with P watched pairs."""
+    sizes = (("force", 3), ("distance", P), ("active", P), ("crossed", P), ("side", P),
+             ("s", P), ("t", P), ("intensity", P), ("gradient", 3 * P),
+             ("direction", 3 * P))
+    out, k = {}, 0
+    for name, n in sizes:
+        out[name] = (k, k + n)
+        k += n
+    return out
+
+
+@_jit
+def interference_tick(geo, par, floor, F_max, p, side, has_side, out):
+    """One tick of the interference block at p (3,): writes the flat result (see
+    `result_layout`) into out (3 + 13 P,). par (P, 4): d_u, F_u, b, mid per pair; side (P,)
+    float: the previous memory (ignored unless has_side: then each pair adopts its line
+    side)."""
+    P = geo.shape[0]
+    o_d, o_act, o_cr, o_side = 3, 3 + P, 3 + 2 * P, 3 + 3 * P
+    o_s, o_t, o_int, o_grad, o_dir = 3 + 4 * P, 3 + 5 * P, 3 + 6 * P, 3 + 7 * P, 3 + 10 * P
+    px, py, pz = p[0], p[1], p[2]
+    fx = fy = fz = 0.0
+    for j in range(P):
+        g = geo[j]
+        dist, s, t, dx, dy, dz, nx, ny, nz, D, a, c = _closest(
+            g[0] - px, g[1] - py, g[2] - pz, g[3] - px, g[4] - py, g[5] - pz,
+            g[6], g[7], g[8])
+        line_side = _line_side(dx, dy, dz, nx, ny, nz, D, a, c)
+        straddle = min(s, t) > 0.0 and max(s, t) < 1.0
+        near = dist <= par[j, 0]
+        q = int(side[j]) if has_side else line_side
+        new_side = _side_rule(q, line_side, straddle and near)
+        crossed = new_side * new_side == 4
+        ts = t - s
+        pos = dist > 0.0
+        # n_hat = (C_i - C_j) / d: |diff_k| <= d, so this cannot overflow even for subnormal
+        # d (a reciprocal 1 / d could); at d == 0 it is diff itself, i.e. zero.
+        den = dist + (0.0 if pos else 1.0)
+        hx, hy, hz = dx / den, dy / den, dz / den
+        if floor > 0.0:
+            # grad / max(|grad|, floor) = n_hat (t - s) / max(|t - s|, floor): continuous in
+            # p and exactly zero where t == s (no division by |grad|).
+            k = ts / max(abs(ts), floor)
+        else:  # the paper: the unit direction sign(t - s) n_hat
+            k = _sign(ts) if abs(ts) > MIN_GRADIENT else 0.0
+        ex, ey, ez = hx * k, hy * k, hz * k
+        F_u = par[j, 1]
+        intensity = _logistic(dist, F_u, par[j, 2], par[j, 3])
+        if not near:
+            intensity = 0.0
+        if crossed or (straddle and not pos):
+            # Gradient of o sigma: o (t_L - s_L) m_hat, t_L - s_L = ((u - v) x w) . n / |n|^2;
+            # (u - v) x w = (U - V) x W does not depend on p: only its sign against n matters.
+            gs = _sign(new_side) * (g[9] * nx + g[10] * ny + g[11] * nz)
+            dn = math.sqrt(D) + (0.0 if D > 0.0 else 1.0)
+            k = _sign(gs) if abs(gs) > MIN_GRADIENT * D else 0.0
+            ex, ey, ez = nx / dn * k, ny / dn * k, nz / dn * k
+            if crossed:
+                intensity = F_u
+        fx += ex * intensity
+        fy += ey * intensity
+        fz += ez * intensity
+        out[o_d + j] = dist
+        out[o_act + j] = 1.0 if (near or crossed) else 0.0
+        out[o_cr + j] = 1.0 if crossed else 0.0
+        out[o_side + j] = new_side
+        out[o_s + j] = s
+        out[o_t + j] = t
+        out[o_int + j] = intensity
+        out[o_grad + 3 * j], out[o_grad + 3 * j + 1], out[o_grad + 3 * j + 2] = (
+            hx * ts, hy * ts, hz * ts)
+        out[o_dir + 3 * j], out[o_dir + 3 * j + 1], out[o_dir + 3 * j + 2] = ex, ey, ez
+    fn = math.sqrt(fx * fx + fy * fy + fz * fz)
+    if fn > F_max:
+        k = F_max / fn
+        fx, fy, fz = fx * k, fy * k, fz * k
+    out[0], out[1], out[2] = fx, fy, fz
+
+
+@_jit
+def interference_tick_stacked(geo, par, floor, F_max, x, out):
+    """`interference_tick` on one stacked input x (3 + P,) = [p, previous side memory]."""
+    interference_tick(geo, par, floor, F_max, x[:3], x[3:], True, out)
+
+
+@_jit
+def _update_side_kernel(q, line_side, can_cross, out):
+    for k in range(q.shape[0]):
+        out[k] = _side_rule(int(q[k]), int(line_side[k]), can_cross[k])
 
 
 # --- scalar reference API --------------------------------------------------------------------
@@ -194,7 +332,9 @@ def _point(value, name: str) -> np.ndarray:
 def _segments(b_i, a_i, b_j, a_j):
     Bi, Ai, Bj, Aj = (_point(x, nm) for x, nm in
                       ((b_i, "b_i"), (a_i, "a_i"), (b_j, "b_j"), (a_j, "a_j")))
-    return _kernel(Ai - Bi, Aj - Bj, Bi - Bj)
+    out = np.empty(13)
+    _segment_kernel(Ai - Bi, Aj - Bj, Bi - Bj, out)
+    return out
 
 
 def segment_distance(b_i, a_i, b_j, a_j) -> SegmentDistance:
@@ -203,8 +343,8 @@ def segment_distance(b_i, a_i, b_j, a_j) -> SegmentDistance:
     All four are WORLD points here (B_i = p + b_i), m. s = d_i*, t = d_j* in [0, 1]. Parallel or
     collinear cables have no unique minimiser: any valid one is returned.
     """
-    dist, s, t, *_ = _segments(b_i, a_i, b_j, a_j)
-    return SegmentDistance(float(dist), float(s), float(t))
+    out = _segments(b_i, a_i, b_j, a_j)
+    return SegmentDistance(float(out[0]), float(out[1]), float(out[2]))
 
 
 def distance_gradient(b_i, a_i, b_j, a_j) -> np.ndarray:
@@ -213,8 +353,7 @@ def distance_gradient(b_i, a_i, b_j, a_j) -> np.ndarray:
     (t - s) (C_i - C_j) / d; zero where d == 0 and where s == t. See the module docstring for
     the value returned where the gradient is undefined.
     """
-    dist, s, t, diff, *_ = _segments(b_i, a_i, b_j, a_j)
-    return _gradient(dist, s, t, diff)
+    return _segments(b_i, a_i, b_j, a_j)[3:6].copy()
 
 
 # --- robot-level, vectorised over pairs (and positions) -------------------------------------
@@ -236,66 +375,30 @@ def _position(p) -> np.ndarray:
 _GEOMETRY = weakref.WeakKeyDictionary()
 
 
-class _PairGeometry:
-    """Per-pair constants of a robot. Only p changes per tick: u = A_i - B_i = U - p with
-    U = a_i - b_i, v = V - p with V = a_j - b_j, and w = B_i - B_j = W = b_i - b_j. The
-    products the kernel needs are then polynomials in p, evaluated by two matrix products:
-        (a, b, c, d, e) = K0 + K1 p + |p|^2 (1, 1, 1, 0, 0),
-        u x v = U x V + (V - U) x p,   v x w = V x W + W x p.
-    The cancellation is no worse than in the direct products (errors ~ eps |U| |V|)."""
-
-    def __init__(self, robot):
+def pair_geometry(robot) -> np.ndarray:
+    """Per-pair constants of a robot, (P, 12) in `robot.pairs` order: U = a_i - b_i,
+    V = a_j - b_j, W = b_i - b_j and (U - V) x W. Only p changes per tick: u = A_i - B_i =
+    U - p, v = V - p, w = B_i - B_j = W. Computed once per robot."""
+    g = _GEOMETRY.get(robot)
+    if g is None:
         i, j = robot.pair_index
         ab = robot.reels - robot.attachments
         U, V = ab[i], ab[j]  # (P, 3)
         W = robot.attachments[i] - robot.attachments[j]
-        self.P = P = len(i)
-        self.pairs = tuple(robot.pairs)
-        self.U, self.V, self.W = (np.ascontiguousarray(x.T) for x in (U, V, W))  # (3, P)
-
-        def dot(x, y):
-            return (x * y).sum(axis=1)
-
-        self.K0 = np.stack([dot(U, U), dot(U, V), dot(V, V), dot(U, W), dot(V, W)])  # (5, P)
-        self.K1 = np.ascontiguousarray(
-            np.stack([-2 * U, -(U + V), -2 * V, -W, -W]).reshape(5 * P, 3))
-        self.C0 = np.stack([np.cross(U, V).T, np.cross(V, W).T])  # (2, 3, P)
-        self.UVxW = np.ascontiguousarray(np.cross(U - V, W).T)  # (u - v) x w, (3, P)
-        self.C1 = np.ascontiguousarray(
-            np.stack([_skew(V - U), _skew(W)]).transpose(0, 2, 1, 3).reshape(6 * P, 3))
-
-
-def _skew(x):
-    """(P, 3) -> (P, 3, 3) matrices with S[k] @ p = x[k] x p."""
-    S = np.zeros(x.shape[:-1] + (3, 3))
-    S[..., 0, 1], S[..., 0, 2] = -x[..., 2], x[..., 1]
-    S[..., 1, 0], S[..., 1, 2] = x[..., 2], -x[..., 0]
-    S[..., 2, 0], S[..., 2, 1] = -x[..., 1], x[..., 0]
-    return S
-
-
-def _geometry(robot) -> _PairGeometry:
-    g = _GEOMETRY.get(robot)
-    if g is None:
-        g = _GEOMETRY[robot] = _PairGeometry(robot)
+        g = np.ascontiguousarray(np.hstack([U, V, W, np.cross(U - V, W)]).reshape(len(i), 12))
+        g.flags.writeable = False
+        _GEOMETRY[robot] = g
     return g
 
 
-def _robot_kernel(geo, p):
-    """`_kernel` for every watched pair at p (3,) or (N, 3); outputs (...) = (P,) or (N, P)."""
-    P = geo.P
-    if p.ndim == 1:
-        G = (geo.K1 @ p).reshape(5, P) + geo.K0
-        G[:3] += p @ p
-        nm = (geo.C1 @ p).reshape(2, 3, P) + geo.C0
-        pc = p[:, None]
-        return _solve(*G, nm, geo.U - pc, geo.V - pc, geo.W)
-    N = p.shape[0]
-    G = (p @ geo.K1.T).reshape(N, 5, P).transpose(1, 0, 2) + geo.K0[:, None, :]
-    G[:3] += (p * p).sum(axis=1)[:, None]
-    nm = (p @ geo.C1.T).reshape(N, 2, 3, P).transpose(1, 2, 0, 3) + geo.C0[:, :, None, :]
-    pc = p.T[:, :, None]  # (3, N, 1)
-    return _solve(*G, nm, geo.U[:, None, :] - pc, geo.V[:, None, :] - pc, geo.W[:, None, :])
+def _pairs_at(robot, p):
+    """(distances, line sides) of every watched pair at p (3,) or (N, 3)."""
+    geo = pair_geometry(robot)
+    q = np.ascontiguousarray(np.atleast_2d(p))
+    dist = np.empty((q.shape[0], geo.shape[0]))
+    side = np.empty((q.shape[0], geo.shape[0]), dtype=np.int8)
+    _pairs_kernel(geo, q, dist, side)
+    return (dist[0], side[0]) if p.ndim == 1 else (dist, side)
 
 
 def pair_distances(robot, p) -> np.ndarray:
@@ -304,7 +407,7 @@ def pair_distances(robot, p) -> np.ndarray:
     p: platform centre (3,) or a batch (N, 3), base frame, m. Returns (P,) or (N, P) with
     P = robot.num_pairs (pairs excluded by the robot description are left out).
     """
-    return _robot_kernel(_geometry(robot), _position(p))[0]
+    return _pairs_at(robot, _position(p))[0]
 
 
 def translation_distance_bound(robot) -> np.ndarray:
@@ -335,34 +438,7 @@ def initial_side(robot, p) -> np.ndarray:
     p = _position(p)
     if p.ndim != 1:
         raise ValueError(f"initial_side takes one position (3,), got shape {p.shape}")
-    dist, s, t, diff, n, D, a, c = _robot_kernel(_geometry(robot), p)
-    return _line_side(s, t, diff, n, D, a, c)[0]
-
-
-def _side_rule(q: int, line_side: int, can_cross: bool) -> int:
-    """One pair's memory transition (the table in the module docstring); can_cross: the
-    segments straddle each other and d <= d_u."""
-    o = (q > 0) - (q < 0)
-    if line_side == 0:
-        return q
-    if o == 0:
-        return line_side
-    if abs(q) == 2:  # crossed: released only by the return to the remembered side
-        return o if line_side == o else q
-    if line_side == o:
-        return q
-    return 2 * o if can_cross else line_side
-
-
-# The rule tabulated at index 6 q + 2 line_side + can_cross + 14 (0..29): one gather per tick.
-_SIDE_TABLE = np.array([_side_rule(q, g, bool(x)) for q in range(-2, 3) for g in (-1, 0, 1)
-                        for x in (0, 1)], dtype=np.int8)
-
-
-def _update_side(q, line_side, can_cross):
-    # q, line_side int8 (P,), can_cross bool (P,); the index fits int8 (max 29).
-    new = _SIDE_TABLE[q * 6 + line_side * 2 + can_cross + 14]
-    return new, new * new == 4
+    return _pairs_at(robot, p)[1]
 
 
 def update_side(side, line_side, straddle, near):
@@ -376,8 +452,10 @@ def update_side(side, line_side, straddle, near):
     g = np.asarray(line_side)
     if g.size and not np.isin(g, (-1, 0, 1)).all():
         raise ValueError(f"line_side entries must be -1, 0 or 1, got {g!r}")
-    return _update_side(q, g.astype(np.int8),
-                        np.asarray(straddle, dtype=bool) & np.asarray(near, dtype=bool))
+    new = np.empty(q.shape, dtype=np.int8)
+    _update_side_kernel(q, g.astype(np.int8),
+                        np.asarray(straddle, dtype=bool) & np.asarray(near, dtype=bool), new)
+    return new, new * new == 4
 
 
 def _side_memory(side, shape) -> np.ndarray:
@@ -405,10 +483,17 @@ def _steepness(d_l, d_u, F_u, eps):
     return 2.0 * np.log((F_u - eps) / eps) / (d_l - d_u), 0.5 * (d_u + d_l)
 
 
+@_jit
 def _logistic(d, F_u, b, mid):
     # Eq. 26: F_u / (1 + exp(-b (d - mid))); the exponent is capped so exp cannot overflow
     # far above the band (the value there is F_u e^-700, zero for every purpose).
-    return F_u / (1.0 + np.exp(np.minimum(b * (mid - d), 700.0)))
+    return F_u / (1.0 + math.exp(min(b * (mid - d), 700.0)))
+
+
+@_jit
+def _logistic_many(d, F_u, b, mid, out):
+    for k in range(d.shape[0]):
+        out[k] = _logistic(d[k], F_u[k], b[k], mid[k])
 
 
 def logistic_intensity(d, d_l, d_u, F_u, eps):
@@ -419,7 +504,12 @@ def logistic_intensity(d, d_l, d_u, F_u, eps):
     """
     d_l, d_u, F_u, eps = (np.asarray(x, dtype=float) for x in (d_l, d_u, F_u, eps))
     _check_logistic(d_l, d_u, F_u, eps, names=None)
-    return _logistic(np.asarray(d, dtype=float), F_u, *_steepness(d_l, d_u, F_u, eps))
+    b, mid = _steepness(d_l, d_u, F_u, eps)
+    d, F_u, b, mid = np.broadcast_arrays(np.asarray(d, dtype=float), F_u, b, mid)
+    out = np.empty(d.shape)
+    _logistic_many(*(np.ascontiguousarray(x).reshape(-1) for x in (d, F_u, b, mid)),
+                   out.reshape(-1))
+    return out if out.ndim else float(out)
 
 
 def _check_logistic(d_l, d_u, F_u, eps, names):
@@ -517,6 +607,10 @@ class InterferenceParams:
         b, mid = _steepness(arrays["d_l"], arrays["d_u"], arrays["F_u"], arrays["eps"])
         object.__setattr__(self, "_b", b)
         object.__setattr__(self, "_mid", mid)
+        # (P, 4) d_u, F_u, b, mid per pair: what the compiled tick reads.
+        packed = np.ascontiguousarray(np.column_stack([arrays["d_u"], arrays["F_u"], b, mid]))
+        packed.flags.writeable = False
+        object.__setattr__(self, "packed", packed)
 
     @classmethod
     def uniform(cls, robot, d_l, d_u, F_u, eps=0.1, F_max=None,
@@ -573,8 +667,8 @@ def interference_force(robot, p, params: InterferenceParams, side=None) -> Inter
     direction, never floored. The sum (eq. 30) is clipped to norm F_max. `side` is the memory
     returned by the previous tick (None: `initial_side(robot, p)`).
     """
-    geo = _geometry(robot)
-    P, pairs = geo.P, geo.pairs
+    geo = pair_geometry(robot)
+    P, pairs = geo.shape[0], tuple(robot.pairs)
     if params.d_l.size != P or (params.pairs is not None and params.pairs != pairs):
         raise ValueError(f"interference parameters are for pairs "
                          f"{params.pairs if params.pairs is not None else params.d_l.size} "
@@ -582,42 +676,13 @@ def interference_force(robot, p, params: InterferenceParams, side=None) -> Inter
     p = _position(p)
     if p.ndim != 1:
         raise ValueError(f"interference_force takes one position (3,), got shape {p.shape}")
-    dist, s, t, diff, n, D, a, c = _robot_kernel(geo, p)
-    line_side, straddle = _line_side(s, t, diff, n, D, a, c)
-    near = dist <= params.d_u
-    q = line_side if side is None else _side_memory(side, (P,))
-    new_side, crossed = _update_side(q, line_side, straddle & near)
-
-    ts = t - s
-    pos = dist > 0.0
-    # n_hat = (C_i - C_j) / d: |diff_k| <= d, so this cannot overflow even for subnormal d
-    # (a reciprocal 1 / d could); at d == 0 it is diff itself, i.e. zero.
-    n_hat = diff / (dist + ~pos)
-    grad = n_hat * ts
-    floor = params.gradient_floor
-    if floor > 0.0:
-        # |grad| = |t - s|: grad / max(|grad|, floor) = n_hat (t - s) / max(|t - s|, floor),
-        # continuous in p and exactly zero where t == s (no division by |grad|).
-        direction = n_hat * (ts / np.maximum(np.abs(ts), floor))
-    else:
-        # The paper: the unit direction sign(t - s) n_hat.
-        direction = n_hat * (np.sign(ts) * (np.abs(ts) > MIN_GRADIENT))
-    intensity = _logistic(dist, params.F_u, params._b, params._mid) * near
-    use_side = crossed | (straddle & ~pos)
-    if use_side.any():
-        # Gradient of o sigma: o (t_L - s_L) m_hat, with t_L - s_L = ((u - v) x w) . n / |n|^2
-        # (t_L, s_L: the two lines' closest points); u - v = U - V and w = W do not depend on
-        # p, so (u - v) x w is a per-pair constant and only its sign against n matters here.
-        g = np.sign(new_side) * (geo.UVxW * n).sum(axis=0)
-        has_n = D > 0.0
-        m_hat = n / (np.sqrt(D) + ~has_n)
-        toward = m_hat * (np.sign(g) * (np.abs(g) > MIN_GRADIENT * D))
-        direction = np.where(use_side, toward, direction)
-        intensity = np.where(crossed, params.F_u, intensity)
-    force = direction @ intensity
-    fn = math.sqrt(force[0] * force[0] + force[1] * force[1] + force[2] * force[2])
-    if fn > params.F_max:
-        force *= params.F_max / fn
-    return InterferenceResult(force=force, distance=dist, s=s, t=t, gradient=grad.T,
-                              intensity=intensity, active=near | crossed, side=new_side,
-                              crossed=crossed, direction=direction.T)
+    q = np.zeros(P) if side is None else _side_memory(side, (P,)).astype(float)
+    out = np.empty(3 + 13 * P)
+    interference_tick(geo, params.packed, params.gradient_floor, params.F_max, p, q,
+                         side is not None, out)
+    f = {name: out[a:b] for name, (a, b) in result_layout(P).items()}
+    return InterferenceResult(
+        force=f["force"], distance=f["distance"], s=f["s"], t=f["t"],
+        gradient=f["gradient"].reshape(P, 3), intensity=f["intensity"],
+        active=f["active"] > 0.5, side=f["side"].astype(np.int8), crossed=f["crossed"] > 0.5,
+        direction=f["direction"].reshape(P, 3))

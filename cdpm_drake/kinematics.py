@@ -1,4 +1,4 @@
-"""Loop-closure kinematics of a translating CDPM (paper eqs. 1-3). Plain numpy.
+"""Loop-closure kinematics of a translating CDPM (paper eqs. 1-3). numpy and numba, no Drake.
 
 Every function takes one platform position p (3,) or a batch (N, 3), base frame, m, and
 returns arrays with the same leading batch shape.
@@ -6,9 +6,15 @@ returns arrays with the same leading batch shape.
 
 from __future__ import annotations
 
+import math
+
+import numba
 import numpy as np
 
 from .robot import Robot
+
+# Compiled once (cached); error_model="numpy": x / 0 is inf or nan, never an exception.
+_jit = numba.njit(cache=True, error_model="numpy")
 
 
 class KinematicsError(RuntimeError):
@@ -23,13 +29,48 @@ def cable_vectors(robot: Robot, p) -> np.ndarray:
 
 def cable_lengths(robot: Robot, p) -> np.ndarray:
     """||rho_i|| (eq. 2); (..., m), m."""
-    return np.linalg.norm(cable_vectors(robot, p), axis=-1)
+    return _batch(robot, p, 1)
 
 
 def jacobian(robot: Robot, p) -> np.ndarray:
     """J with l_dot = J @ p_dot (eq. 3): row i is rho_i^T / ||rho_i||; (..., m, 3)."""
-    rho = cable_vectors(robot, p)
-    return rho / np.linalg.norm(rho, axis=-1, keepdims=True)
+    return _batch(robot, p, 3)
+
+
+def _batch(robot, p, width):
+    """cable_lengths (width 1) or jacobian (width 3) by the compiled kernel, any batch shape."""
+    p = np.asarray(p, dtype=float)
+    m = robot.num_cables
+    q = np.ascontiguousarray(p.reshape(-1, 3))
+    out = np.empty((q.shape[0], m, width))
+    _cable_kernel(np.ascontiguousarray(robot.attachments - robot.reels), q, out)
+    shape = p.shape[:-1] + ((m,) if width == 1 else (m, 3))
+    return out.reshape(shape)
+
+
+@_jit
+def _cable_kernel(offsets, p, out):
+    """Per row of p (N, 3): lengths ||p + b_i - a_i|| (out width 1) or unit rows (width 3)."""
+    for k in range(p.shape[0]):
+        for i in range(offsets.shape[0]):
+            x = p[k, 0] + offsets[i, 0]
+            y = p[k, 1] + offsets[i, 1]
+            z = p[k, 2] + offsets[i, 2]
+            n = math.sqrt(x * x + y * y + z * z)
+            if out.shape[2] == 1:
+                out[k, i, 0] = n
+            else:
+                out[k, i, 0], out[k, i, 1], out[k, i, 2] = x / n, y / n, z / n
+
+
+@_jit
+def reel_rates(offsets, p, v, out):
+    """l_dot = J(p) v (eq. 3) into out (m,), m/s: offsets (m, 3) = b_i - a_i, p (3,) m,
+    v (3,) m/s. The Jacobian block's tick."""
+    for i in range(offsets.shape[0]):
+        x, y, z = p[0] + offsets[i, 0], p[1] + offsets[i, 1], p[2] + offsets[i, 2]
+        n = math.sqrt(x * x + y * y + z * z)
+        out[i] = (x * v[0] + y * v[1] + z * v[2]) / n
 
 
 def forward_kinematics(robot: Robot, lengths, p_guess=None, tol: float = 1e-10,
@@ -56,10 +97,10 @@ def forward_kinematics(robot: Robot, lengths, p_guess=None, tol: float = 1e-10,
     if single and p_guess is not None:
         # The control loop's case: one position, warm-started a tick away. Plain Gauss-Newton
         # converges in two or three steps; anything harder falls through to the damped solver.
-        p = _gauss_newton_warm(robot.attachments - robot.reels, lengths,
-                               np.asarray(p_guess, dtype=float), tol, max_residual,
-                               min(8, max_iterations))
-        if p is not None:
+        p = np.empty(3)
+        if gauss_newton_warm(np.ascontiguousarray(robot.attachments - robot.reels), lengths,
+                             np.asarray(p_guess, dtype=float), tol, float(max_residual),
+                             min(8, max_iterations), p):
             return p
     if p_guess is None:
         p = np.broadcast_to(robot.workspace.center, (L.shape[0], 3)).copy()
@@ -117,39 +158,103 @@ def forward_kinematics(robot: Robot, lengths, p_guess=None, tol: float = 1e-10,
     return p[0] if single else p
 
 
-def _gauss_newton_warm(offsets, L, p, tol, max_residual, max_iterations=8):
-    """Undamped Gauss-Newton from a close guess; None when it does not settle quickly."""
+@_jit
+def gauss_newton_warm(offsets, L, p_guess, tol, max_residual, max_iterations, out):
+    """Undamped Gauss-Newton from a close guess (the control loop's forward kinematics):
+    offsets (m, 3) = b_i - a_i, L (m,) m, p_guess (3,) m. Writes p (m) into out (3,) and
+    returns True when it settles (step below tol m) within max_iterations with every residual
+    at most max_residual m; False otherwise (out then holds no answer)."""
+    m = offsets.shape[0]
+    px, py, pz = p_guess[0], p_guess[1], p_guess[2]
     for _ in range(max_iterations):
-        rho = p + offsets
-        n = np.sqrt(np.einsum("ij,ij->i", rho, rho))
-        r = n - L
-        J = rho / n[:, None]
-        step = _solve_sym3(J.T @ J, J.T @ r)
-        if step is None:
-            return None
-        p = p - step
-        if step @ step < tol * tol:
-            rho = p + offsets
-            worst = np.max(np.abs(np.sqrt(np.einsum("ij,ij->i", rho, rho)) - L))
-            return p if worst <= max_residual else None
-    return None
-
-
-def _solve_sym3(A, b):
-    """x with A x = b for a symmetric 3x3 A, by cofactors (np.linalg.solve's call overhead is
-    most of its cost at this size); None when A is singular to working precision."""
-    (a, d, e), (_, c, f), (_, _, k) = A.tolist()
-    c00, c01, c02 = c * k - f * f, e * f - d * k, d * f - c * e
-    det = a * c00 + d * c01 + e * c02
-    if not abs(det) > 1e-14 * (abs(a) + abs(c) + abs(k)) ** 3:
-        return None
-    c11, c12, c22 = a * k - e * e, d * e - a * f, a * c - d * d
-    x, y, z = b.tolist()
-    return np.array([c00 * x + c01 * y + c02 * z,
-                     c01 * x + c11 * y + c12 * z,
-                     c02 * x + c12 * y + c22 * z]) / det
+        # J^T J (symmetric: a d e / c f / k) and J^T r, J_i = rho_i / |rho_i|, r_i = |rho_i| - L_i.
+        a = d = e = c = f = kk = 0.0
+        gx = gy = gz = 0.0
+        for i in range(m):
+            x, y, z = px + offsets[i, 0], py + offsets[i, 1], pz + offsets[i, 2]
+            n = math.sqrt(x * x + y * y + z * z)
+            r = n - L[i]
+            x, y, z = x / n, y / n, z / n
+            a += x * x
+            d += x * y
+            e += x * z
+            c += y * y
+            f += y * z
+            kk += z * z
+            gx += x * r
+            gy += y * r
+            gz += z * r
+        # x with A x = g for the symmetric 3x3 A, by cofactors; give up when A is singular
+        # to working precision.
+        c00, c01, c02 = c * kk - f * f, e * f - d * kk, d * f - c * e
+        det = a * c00 + d * c01 + e * c02
+        if not abs(det) > 1e-14 * (abs(a) + abs(c) + abs(kk)) ** 3:
+            return False
+        c11, c12, c22 = a * kk - e * e, d * e - a * f, a * c - d * d
+        sx = (c00 * gx + c01 * gy + c02 * gz) / det
+        sy = (c01 * gx + c11 * gy + c12 * gz) / det
+        sz = (c02 * gx + c12 * gy + c22 * gz) / det
+        px, py, pz = px - sx, py - sy, pz - sz
+        if sx * sx + sy * sy + sz * sz < tol * tol:
+            worst = 0.0
+            for i in range(m):
+                x, y, z = px + offsets[i, 0], py + offsets[i, 1], pz + offsets[i, 2]
+                worst = max(worst, abs(math.sqrt(x * x + y * y + z * z) - L[i]))
+            if not worst <= max_residual:
+                return False
+            out[0], out[1], out[2] = px, py, pz
+            return True
+    return False
 
 
 def condition_number(robot: Robot, p) -> float:
     """2-norm condition number of J at p (how evenly cable speeds map to platform speeds)."""
     return float(np.linalg.cond(jacobian(robot, p)))
+
+
+@_jit
+def simulated_reel_step(offsets, time_step, lag, max_reel_speed, command, state, out):
+    """One tick of the simulated reels (systems.SimulatedReels), compiled.
+
+    state and out (2 m + 6,): cable lengths (m), platform p (3, m), its velocity (3, m/s),
+    lagged reel speeds (m, m/s). The command (m,) m/s is scaled down to max_reel_speed (all
+    reels alike), lagged (factor `lag`), integrated over time_step, and the lengths projected
+    onto the geometry (warm Gauss-Newton forward kinematics, then the lengths of that p).
+    Returns False when Gauss-Newton does not settle: out then holds the new speeds and the
+    integrated (unprojected) lengths, and the caller finishes with the damped solver."""
+    m = offsets.shape[0]
+    peak = 0.0
+    for i in range(m):
+        peak = max(peak, abs(command[i]))
+    scale = max_reel_speed / peak if peak > max_reel_speed else 1.0
+    for i in range(m):
+        # Scale all reels alike, as the hardware plant does: the platform slows down but
+        # keeps its direction (clipping one reel would steer it).
+        c = command[i] * scale if peak > max_reel_speed else command[i]
+        speed = state[m + 6 + i] + lag * (c - state[m + 6 + i])
+        out[m + 6 + i] = speed
+        out[i] = state[i] + time_step * speed
+    p = np.empty(3)
+    if not gauss_newton_warm(offsets, out[:m], state[m:m + 3], 1e-10, np.inf, 8, p):
+        return False
+    for i in range(m):
+        x, y, z = p[0] + offsets[i, 0], p[1] + offsets[i, 1], p[2] + offsets[i, 2]
+        out[i] = math.sqrt(x * x + y * y + z * z)
+    for k in range(3):
+        out[m + 3 + k] = (p[k] - state[m + k]) / time_step
+        out[m + k] = p[k]
+    return True
+
+
+@_jit
+def gauss_newton_warm_stacked(offsets, x, tol, max_residual, max_iterations, out):
+    """`gauss_newton_warm` on one stacked input x (m + 3,) = [lengths, p_guess] (m)."""
+    m = offsets.shape[0]
+    return gauss_newton_warm(offsets, x[:m], x[m:], tol, max_residual, max_iterations, out)
+
+
+@_jit
+def simulated_reel_step_stacked(offsets, time_step, lag, max_reel_speed, x, out):
+    """`simulated_reel_step` on one stacked input x = [command (m), state]."""
+    m = offsets.shape[0]
+    return simulated_reel_step(offsets, time_step, lag, max_reel_speed, x[:m], x[m:], out)

@@ -1,11 +1,16 @@
-"""Safety limits after the admittance (Fig. 5) and the workspace-wall force. Plain numpy.
+"""Safety limits after the admittance (Fig. 5) and the workspace-wall force. numpy and numba,
+no Drake.
 
 Base frame, SI units: p in m, velocities in m/s, accelerations in m/s^2, forces in N.
 """
 
 import math
 
+import numba
 import numpy as np
+
+# Compiled once (cached); error_model="numpy": x / 0 is inf or nan, never an exception.
+_jit = numba.njit(cache=True, error_model="numpy")
 
 
 def limit_velocity(v_desired, v_previous, p, lower, upper, *, max_velocity, max_acceleration,
@@ -19,46 +24,60 @@ def limit_velocity(v_desired, v_previous, p, lower, upper, *, max_velocity, max_
     the previous command is capped at max_acceleration * time_step. The wall cap is applied
     again last: it wins over the acceleration limit (never leave the box).
     """
-    # Three components: plain floats are several times faster than numpy at this size, and
-    # this runs every tick.
-    v = [float(x) for x in v_desired]
-    prev = [float(x) for x in v_previous]
-    speed = math.sqrt(v[0] * v[0] + v[1] * v[1] + v[2] * v[2])
+    out = np.empty(3)
+    bounds = np.array([np.asarray(lower, dtype=float), np.asarray(upper, dtype=float)])
+    limit_velocity_into(np.asarray(v_desired, dtype=float), np.asarray(v_previous, dtype=float),
+                        np.asarray(p, dtype=float), bounds, float(max_velocity),
+                        float(max_acceleration), float(time_step), bool(virtual_wall), out)
+    return out
+
+
+@_jit
+def limit_velocity_into(v_desired, v_previous, p, bounds, max_velocity, max_acceleration,
+                        time_step, virtual_wall, out):
+    """`limit_velocity` compiled, writing the command (3,) m/s into out; bounds (2, 3) is
+    (lower, upper) of the workspace box, m. The safety limits block's tick."""
+    vx, vy, vz = v_desired[0], v_desired[1], v_desired[2]
+    speed = math.sqrt(vx * vx + vy * vy + vz * vz)
     if speed > max_velocity:
-        v = [x * (max_velocity / speed) for x in v]
+        k = max_velocity / speed
+        vx, vy, vz = vx * k, vy * k, vz * k
+    caps = np.empty((3, 2))
     if virtual_wall:
-        caps = _wall_caps(p, lower, upper, max_acceleration, time_step)
-        v = _clip(v, caps)
-    dv = [x - y for x, y in zip(v, prev)]
-    step = math.sqrt(dv[0] * dv[0] + dv[1] * dv[1] + dv[2] * dv[2])
+        _wall_caps(p, bounds, max_acceleration, time_step, caps)
+        vx, vy, vz = _clip(vx, caps[0]), _clip(vy, caps[1]), _clip(vz, caps[2])
+    ux, uy, uz = v_previous[0], v_previous[1], v_previous[2]
+    dx, dy, dz = vx - ux, vy - uy, vz - uz
+    step = math.sqrt(dx * dx + dy * dy + dz * dz)
     max_step = max_acceleration * time_step
     if step > max_step:
-        v = [y + d * (max_step / step) for y, d in zip(prev, dv)]
+        k = max_step / step
+        vx, vy, vz = ux + dx * k, uy + dy * k, uz + dz * k
     if virtual_wall:
-        v = _clip(v, caps)
-    return np.array(v)
+        vx, vy, vz = _clip(vx, caps[0]), _clip(vy, caps[1]), _clip(vz, caps[2])
+    out[0], out[1], out[2] = vx, vy, vz
 
 
-def _clip(v, caps):
-    return [min(max(x, -lo), up) for x, (lo, up) in zip(v, caps)]
+@_jit
+def _clip(x, cap):
+    return min(max(x, -cap[0]), cap[1])
 
 
-def _wall_caps(p, lower, upper, a, T):
+@_jit
+def _wall_caps(p, bounds, a, T, caps):
     """Per axis (cap towards the lower face, cap towards the upper face), m/s, both >= 0."""
     # Each axis brakes on its own curve; at a/sqrt(3) per axis the vector deceleration stays
     # within a even where three faces meet (a corner), at the price of braking earlier at a face.
     a = a / math.sqrt(3.0)
-    caps = []
-    for x, lo, up in zip(p, lower, upper):
-        gap_up = max(float(up) - float(x), 0.0)
-        gap_lo = max(float(x) - float(lo), 0.0)
+    for k in range(3):
+        gap_up = max(bounds[1, k] - p[k], 0.0)
+        gap_lo = max(p[k] - bounds[0, k], 0.0)
         # Braking curve and one-tick bound (no overshoot). The continuous curve sqrt(2 a gap)
         # is not enough at 500 Hz: braking by a T per tick from v covers T (v + (v - aT) +
         # ...), at most (v + aT/2)^2 / (2a), so the cap is sqrt(2 a gap) - aT/2; on it, the
         # next tick's cap is exactly v - aT.
-        caps.append((max(min(math.sqrt(2.0 * a * gap_lo) - 0.5 * a * T, gap_lo / T), 0.0),
-                     max(min(math.sqrt(2.0 * a * gap_up) - 0.5 * a * T, gap_up / T), 0.0)))
-    return caps
+        caps[k, 0] = max(min(math.sqrt(2.0 * a * gap_lo) - 0.5 * a * T, gap_lo / T), 0.0)
+        caps[k, 1] = max(min(math.sqrt(2.0 * a * gap_up) - 0.5 * a * T, gap_up / T), 0.0)
 
 
 def wall_force(p, lower, upper, *, margin, max_force) -> np.ndarray:
@@ -68,9 +87,26 @@ def wall_force(p, lower, upper, *, margin, max_force) -> np.ndarray:
     max_force * ((margin - gap) / margin)^2 towards the inside, `max_force` at the face and
     beyond. Smooth (C1) at the margin, so the operator feels no step.
     """
-    p = np.asarray(p, dtype=float)
-    gap_lo = p - np.asarray(lower)
-    gap_up = np.asarray(upper) - p
-    push_lo = np.clip((margin - gap_lo) / margin, 0.0, 1.0) ** 2
-    push_up = np.clip((margin - gap_up) / margin, 0.0, 1.0) ** 2
-    return max_force * (push_lo - push_up)
+    out = np.empty(3)
+    bounds = np.array([np.asarray(lower, dtype=float), np.asarray(upper, dtype=float)])
+    wall_force_into(np.asarray(p, dtype=float), bounds, float(margin), float(max_force), out)
+    return out
+
+
+@_jit
+def wall_force_into(p, bounds, margin, max_force, out):
+    """`wall_force` compiled, into out (3,) N; bounds (2, 3) = (lower, upper), m."""
+    for k in range(3):
+        push_lo = min(max((margin - (p[k] - bounds[0, k])) / margin, 0.0), 1.0)
+        push_up = min(max((margin - (bounds[1, k] - p[k])) / margin, 0.0), 1.0)
+        out[k] = max_force * (push_lo * push_lo - push_up * push_up)
+
+
+@_jit
+def limit_velocity_stacked(x, bounds, max_velocity, max_acceleration, time_step, virtual_wall,
+                           out):
+    """`limit_velocity_into` on one stacked input x (9,) = [v_desired, p, v_previous] (m/s,
+    m, m/s): the block reads its three inputs as one C++-multiplexed vector (one port
+    evaluation from Python instead of three)."""
+    limit_velocity_into(x[0:3], x[6:9], x[3:6], bounds, max_velocity, max_acceleration,
+                        time_step, virtual_wall, out)

@@ -1,15 +1,20 @@
 """Models of the person holding the handle, for simulation and the reel-bridge emulator.
 
-Plain numpy. An operator is a pure function of time and the platform's true motion, so that it
+numpy and numba, no Drake. An operator is a pure function of time and the platform's true motion, so that it
 keeps no hidden state: `force(t, p, v) -> (3,)`, base frame, N; t in s, p in m, v in m/s.
 """
 
 import csv
+import math
 import dataclasses
 import typing
 from pathlib import Path
 
+import numba
 import numpy as np
+
+# Compiled once (cached); error_model="numpy": x / 0 is inf or nan, never an exception.
+_jit = numba.njit(cache=True, error_model="numpy")
 
 
 class OperatorError(ValueError):
@@ -21,6 +26,9 @@ class NoForce:
 
     def force(self, t: float, p, v) -> np.ndarray:
         return np.zeros(3)
+
+    def force_into(self, t: float, p, v, out) -> None:
+        out[:] = 0.0
 
 
 class ForceProfile:
@@ -45,10 +53,51 @@ class ForceProfile:
             k = int(np.argmax(np.diff(t) <= 0))
             raise OperatorError(f"{field}.times must increase strictly: times[{k + 1}] = "
                                 f"{float(t[k + 1])!r} s follows {float(t[k])!r} s")
-        self.times, self.forces = t, f
+        self.times, self.forces = t, np.ascontiguousarray(f)
 
     def force(self, t: float, p, v) -> np.ndarray:
-        return np.array([np.interp(t, self.times, self.forces[:, k]) for k in range(3)])
+        out = np.empty(3)
+        _interp_into(self.times, self.forces, float(t), out)
+        return out
+
+    def force_into(self, t: float, p, v, out) -> None:
+        """`force` written into out (3,): the simulated operator's tick."""
+        _interp_into(self.times, self.forces, t, out)
+
+
+@_jit
+def _interp_into(times, rows, t, out):
+    """Piecewise-linear interpolation of rows (n, 3) at times (n,), held at the end rows, as
+    np.interp per column: slope (f_j+1 - f_j) / (t_j+1 - t_j) times (t - t_j) plus f_j."""
+    n = times.shape[0]
+    if t <= times[0] or n == 1:
+        j = 0 if t <= times[0] else n - 1
+        out[0], out[1], out[2] = rows[j, 0], rows[j, 1], rows[j, 2]
+        return
+    if t >= times[n - 1]:
+        out[0], out[1], out[2] = rows[n - 1, 0], rows[n - 1, 1], rows[n - 1, 2]
+        return
+    j = np.searchsorted(times, t, side="right") - 1
+    dt = times[j + 1] - times[j]
+    for k in range(3):
+        out[k] = (rows[j + 1, k] - rows[j, k]) / dt * (t - times[j]) + rows[j, k]
+
+
+@_jit
+def _spring_force_into(times, waypoints, K, D, F_max, release, t, p, v, out):
+    """The SpringHand force (N) into out (3,); release = inf: never lets go."""
+    if t >= release:
+        out[0] = out[1] = out[2] = 0.0
+        return
+    _interp_into(times, waypoints, t, out)
+    fx = K * (out[0] - p[0]) - D * v[0]
+    fy = K * (out[1] - p[1]) - D * v[1]
+    fz = K * (out[2] - p[2]) - D * v[2]
+    n = math.sqrt(fx * fx + fy * fy + fz * fz)
+    if n > F_max:
+        k = F_max / n
+        fx, fy, fz = fx * k, fy * k, fz * k
+    out[0], out[1], out[2] = fx, fy, fz
 
 
 def load_force_csv(path, *, field: str = "operator.path") -> ForceProfile:
@@ -107,11 +156,15 @@ class SpringHand:
         return self.profile.force(t, None, None)
 
     def force(self, t: float, p, v) -> np.ndarray:
-        if self.release_time is not None and t >= self.release_time:
-            return np.zeros(3)
-        f = self.K * (self.target(t) - np.asarray(p)) - self.D * np.asarray(v)
-        n = np.linalg.norm(f)
-        return f * (self.F_max / n) if n > self.F_max else f
+        out = np.empty(3)
+        self.force_into(float(t), np.asarray(p, dtype=float), np.asarray(v, dtype=float), out)
+        return out
+
+    def force_into(self, t: float, p, v, out) -> None:
+        """`force` written into out (3,): the simulated operator's tick."""
+        release = math.inf if self.release_time is None else self.release_time
+        _spring_force_into(self.profile.times, self.profile.forces, self.K, self.D, self.F_max,
+                           release, t, p, v, out)
 
 
 # --- Typed descriptions (the scenario's `operator:` entry) -----------------------------------

@@ -16,8 +16,8 @@ import numpy as np
 from pydrake.systems.analysis import Simulator
 
 from .diagram import LOGGED, BuildOptions, build_diagram
-from .scenario import (DynamicReels, Scenario, ScenarioError, SimulatedReels, check_scenario,
-                       scenario_to_yaml)
+from .scenario import (DynamicReels, ResolvedScenario, Scenario, ScenarioError, SimulatedReels,
+                       resolve_scenario, scenario_to_yaml)
 from .simulation import assemble_log, mark_ending, tick_targets
 
 
@@ -65,7 +65,7 @@ class _StopRequest:
             signal.signal(sig, handler)
 
 
-def run(*, scenario: Scenario, out_dir, duration: float | None = None, status=None,
+def run(*, scenario: Scenario | ResolvedScenario, out_dir, duration: float | None = None, status=None,
         status_period: float = 1.0, step: float = 0.02, on_view=None,
         view_period: float = 0.1) -> RunResult:
     """Run the scenario's diagram at real-time rate 1 against the reel bridge.
@@ -76,7 +76,8 @@ def run(*, scenario: Scenario, out_dir, duration: float | None = None, status=No
     """
     from .hardware.reels import ReelFault, start_realtime
 
-    robot = check_scenario(scenario)
+    resolved = resolve_scenario(scenario)  # once: the builder and the log take it
+    scenario, robot = resolved.scenario, resolved.robot
     if isinstance(scenario.plant, (SimulatedReels, DynamicReels)):
         raise ScenarioError(
             f"scenario {scenario.name!r} has plant: !{type(scenario.plant).__name__}; `cdpm "
@@ -92,7 +93,7 @@ def run(*, scenario: Scenario, out_dir, duration: float | None = None, status=No
         # An earlier run's files would otherwise be reported as this run's if it fails early.
         (out / stale).unlink(missing_ok=True)
     tick_path = out / "ticks.bin"
-    diagram = build_diagram(scenario, BuildOptions(loggers=False, tick_log=str(tick_path)))
+    diagram = build_diagram(resolved, BuildOptions(loggers=False, tick_log=str(tick_path)))
     reels = diagram.GetSubsystemByName("reels")
     sink = diagram.GetSubsystemByName("tick_log")
     simulator = Simulator(diagram)
@@ -148,7 +149,7 @@ def run(*, scenario: Scenario, out_dir, duration: float | None = None, status=No
             path.unlink(missing_ok=True)
         return RunResult(log={}, timing={}, link=link, error=error, ending=ending,
                          log_path=None, tick_log_path=None, signal=stop.signal, enabled=False)
-    log, timing, _ = log_from_tick_log(tick_path, scenario, robot)
+    log, timing, _ = log_from_tick_log(tick_path, resolved, robot)
     mark_ending(log, ending, error)
     log_path = out / "log.npz"
     np.savez_compressed(log_path, **log)
@@ -156,10 +157,14 @@ def run(*, scenario: Scenario, out_dir, duration: float | None = None, status=No
                      log_path=log_path, tick_log_path=tick_path, signal=stop.signal)
 
 
-def log_from_tick_log(tick_path, scenario: Scenario, robot) -> tuple[dict, dict, dict]:
+def log_from_tick_log(tick_path, scenario: Scenario | ResolvedScenario,
+                      robot) -> tuple[dict, dict, dict]:
     """docs/LOG_FORMAT.md from a run's ticks.bin: (log without the ending keys, timing,
     {"ticks": whole rows read, "cut_bytes": bytes of a partial last row left out})."""
     from .hardware.tick_log import read_tick_log, realtime_stats, tick_log_tail
+
+    resolved = resolve_scenario(scenario)
+    scenario = resolved.scenario
 
     tick_path = Path(tick_path)
     raw = read_tick_log(tick_path) if tick_path.exists() else {}
@@ -167,7 +172,7 @@ def log_from_tick_log(tick_path, scenario: Scenario, robot) -> tuple[dict, dict,
     T = scenario.time_step
     timing = realtime_stats(raw, T) if raw else {}
     signals = {key: raw[key] for key, _, _ in LOGGED if key in raw}
-    log = assemble_log(raw.get("time", np.zeros(0)), signals, scenario, robot)
+    log = assemble_log(raw.get("time", np.zeros(0)), signals, resolved, robot)
     log["tick"] = raw.get("tick", np.zeros(0, dtype=int))
     log["wall"] = raw.get("wall", np.zeros(0))
     compute = raw.get("compute", np.full((len(log["time"]), 1), np.nan))
@@ -195,9 +200,9 @@ def recover(run_dir) -> tuple[Path, dict]:
         # The run converted its stream itself, with how it ended: never replace that.
         raise RecoverError(f"{str(run_dir)!r} already has its log.npz; nothing to recover "
                            "(remove it to convert ticks.bin again)")
-    scenario = load_scenario(scenario_path)
-    robot = check_scenario(scenario)
-    log, _, tail = log_from_tick_log(tick_path, scenario, robot)
+    resolved = resolve_scenario(load_scenario(scenario_path))
+    scenario, robot = resolved.scenario, resolved.robot
+    log, _, tail = log_from_tick_log(tick_path, resolved, robot)
     # Ticks 0..n of the duration the run was asked for (scenario.yaml records it).
     expected = int(np.floor(scenario.duration / scenario.time_step + 1e-9)) + 1
     ending = "completed" if len(log["time"]) >= expected else "interrupted"

@@ -254,10 +254,10 @@ def load_scenario(name_or_path="exp2_interaction", overlay_text: str | None = No
     # Absolute, so the resolved scenario written beside a log (which records base_dir) finds
     # the same robot and CSV files when loaded back from elsewhere.
     scenario.base_dir = str((path.parent / scenario.base_dir).resolve())
-    robot = check_scenario(scenario, source=str(path))
-    if scenario.interference.enabled and robot.num_pairs:
-        _warn_unreachable_d_u(robot, interference_params(scenario, robot))
-    _warn_reel_saturation(scenario, robot)
+    resolved = resolve_scenario(scenario, source=str(path))
+    if resolved.interference is not None:
+        _warn_unreachable_d_u(resolved.robot, resolved.interference)
+    _warn_reel_saturation(scenario, resolved.robot)
     return scenario
 
 
@@ -491,8 +491,49 @@ def interference_params(scenario: Scenario, robot: Robot):
         raise ScenarioError(f"interference: {e}") from None
 
 
+@dataclasses.dataclass(frozen=True, eq=False)
+class ResolvedScenario:
+    """A scenario checked and resolved once (`resolve_scenario`): what the builder, the runners
+    and the views take, so that none of them goes back to the scenario's fields to derive
+    these again. The scenario itself is kept as given."""
+
+    scenario: Scenario
+    # The robot with the scenario's cable swaps applied.
+    robot: Robot
+    # Per-pair logistic parameters (interference.InterferenceParams); None when the block is
+    # off (interference.enabled false, or a robot without watched pairs).
+    interference: typing.Any
+    # The person at the handle (an operators model: force(t, p, v) in N).
+    operator: typing.Any
+    # Safety limits with the robot file's defaults applied: m/s, m/s^2.
+    max_velocity: float
+    max_acceleration: float
+    # Simulated reels' speed limit, m/s of cable (the plant's or the robot file's).
+    max_reel_speed: float
+    # How far measured lengths may disagree with the geometry, m: the simulated plant keeps
+    # them consistent to round-off; real encoders and cable stretch do not.
+    fk_max_residual: float
+
+    @property
+    def time_step(self) -> float:
+        return self.scenario.time_step
+
+
+def resolve_scenario(scenario, source: str = "<scenario>") -> ResolvedScenario:
+    """Check the scenario (as `check_scenario`) and resolve it: robot loaded and swapped,
+    parameters per pair, operator, limits with the robot's defaults. A ResolvedScenario is
+    returned as it is."""
+    if isinstance(scenario, ResolvedScenario):
+        return scenario
+    return _resolve(scenario, source)
+
+
 def check_scenario(scenario: Scenario, source: str = "<scenario>") -> Robot:
     """Check every field a run depends on; returns the robot (swaps applied)."""
+    return resolve_scenario(scenario, source).robot
+
+
+def _resolve(scenario: Scenario, source: str) -> ResolvedScenario:
     robot = scenario_robot(scenario)
     _positive(scenario.duration, "duration")
     _positive(scenario.time_step, "time_step")
@@ -540,10 +581,25 @@ def check_scenario(scenario: Scenario, source: str = "<scenario>") -> Robot:
                                 f"{scenario.plant.time_constant!r}")
         if scenario.plant.max_reel_speed is not None:
             _positive(scenario.plant.max_reel_speed, "plant.max_reel_speed")
-    scenario_operator(scenario)
+    operator = scenario_operator(scenario)
+    params = None
     if scenario.interference.enabled and robot.num_pairs:
-        interference_params(scenario, robot)
-    return robot
+        params = interference_params(scenario, robot)
+    limits = scenario.limits
+    plant = scenario.plant
+    simulated = isinstance(plant, SimulatedReels)
+    return ResolvedScenario(
+        scenario=scenario, robot=robot, interference=params, operator=operator,
+        max_velocity=float(_or(limits.max_velocity, robot.limits.max_velocity)),
+        max_acceleration=float(_or(limits.max_acceleration, robot.limits.max_acceleration)),
+        max_reel_speed=float(_or(getattr(plant, "max_reel_speed", None),
+                                 robot.limits.max_reel_speed)),
+        fk_max_residual=1e-6 if simulated else float(getattr(plant, "max_length_residual",
+                                                             0.005)))
+
+
+def _or(value, default):
+    return default if value is None else value
 
 
 def check_dynamic_reels(scenario: Scenario, robot: Robot):

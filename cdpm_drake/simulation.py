@@ -12,9 +12,9 @@ from pathlib import Path
 import numpy as np
 from pydrake.systems.analysis import Simulator
 
-from .diagram import LOGGED, build_diagram
-from .scenario import (DynamicReels, Scenario, ScenarioError, SimulatedReels, check_scenario,
-                       interference_params, scenario_to_yaml)
+from .diagram import build_diagram, logged_signals
+from .scenario import (DynamicReels, ResolvedScenario, Scenario, ScenarioError, SimulatedReels,
+                       resolve_scenario, scenario_to_yaml)
 
 
 @dataclasses.dataclass
@@ -31,7 +31,7 @@ class SimulationResult:
         return float(t[-1] - t[0]) / self.wall_time if t.size > 1 and self.wall_time > 0 else 0.0
 
 
-def simulate(*, scenario: Scenario, duration: float | None = None, progress: bool = False,
+def simulate(*, scenario: Scenario | ResolvedScenario, duration: float | None = None, progress: bool = False,
              on_chunk=None, chunk: float = 0.5, diagram=None,
              realtime_rate: float | None = None) -> SimulationResult:
     """Simulate the scenario's diagram for `duration` s (default: the scenario's).
@@ -41,7 +41,8 @@ def simulate(*, scenario: Scenario, duration: float | None = None, progress: boo
     as fast as it can. Exceptions raised by the diagram end the run; the result carries them
     in `error` with the log up to that point.
     """
-    robot = check_scenario(scenario)
+    resolved = resolve_scenario(scenario)  # once: the builder and the log take it
+    scenario, robot = resolved.scenario, resolved.robot
     if diagram is None and not isinstance(scenario.plant, (SimulatedReels, DynamicReels)):
         raise ScenarioError(
             f"scenario {scenario.name!r} has plant: !{type(scenario.plant).__name__}; a "
@@ -50,7 +51,7 @@ def simulate(*, scenario: Scenario, duration: float | None = None, progress: boo
     duration = scenario.duration if duration is None else float(duration)
     if not (duration > 0 and np.isfinite(duration)):
         raise ValueError(f"duration must be a finite number > 0 s, got {duration!r}")
-    diagram = build_diagram(scenario) if diagram is None else diagram
+    diagram = build_diagram(resolved) if diagram is None else diagram
     simulator = Simulator(diagram)
     context = simulator.get_mutable_context()
     if realtime_rate is not None:
@@ -81,7 +82,7 @@ def simulate(*, scenario: Scenario, duration: float | None = None, progress: boo
         wall = time.perf_counter() - start
         if bar is not None:
             bar.close()
-    log = collect_log(diagram, context, scenario, robot)
+    log = collect_log(diagram, context, resolved, robot)
     mark_ending(log, "completed" if error is None else
                 "interrupted" if isinstance(error, KeyboardInterrupt) else "fault", error)
     return SimulationResult(log=log, wall_time=wall, error=error)
@@ -111,18 +112,12 @@ def mark_ending(log: dict, ending: str, error: BaseException | None) -> dict:
     return log
 
 
-def collect_log(diagram, context, scenario: Scenario, robot) -> dict:
-    """The loggers' contents as named arrays, one row per tick (docs/LOG_FORMAT.md)."""
-    columns = {}
-    for key, _, _ in LOGGED:
-        name = f"log_{key}"
-        if not diagram.HasSubsystemNamed(name):
-            continue
-        data = diagram.GetSubsystemByName(name).FindLog(context)
-        columns[key] = (data.sample_times().copy(), data.data().T.copy())
-    time_column, signals = whole_ticks(columns)
+def collect_log(diagram, context, scenario: Scenario | ResolvedScenario, robot) -> dict:
+    """The logger's contents as named arrays, one row per tick (docs/LOG_FORMAT.md)."""
+    time_column, signals = logged_signals(diagram, context)
     # The dynamic plant's ground truth, logged inside the plant (no ports for it), one row per
-    # tick like the rest: cut to the same whole ticks.
+    # tick like the rest: cut to the ticks every logger logged (Ctrl-C or SIGTERM can stop the
+    # run between two loggers' publishes of one tick).
     from .systems.dynamic_plant import ground_truth_log
     truth = ground_truth_log(diagram, context)
     if truth:
@@ -132,23 +127,12 @@ def collect_log(diagram, context, scenario: Scenario, robot) -> dict:
     return assemble_log(time_column, signals, scenario, robot)
 
 
-def whole_ticks(columns: dict) -> tuple[np.ndarray, dict]:
-    """(time, {key: rows}) from {key: (sample times, rows)}, cut to the ticks every logger
-    logged: Ctrl-C or SIGTERM can stop the run between two loggers' publishes of one tick,
-    which leaves that tick in some of them only."""
-    if not columns:
-        return np.zeros(0), {}
-    n = min(len(times) for times, _ in columns.values())
-    times = next(iter(columns.values()))[0][:n]
-    for key, (t, _) in columns.items():
-        if not np.array_equal(t[:n], times):
-            raise RuntimeError(f"logger {key!r} sampled other times than the others")
-    return times, {key: rows[:n] for key, (_, rows) in columns.items()}
-
-
-def assemble_log(time_column, signals: dict, scenario: Scenario, robot) -> dict:
+def assemble_log(time_column, signals: dict, scenario: Scenario | ResolvedScenario,
+                 robot) -> dict:
     """docs/LOG_FORMAT.md from the logged signals ({LOGGED key: (T, width)}): fills the
     signals of blocks the diagram did not have, and adds the robot and parameters."""
+    resolved = resolve_scenario(scenario)
+    scenario = resolved.scenario
     log = dict(signals)
     T = len(time_column)
     P = robot.num_pairs
@@ -164,8 +148,8 @@ def assemble_log(time_column, signals: dict, scenario: Scenario, robot) -> dict:
         if key in log:
             log[key] = np.asarray(log[key]) > 0.5
     log["pairs"] = np.array(robot.pairs, dtype=int).reshape(P, 2)
-    if scenario.interference.enabled and P:
-        params = interference_params(scenario, robot)
+    params = resolved.interference
+    if params is not None:
         for key in ("d_l", "d_u", "F_u", "eps"):
             log[key] = np.asarray(getattr(params, key), dtype=float)
         log["F_max"] = np.array(params.F_max)

@@ -49,9 +49,11 @@ def test_system_names_follow_fig_5():
     names = {s.get_name() for s in diagram.GetSystems()}
     assert {"reels", "force_sensor", "interference_force", "F_d_adder", "admittance",
             "safety_limits", "jacobian_mapping", "forward_kinematics"} <= names
-    # One logger per logged signal whose block exists (no wall force in exp2).
-    for key, system, _ in LOGGED:
-        assert (f"log_{key}" in names) == (system in names), key
+    # One logger, of every logged signal whose block exists (no wall force in exp2).
+    assert {"log", "log_signals"} <= names
+    width = sum(diagram.GetSubsystemByName(system).GetOutputPort(port).size()
+                for _, system, port in LOGGED if system in names)
+    assert diagram.GetSubsystemByName("log").get_input_port().size() == width
 
 
 def test_plant_exposes_exactly_the_hardware_port_names():
@@ -69,7 +71,7 @@ def test_build_options_drop_the_interference_block_and_the_loggers():
     names = {s.get_name() for s in build_diagram(
         scenario, BuildOptions(interference=False, loggers=False)).GetSystems()}
     assert "interference_force" not in names
-    assert not any(n.startswith("log_") for n in names)
+    assert not any(n.startswith("log") for n in names)
     assert scenario.interference.enabled  # the builder did not modify the scenario
 
 
@@ -295,9 +297,7 @@ def test_running_the_same_context_twice_gives_identical_logs():
     context = first.get_mutable_context()
     diagram.SetDefaultContext(context)
     context.SetTime(0.0)
-    for key, _, _ in LOGGED:  # the loggers keep their rows in the context
-        if diagram.HasSubsystemNamed(f"log_{key}"):
-            diagram.GetSubsystemByName(f"log_{key}").FindMutableLog(context).Clear()
+    diagram.GetSubsystemByName("log").FindMutableLog(context).Clear()  # rows live there
     first.Initialize()
     first.AdvanceTo(0.4)
     assert_same_logs(log_1, logs(diagram, context, scenario))

@@ -289,23 +289,6 @@ def test_tick_targets_end_exactly_on_the_last_whole_tick(duration, chunk):
     assert np.allclose(np.diff(targets)[:-1], max(1, round(chunk / T)) * T)
 
 
-def test_a_tick_some_loggers_missed_is_cut_from_the_log():
-    # A signal can stop the run between two loggers' publishes of the same tick (seen with
-    # `timeout -s TERM`: F_H had 778 rows, time 777): keep the ticks every logger has.
-    from cdpm_drake.simulation import whole_ticks
-
-    t = np.arange(5) * T
-    columns = {"p": (t, np.ones((5, 3))), "F_H": (t[:4], 2 * np.ones((4, 3))),
-               "lengths": (t, np.zeros((5, 7)))}
-    times, signals = whole_ticks(columns)
-    np.testing.assert_array_equal(times, t[:4])
-    assert {k: v.shape for k, v in signals.items()} == {"p": (4, 3), "F_H": (4, 3),
-                                                        "lengths": (4, 7)}
-    assert whole_ticks({})[0].size == 0
-    with pytest.raises(RuntimeError, match="logger 'F_H' sampled other times"):
-        whole_ticks({"p": (t, np.ones((5, 3))), "F_H": (t + T, np.ones((5, 3)))})
-
-
 def test_latest_points_at_a_run_as_it_starts_and_back_if_it_writes_nothing(tmp_path):
     from cdpm_drake.run_folder import RunFolder
 

@@ -14,8 +14,7 @@ from cdpm_drake.operators import ForceProfile
 from cdpm_drake.robot import Limits, Robot, Workspace, load_robot
 from cdpm_drake.systems import (ForceSensorSource, ForwardKinematicsEstimator,
                                 JacobianVelocityMapping, SafetyLimits, SensorNoise,
-                                SimulatedOperator, SimulatedReels, WorkspaceWallForce,
-                                make_admittance)
+                                SimulatedReels, WorkspaceWallForce, make_admittance)
 from cdpm_drake.systems.force_sensor import clip_to_sensor_range
 
 T = 0.002
@@ -295,12 +294,32 @@ def test_wall_force_block_wraps_wall_force():
     np.testing.assert_allclose(out, [1.0, -1.96, 0.0], atol=1e-12)
 
 
-def test_simulated_operator_evaluates_its_model_at_the_context_time():
-    profile = ForceProfile([0.0, 1.0], [[0.0, 0.0, 0.0], [2.0, -4.0, 8.0]])
-    block = SimulatedOperator(profile)
-    context = block.CreateDefaultContext()
-    block.GetInputPort("p_WP_true").FixValue(context, np.zeros(3))
-    block.GetInputPort("v_WP_true").FixValue(context, np.zeros(3))
-    context.SetTime(0.25)
-    np.testing.assert_allclose(block.GetOutputPort("hand_force").Eval(context),
-                               [0.5, -1.0, 2.0], atol=1e-15)
+def test_simulated_person_is_the_model_at_each_tick_on_the_true_pose():
+    """The reels' hand_force at tick k is the operator model at t_k = k T on that tick's true
+    pose, for a scripted ramp (no pose dependence: exactly the table) and for a spring hand
+    (pose dependent: K (target - p) - D v, the model evaluated independently here)."""
+    from cdpm_drake.operators import SpringHand
+
+    ramp = ForceProfile([0.0, 1.0], [[0.0, 0.0, 0.0], [2.0, -4.0, 8.0]])
+    v = np.array([0.1, 0.05, -0.08])
+    for model in (ramp, SpringHand([P0, P0 + [0.2, 0.0, 0.0]], [0.0, 1.0], 60.0, 6.0, 5.0)):
+        reels = SimulatedReels(TRIPOD, initial_position=P0, time_step=T, operator=model)
+        builder = DiagramBuilder()
+        builder.AddSystem(reels)
+        source = builder.AddSystem(ConstantVectorSource(jacobian(TRIPOD, P0) @ v))
+        builder.Connect(source.get_output_port(), reels.GetInputPort("reel_velocity_command"))
+        loggers = {}
+        for name in ("hand_force", "p_WP_true", "v_WP_true"):
+            port = reels.GetOutputPort(name)
+            loggers[name] = builder.AddSystem(VectorLogSink(port.size(), T))
+            builder.Connect(port, loggers[name].get_input_port())
+        diagram = builder.Build()
+        simulator = Simulator(diagram)
+        simulator.AdvanceTo(50 * T)
+        rows = {name: log.FindLog(simulator.get_context()) for name, log in loggers.items()}
+        times = rows["hand_force"].sample_times()
+        force, p, v_true = (rows[n].data().T for n in ("hand_force", "p_WP_true", "v_WP_true"))
+        expected = np.array([model.force(t, pk, vk) for t, pk, vk in zip(times, p, v_true)])
+        np.testing.assert_allclose(force, expected, rtol=0, atol=1e-12)
+        if model is ramp:
+            np.testing.assert_allclose(force[25], [0.1, -0.2, 0.4], atol=1e-12)  # t = 0.05 s

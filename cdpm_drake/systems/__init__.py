@@ -1,4 +1,11 @@
-"""One Drake LeafSystem per block of the paper's Fig. 5; each a thin wrapper of numpy math."""
+"""One named Drake system per block of the paper's Fig. 5.
+
+A block is a LeafSystem (the Jacobian mapping) or a small sub-diagram: one stateless Python
+LeafSystem calling the block's compiled kernel (numba, in the math modules) once per tick,
+its state held by C++ primitives fed back (ZeroOrderHold, a discrete LinearSystem), results
+split by a C++ Demultiplexer; the admittance and the sliding average are C++ LinearSystems.
+Contexts clone and simulations repeat exactly: nothing that changes lives in Python.
+"""
 
 from .admittance import Admittance, make_admittance
 from .force_sensor import ForceSensorSource
@@ -6,11 +13,11 @@ from .forward_kinematics import ForwardKinematicsEstimator
 from .interference_force import InterferenceForce
 from .jacobian_mapping import JacobianVelocityMapping
 from .safety_limits import SafetyLimits
-from .simulated_reels import SensorNoise, SimulatedOperator, SimulatedReels
+from .simulated_reels import SensorNoise, SimulatedReels, add_simulated_world
 from .wall_force import WorkspaceWallForce
 
 __all__ = [
     "Admittance", "ForceSensorSource", "ForwardKinematicsEstimator", "InterferenceForce",
-    "JacobianVelocityMapping", "SafetyLimits", "SensorNoise", "SimulatedOperator",
+    "JacobianVelocityMapping", "SafetyLimits", "SensorNoise", "add_simulated_world",
     "SimulatedReels", "WorkspaceWallForce", "make_admittance",
 ]

@@ -2,8 +2,10 @@
 
 import numpy as np
 from pydrake.systems.analysis import DiscreteTimeApproximation
-from pydrake.systems.framework import LeafSystem
-from pydrake.systems.primitives import LinearSystem
+from pydrake.systems.framework import Diagram
+from pydrake.systems.primitives import LinearSystem, Multiplexer
+
+from ._wiring import sub_diagram
 
 
 def make_admittance(mass: float, damping: float, time_step: float):
@@ -26,10 +28,19 @@ def make_admittance(mass: float, damping: float, time_step: float):
     return DiscreteTimeApproximation(continuous, time_step)
 
 
-class Admittance(LeafSystem):
+def make_anti_windup_admittance(mass: float, damping: float, time_step: float):
+    """The discrete LinearSystem v_{k+1} = A_d u_k + B_d F_d,k, y = v, input [F_d; u] (6,):
+    `make_admittance`'s zero-order-hold matrices, integrating from the commanded u_k."""
+    zoh = make_admittance(mass, damping, time_step)
+    return LinearSystem(A=np.zeros((3, 3)), B=np.hstack([zoh.B(), zoh.A()]), C=np.eye(3),
+                        D=np.zeros((3, 6)), time_period=time_step)
+
+
+class Admittance(Diagram):
     """The admittance of Fig. 5 with anti-windup: v_{k+1} = A_d u_k + B_d F_d,k, where A_d,
     B_d are `make_admittance`'s zero-order-hold matrices and u_k is the velocity actually
-    commanded at tick k (after the safety limits).
+    commanded at tick k (after the safety limits). All C++: a Multiplexer and a discrete
+    LinearSystem.
 
     While no limit acts, u_k = v_k and this is exactly 1/(M s + C). When a limit holds the
     command below the admittance's velocity (speed cap, virtual wall), integrating from v_k
@@ -50,14 +61,14 @@ class Admittance(LeafSystem):
 
     def __init__(self, mass: float, damping: float, time_step: float):
         super().__init__()
-        zoh = make_admittance(mass, damping, time_step)
-        self._Ad, self._Bd = zoh.A().copy(), zoh.B().copy()
-        self._F_d = self.DeclareVectorInputPort("F_d", 3)
-        self._command = self.DeclareVectorInputPort("velocity_command", 3)
-        self._velocity = self.DeclareDiscreteState(3)
-        self.DeclareStateOutputPort("velocity", self._velocity)
-        self.DeclarePeriodicDiscreteUpdateEvent(time_step, 0.0, self._update_velocity)
 
-    def _update_velocity(self, context, discrete_state):
-        discrete_state.get_mutable_vector(self._velocity).SetFromVector(
-            self._Ad @ self._command.Eval(context) + self._Bd @ self._F_d.Eval(context))
+        def build(builder):
+            inputs = builder.AddNamedSystem("inputs", Multiplexer([3, 3]))
+            dynamics = builder.AddNamedSystem("dynamics", make_anti_windup_admittance(
+                mass, damping, time_step))
+            builder.Connect(inputs.get_output_port(), dynamics.get_input_port())
+            builder.ExportInput(inputs.get_input_port(0), "F_d")
+            builder.ExportInput(inputs.get_input_port(1), "velocity_command")
+            builder.ExportOutput(dynamics.get_output_port(), "velocity")
+
+        sub_diagram(self, build)

@@ -21,7 +21,7 @@ from pydrake.systems.primitives import Adder, VectorLogSink
 from ..rotation import rotation_from_rpy, rpy_from_rotation
 from ..tension import unstretched_lengths
 from ._tick_cache import declare_tick_cache
-from .simulated_reels import SensorNoise, SimulatedOperator
+from .simulated_reels import SensorNoise
 
 # The plant's logged ground truth: (log key, system, output port), collected by name.
 GROUND_TRUTH = (
@@ -30,6 +30,35 @@ GROUND_TRUTH = (
     ("p_true", "cables", "p_WP_true"),
     ("rpy_true", "cables", "rpy_true"),
 )
+
+
+class SimulatedOperator(LeafSystem):
+    """The person at the handle: an operator model (see `operators`) evaluated on the
+    platform's true motion. Part of the dynamic plant, never of the controller (the kinematic
+    plant samples the person inside its own step).
+
+    .. pydrake_system::
+
+        name: operator
+        input_ports:
+        - p_WP_true (m, base frame)
+        - v_WP_true (m/s, base frame)
+        output_ports:
+        - hand_force (N, base frame)
+    """
+
+    def __init__(self, operator):
+        super().__init__()
+        self._operator = operator
+        self._p = self.DeclareVectorInputPort("p_WP_true", 3)
+        self._v = self.DeclareVectorInputPort("v_WP_true", 3)
+        self.DeclareVectorOutputPort(
+            "hand_force", 3, self._calc_hand_force,
+            prerequisites_of_calc={self.time_ticket(), self._p.ticket(), self._v.ticket()})
+
+    def _calc_hand_force(self, context, output):
+        output.SetFromVector(self._operator.force(context.get_time(), self._p.Eval(context),
+                                                  self._v.Eval(context)))
 
 
 def reel_step(w, u, h, *, bandwidth, inertia, viscous, coulomb):
@@ -344,6 +373,7 @@ def ground_truth_log(diagram, context) -> dict:
     return out
 
 
-__all__ = ["CableForces", "Encoders", "GROUND_TRUTH", "ReelDrives", "build_dynamic_plant",
+__all__ = ["CableForces", "Encoders", "GROUND_TRUTH", "ReelDrives", "SimulatedOperator",
+           "build_dynamic_plant",
            "cable_tensions", "ground_truth_log", "reel_step",
            "unstretched_lengths"]

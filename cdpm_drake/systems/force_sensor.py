@@ -1,33 +1,65 @@
 """The force-sensor source of Fig. 5: sensor range and the sliding-average filter."""
 
-import math
-
 import numpy as np
-from pydrake.systems.framework import LeafSystem
+from pydrake.systems.framework import Diagram, LeafSystem
+from pydrake.systems.primitives import LinearSystem
+
+from ..sensor import clip_into, clip_to_sensor_range
+from ._wiring import sub_diagram
+
+__all__ = ["ForceSensorSource", "SensorRange", "clip_to_sensor_range", "sliding_average"]
 
 
-def clip_to_sensor_range(f, axis, axial_range, transverse_range) -> np.ndarray:
-    """Saturate a force (N) as an FSE103 does: axial component to +-axial_range along the handle
-    `axis` (unit), transverse part to transverse_range in norm."""
-    # Plain floats: three components, every tick.
-    fx, fy, fz = (float(c) for c in f)
-    ax, ay, az = (float(c) for c in axis)
-    axial = fx * ax + fy * ay + fz * az
-    tx, ty, tz = fx - axial * ax, fy - axial * ay, fz - axial * az
-    n = math.sqrt(tx * tx + ty * ty + tz * tz)
-    if n > transverse_range:
-        k = transverse_range / n
-        tx, ty, tz = tx * k, ty * k, tz * k
-    axial = min(max(axial, -axial_range), axial_range)
-    return np.array([axial * ax + tx, axial * ay + ty, axial * az + tz])
+class SensorRange(LeafSystem):
+    """The sensor's measuring range (`sensor.clip_to_sensor_range`), per sample; stateless.
+
+    .. pydrake_system::
+
+        name: sensor_range
+        input_ports:
+        - measured_force (N, base frame)
+        output_ports:
+        - clipped_force (N, base frame)
+    """
+
+    def __init__(self, *, axial_axis, axial_range, transverse_range):
+        super().__init__()
+        axis = np.asarray(axial_axis, dtype=float)
+        self._axis = axis / np.linalg.norm(axis)
+        self._axial_range = float(axial_range)
+        self._transverse_range = float(transverse_range)
+        self._measured = self.DeclareVectorInputPort("measured_force", 3)
+        self.DeclareVectorOutputPort("clipped_force", 3, self._calc_clipped_force,
+                                     prerequisites_of_calc={self._measured.ticket()})
+        clip_into(np.zeros(3), self._axis, 1.0, 1.0, np.empty(3))  # compile now, not in a tick
+
+    def _calc_clipped_force(self, context, output):
+        clip_into(self._measured.Eval(context), self._axis, self._axial_range,
+                  self._transverse_range, output.get_mutable_value())
 
 
-class ForceSensorSource(LeafSystem):
+def sliding_average(window: int, time_step: float) -> LinearSystem:
+    """The average of the last `window` samples as a discrete FIR LinearSystem (3 axes):
+    the state holds the previous window - 1 samples, oldest first; y_k = (x_k sum + u_k) / W
+    (direct feedthrough: the sample of tick k counts at tick k)."""
+    W = int(window)
+    n = 3 * (W - 1)
+    A = np.zeros((n, n))
+    A[:n - 3, 3:] = np.eye(n - 3)  # shift: drop the oldest sample
+    B = np.zeros((n, 3))
+    B[n - 3:] = np.eye(3)           # the newest sample enters last
+    C = np.tile(np.eye(3), W - 1) / W
+    D = np.eye(3) / W
+    return LinearSystem(A=A, B=B, C=C, D=D, time_period=time_step)
+
+
+class ForceSensorSource(Diagram):
     """The operator's hand force F_H in the base frame, as the controller sees it.
 
     The raw sample (simulated operator or the real sensor, via the plant's `measured_force`)
-    is saturated to the sensor's range, then averaged over the last `window` samples (the
-    sliding-average filter of section 5). The window lives in discrete state.
+    is saturated to the sensor's range (`sensor_range`, exact), then averaged over the last
+    `window` samples (`sliding_average`: the filter of section 5, a C++ FIR whose state is
+    the window).
 
     .. pydrake_system::
 
@@ -41,33 +73,18 @@ class ForceSensorSource(LeafSystem):
     def __init__(self, *, axial_axis, axial_range=100.0, transverse_range=80.0, window=10,
                  time_step=0.002):
         super().__init__()
-        axis = np.asarray(axial_axis, dtype=float)
-        self._axis = axis / np.linalg.norm(axis)
-        self._axial_range = float(axial_range)
-        self._transverse_range = float(transverse_range)
-        self._window = int(window)
-        self._measured = self.DeclareVectorInputPort("measured_force", 3)
-        # The last window-1 clipped samples, oldest first (3 per sample).
-        self._history = self.DeclareDiscreteState(3 * (self._window - 1))
-        self.DeclareVectorOutputPort(
-            "F_H", 3, self._calc_F_H,
-            prerequisites_of_calc={self._measured.ticket(),
-                                   self.discrete_state_ticket(self._history)})
-        if self._window > 1:
-            self.DeclarePeriodicDiscreteUpdateEvent(time_step, 0.0, self._update_history)
 
-    def _clipped(self, context):
-        return clip_to_sensor_range(self._measured.Eval(context), self._axis,
-                                    self._axial_range, self._transverse_range)
+        def build(builder):
+            clip = builder.AddNamedSystem("sensor_range", SensorRange(
+                axial_axis=axial_axis, axial_range=axial_range,
+                transverse_range=transverse_range))
+            builder.ExportInput(clip.GetInputPort("measured_force"), "measured_force")
+            out = clip.GetOutputPort("clipped_force")
+            if int(window) > 1:
+                fir = builder.AddNamedSystem("sliding_average",
+                                             sliding_average(window, time_step))
+                builder.Connect(out, fir.get_input_port())
+                out = fir.get_output_port()
+            builder.ExportOutput(out, "F_H")
 
-    def _calc_F_H(self, context, output):
-        f = self._clipped(context)
-        if self._window > 1:
-            past = context.get_discrete_state(self._history).get_value().reshape(-1, 3)
-            f = (past.sum(axis=0) + f) / self._window
-        output.SetFromVector(f)
-
-    def _update_history(self, context, discrete_state):
-        past = context.get_discrete_state(self._history).get_value()
-        new = np.concatenate([past[3:], self._clipped(context)])
-        discrete_state.get_mutable_vector(self._history).SetFromVector(new)
+        sub_diagram(self, build)

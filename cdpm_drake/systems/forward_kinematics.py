@@ -1,15 +1,51 @@
 """The forward-kinematics block of Fig. 5: cable lengths back to the platform position."""
 
 import numpy as np
-from pydrake.systems.framework import LeafSystem
+from pydrake.systems.framework import Diagram, LeafSystem
+from pydrake.systems.primitives import Multiplexer
 
-from ..kinematics import forward_kinematics
-from ._tick_cache import declare_tick_cache
+from ..kinematics import forward_kinematics, gauss_newton_warm_stacked
+from ._wiring import sub_diagram, unit_delay
 
 
-class ForwardKinematicsEstimator(LeafSystem):
-    """p from the measured cable lengths, warm-started from the previous estimate (discrete
-    state), so one or two Levenberg-Marquardt steps suffice at 500 Hz.
+class ForwardKinematicsSolve(LeafSystem):
+    """p from the lengths, warm-started at the previous estimate; stateless. Its inputs
+    arrive stacked by a C++ Multiplexer (one evaluation from Python, not two).
+
+    .. pydrake_system::
+
+        name: solve
+        input_ports:
+        - inputs ([cable_lengths m (one per cable), p_WP_previous m (base frame)])
+        output_ports:
+        - p_WP (m, base frame)
+    """
+
+    def __init__(self, robot, *, max_residual):
+        super().__init__()
+        self._robot = robot
+        self._offsets = np.ascontiguousarray(robot.attachments - robot.reels)
+        self._max_residual = float(max_residual)
+        self._m = m = robot.num_cables
+        self._inputs = self.DeclareVectorInputPort("inputs", m + 3)
+        self.DeclareVectorOutputPort("p_WP", 3, self._calc_p_WP,
+                                     prerequisites_of_calc={self._inputs.ticket()})
+        # Compile (or load) the kernel now, not in the first tick.
+        gauss_newton_warm_stacked(self._offsets, np.ones(m + 3), 1e-10, 1.0, 1, np.empty(3))
+
+    def _calc_p_WP(self, context, output):
+        x = self._inputs.Eval(context)
+        out = output.get_mutable_value()
+        # Plain Gauss-Newton from a tick away converges in two or three steps; anything else
+        # (and every error message) goes through kinematics.forward_kinematics.
+        if not gauss_newton_warm_stacked(self._offsets, x, 1e-10, self._max_residual, 8, out):
+            out[:] = forward_kinematics(self._robot, x[:self._m], p_guess=x[self._m:],
+                                        max_residual=self._max_residual)
+
+
+class ForwardKinematicsEstimator(Diagram):
+    """p from the measured cable lengths, warm-started from the previous estimate (held by a
+    C++ one-tick delay), so one or two Gauss-Newton steps suffice at 500 Hz.
 
     Lengths that no platform position explains within `max_residual` (m) raise
     KinematicsError: on the robot that is a fault (slack or broken cable, bad encoder).
@@ -25,25 +61,17 @@ class ForwardKinematicsEstimator(LeafSystem):
 
     def __init__(self, robot, *, initial_position, max_residual=1e-6, time_step=0.002):
         super().__init__()
-        self._robot = robot
-        self._max_residual = float(max_residual)
-        self._lengths = self.DeclareVectorInputPort("cable_lengths", robot.num_cables)
-        self._previous = self.DeclareDiscreteState(np.asarray(initial_position, dtype=float))
-        deps = {self._lengths.ticket(), self.discrete_state_ticket(self._previous)}
-        self._estimate = declare_tick_cache(self, "p_WP_estimate", self._compute_estimate, deps)
-        self.DeclareVectorOutputPort("p_WP", 3, self._calc_p_WP, prerequisites_of_calc=deps)
-        self.DeclarePeriodicDiscreteUpdateEvent(time_step, 0.0, self._update_previous)
 
-    def _compute_estimate(self, context):
-        return forward_kinematics(
-            self._robot, self._lengths.Eval(context),
-            p_guess=context.get_discrete_state(self._previous).get_value(),
-            max_residual=self._max_residual)
+        def build(builder):
+            solve = builder.AddNamedSystem("solve", ForwardKinematicsSolve(
+                robot, max_residual=max_residual))
+            previous = builder.AddNamedSystem("previous", unit_delay(
+                3, time_step, np.asarray(initial_position, dtype=float)))
+            inputs = builder.AddNamedSystem("inputs", Multiplexer([robot.num_cables, 3]))
+            builder.Connect(solve.GetOutputPort("p_WP"), previous.get_input_port())
+            builder.Connect(previous.get_output_port(), inputs.get_input_port(1))
+            builder.Connect(inputs.get_output_port(), solve.GetInputPort("inputs"))
+            builder.ExportInput(inputs.get_input_port(0), "cable_lengths")
+            builder.ExportOutput(solve.GetOutputPort("p_WP"), "p_WP")
 
-    def _calc_p_WP(self, context, output):
-        output.SetFromVector(self._estimate.Eval(context))
-
-    def _update_previous(self, context, discrete_state):
-        discrete_state.get_mutable_vector(self._previous).SetFromVector(
-            self._estimate.Eval(context))
-
+        sub_diagram(self, build)

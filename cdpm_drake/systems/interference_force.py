@@ -1,22 +1,61 @@
 """The interference-force block of Fig. 5 (section 4, eqs. 23-30)."""
 
 import numpy as np
-from pydrake.systems.framework import LeafSystem
+from pydrake.systems.framework import Diagram, LeafSystem
+from pydrake.systems.primitives import Demultiplexer, Multiplexer
 
-from ..interference import interference_force
-from ._tick_cache import declare_tick_cache
+from ..interference import interference_tick_stacked, pair_geometry, result_layout
+from ._wiring import sub_diagram, unit_delay
+
+# The ports of the block, in the order of the flat result (interference.result_layout).
+OUTPUTS = ("F_int", "pair_distances", "active", "crossed", "side")
 
 
-class InterferenceForce(LeafSystem):
+class InterferencePairs(LeafSystem):
+    """Every watched pair at p, in one compiled evaluation per tick; stateless.
+
+    The output is `interference.result_layout`'s flat vector: F_int (3), distances, active,
+    crossed, the updated side memory (P each), then s, t, intensities, gradients and
+    directions. The position and the previous side memory arrive stacked by a C++
+    Multiplexer (one evaluation from Python, not two).
+
+    .. pydrake_system::
+
+        name: pairs
+        input_ports:
+        - inputs ([p_WP m (base frame), previous side memory (one per watched pair)])
+        output_ports:
+        - result (see interference.result_layout)
+    """
+
+    def __init__(self, robot, params):
+        super().__init__()
+        P = robot.num_pairs
+        self._geo = pair_geometry(robot)
+        self._par = params.packed
+        self._floor, self._F_max = params.gradient_floor, params.F_max
+        self._inputs = self.DeclareVectorInputPort("inputs", 3 + P)
+        self.DeclareVectorOutputPort("result", 3 + 13 * P, self._calc_result,
+                                     prerequisites_of_calc={self._inputs.ticket()})
+        # Compile (or load) the kernel now, not in the first tick.
+        interference_tick_stacked(self._geo, self._par, self._floor, self._F_max,
+                                  np.zeros(3 + P), np.empty(3 + 13 * P))
+
+    def _calc_result(self, context, output):
+        interference_tick_stacked(self._geo, self._par, self._floor, self._F_max,
+                                  self._inputs.Eval(context), output.get_mutable_value())
+
+
+class InterferenceForce(Diagram):
     """F_int from the platform position: distances of all watched cable pairs, the repulsive
     force along each distance gradient with logistic intensity, summed and clipped.
 
     The crossing-side memory (one entry per pair, see `interference.update_side`: its sign is
-    the side the cables started on, 0 while unknown, magnitude 2 while crossed) lives in
-    discrete state, updated every tick, so that a crossing is remembered and the force pushes
-    back towards the side the cables started on. It starts unknown (0): the first tick adopts
-    the sides the cables are on wherever the platform really is (on the robot, the measured
-    pose rather than the scenario's start); the start is assumed not crossed.
+    the side the cables started on, 0 while unknown, magnitude 2 while crossed) is held by a
+    C++ one-tick delay, so that a crossing is remembered and the force pushes back towards the
+    side the cables started on. It starts unknown (0): the first tick adopts the sides the
+    cables are on wherever the platform really is (on the robot, the measured pose rather
+    than the scenario's start); the start is assumed not crossed.
 
     .. pydrake_system::
 
@@ -32,41 +71,24 @@ class InterferenceForce(LeafSystem):
 
     def __init__(self, robot, params, *, time_step=0.002):
         super().__init__()
-        self._robot = robot
-        self._params = params
         P = robot.num_pairs
-        self._p = self.DeclareVectorInputPort("p_WP", 3)
-        self._side = self.DeclareDiscreteState(P)  # 0: unknown
-        deps = {self._p.ticket(), self.discrete_state_ticket(self._side)}
-        # One evaluation of the math per tick, shared by all outputs and the update.
-        self._result = declare_tick_cache(self, "interference_result", self._compute_result, deps)
-        self.DeclareVectorOutputPort("F_int", 3, self._calc_F_int, prerequisites_of_calc=deps)
-        self.DeclareVectorOutputPort("pair_distances", P, self._calc_pair_distances,
-                                     prerequisites_of_calc=deps)
-        self.DeclareVectorOutputPort("active", P, self._calc_active, prerequisites_of_calc=deps)
-        self.DeclareVectorOutputPort("crossed", P, self._calc_crossed,
-                                     prerequisites_of_calc=deps)
-        self.DeclarePeriodicDiscreteUpdateEvent(time_step, 0.0, self._update_side)
+        layout = result_layout(P)
+        sizes = [layout[name][1] - layout[name][0] for name in
+                 ("force", "distance", "active", "crossed", "side")]
+        sizes.append(3 + 13 * P - sum(sizes))  # s, t, intensities, gradients, directions
 
-    def _compute_result(self, context):
-        side = context.get_discrete_state(self._side).get_value().astype(np.int8)
-        return interference_force(self._robot, self._p.Eval(context), self._params, side=side)
+        def build(builder):
+            pairs = builder.AddNamedSystem("pairs", InterferencePairs(robot, params))
+            split = builder.AddNamedSystem("split", Demultiplexer(sizes))
+            side = builder.AddNamedSystem("side_memory", unit_delay(P, time_step))
+            inputs = builder.AddNamedSystem("inputs", Multiplexer([3, P]))
+            builder.Connect(pairs.GetOutputPort("result"), split.get_input_port())
+            builder.Connect(split.get_output_port(OUTPUTS.index("side")),
+                            side.get_input_port())
+            builder.Connect(side.get_output_port(), inputs.get_input_port(1))
+            builder.Connect(inputs.get_output_port(), pairs.GetInputPort("inputs"))
+            builder.ExportInput(inputs.get_input_port(0), "p_WP")
+            for k, name in enumerate(OUTPUTS[:-1]):
+                builder.ExportOutput(split.get_output_port(k), name)
 
-    def _result_of(self, context):
-        return self._result.Eval(context)
-
-    def _calc_F_int(self, context, output):
-        output.SetFromVector(self._result_of(context).force)
-
-    def _calc_pair_distances(self, context, output):
-        output.SetFromVector(self._result_of(context).distance)
-
-    def _calc_active(self, context, output):
-        output.SetFromVector(self._result_of(context).active.astype(float))
-
-    def _calc_crossed(self, context, output):
-        output.SetFromVector(self._result_of(context).crossed.astype(float))
-
-    def _update_side(self, context, discrete_state):
-        discrete_state.get_mutable_vector(self._side).SetFromVector(
-            self._result_of(context).side.astype(float))
+        sub_diagram(self, build)

@@ -1,15 +1,48 @@
 """The threshold block of Fig. 5: velocity, acceleration and the virtual wall."""
 
 import numpy as np
-from pydrake.systems.framework import LeafSystem
+from pydrake.systems.framework import Diagram, LeafSystem
+from pydrake.systems.primitives import Multiplexer
 
-from ..limits import limit_velocity
-from ._tick_cache import declare_tick_cache
+from ..limits import limit_velocity_stacked
+from ._wiring import sub_diagram, unit_delay
 
 
-class SafetyLimits(LeafSystem):
-    """Caps the admittance velocity (see `limits.limit_velocity`). The previous command lives in
-    discrete state (for the acceleration limit).
+class VelocityLimit(LeafSystem):
+    """`limits.limit_velocity` of the desired velocity, given the previous command; stateless.
+    Its inputs arrive stacked by a C++ Multiplexer (one evaluation from Python, not three).
+
+    .. pydrake_system::
+
+        name: limit
+        input_ports:
+        - inputs ([velocity_desired m/s, p_WP m, velocity_previous m/s], base frame)
+        output_ports:
+        - velocity_command (m/s, base frame)
+    """
+
+    def __init__(self, *, lower, upper, max_velocity, max_acceleration, virtual_wall,
+                 time_step):
+        super().__init__()
+        self._bounds = np.array([np.asarray(lower, dtype=float),
+                                 np.asarray(upper, dtype=float)])
+        self._args = (float(max_velocity), float(max_acceleration), float(time_step),
+                      bool(virtual_wall))
+        self._inputs = self.DeclareVectorInputPort("inputs", 9)
+        self.DeclareVectorOutputPort(
+            "velocity_command", 3, self._calc_velocity_command,
+            prerequisites_of_calc={self._inputs.ticket()})
+        # Compile (or load) the kernel now, not in the first tick.
+        limit_velocity_stacked(np.zeros(9), self._bounds, *self._args, np.empty(3))
+
+    def _calc_velocity_command(self, context, output):
+        limit_velocity_stacked(self._inputs.Eval(context), self._bounds, *self._args,
+                               output.get_mutable_value())
+
+
+class SafetyLimits(Diagram):
+    """Caps the admittance velocity (see `limits.limit_velocity`). The previous command, for
+    the acceleration limit, is held by a C++ one-tick delay (zero at the start).
 
     .. pydrake_system::
 
@@ -24,33 +57,20 @@ class SafetyLimits(LeafSystem):
     def __init__(self, *, lower, upper, max_velocity, max_acceleration, virtual_wall=True,
                  time_step=0.002):
         super().__init__()
-        self._lower = np.asarray(lower, dtype=float)
-        self._upper = np.asarray(upper, dtype=float)
-        self._vmax = float(max_velocity)
-        self._amax = float(max_acceleration)
-        self._wall = bool(virtual_wall)
-        self._T = float(time_step)
-        self._v_desired = self.DeclareVectorInputPort("velocity_desired", 3)
-        self._p = self.DeclareVectorInputPort("p_WP", 3)
-        self._previous = self.DeclareDiscreteState(3)
-        deps = {self._v_desired.ticket(), self._p.ticket(),
-                self.discrete_state_ticket(self._previous)}
-        # Computed once per tick, for the output and the update alike.
-        self._command = declare_tick_cache(self, "velocity_command", self._compute_command, deps)
-        self.DeclareVectorOutputPort("velocity_command", 3, self._calc_velocity_command,
-                                     prerequisites_of_calc=deps)
-        self.DeclarePeriodicDiscreteUpdateEvent(time_step, 0.0, self._update_previous)
 
-    def _compute_command(self, context):
-        return limit_velocity(
-            self._v_desired.Eval(context),
-            context.get_discrete_state(self._previous).get_value(),
-            self._p.Eval(context), self._lower, self._upper, max_velocity=self._vmax,
-            max_acceleration=self._amax, time_step=self._T, virtual_wall=self._wall)
+        def build(builder):
+            limit = builder.AddNamedSystem("limit", VelocityLimit(
+                lower=lower, upper=upper, max_velocity=max_velocity,
+                max_acceleration=max_acceleration, virtual_wall=virtual_wall,
+                time_step=time_step))
+            previous = builder.AddNamedSystem("previous", unit_delay(3, time_step))
+            inputs = builder.AddNamedSystem("inputs", Multiplexer([3, 3, 3]))
+            command = limit.GetOutputPort("velocity_command")
+            builder.Connect(command, previous.get_input_port())
+            builder.Connect(previous.get_output_port(), inputs.get_input_port(2))
+            builder.Connect(inputs.get_output_port(), limit.GetInputPort("inputs"))
+            builder.ExportInput(inputs.get_input_port(0), "velocity_desired")
+            builder.ExportInput(inputs.get_input_port(1), "p_WP")
+            builder.ExportOutput(command, "velocity_command")
 
-    def _calc_velocity_command(self, context, output):
-        output.SetFromVector(self._command.Eval(context))
-
-    def _update_previous(self, context, discrete_state):
-        discrete_state.get_mutable_vector(self._previous).SetFromVector(
-            self._command.Eval(context))
+        sub_diagram(self, build)

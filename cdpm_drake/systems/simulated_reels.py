@@ -1,21 +1,121 @@
-"""The simulated reel plant of Fig. 5 and the simulated person at the handle."""
+"""The simulated reel plant of Fig. 5, with the simulated person at the handle."""
 
 import numpy as np
-from pydrake.systems.framework import LeafSystem
+from pydrake.systems.framework import Diagram, LeafSystem
+from pydrake.systems.primitives import Demultiplexer, Multiplexer
 
-from ..kinematics import cable_lengths, forward_kinematics
+from ..kinematics import cable_lengths, forward_kinematics, simulated_reel_step_stacked
+from ..operators import NoForce
+from ._wiring import sub_diagram, unit_delay
 
 
-class SimulatedReels(LeafSystem):
-    """Reels that integrate their velocity commands to cable lengths at the control rate.
+class ReelStep(LeafSystem):
+    """The world's next state from the reel command and the present state: one call of
+    `kinematics.simulated_reel_step` per tick, then the person's hand force at the next tick
+    on the new pose (the force sensor's next sample); stateless. Its inputs arrive stacked by
+    a C++ Multiplexer (one evaluation from Python, not two).
 
-    Each tick: the command is scaled down to the reel speed limit (all reels alike), passed through a first-order lag
-    (time constant `time_constant`, s; 0 for ideal drives) and integrated over one step. Seven
-    cables over-constrain a translating platform, so the integrated lengths are projected back
-    onto the geometry (least-squares forward kinematics, then inverse kinematics): the platform
-    settles where the cables agree best, as taut elastic cables make it do. The true platform
-    position and velocity are outputs for the simulated operator only; the controller sees the
-    cable lengths, as on the robot.
+    .. pydrake_system::
+
+        name: simulated_reels
+        input_ports:
+        - inputs ([reel_velocity_command m/s (one per cable), state (see state_size)])
+        output_ports:
+        - next_state (same layout)
+    """
+
+    def __init__(self, robot, operator, *, time_step, time_constant, max_reel_speed):
+        super().__init__()
+        self._robot = robot
+        m = self._m = robot.num_cables
+        self._offsets = np.ascontiguousarray(robot.attachments - robot.reels)
+        self._T = float(time_step)
+        self._lag = 1.0 - np.exp(-self._T / time_constant) if time_constant > 0 else 1.0
+        self._vmax = float(max_reel_speed)
+        self._operator = operator
+        # The shipped models write into the state directly (operators.*.force_into).
+        self._force_into = getattr(operator, "force_into", None)
+        self._inputs = self.DeclareVectorInputPort("inputs", m + state_size(m))
+        self.DeclareVectorOutputPort(
+            "next_state", state_size(m), self._calc_next_state,
+            prerequisites_of_calc={self.time_ticket(), self._inputs.ticket()})
+        # Compile (or load) the kernels now, not in the first tick.
+        simulated_reel_step_stacked(self._offsets, self._T, self._lag, self._vmax,
+                                    np.ones(m + state_size(m)), np.empty(state_size(m)))
+        if self._force_into is not None:
+            self._force_into(0.0, np.zeros(3), np.zeros(3), np.empty(3))
+
+    def _calc_next_state(self, context, output):
+        m = self._m
+        x = self._inputs.Eval(context)
+        out = output.get_mutable_value()
+        if not simulated_reel_step_stacked(self._offsets, self._T, self._lag, self._vmax, x,
+                                           out):
+            # Gauss-Newton did not settle: the damped solver (and its error messages).
+            p = x[2 * m:2 * m + 3]
+            p_new = forward_kinematics(self._robot, out[:m].copy(), p_guess=p,
+                                       max_residual=np.inf)
+            out[:m] = cable_lengths(self._robot, p_new)
+            out[m:m + 3] = p_new
+            out[m + 3:m + 6] = (p_new - p) / self._T
+        # The hand force the sensor samples at the next tick, t + T, on the new pose.
+        hand_force(self._operator, self._force_into, context.get_time() + self._T,
+                   out[m:m + 3], out[m + 3:m + 6], out[2 * m + 6:])
+
+
+def state_size(m: int) -> int:
+    """The simulated world's state: cable lengths (m, m), platform p (3, m) and its velocity
+    v (3, m/s), lagged reel speeds (m, m/s), the hand force at this tick (3, N)."""
+    return 2 * m + 9
+
+
+def hand_force(operator, force_into, t, p, v, out):
+    """The operator model's force (N) at time t (s) on the pose p (m), v (m/s), into out."""
+    if force_into is not None:
+        force_into(t, p, v, out)
+    else:  # any model with force(t, p, v)
+        out[:] = operator.force(t, p, v)
+
+
+def add_simulated_world(builder, robot, operator, *, initial_position, time_step,
+                        time_constant, max_reel_speed):
+    """Add the simulated reels and the person to `builder` (systems `simulated_reels`, the
+    step of both, and `state`, `split`, `inputs`); returns (reel_velocity_command input port, {output name: port}) with outputs
+    cable_lengths, p_WP_true, v_WP_true, hand_force. The state is held by a C++ one-tick
+    delay; its start is the scenario's pose at rest and the force at t = 0 there."""
+    m = robot.num_cables
+    p0 = np.asarray(initial_position, dtype=float)
+    x0 = np.concatenate([cable_lengths(robot, p0), p0, np.zeros(3), np.zeros(m), np.zeros(3)])
+    step = builder.AddNamedSystem("simulated_reels", ReelStep(
+        robot, operator, time_step=time_step, time_constant=time_constant,
+        max_reel_speed=max_reel_speed))
+    hand_force(operator, getattr(operator, "force_into", None), 0.0, p0, np.zeros(3),
+               x0[2 * m + 6:])
+    state = builder.AddNamedSystem("state", unit_delay(state_size(m), time_step, x0))
+    split = builder.AddNamedSystem("split", Demultiplexer([m, 3, 3, m, 3]))
+    inputs = builder.AddNamedSystem("inputs", Multiplexer([m, state_size(m)]))
+    builder.Connect(step.GetOutputPort("next_state"), state.get_input_port())
+    builder.Connect(state.get_output_port(), inputs.get_input_port(1))
+    builder.Connect(inputs.get_output_port(), step.GetInputPort("inputs"))
+    builder.Connect(state.get_output_port(), split.get_input_port())
+    names = ("cable_lengths", "p_WP_true", "v_WP_true", None, "hand_force")
+    return (inputs.get_input_port(0),
+            {name: split.get_output_port(k) for k, name in enumerate(names) if name})
+
+
+class SimulatedReels(Diagram):
+    """Reels that integrate their velocity commands to cable lengths at the control rate, and
+    the person at the handle (an operator model, see `operators`; default: nobody).
+
+    Each tick: the command is scaled down to the reel speed limit (all reels alike), passed
+    through a first-order lag (time constant `time_constant`, s; 0 for ideal drives) and
+    integrated over one step. Seven cables over-constrain a translating platform, so the
+    integrated lengths are projected back onto the geometry (least-squares forward
+    kinematics, then inverse kinematics): the platform settles where the cables agree best, as
+    taut elastic cables make it do. The person's force is the model evaluated at the tick's
+    time on the platform's true pose, sampled with the pose (so the hand costs no evaluation
+    of its own). The true pose is output for analysis only; the controller sees the cable
+    lengths and the force, as on the robot. The state is held by a C++ one-tick delay.
 
     .. pydrake_system::
 
@@ -26,79 +126,24 @@ class SimulatedReels(LeafSystem):
         - cable_lengths (m, one per cable)
         - p_WP_true (m, base frame)
         - v_WP_true (m/s, base frame)
-    """
-
-    def __init__(self, robot, *, initial_position, time_step=0.002, time_constant=0.0,
-                 max_reel_speed=None):
-        super().__init__()
-        self._robot = robot
-        m = robot.num_cables
-        self._T = float(time_step)
-        self._lag = 1.0 - np.exp(-self._T / time_constant) if time_constant > 0 else 1.0
-        self._vmax = float(max_reel_speed if max_reel_speed is not None
-                           else robot.limits.max_reel_speed)
-        self._command = self.DeclareVectorInputPort("reel_velocity_command", m)
-        p0 = np.asarray(initial_position, dtype=float)
-        self._lengths = self.DeclareDiscreteState(cable_lengths(robot, p0))
-        self._pose = self.DeclareDiscreteState(np.concatenate([p0, np.zeros(3)]))  # p, v
-        self._reel_speed = self.DeclareDiscreteState(m)  # lagged actual reel velocity
-        self.DeclareStateOutputPort("cable_lengths", self._lengths)
-        self.DeclareVectorOutputPort(
-            "p_WP_true", 3, lambda c, o: o.SetFromVector(self._pose_of(c)[:3]),
-            prerequisites_of_calc={self.discrete_state_ticket(self._pose)})
-        self.DeclareVectorOutputPort(
-            "v_WP_true", 3, lambda c, o: o.SetFromVector(self._pose_of(c)[3:]),
-            prerequisites_of_calc={self.discrete_state_ticket(self._pose)})
-        self.DeclarePeriodicDiscreteUpdateEvent(time_step, 0.0, self._update_reels)
-
-    def _pose_of(self, context):
-        return context.get_discrete_state(self._pose).get_value()
-
-    def _update_reels(self, context, discrete_state):
-        command = self._command.Eval(context)
-        peak = float(np.max(np.abs(command))) if command.size else 0.0
-        if peak > self._vmax:
-            # Scale all reels alike, as the hardware plant does: the platform slows down but
-            # keeps its direction (clipping one reel would steer it).
-            command = command * (self._vmax / peak)
-        speed = context.get_discrete_state(self._reel_speed).get_value()
-        speed = speed + self._lag * (command - speed)
-        lengths = context.get_discrete_state(self._lengths).get_value() + self._T * speed
-        p = self._pose_of(context)[:3]
-        p_new = forward_kinematics(self._robot, lengths, p_guess=p, max_residual=np.inf)
-        discrete_state.get_mutable_vector(self._lengths).SetFromVector(
-            cable_lengths(self._robot, p_new))
-        discrete_state.get_mutable_vector(self._pose).SetFromVector(
-            np.concatenate([p_new, (p_new - p) / self._T]))
-        discrete_state.get_mutable_vector(self._reel_speed).SetFromVector(speed)
-
-
-class SimulatedOperator(LeafSystem):
-    """The person at the handle: an operator model (see `operators`) evaluated on the
-    platform's true motion. Part of the simulated plant, never of the controller.
-
-    .. pydrake_system::
-
-        name: operator
-        input_ports:
-        - p_WP_true (m, base frame)
-        - v_WP_true (m/s, base frame)
-        output_ports:
         - hand_force (N, base frame)
     """
 
-    def __init__(self, operator):
+    def __init__(self, robot, *, initial_position, time_step=0.002, time_constant=0.0,
+                 max_reel_speed=None, operator=None):
         super().__init__()
-        self._operator = operator
-        self._p = self.DeclareVectorInputPort("p_WP_true", 3)
-        self._v = self.DeclareVectorInputPort("v_WP_true", 3)
-        self.DeclareVectorOutputPort(
-            "hand_force", 3, self._calc_hand_force,
-            prerequisites_of_calc={self.time_ticket(), self._p.ticket(), self._v.ticket()})
+        vmax = max_reel_speed if max_reel_speed is not None else robot.limits.max_reel_speed
 
-    def _calc_hand_force(self, context, output):
-        output.SetFromVector(self._operator.force(context.get_time(), self._p.Eval(context),
-                                                  self._v.Eval(context)))
+        def build(builder):
+            command, outputs = add_simulated_world(
+                builder, robot, NoForce() if operator is None else operator,
+                initial_position=initial_position, time_step=time_step,
+                time_constant=time_constant, max_reel_speed=vmax)
+            builder.ExportInput(command, "reel_velocity_command")
+            for name, port in outputs.items():
+                builder.ExportOutput(port, name)
+
+        sub_diagram(self, build)
 
 
 class SensorNoise(LeafSystem):
