@@ -207,7 +207,7 @@ def startup_rows(scenario_name, repeat):
     with tempfile.TemporaryDirectory() as out:
         cli = ("import sys; from cdpm_drake.cli import main; "
                f"sys.exit(main(['simulate', {scenario_name!r}, '--duration', '0.002', "
-               f"'--no-progress', '--out', {out!r}]))")
+               f"'--no-progress', '--force', '--out', {out!r}]))")
         rows.append(["warm `cdpm simulate --duration 0.002` (whole process)",
                      f"{_subprocess_seconds(cli, repeat=repeat):.2f}"])
     return rows
