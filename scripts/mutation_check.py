@@ -1,0 +1,599 @@
+"""Mutation check: does the test suite catch plausible one-line bugs?
+
+Each mutant below is (name, file, exact original snippet, replacement, reason, test files most
+likely to kill it). For each, the tree is copied to a temporary directory (never the working
+tree: every worker owns its own copy, and a mutant is undone there in a `finally`), the
+snippet is replaced, and `pytest -x -q` runs first on the mutant's own test files, then, if
+they all pass, on the rest of the suite. A failing run means the mutant is KILLED; a green
+suite means it SURVIVED. A mutant whose original snippet is not found exactly once is STALE:
+the code moved and the list must be updated (a STALE mutant counts as a failure).
+
+    python scripts/mutation_check.py            # all mutants, one worker
+    python scripts/mutation_check.py --jobs 2   # two workers (two tree copies)
+    python scripts/mutation_check.py --list     # the list, and which are stale
+    python scripts/mutation_check.py --only admittance_mass_damping_swapped
+
+Prints a table (mutant, result, where it was killed, seconds) and the score killed / total.
+Exit code 0 when every mutant is killed, 1 otherwise. Refresh a stale mutant when its code
+moves: keep the snippets short and on lines likely to stay.
+"""
+
+import argparse
+import concurrent.futures
+import dataclasses
+import os
+import queue
+import shutil
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parent.parent
+# What a copy of the tree needs to run the suite (the package, the robot files, the tests and
+# the files tests read); not the virtual environment, git, caches or run outputs.
+COPY = ("cdpm_drake", "hardware", "tests", "scripts", "docs", "diagrams", "README.md",
+        "pyproject.toml")
+IGNORE = shutil.ignore_patterns("__pycache__", "*.pyc", ".pytest_cache", "runs", "*.egg-info")
+# One pytest run may not take longer than this (a mutant that hangs the suite is killed).
+TIMEOUT = 900.0
+
+
+@dataclasses.dataclass(frozen=True)
+class Mutant:
+    name: str
+    file: str
+    original: str
+    replacement: str
+    reason: str
+    tests: tuple = ()
+
+
+M = Mutant
+MUTANTS = [
+    # --- math: kinematics, interference, limits, operators, robot ---------------------------
+    M("jacobian_sign", "cdpm_drake/kinematics.py",
+      'out[k, i, 0], out[k, i, 1], out[k, i, 2] = x / n, y / n, z / n',
+      'out[k, i, 0], out[k, i, 1], out[k, i, 2] = -x / n, -y / n, -z / n',
+      "J's rows point from the platform to the reel instead of along rho",
+      ("tests/test_kinematics.py", "tests/test_wiring_scenario.py")),
+    M("near_uses_d_l", "cdpm_drake/interference.py",
+      'near = dist <= par[j, 0]',
+      'near = dist <= par[j, 0] - 0.011',
+      "a pair is active only within d_u minus 11 mm (about d_l), not within d_u",
+      ("tests/test_rules_in_callers.py", "tests/test_interference.py")),
+    M("straddle_includes_ends", "cdpm_drake/interference.py",
+      'straddle = min(s, t) > 0.0 and max(s, t) < 1.0',
+      'straddle = min(s, t) >= 0.0 and max(s, t) <= 1.0',
+      "lines that meet beyond a cable's end count as a crossing",
+      ("tests/test_rules_in_callers.py", "tests/test_interference.py")),
+    M("gradient_floor_ignored", "cdpm_drake/interference.py",
+      'k = ts / max(abs(ts), floor)',
+      'k = _sign(ts)',
+      "the force keeps full intensity at the ridge (no fade within the floor)",
+      ("tests/test_rules_in_callers.py", "tests/test_interference.py")),
+    M("clip_at_largest_F_u", "cdpm_drake/interference.py",
+      '    if fn > F_max:\n        k = F_max / fn',
+      '    if fn > F_u:\n        k = F_u / fn',
+      "|F_int| is clipped at the last pair's F_u, ignoring the configured F_max",
+      ("tests/test_rules_in_callers.py", "tests/test_wiring_scenario.py")),
+    M("logistic_exponent_sign", "cdpm_drake/interference.py",
+      'return F_u / (1.0 + math.exp(min(b * (mid - d), 700.0)))',
+      'return F_u / (1.0 + math.exp(min(b * (d - mid), 700.0)))',
+      "eq. 26 with the sign of the exponent flipped: the force grows with distance",
+      ("tests/test_interference.py",)),
+    M("crossed_at_eps", "cdpm_drake/interference.py",
+      '            if crossed:\n                intensity = F_u',
+      '            if crossed:\n                intensity = 0.5 * F_u',
+      "a crossed pair pushes back at eps instead of F_u",
+      ("tests/test_rules_in_callers.py", "tests/test_interference.py")),
+    M("cross_without_straddle", "cdpm_drake/interference.py",
+      "return 2 * o if can_cross else line_side",
+      "return 2 * o",
+      "every flip of the line side counts as a crossing, even far away or beyond an end",
+      ("tests/test_rules_in_callers.py", "tests/test_interference.py")),
+    M("crossed_never_released", "cdpm_drake/interference.py",
+      "return o if line_side == o else q",
+      "return q",
+      "a crossed pair stays crossed after it returns to its side",
+      ("tests/test_interference.py", "tests/test_rules_in_callers.py")),
+    M("acceleration_limit_per_second", "cdpm_drake/limits.py",
+      "max_step = max_acceleration * time_step",
+      "max_step = max_acceleration",
+      "the per-tick velocity change is capped at a (m/s^2) instead of a T (m/s)",
+      ("tests/test_limits.py",)),
+    M("wall_gap_copy_paste", "cdpm_drake/limits.py",
+      'gap_lo = max(p[k] - bounds[0, k], 0.0)',
+      'gap_lo = max(bounds[1, k] - p[k], 0.0)',
+      "the gap to the lower face is measured to the upper face",
+      ("tests/test_limits.py",)),
+    M("wall_force_sign", "cdpm_drake/limits.py",
+      'out[k] = max_force * (push_lo * push_lo - push_up * push_up)',
+      'out[k] = max_force * (push_up * push_up - push_lo * push_lo)',
+      "the wall force pulls towards the faces",
+      ("tests/test_limits.py", "tests/test_wiring_scenario.py")),
+    M("spring_hand_damping_sign", "cdpm_drake/operators.py",
+      'fx = K * (out[0] - p[0]) - D * v[0]',
+      'fx = K * (out[0] - p[0]) + D * v[0]',
+      "the hand's damping pushes along the velocity",
+      ("tests/test_operators.py",)),
+    M("release_time_inverted", "cdpm_drake/operators.py",
+      '    if t >= release:\n        out[0] = out[1] = out[2] = 0.0',
+      '    if t <= release:\n        out[0] = out[1] = out[2] = 0.0',
+      "the hand lets go before release_time instead of after it",
+      ("tests/test_operators.py", "tests/test_wiring_scenario.py")),
+    M("spring_stiffness_damping_swapped", "cdpm_drake/operators.py",
+      "return SpringHand(config.waypoints, config.times, config.stiffness, config.damping,",
+      "return SpringHand(config.waypoints, config.times, config.damping, config.stiffness,",
+      "the scenario's stiffness and damping reach the hand in the wrong order",
+      ("tests/test_wiring_scenario.py", "tests/test_operators.py")),
+    M("robot_limits_swapped", "cdpm_drake/robot.py",
+      "limits=Limits(lim.max_velocity, lim.max_acceleration, lim.max_reel_speed),",
+      "limits=Limits(lim.max_acceleration, lim.max_velocity, lim.max_reel_speed),",
+      "a robot file's speed and acceleration limits land in each other's place",
+      ("tests/test_wiring_scenario.py", "tests/test_robot.py")),
+    M("robot_ignore_pairs_dropped", "cdpm_drake/robot.py",
+      "ignore_pairs=tuple(tuple(p) for p in schema.ignore_pairs),",
+      "ignore_pairs=(),",
+      "a robot file's ignore_pairs never reach the robot",
+      ("tests/test_wiring_scenario.py", "tests/test_robot.py")),
+    M("swap_off_by_one", "cdpm_drake/robot.py",
+      "b[[i - 1, j - 1]] = b[[j - 1, i - 1]]",
+      "b[[i, j]] = b[[j, i]]",
+      "1-based cable numbers used as 0-based indices in a swap",
+      ("tests/test_robot.py", "tests/test_wiring_scenario.py")),
+    M("workspace_allows_flat_box", "cdpm_drake/robot.py",
+      "if not lo[axis] < hi[axis]:",
+      "if not lo[axis] <= hi[axis]:",
+      "a workspace box of zero width is accepted",
+      ("tests/test_robot.py",)),
+    # --- the builder: scenario.py, diagram.py, simulation.py ---------------------------------
+    M("admittance_mass_damping_swapped", "cdpm_drake/diagram.py",
+      "scenario.admittance.mass, scenario.admittance.damping, T))",
+      "scenario.admittance.damping, scenario.admittance.mass, T))",
+      "the builder passes M and C in the wrong order",
+      ("tests/test_wiring_scenario.py", "tests/test_diagram.py")),
+    M("scenario_max_velocity_ignored", "cdpm_drake/scenario.py",
+      'max_velocity=float(_or(limits.max_velocity, robot.limits.max_velocity)),',
+      'max_velocity=float(robot.limits.max_velocity),',
+      "the scenario's speed limit never overrides the robot file's",
+      ("tests/test_wiring_scenario.py", "tests/test_diagram.py")),
+    M("virtual_wall_always_on", "cdpm_drake/diagram.py",
+      'virtual_wall=scenario.limits.virtual_wall, time_step=T))',
+      'virtual_wall=True, time_step=T))',
+      "limits.virtual_wall: false is ignored",
+      ("tests/test_wiring_scenario.py",)),
+    M("wall_force_gets_margin", "cdpm_drake/diagram.py",
+      "max_force=wall.max_force))",
+      "max_force=wall.margin))",
+      "the wall block's force is set from the margin",
+      ("tests/test_wiring_scenario.py",)),
+    M("sensor_ranges_swapped", "cdpm_drake/diagram.py",
+      "transverse_range=sensor_cfg.transverse_range, window=sensor_cfg.filter_window,",
+      "transverse_range=sensor_cfg.axial_range, window=sensor_cfg.filter_window,",
+      "the transverse sensing range is set from the axial one",
+      ("tests/test_wiring_scenario.py",)),
+    M("noise_seed_ignored", "cdpm_drake/diagram.py",
+      "std=scenario.sensor.noise_std, seed=scenario.random_seed, time_step=T))",
+      "std=scenario.sensor.noise_std, seed=0, time_step=T))",
+      "random_seed never reaches the sensor noise",
+      ("tests/test_wiring_scenario.py",)),
+    M("plant_reel_speed_ignored", "cdpm_drake/scenario.py",
+      'max_reel_speed=float(_or(getattr(plant, "max_reel_speed", None),',
+      'max_reel_speed=float(_or(None,',
+      "plant.max_reel_speed never reaches the simulated reels",
+      ("tests/test_wiring_scenario.py",)),
+    M("pair_override_on_previous_pair", "cdpm_drake/scenario.py",
+      "arrays[key][k] = float(value)",
+      "arrays[key][k - 1] = float(value)",
+      "a per-pair interference override lands on the pair before it",
+      ("tests/test_wiring_scenario.py", "tests/test_scenario.py")),
+    M("gradient_floor_not_passed", "cdpm_drake/scenario.py",
+      'extra = {} if cfg.gradient_floor is None else {"gradient_floor": cfg.gradient_floor}',
+      "extra = {}",
+      "interference.gradient_floor is checked but never reaches the block",
+      ("tests/test_wiring_scenario.py", "tests/test_rules_in_callers.py")),
+    M("F_max_ignored", "cdpm_drake/scenario.py",
+      "F_max = float(cfg.F_max) if cfg.F_max is not None else (",
+      "F_max = (",
+      "interference.F_max never reaches the clip",
+      ("tests/test_wiring_scenario.py",)),
+    M("damping_checked_as_mass", "cdpm_drake/scenario.py",
+      '_positive(scenario.admittance.damping, "admittance.damping")',
+      '_positive(scenario.admittance.mass, "admittance.damping")',
+      "a damping of 0 or below is not refused",
+      ("tests/test_scenario.py", "tests/test_wiring_scenario.py")),
+    M("swap_second_cable_lost", "cdpm_drake/scenario.py",
+      "robot = robot.with_swapped_attachments(int(swap[0]), int(swap[1]))",
+      "robot = robot.with_swapped_attachments(int(swap[0]), int(swap[0]))",
+      "a scenario's swap never moves the second cable",
+      ("tests/test_wiring_scenario.py", "tests/test_scenario.py")),
+    M("simulate_duration_argument_ignored", "cdpm_drake/simulation.py",
+      "for target in tick_targets(duration, scenario.time_step, chunk):",
+      "for target in tick_targets(scenario.duration, scenario.time_step, chunk):",
+      "simulate(duration=...) runs the scenario's duration",
+      ("tests/test_wiring_cli.py", "tests/test_wiring_scenario.py")),
+    # --- the blocks: systems/, hardware/reels.py --------------------------------------------
+    M("filter_window_off_by_one", "cdpm_drake/systems/force_sensor.py",
+      'C = np.tile(np.eye(3), W - 1) / W',
+      'C = np.tile(np.eye(3), W - 1) / (W - 1)',
+      "the sliding average divides by one sample less than it sums",
+      ("tests/test_systems.py", "tests/test_wiring_scenario.py")),
+    M("axial_clip_uses_transverse", "cdpm_drake/sensor.py",
+      'axial = min(max(axial, -axial_range), axial_range)',
+      'axial = min(max(axial, -transverse_range), transverse_range)',
+      "the axial component saturates at the transverse range",
+      ("tests/test_systems.py", "tests/test_wiring_scenario.py")),
+    M("reel_lag_inverted", "cdpm_drake/systems/simulated_reels.py",
+      "self._lag = 1.0 - np.exp(-self._T / time_constant) if time_constant > 0 else 1.0",
+      "self._lag = 1.0 - np.exp(-time_constant / self._T) if time_constant > 0 else 1.0",
+      "the first-order lag uses tau / T instead of T / tau",
+      ("tests/test_systems.py", "tests/test_wiring_scenario.py")),
+    M("reel_speed_clipped_per_reel", "cdpm_drake/kinematics.py",
+      'c = command[i] * scale if peak > max_reel_speed else command[i]',
+      'c = min(max(command[i], -max_reel_speed), max_reel_speed)',
+      "each reel clips its own command, which steers the platform",
+      ("tests/test_systems.py", "tests/test_wiring_scenario.py")),
+    M("hardware_no_ramp", "cdpm_drake/hardware/reels.py",
+      "v = book[RAMP] * u",
+      "v = u",
+      "the reels get full velocity the tick they are enabled",
+      ("tests/test_hardware_reels.py",)),
+    M("watchdog_one_tick_late", "cdpm_drake/hardware/reels.py",
+      "if (book[MISSED] >= self._config.watchdog_ticks",
+      "if (book[MISSED] > self._config.watchdog_ticks",
+      "the watchdog waits one tick more than watchdog_ticks",
+      ("tests/test_wiring_scenario.py", "tests/test_hardware_reels.py")),
+    # --- the CLI -----------------------------------------------------------------------------
+    M("simulate_out_ignored", "cdpm_drake/cli.py",
+      "code = simulate_main(scenario=scenario, duration=args.duration, out_dir=args.out,",
+      "code = simulate_main(scenario=scenario, duration=args.duration, out_dir=None,",
+      "cdpm simulate --out writes to runs/<name> anyway",
+      ("tests/test_wiring_cli.py",)),
+    M("run_duration_dropped", "cdpm_drake/cli.py",
+      "return run_main(scenario=scenario, duration=args.duration, out_dir=args.out,",
+      "return run_main(scenario=scenario, duration=None, out_dir=args.out,",
+      "cdpm run --duration is parsed but the scenario's duration runs",
+      ("tests/test_wiring_cli.py",)),
+    M("simulate_realtime_dropped", "cdpm_drake/cli.py",
+      "html=args.html, plots=args.plot, realtime_rate=realtime,",
+      "html=args.html, plots=args.plot, realtime_rate=None,",
+      "cdpm simulate --realtime does not pace the run",
+      ("tests/test_wiring_cli.py",)),
+    M("diagram_depth_dropped", "cdpm_drake/cli.py",
+      "return diagram_main(scenario=_load_scenario_arg(args), out_dir=args.out, depth=args.depth,",
+      "return diagram_main(scenario=_load_scenario_arg(args), out_dir=args.out, depth=1,",
+      "cdpm diagram --depth is ignored",
+      ("tests/test_wiring_cli.py",)),
+    M("info_robot_ignored", "cdpm_drake/cli.py",
+      "r = load_robot(robot)",
+      'r = load_robot("paper_7cable")',
+      "cdpm info describes the default robot whatever it is given",
+      ("tests/test_wiring_cli.py", "tests/test_cli.py")),
+    M("plot_dir_writes_to_parent", "cdpm_drake/cli.py",
+      "target if target.is_dir() else target.parent)",
+      "target.parent)",
+      "cdpm plot DIR writes its figures beside DIR instead of into it",
+      ("tests/test_wiring_cli.py",)),
+    M("emulator_time_constant_dropped", "cdpm_drake/hardware/emulator.py",
+      "bridge = ReelBridge(robot, lengths, force=force, time_constant=args.time_constant)",
+      "bridge = ReelBridge(robot, lengths, force=force, time_constant=0.02)",
+      "cdpm emulate --time-constant is ignored",
+      ("tests/test_wiring_cli.py",)),
+    # --- second batch: the same kinds, written after the tests above -------------------------
+    M("speed_cap_per_axis", "cdpm_drake/limits.py",
+      '        k = max_velocity / speed\n        vx, vy, vz = vx * k, vy * k, vz * k',
+      '        vx, vy, vz = (min(max(vx, -max_velocity), max_velocity), '
+      'min(max(vy, -max_velocity), max_velocity), min(max(vz, -max_velocity), max_velocity))',
+      "the speed limit clips each axis instead of the norm (diagonal motion runs faster)",
+      ("tests/test_limits.py", "tests/test_wiring_scenario.py")),
+    M("wall_force_linear", "cdpm_drake/limits.py",
+      'out[k] = max_force * (push_lo * push_lo - push_up * push_up)',
+      'out[k] = max_force * (push_lo - push_up * push_up)',
+      "the wall force rises linearly from the lower faces (not C1 at the margin)",
+      ("tests/test_wiring_scenario.py", "tests/test_limits.py")),
+    M("hand_cap_per_axis", "cdpm_drake/operators.py",
+      '    if n > F_max:\n        k = F_max / n\n        fx, fy, fz = fx * k, fy * k, fz * k',
+      '    if n > F_max:\n        fx, fy, fz = (min(max(fx, -F_max), F_max), '
+      'min(max(fy, -F_max), F_max), min(max(fz, -F_max), F_max))',
+      "the hand's force cap clips each axis instead of the norm",
+      ("tests/test_wiring_scenario.py", "tests/test_operators.py")),
+    M("scripted_force_x_only", "cdpm_drake/operators.py",
+      'out[k] = (rows[j + 1, k] - rows[j, k]) / dt * (t - times[j]) + rows[j, k]',
+      'out[k] = (rows[j + 1, 0] - rows[j, 0]) / dt * (t - times[j]) + rows[j, 0]',
+      "every axis of a scripted force replays the x column",
+      ("tests/test_wiring_scenario.py", "tests/test_operators.py")),
+    M("overlay_resets_the_file", "cdpm_drake/scenario.py",
+      "scenario = yaml_load_typed(schema=Scenario, data=overlay_text, defaults=scenario)",
+      "scenario = yaml_load_typed(schema=Scenario, data=overlay_text, defaults=Scenario())",
+      "--scenario-text starts from the defaults instead of the scenario file",
+      ("tests/test_scenario.py", "tests/test_wiring_cli.py")),
+    M("F_max_default_smallest_F_u", "cdpm_drake/scenario.py",
+      'else (float(arrays["F_u"].max()) if P else 0.0)',
+      'else (float(arrays["F_u"].min()) if P else 0.0)',
+      "the default clip is the smallest F_u instead of the largest",
+      ("tests/test_wiring_scenario.py",)),
+    M("scenario_max_acceleration_ignored", "cdpm_drake/scenario.py",
+      'max_acceleration=float(_or(limits.max_acceleration, robot.limits.max_acceleration)),',
+      'max_acceleration=float(robot.limits.max_acceleration),',
+      "the scenario's acceleration limit never overrides the robot file's",
+      ("tests/test_wiring_scenario.py",)),
+    M("sensor_axis_fixed", "cdpm_drake/diagram.py",
+      "axial_axis=sensor_cfg.axial_axis, axial_range=sensor_cfg.axial_range,",
+      "axial_axis=[0.0, 0.0, 1.0], axial_range=sensor_cfg.axial_range,",
+      "sensor.axial_axis never reaches the sensor",
+      ("tests/test_wiring_scenario.py",)),
+    M("sensor_axis_not_normalised", "cdpm_drake/systems/force_sensor.py",
+      "self._axis = axis / np.linalg.norm(axis)",
+      "self._axis = axis",
+      "a handle axis that is not a unit vector scales the axial force",
+      ("tests/test_wiring_scenario.py", "tests/test_systems.py")),
+    M("hardware_reel_speed_unlimited", "cdpm_drake/hardware/reels.py",
+      "self._vmax = float(robot.limits.max_reel_speed)",
+      "self._vmax = float('inf')",
+      "the real reels get commands above their speed limit",
+      ("tests/test_wiring_scenario.py", "tests/test_hardware_reels.py")),
+    M("run_duration_ignored", "cdpm_drake/realtime.py",
+      "for target in tick_targets(duration, T, step):",
+      "for target in tick_targets(scenario.duration, T, step):",
+      "run(duration=...) runs the scenario's duration on the robot",
+      ("tests/test_wiring_cli.py", "tests/test_realtime_run.py")),
+    M("run_force_always", "cdpm_drake/run_folder.py",
+      "if not self.force:",
+      "if False:",
+      "an --out holding an earlier run is emptied without --force",
+      ("tests/test_wiring_cli.py",)),
+    M("live_view_chunk_fixed", "cdpm_drake/cli.py",
+      "chunk=0.04 if args.meshcat else 0.5, force=args.force)",
+      "chunk=0.5, force=args.force)",
+      "the live view is drawn every 0.5 s of simulated time",
+      ("tests/test_wiring_cli.py",)),
+    M("run_meshcat_dropped", "cdpm_drake/cli.py",
+      "on_view = _live_meshcat(scenario) if args.meshcat else None",
+      "on_view = None",
+      "cdpm run --meshcat shows nothing",
+      ("tests/test_wiring_cli.py",)),
+    M("emulator_length_offset_off_by_one", "cdpm_drake/hardware/emulator.py",
+      "lengths[k - 1] += float(metres)",
+      "lengths[k % len(lengths)] += float(metres)",
+      "--length-offset CABLE uses the 1-based cable number as an index",
+      ("tests/test_wiring_cli.py", "tests/test_emulator.py")),
+    M("logistic_grid_below_zero", "cdpm_drake/views/plots.py",
+      "return np.linspace(max(0.0, d_l - w), d_u + w, num)",
+      "return np.linspace(d_l - w, d_u + w, num)",
+      "Fig. 8 is drawn over negative distances",
+      ("tests/test_wiring_cli.py", "tests/test_plots.py")),
+    M("noise_same_every_tick", "cdpm_drake/systems/simulated_reels.py",
+      "rng = np.random.default_rng([self._seed, k])",
+      "rng = np.random.default_rng(self._seed)",
+      "the sensor noise is one constant offset instead of a new sample every tick",
+      ("tests/test_wiring_scenario.py", "tests/test_diagram.py")),
+    M("braking_curve_continuous", "cdpm_drake/limits.py",
+      'caps[k, 0] = max(min(math.sqrt(2.0 * a * gap_lo) - 0.5 * a * T, gap_lo / T), 0.0)',
+      'caps[k, 0] = max(min(math.sqrt(2.0 * a * gap_lo), gap_lo / T), 0.0)',
+      "the braking cap at the lower faces is the continuous curve, not the discrete one",
+      ("tests/test_limits.py",)),
+    M("no_anti_windup", "cdpm_drake/diagram.py",
+      """builder.Connect(limits.GetOutputPort("velocity_command"),
+                    admittance.GetInputPort("velocity_command"))""",
+      """builder.Connect(admittance.GetOutputPort("velocity"),
+                    admittance.GetInputPort("velocity_command"))""",
+      "the admittance integrates from its own velocity, not the limited command (windup)",
+      ("tests/test_diagram.py", "tests/test_wiring_scenario.py")),
+    M("wall_force_not_in_F_d", "cdpm_drake/diagram.py",
+      'forces.append(wall_system.GetOutputPort("F_wall"))',
+      "pass",
+      "the wall force is computed and logged but never added to F_d",
+      ("tests/test_wiring_scenario.py",)),
+    M("ramp_jumps_to_full", "cdpm_drake/hardware/reels.py",
+      "book[RAMP] = min(1.0, book[RAMP] + self._ramp_step)",
+      "book[RAMP] = 1.0",
+      "the reels are enabled at full velocity (no ramp)",
+      ("tests/test_wiring_scenario.py", "tests/test_hardware_reels.py")),
+    M("force_table_allows_equal_times", "cdpm_drake/operators.py",
+      "if np.any(np.diff(t) <= 0):",
+      "if np.any(np.diff(t) < 0):",
+      "a force table with two equal times is accepted (a jump with no defined value)",
+      ("tests/test_operators.py",)),
+    M("emulator_ignores_scenario_port", "cdpm_drake/hardware/emulator.py",
+      'port = getattr(scenario.plant, "port", port)',
+      "port = port",
+      "cdpm emulate --scenario listens on the default port, not the scenario's",
+      ("tests/test_wiring_cli.py",)),
+    M("run_yaml_keeps_scenario_duration", "cdpm_drake/realtime.py",
+      "scenario_path.write_text(scenario_to_yaml(dataclasses.replace(scenario, "
+      "duration=duration)))",
+      "scenario_path.write_text(scenario_to_yaml(scenario))",
+      "a run's scenario.yaml records the scenario's duration, not the one that ran",
+      ("tests/test_wiring_cli.py", "tests/test_realtime_run.py")),
+    M("logged_velocity_is_the_admittance", "cdpm_drake/diagram.py",
+      '("velocity", "safety_limits", "velocity_command"),',
+      '("velocity", "admittance", "velocity"),',
+      "the log's velocity column shows the admittance output, not the limited command",
+      ("tests/test_wiring_scenario.py", "tests/test_diagram.py")),
+    M("reels_start_at_the_centre", "cdpm_drake/diagram.py",
+      'builder, robot, resolved.operator, initial_position=scenario.initial_position,',
+      'builder, robot, resolved.operator, initial_position=robot.workspace.center,',
+      "the simulated reels start at the workspace centre, not initial_position",
+      ("tests/test_wiring_scenario.py",)),
+    # --- the views: plots, Meshcat ------------------------------------------------------------
+    M("plot_distance_in_metres", "cdpm_drake/views/plots.py",
+      "ax.plot(t, 1000.0 * d[:, k], label=_pair_label(pairs[k]))",
+      "ax.plot(t, d[:, k], label=_pair_label(pairs[k]))",
+      "Fig. 10 plots metres on an axis labelled mm",
+      ("tests/test_plots.py",)),
+    M("plot_forces_only_x", "cdpm_drake/views/plots.py",
+      "ax.plot(t, np.asarray(log[name], dtype=float)[:, c], color=FORCE_COLORS[name],",
+      "ax.plot(t, np.asarray(log[name], dtype=float)[:, 0], color=FORCE_COLORS[name],",
+      "every axis of the forces figure shows the x component",
+      ("tests/test_plots.py",)),
+    M("cable_level_off_by_one", "cdpm_drake/views/meshcat_view.py",
+      "np.minimum.at(level, pairs[:, 1] - 1, pl)",
+      "np.minimum.at(level, pairs[:, 1], pl)",
+      "the second cable of a pair is coloured one cable further on",
+      ("tests/test_meshcat_view.py",)),
+    M("pair_level_band_from_zero", "cdpm_drake/views/meshcat_view.py",
+      "s = (d - d_l) / (d_u - d_l)",
+      "s = (d - d_l) / d_u",
+      "the colour steps span [d_l, d_l + d_u] instead of [d_l, d_u]",
+      ("tests/test_meshcat_view.py",)),
+]
+
+
+def _check_unique_names():
+    names = [m.name for m in MUTANTS]
+    dupes = sorted({n for n in names if names.count(n) > 1})
+    if dupes:
+        raise SystemExit(f"duplicate mutant names: {dupes}")
+
+
+def stale_reason(mutant: Mutant, root: Path = ROOT) -> str | None:
+    """None when the mutant applies (its snippet occurs exactly once), else why not."""
+    path = root / mutant.file
+    if not path.is_file():
+        return f"{mutant.file} does not exist"
+    n = path.read_text().count(mutant.original)
+    if n != 1:
+        return f"snippet found {n} times in {mutant.file}"
+    return None
+
+
+def copy_tree(dest: Path) -> Path:
+    for name in COPY:
+        src = ROOT / name
+        if src.is_dir():
+            shutil.copytree(src, dest / name, ignore=IGNORE)
+        elif src.is_file():
+            shutil.copy2(src, dest / name)
+    return dest
+
+
+def _pytest(copy: Path, args: list[str], python: str) -> tuple[int, str]:
+    env = dict(os.environ, PYTHONPATH=str(copy), PYTHONDONTWRITEBYTECODE="1",
+               MPLBACKEND="Agg")
+    cmd = [python, "-m", "pytest", "-x", "-q", "-p", "no:cacheprovider",
+           "--rootdir", str(copy), *args]
+    try:
+        proc = subprocess.run(cmd, cwd=copy, env=env, capture_output=True, text=True,
+                              timeout=TIMEOUT)
+    except subprocess.TimeoutExpired:
+        return -1, "timeout"
+    lines = [ln for ln in proc.stdout.splitlines() if ln.strip()]
+    failed = next((ln for ln in lines if ln.startswith(("FAILED", "ERROR"))), "")
+    return proc.returncode, failed or (lines[-1] if lines else proc.stderr[-200:])
+
+
+def run_mutant(mutant: Mutant, copy: Path, python: str) -> dict:
+    """Apply the mutant in `copy`, run the tests, undo it; returns a result row."""
+    start = time.perf_counter()
+    why = stale_reason(mutant, copy)
+    if why is not None:
+        return dict(name=mutant.name, result="STALE", where=why, seconds=0.0)
+    path = copy / mutant.file
+    text = path.read_text()
+    try:
+        path.write_text(text.replace(mutant.original, mutant.replacement, 1))
+        first = [t for t in mutant.tests if (copy / t).is_file()]
+        stages = []
+        if first:
+            stages.append(("own tests", first))
+        stages.append(("rest of suite",
+                       ["tests"] + [f"--ignore={t}" for t in first]))
+        for label, args in stages:
+            code, line = _pytest(copy, args, python)
+            if code != 0:
+                where = f"{label}: {line}" if code != -1 else f"{label}: timeout"
+                result = "killed"
+                node = _failed_test(line)
+                if node is not None:
+                    # A kill counts only if that test passes without the mutant: on a busy
+                    # host a timing test may fail by itself, which says nothing of the mutant.
+                    path.write_text(text)
+                    if _pytest(copy, [node], python)[0] != 0:
+                        result, where = "FLAKY", f"{node} fails without the mutant too"
+                return dict(name=mutant.name, result=result, where=where[:110],
+                            seconds=time.perf_counter() - start)
+        return dict(name=mutant.name, result="SURVIVED", where="the whole suite passed",
+                    seconds=time.perf_counter() - start)
+    finally:
+        path.write_text(text)
+
+
+def _failed_test(line: str) -> str | None:
+    """The test node id of a pytest `FAILED path::name - message` line."""
+    if not line.startswith(("FAILED ", "ERROR ")):
+        return None
+    node = line.split(" ", 1)[1].split(" - ", 1)[0].strip()
+    return node if "::" in node else None
+
+
+def main(argv=None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser.add_argument("--list", action="store_true", help="list the mutants and exit")
+    parser.add_argument("--only", action="append", metavar="NAME",
+                        help="run only this mutant (repeatable)")
+    parser.add_argument("--jobs", type=int, default=1, metavar="N",
+                        help="workers, each on its own copy of the tree (default 1)")
+    parser.add_argument("--python", default=sys.executable,
+                        help="the interpreter with the test dependencies (default: this one)")
+    args = parser.parse_args(argv)
+    _check_unique_names()
+    if args.jobs < 1:
+        parser.error(f"--jobs must be >= 1, got {args.jobs}")
+    mutants = MUTANTS
+    if args.only:
+        known = {m.name for m in MUTANTS}
+        unknown = [n for n in args.only if n not in known]
+        if unknown:
+            parser.error(f"unknown mutant(s) {unknown}; valid names: {sorted(known)}")
+        mutants = [m for m in MUTANTS if m.name in args.only]
+    if args.list:
+        for m in mutants:
+            why = stale_reason(m)
+            print(f"{m.name:36s} {m.file:40s} {'STALE: ' + why if why else m.reason}")
+        return 0
+
+    rows = []
+    started = time.perf_counter()
+    with tempfile.TemporaryDirectory(prefix="cdpm_mutants_") as tmp:
+        copies = queue.Queue()
+        for k in range(min(args.jobs, len(mutants))):
+            copies.put(copy_tree(Path(tmp) / f"copy{k}"))
+
+        def work(m):
+            copy = copies.get()
+            try:
+                row = run_mutant(m, copy, args.python)
+            finally:
+                copies.put(copy)
+            print(f"  {row['result']:8s} {m.name} ({row['seconds']:.0f} s)", flush=True)
+            return row
+
+        with concurrent.futures.ThreadPoolExecutor(max_workers=max(1, copies.qsize())) as ex:
+            rows = list(ex.map(work, mutants))
+    total = time.perf_counter() - started
+
+    print()
+    print(f"{'mutant':36s} {'result':8s} {'s':>5s}  where")
+    for r in rows:
+        print(f"{r['name']:36s} {r['result']:8s} {r['seconds']:5.0f}  {r['where']}")
+    killed = sum(r["result"] == "killed" for r in rows)
+    survived = [r["name"] for r in rows if r["result"] == "SURVIVED"]
+    stale = [r["name"] for r in rows if r["result"] == "STALE"]
+    flaky = [r["name"] for r in rows if r["result"] == "FLAKY"]
+    print()
+    print(f"score: {killed}/{len(rows)} killed ({100.0 * killed / max(1, len(rows)):.0f} %), "
+          f"{len(survived)} survived, {len(stale)} stale, {len(flaky)} flaky; "
+          f"{total / 60:.1f} min with {args.jobs} job(s)")
+    if survived:
+        print(f"survived: {survived}")
+    if stale:
+        print(f"stale (update the list): {stale}")
+    if flaky:
+        print(f"flaky (run them again with --only): {flaky}")
+    return 0 if killed == len(rows) else 1
+
+
+if __name__ == "__main__":
+    sys.exit(main())
