@@ -28,7 +28,7 @@ from cdpm_drake import scenario as scenario_module
 from cdpm_drake.hardware.config import HardwareReels
 from cdpm_drake.hardware.emulator import FaultPlan, ReelBridge, ReelBridgeServer
 from cdpm_drake.interference import InterferenceParams, interference_force
-from cdpm_drake.kinematics import cable_lengths, forward_kinematics
+from cdpm_drake.kinematics import KinematicsError, cable_lengths, forward_kinematics
 from cdpm_drake.operators import CsvOperator, NoOperator, ScriptedOperator, SpringHandOperator
 from cdpm_drake.realtime import run as realtime_run
 from cdpm_drake.robot import RobotSchema, load_robot
@@ -36,6 +36,7 @@ from cdpm_drake.scenario import (Admittance, Interference, Limits, Logistic, Pai
                                  Scenario, ScenarioError, Sensor, SimulatedReels, WallForce,
                                  load_scenario, scenario_robot)
 from cdpm_drake.simulation import save_log, simulate
+from cdpm_drake.systems.dynamic_plant import reel_step
 
 from conftest import to_yaml
 
@@ -48,17 +49,10 @@ P0 = [1.77, 2.4, 1.3]
 P_EXP1 = [1.77, 3.65, 1.22]
 
 CASES: dict[str, str] = {}
-# Fields that came with the dynamic plant (merged after these tests were written) and have
-# no wiring case here yet. NOT a case: listed so the suite runs while their owner
-# adds the cases; the walk fails if one of them gets a case (then remove it here) or is gone.
-NO_CASE_YET = {
-    "Scenario.plant!DynamicReels.time_step", "Scenario.plant!DynamicReels.max_reel_speed",
-    "Scenario.plant!DynamicReels.max_length_residual",
-    "RobotSchema.platform.inertia", "RobotSchema.platform.handle",
-    "RobotSchema.cables.EA", "RobotSchema.cables.damping",
-    "RobotSchema.reel_drives.bandwidth", "RobotSchema.reel_drives.inertia",
-    "RobotSchema.reel_drives.viscous_friction", "RobotSchema.reel_drives.coulomb_friction",
-}
+# Fields with no wiring case here yet (none now). NOT a case: a field listed here lets the
+# suite run while its owner adds the case; the walk fails if one of them gets a case (then
+# remove it here) or is gone.
+NO_CASE_YET: set[str] = set()
 
 
 def covers(*keys):
@@ -543,7 +537,7 @@ def test_plant_reel_speed_limit_scales_the_reels():
     assert _reel_speeds(log).max() == pytest.approx(0.043, rel=1e-3)
 
 
-# --- the dynamic plant (a few of its fields; see NO_CASE_YET) ----------------------------------
+# --- the dynamic plant ---------------------------------------------------------------------------
 
 # exp2's start, where the paper robot's cables hold the platform (tests/test_dynamic_plant.py).
 P_EXP2 = [1.56, 3.24, 1.22]
@@ -594,6 +588,258 @@ def test_robot_file_platform_mass_is_what_the_cables_carry(tmp_path):
     log = sim(s, 0.004)
     assert np.abs(_force_residual(s, log, 0, 3.1)[:3]).max() < 1e-6
     assert np.abs(_force_residual(s, log, 0, 2.5)[:3]).max() > 5.0
+
+
+def _paper_with(tmp_path, extra, name="robot.yaml"):
+    """paper_7cable's file with `extra` (YAML sections) appended."""
+    from cdpm_drake.robot import resolve_robot_path
+
+    path = tmp_path / name
+    path.write_text(resolve_robot_path("paper_7cable").read_text() + "\n" + extra + "\n")
+    return str(path)
+
+
+def _plant_alone(scenario, command=None):
+    """The scenario's dynamic plant alone, its reel command held at `command` (zeros), and a
+    Simulator on it (as tests/test_dynamic_plant.py's _plant_only)."""
+    from pydrake.systems.analysis import Simulator
+    from pydrake.systems.framework import DiagramBuilder
+    from pydrake.systems.primitives import ConstantVectorSource
+
+    from cdpm_drake.diagram import make_plant
+
+    robot = scenario_robot(scenario)
+    builder = DiagramBuilder()
+    builder.AddNamedSystem("reels", make_plant(scenario, robot))
+    source = builder.AddSystem(ConstantVectorSource(
+        np.zeros(robot.num_cables) if command is None else np.asarray(command, float)))
+    builder.Connect(source.get_output_port(),
+                    builder.GetSubsystemByName("reels").GetInputPort("reel_velocity_command"))
+    diagram = builder.Build()
+    return diagram, Simulator(diagram), robot
+
+
+def _sub(diagram, simulator, name):
+    """Plant subsystem `name` and its context in the simulator."""
+    system = diagram.GetSubsystemByName("reels").GetSubsystemByName(name)
+    return system, system.GetMyMutableContextFromRoot(simulator.get_mutable_context())
+
+
+def _start_geometry(scenario):
+    """Rigid cable lengths L and unit vectors u (attachment -> reel) at the start pose (level),
+    and the start tension distribution (tension.py, via check_dynamic_reels)."""
+    robot = scenario_robot(scenario)
+    rho = robot.reels - (np.asarray(scenario.initial_position) + robot.attachments)
+    L = np.linalg.norm(rho, axis=1)
+    dist = scenario_module.check_dynamic_reels(scenario, robot)
+    return L, rho / L[:, None], dist.tensions
+
+
+@covers("RobotSchema.cables.EA")
+def test_cables_EA_sets_the_start_stretch(tmp_path):
+    """EA 41 kN (default 70 kN): the plant pays out L0 with L - L0 = T L0 / EA at the start
+    distribution T (tension.py's unstretched_lengths, solved here by hand: L0 = L EA/(EA + T)),
+    the encoders log that L0, and the cables' elastic law gives back T from it."""
+    s = _dynamic(robot=_paper_with(tmp_path, "cables: {EA: 41000.0}"), lock_rotation=True)
+    L, _, T0 = _start_geometry(s)
+    log = sim(s, 0.004)
+    L0 = L * 41000.0 / (41000.0 + T0)
+    np.testing.assert_allclose(log["lengths"][0], L0, rtol=0, atol=1e-12)
+    np.testing.assert_allclose(log["tensions"][0], T0, rtol=1e-9)
+    # With the default EA the stretch would differ by > 0.1 mm (100 000 x the tolerance).
+    assert np.abs(L * 70000.0 / (70000.0 + T0) - L0).max() > 1e-4
+
+
+@covers("RobotSchema.cables.damping")
+def test_cables_damping_adds_its_force_to_a_knocked_platform_and_decays_it(tmp_path):
+    """Damping 33 N s/m (default 20). Knocked at v = [0.03, -0.02, 0.04] m/s (rotation
+    locked), each cable at once carries T_i + c dL_i, dL_i = -u_i . v (cable_tensions; the
+    reels still). Over 0.1 s the knock decays faster than with damping 3 N s/m."""
+    def knocked(c, duration):
+        s = _dynamic(robot=_paper_with(tmp_path, f"cables: {{damping: {c}}}", f"c{c}.yaml"),
+                     lock_rotation=True)
+        diagram, simulator, _ = _plant_alone(s)
+        mbp, mbp_context = _sub(diagram, simulator, "platform_plant")
+        mbp.SetVelocities(mbp_context, v)
+        cables, cables_context = _sub(diagram, simulator, "cables")
+        T_knocked = cables.GetOutputPort("tensions").Eval(cables_context).copy()
+        simulator.AdvanceTo(duration)
+        return s, T_knocked, mbp.GetVelocities(mbp_context)
+
+    v = np.array([0.03, -0.02, 0.04])
+    s, T_knocked, v_end = knocked(33.0, 0.1)
+    _, u, T0 = _start_geometry(s)
+    np.testing.assert_allclose(T_knocked, T0 + 33.0 * (-u @ v), rtol=0, atol=1e-9)
+    assert np.abs(20.0 * (-u @ v) - 33.0 * (-u @ v)).max() > 0.1  # the default: 0.1 N off
+    _, _, v_light = knocked(3.0, 0.1)
+    assert np.linalg.norm(v_end) < 0.5 * np.linalg.norm(v_light)
+
+
+# The reel drive's closed form (reel_step, dynamic_plant.py): inertia dw/dt = K (u - w) - b w
+# - F_c sgn w, K = bandwidth * inertia, stepped implicitly with h. From rest under a constant
+# command u with |K u| > F_c the reel never reverses, so each step is
+# w' = (J w + h K u - h F_c sgn u) / (J + h (K + b)): w_n = w_inf (1 - r^n), w_inf = (K u - F_c
+# sgn u) / (K + b), r = J / (J + h (K + b)). With |K u| <= F_c it sticks: w_n = 0.
+def _drive_closed_form(u, n, h, *, bandwidth, inertia, viscous, coulomb):
+    u = np.asarray(u, dtype=float)
+    K = bandwidth * inertia
+    w_inf = (K * u - coulomb * np.sign(u)) / (K + viscous)
+    r = inertia / (inertia + h * (K + viscous))
+    return np.where(np.abs(K * u) <= coulomb, 0.0, w_inf * (1.0 - r ** n))
+
+
+def _reel_speeds_after(scenario, command, duration):
+    """The reel drives' speeds (m/s, their state) after `duration` s of a constant command."""
+    diagram, simulator, _ = _plant_alone(scenario, command)
+    simulator.AdvanceTo(duration)
+    drives, context = _sub(diagram, simulator, "reel_drives")
+    return context.get_discrete_state(1).value().copy()
+
+
+FRICTIONLESS = "reel_drives: {viscous_friction: 0.0, coulomb_friction: 0.0"
+COMMAND = [0.012, -0.009, 0.006, -0.011, 0.004, 0.010, -0.007]  # m/s, within every limit
+
+
+@covers("RobotSchema.reel_drives.bandwidth")
+def test_reel_bandwidth_sets_the_velocity_step_response(tmp_path):
+    """Bandwidth 37 rad/s (default 100), no friction: the implicit first-order loop gives
+    w_n = u (1 - (1 + h bw)^-n), within 2 % of 1 - exp(-bw t): after 20 steps of 1 ms (the
+    reels' updates up to t = 0.02 s), 51.6 % of the command (default: 85.1 %)."""
+    s = _dynamic(robot=_paper_with(tmp_path, FRICTIONLESS + ", bandwidth: 37.0}"),
+                 lock_rotation=True)
+    w = _reel_speeds_after(s, COMMAND, 0.02)
+    fraction = 1.0 - 1.037 ** -20
+    assert fraction == pytest.approx(1.0 - np.exp(-37.0 * 0.02), rel=0.02)
+    np.testing.assert_allclose(w, fraction * np.array(COMMAND), rtol=1e-12, atol=1e-15)
+    assert 1.0 - 1.1 ** -20 - fraction > 0.3
+
+
+@covers("RobotSchema.reel_drives.inertia", "RobotSchema.reel_drives.viscous_friction",
+        "RobotSchema.reel_drives.coulomb_friction")
+def test_reel_inertia_and_friction_set_the_drive_response(tmp_path):
+    """Inertia 0.41 kg, viscous 1.7 N s/m, Coulomb 0.23 N (defaults 0.25, 0.25, 0.125),
+    bandwidth 100: K = 41 N s/m, so cable 5's 4 mm/s (K u = 0.164 N < 0.23 N) sticks and the
+    others follow `_drive_closed_form` (the expected numbers) after 30 steps. The step
+    function itself matches the form, and each of the three at its default would move some
+    reel's speed by > 100 x the tolerance."""
+    params = dict(bandwidth=100.0, inertia=0.41, viscous=1.7, coulomb=0.23)
+    expected = _drive_closed_form(COMMAND, 30, 0.001, **params)
+    assert expected[4] == 0.0 and np.all(expected[[0, 1, 2, 3, 5, 6]] != 0.0)
+    w = np.zeros(7)
+    for _ in range(30):
+        w = reel_step(w, np.array(COMMAND), 0.001, **params)
+    np.testing.assert_allclose(w, expected, rtol=1e-12, atol=1e-15)
+    s = _dynamic(robot=_paper_with(tmp_path, "reel_drives: {inertia: 0.41, "
+                                   "viscous_friction: 1.7, coulomb_friction: 0.23}"),
+                 lock_rotation=True)
+    np.testing.assert_allclose(_reel_speeds_after(s, COMMAND, 0.03), expected,
+                               rtol=1e-12, atol=1e-15)
+    for key, default in (("inertia", 0.25), ("viscous", 0.25), ("coulomb", 0.125)):
+        other = _drive_closed_form(COMMAND, 30, 0.001, **{**params, key: default})
+        assert np.abs(other - expected).max() > 1e-5, key
+
+
+@covers("Scenario.plant!DynamicReels.max_reel_speed")
+def test_dynamic_plant_reel_speed_limit_scales_the_command(tmp_path):
+    """Limit 0.0047 m/s (robot file 1.0): the command (peak 0.012) is scaled by 0.0047/0.012
+    before the drives, which (no friction, bandwidth 100) then reach w_n = u' (1 - 1.1^-n):
+    after 100 steps the fastest reel runs at 0.0047 m/s (to 7e-5 relative). In a closed-loop
+    run the logged encoder lengths move at most that fast."""
+    s = _dynamic(robot=_paper_with(tmp_path, FRICTIONLESS + "}"), lock_rotation=True,
+                 max_reel_speed=0.0047)
+    scaled = np.array(COMMAND) * (0.0047 / 0.012)
+    w = _reel_speeds_after(s, COMMAND, 0.1)
+    np.testing.assert_allclose(w, scaled * (1.0 - 1.1 ** -100), rtol=1e-12, atol=1e-15)
+    assert np.abs(w).max() == pytest.approx(0.0047, rel=1e-4)
+    # In the loop, an 8 N push asks for up to ~0.19 m/s of cable within 0.2 s; the encoder
+    # lengths logged tick to tick never move faster than the limit, and reach it.
+    log = sim(dataclasses.replace(s, operator=ScriptedOperator(times=[0.0],
+                                                               forces=[[8.0, 0.0, 0.0]])), 0.2)
+    assert np.abs(log["reel_velocity"]).max() > 0.1
+    logged = np.abs(np.diff(log["lengths"], axis=0)).max(axis=1) / T
+    assert logged.max() <= 0.0047 * (1 + 1e-9)
+    assert logged[-1] == pytest.approx(0.0047, rel=1e-4)
+
+
+@covers("Scenario.plant!DynamicReels.time_step")
+def test_dynamic_plant_time_step_sets_the_steps_per_tick(tmp_path):
+    """time_step 0.0005 s (default 0.001): the MultibodyPlant is discrete at 0.5 ms, and the
+    reel drives take 4 steps per 2 ms tick: after 0.02 s (40 steps, no friction, bandwidth
+    100) the reels are at 1 - 1.05^-40 = 85.80 % of the command (20 steps of 1 ms: 85.14 %).
+    0.0015 s does not divide the 2 ms control period: refused."""
+    s = _dynamic(robot=_paper_with(tmp_path, FRICTIONLESS + "}"), lock_rotation=True,
+                 time_step=0.0005)
+    diagram, _, _ = _plant_alone(s)
+    mbp = diagram.GetSubsystemByName("reels").GetSubsystemByName("platform_plant")
+    assert mbp.time_step() == 0.0005
+    w = _reel_speeds_after(s, COMMAND, 0.02)
+    np.testing.assert_allclose(w, (1.0 - 1.05 ** -40) * np.array(COMMAND), rtol=1e-12,
+                               atol=1e-15)
+    assert (1.0 - 1.05 ** -40) - (1.0 - 1.1 ** -20) > 6e-3
+    with pytest.raises(ScenarioError, match=r"plant\.time_step 0\.0015 s must divide"):
+        scenario_module.check_scenario(_dynamic(time_step=0.0015))
+
+
+@covers("Scenario.plant!DynamicReels.max_length_residual")
+def test_dynamic_plant_max_length_residual_bounds_the_forward_kinematics_misfit():
+    """The start's encoder lengths L0 = L EA/(EA + T) (unstretched) do not fit a rigid
+    translating platform: forward_kinematics' best fit leaves 8.57 mm on cable 3. A limit of
+    8.1 mm refuses them; 9.1 mm accepts (the default 20 mm would accept both)."""
+    s = _dynamic()
+    L, _, T0 = _start_geometry(s)
+    L0 = L * 70000.0 / (70000.0 + T0)
+    with pytest.raises(KinematicsError, match=r"residual of 0\.00857 m on cable 3"):
+        forward_kinematics(scenario_robot(s), L0, max_residual=0.0081)
+    forward_kinematics(scenario_robot(s), L0, max_residual=0.0091)
+    with pytest.raises(KinematicsError, match=r"allowed 0\.0081 m"):
+        sim(_dynamic(max_length_residual=0.0081), 0.004)
+    sim(_dynamic(max_length_residual=0.0091), 0.004)
+
+
+def _first_step_angular_velocity(tmp_path, platform, force, name):
+    """The free platform's angular velocity w_WB (rad/s, base frame) after its first 1 ms
+    step under a constant hand force, with `platform` (a YAML mapping) in the robot file. At
+    the start the cables and gravity balance exactly (tests/test_dynamic_plant.py), and at
+    v = 0 the discrete MultibodyPlant's step is v_1 = h M^-1 f: w_1 = h I^-1 (h_pt x F)."""
+    s = dataclasses.replace(
+        _dynamic(robot=_paper_with(tmp_path, f"platform: {platform}", name)),
+        operator=ScriptedOperator(times=[0.0], forces=[list(force)]))
+    diagram, simulator, _ = _plant_alone(s)
+    simulator.AdvanceTo(0.001)
+    mbp, context = _sub(diagram, simulator, "platform_plant")
+    return mbp.GetVelocities(context)[:3]
+
+
+@covers("RobotSchema.platform.handle")
+def test_platform_handle_is_where_the_hand_force_acts(tmp_path):
+    """Handle [0.11, 0.06, 0] m (default [0, 0, -0.15], on the line of an upward force: no
+    moment): 4 N up gives the moment h x F = [0.24, -0.44, 0] N m, and after one 1 ms step
+    w = h tau / 0.0525 kg m^2; the handle on the other side turns the platform the other way."""
+    F = [0.0, 0.0, 4.0]
+    tau = np.cross([0.11, 0.06, 0.0], F)
+    np.testing.assert_allclose(tau, [0.24, -0.44, 0.0], atol=1e-15)
+    w = _first_step_angular_velocity(tmp_path, "{handle: [0.11, 0.06, 0.0]}", F, "h1.yaml")
+    np.testing.assert_allclose(w, 0.001 * tau / 0.0525, rtol=0, atol=1e-9)
+    w_other = _first_step_angular_velocity(tmp_path, "{handle: [-0.11, -0.06, 0.0]}", F,
+                                           "h2.yaml")
+    np.testing.assert_allclose(w_other, -w, rtol=0, atol=1e-9)
+    assert np.abs(w).max() > 5e-3  # 5000 x the tolerance
+
+
+@covers("RobotSchema.platform.inertia")
+def test_platform_inertia_sets_the_rotation_rate_under_a_moment(tmp_path):
+    """Inertia with distinct diagonal and off-diagonal entries (default 0.0525 I): the hand's
+    moment tau = h_pt x F (default handle [0, 0, -0.15], F = [2, -3, 1] N) turns the platform
+    at w = h I^-1 tau after one 1 ms step (the full matrix: its diagonal alone, or the default,
+    gives another w)."""
+    I = np.array([[0.051, 0.004, -0.003], [0.004, 0.043, 0.002], [-0.003, 0.002, 0.058]])
+    F = [2.0, -3.0, 1.0]
+    tau = np.cross([0.0, 0.0, -0.15], F)
+    w = _first_step_angular_velocity(tmp_path, f"{{inertia: {I.tolist()}}}", F, "I.yaml")
+    expected = 0.001 * np.linalg.solve(I, tau)
+    np.testing.assert_allclose(w, expected, rtol=0, atol=1e-9)
+    for wrong in (np.diag(np.diag(I)), 0.0525 * np.eye(3)):
+        assert np.abs(0.001 * np.linalg.solve(wrong, tau) - expected).max() > 1e-5
 
 
 # --- the robot file's optional fields ---------------------------------------------------
