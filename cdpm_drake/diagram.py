@@ -14,7 +14,8 @@ from pydrake.systems.primitives import Adder, Multiplexer, VectorLogSink
 from .scenario import (DynamicReels as DynamicReelsConfig, ResolvedScenario, Scenario,
                        SimulatedReels as SimulatedReelsConfig, check_dynamic_reels,
                        resolve_scenario)
-from .systems import JacobianVelocityMapping, SensorNoise, WorkspaceWallForce, add_simulated_world
+from .systems import JacobianVelocityMapping, WorkspaceWallForce, add_simulated_world
+from .systems.simulated_reels import add_measured_force
 from .systems._wiring import FlatBlock
 from .systems.admittance import ADMITTANCE_MAIN, build_admittance
 from .systems.force_sensor import FORCE_SENSOR_MAIN, build_force_sensor
@@ -194,14 +195,7 @@ def build_simulated_plant(scenario: Scenario | ResolvedScenario, robot=None) -> 
     builder.ExportInput(command, "reel_velocity_command")
     builder.ExportOutput(world["cable_lengths"], "cable_lengths")
     force = world["hand_force"]
-    if scenario.sensor.noise_std > 0:
-        noise = builder.AddNamedSystem("sensor_noise", SensorNoise(
-            std=scenario.sensor.noise_std, seed=scenario.random_seed, time_step=T))
-        noisy = builder.AddNamedSystem("noisy_force", Adder(2, 3))
-        builder.Connect(force, noisy.get_input_port(0))
-        builder.Connect(noise.GetOutputPort("noise"), noisy.get_input_port(1))
-        force = noisy.get_output_port()
-    builder.ExportOutput(force, "measured_force")
+    add_measured_force(builder, force, scenario, T)
     plant = builder.Build()
     plant.set_name("reels")
     return plant

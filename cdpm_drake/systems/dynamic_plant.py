@@ -16,12 +16,12 @@ from pydrake.multibody.plant import ExternallyAppliedSpatialForce, MultibodyPlan
 from pydrake.multibody.tree import (FixedOffsetFrame, PrismaticJoint, RotationalInertia,
                                     SpatialInertia)
 from pydrake.systems.framework import DiagramBuilder, LeafSystem
-from pydrake.systems.primitives import Adder, VectorLogSink
+from pydrake.systems.primitives import VectorLogSink
 
 from ..rotation import rotation_from_rpy, rpy_from_rotation
 from ..tension import unstretched_lengths
 from ._tick_cache import declare_tick_cache
-from .simulated_reels import SensorNoise
+from .simulated_reels import add_measured_force
 
 # The plant's logged ground truth: (log key, system, output port), collected by name.
 GROUND_TRUTH = (
@@ -341,14 +341,7 @@ def build_dynamic_plant(scenario, robot, operator, start_tensions):
     builder.ExportInput(drives.GetInputPort("reel_velocity_command"), "reel_velocity_command")
     builder.ExportOutput(encoders.GetOutputPort("cable_lengths"), "cable_lengths")
     force = person.GetOutputPort("hand_force")
-    if scenario.sensor.noise_std > 0:
-        noise = builder.AddNamedSystem("sensor_noise", SensorNoise(
-            std=scenario.sensor.noise_std, seed=scenario.random_seed, time_step=T))
-        noisy = builder.AddNamedSystem("noisy_force", Adder(2, 3))
-        builder.Connect(force, noisy.get_input_port(0))
-        builder.Connect(noise.GetOutputPort("noise"), noisy.get_input_port(1))
-        force = noisy.get_output_port()
-    builder.ExportOutput(force, "measured_force")
+    add_measured_force(builder, force, scenario, T)
     for key, system, port in GROUND_TRUTH:
         source = builder.GetSubsystemByName(system).GetOutputPort(port)
         logger = builder.AddNamedSystem(f"log_{key}", VectorLogSink(source.size(), T))

@@ -2,7 +2,7 @@
 
 import numpy as np
 from pydrake.systems.framework import Diagram, LeafSystem
-from pydrake.systems.primitives import Demultiplexer, Multiplexer
+from pydrake.systems.primitives import Adder, Demultiplexer, Multiplexer
 
 from ..kinematics import cable_lengths, forward_kinematics, simulated_reel_step_stacked
 from ..operators import NoForce
@@ -174,3 +174,16 @@ class SensorNoise(LeafSystem):
         k = int(np.floor(context.get_time() / self._T + 1e-9))
         rng = np.random.default_rng([self._seed, k])
         output.SetFromVector(self._std * rng.standard_normal(3))
+
+
+def add_measured_force(builder, force, scenario, time_step):
+    """Export `force` (the hand force, N) as the plant's `measured_force`, plus the simulated
+    sensor's noise when the scenario asks for it (`sensor_noise` summed in `noisy_force`)."""
+    if scenario.sensor.noise_std > 0:
+        noise = builder.AddNamedSystem("sensor_noise", SensorNoise(
+            std=scenario.sensor.noise_std, seed=scenario.random_seed, time_step=time_step))
+        noisy = builder.AddNamedSystem("noisy_force", Adder(2, 3))
+        builder.Connect(force, noisy.get_input_port(0))
+        builder.Connect(noise.GetOutputPort("noise"), noisy.get_input_port(1))
+        force = noisy.get_output_port()
+    builder.ExportOutput(force, "measured_force")
