@@ -230,14 +230,12 @@ def _cmd_simulate(args) -> int:
 
 
 def _writable_dir(path: Path, field: str) -> None:
+    from .run_folder import RunFolderError, writable_dir
+
     try:
-        path.mkdir(parents=True, exist_ok=True)
-        probe = path / ".cdpm_write_test"
-        probe.write_bytes(b"")
-        probe.unlink()
-    except OSError as e:
-        raise CliError(f"{field} {str(path)!r} is not a writable directory: "
-                       f"{e.strerror or e}") from None
+        writable_dir(path, field)
+    except RunFolderError as e:
+        raise CliError(str(e)) from None
 
 
 def _save_replay(log, path):

@@ -23,6 +23,19 @@ class RunFolderError(ValueError):
     """An --out that cannot be used; the message names it and says what to do."""
 
 
+def writable_dir(path: Path, field: str = "--out") -> None:
+    """Make `path` (and its parents) and check a file can be written there; RunFolderError
+    naming `field` and the path otherwise."""
+    try:
+        path.mkdir(parents=True, exist_ok=True)
+        probe = path / ".cdpm_write_test"
+        probe.write_bytes(b"")
+        probe.unlink()
+    except OSError as e:
+        raise RunFolderError(f"{field} {str(path)!r} is not a writable directory: "
+                             f"{e.strerror or e}") from None
+
+
 def utc_stamp(now: datetime.datetime | None = None) -> str:
     """e.g. 20261201T211039.123Z: sorts by time, no ':' (safe on every file system)."""
     now = datetime.datetime.now(datetime.timezone.utc) if now is None else now
@@ -86,15 +99,8 @@ class RunFolder:
         while not q.exists():
             missing.append(q)
             q = q.parent
-        try:
-            p.mkdir(parents=True, exist_ok=True)
-            self._created = missing
-            probe = p / ".cdpm_write_test"
-            probe.write_bytes(b"")
-            probe.unlink()
-        except OSError as e:
-            raise RunFolderError(f"--out {str(p)!r} is not a writable directory: "
-                                 f"{e.strerror or e}") from None
+        writable_dir(p)
+        self._created = missing
         self.finish()
         return p
 
