@@ -102,9 +102,10 @@ def _print_dynamic_summary(log, out) -> None:
 
 
 def _load_scenario_arg(args):
-    from .scenario import load_scenario
+    from .scenario import load_resolved_scenario
 
-    return load_scenario(args.scenario, overlay_text=args.scenario_text)
+    # Resolved once here; the run, its view and its log all take this object.
+    return load_resolved_scenario(args.scenario, overlay_text=args.scenario_text)
 
 
 def simulate_main(*, scenario, duration=None, out_dir=None, progress=True, out=None,
@@ -116,15 +117,18 @@ def simulate_main(*, scenario, duration=None, out_dir=None, progress=True, out=N
     ended on an error; 130 / 143 after Ctrl-C / SIGTERM (the log up to then is written all the
     same, and the plots and replay asked for)."""
     from .run_folder import RUNS_DIR, RunFolder
+    from .scenario import resolve_scenario
     from .simulation import save_log, simulate, summary_rows
 
     out = sys.stdout if out is None else out
+    resolved = resolve_scenario(scenario)
+    scenario = resolved.scenario
     folder = RunFolder(scenario.name, out_dir, force=force,
                        root=RUNS_DIR if runs_root is None else runs_root)
     _run_folder_step(folder.plan)
     out_dir = _run_folder_step(folder.create)  # before the run: a long run's log needs a place
     try:
-        result = simulate(scenario=scenario, duration=duration, progress=progress,
+        result = simulate(scenario=resolved, duration=duration, progress=progress,
                           on_chunk=on_chunk, realtime_rate=realtime_rate, chunk=chunk)
     except BaseException:
         folder.discard()  # an early error (bad scenario, bad plant) leaves no folder
@@ -261,15 +265,13 @@ def _check_duration(duration):
 
 def _live_meshcat(scenario):
     """A Meshcat window that follows the simulation (views hang off the CLI, not the blocks)."""
-    from .scenario import interference_params, scenario_robot
+    from .scenario import resolve_scenario
     from .views.meshcat_view import CdpmMeshcatView, live_view_callback, make_meshcat
 
-    robot = scenario_robot(scenario)
+    resolved = resolve_scenario(scenario)
+    robot, params = resolved.robot, resolved.interference
     meshcat = make_meshcat()
-    kwargs = {}
-    if scenario.interference.enabled and robot.num_pairs:
-        params = interference_params(scenario, robot)
-        kwargs = dict(d_l=params.d_l, d_u=params.d_u)
+    kwargs = {} if params is None else dict(d_l=params.d_l, d_u=params.d_u)
     view = CdpmMeshcatView(meshcat, robot.reels, robot.attachments, robot.workspace.lower,
                            robot.workspace.upper, robot.pairs, **kwargs)
     print(f"Meshcat: open {meshcat.web_url()} in a browser", file=sys.stderr)
@@ -287,8 +289,11 @@ def run_main(*, scenario, duration=None, out_dir=None, out=None, on_status=None,
     from .interrupt import exit_code
     from .realtime import report_lines, run
     from .run_folder import RUNS_DIR, RunFolder
+    from .scenario import resolve_scenario
 
     out = sys.stdout if out is None else out
+    resolved = resolve_scenario(scenario)
+    scenario = resolved.scenario
     folder = RunFolder(scenario.name, out_dir, force=force,
                        root=RUNS_DIR if runs_root is None else runs_root)
     _run_folder_step(folder.plan)
@@ -302,7 +307,7 @@ def run_main(*, scenario, duration=None, out_dir=None, out=None, on_status=None,
               flush=True)
 
     try:
-        result = run(scenario=scenario, out_dir=out_dir, duration=duration, status=status,
+        result = run(scenario=resolved, out_dir=out_dir, duration=duration, status=status,
                      on_view=on_view)
     except BaseException:
         folder.discard()
@@ -492,7 +497,7 @@ def diagram_main(*, scenario, out_dir, depth=1, svg=True, out=None) -> int:
 def _cmd_diagram(args) -> int:
     if args.depth < 1:
         raise CliError(f"--depth must be an integer >= 1, got {args.depth!r}")
-    return diagram_main(scenario=_load_scenario_arg(args), out_dir=args.out, depth=args.depth,
+    return diagram_main(scenario=_load_scenario_arg(args).scenario, out_dir=args.out, depth=args.depth,
                         svg=not args.no_svg)
 
 

@@ -224,9 +224,14 @@ def resolve_scenario_path(name_or_path) -> Path:
 
 def load_scenario(name_or_path="exp2_interaction", overlay_text: str | None = None) -> Scenario:
     """Load a scenario by name or path, apply a YAML overlay, and check it."""
-    from pydrake.common.yaml import yaml_load_typed
+    return load_resolved_scenario(name_or_path, overlay_text).scenario
 
-    from pydrake.common.yaml import yaml_load
+
+def load_resolved_scenario(name_or_path="exp2_interaction",
+                           overlay_text: str | None = None) -> "ResolvedScenario":
+    """`load_scenario`, returning the check's `resolve_scenario` result, so that a caller that
+    goes on to build and run it resolves it only once."""
+    from pydrake.common.yaml import yaml_load, yaml_load_typed
 
     path = resolve_scenario_path(name_or_path)
     _check_yaml_text(f"{path}", filename=str(path))
@@ -258,7 +263,7 @@ def load_scenario(name_or_path="exp2_interaction", overlay_text: str | None = No
     if resolved.interference is not None:
         _warn_unreachable_d_u(resolved.robot, resolved.interference)
     _warn_reel_saturation(scenario, resolved.robot)
-    return scenario
+    return resolved
 
 
 def _resolve_paths(scenario: Scenario, base: Path, source: str, base_what: str, *,
