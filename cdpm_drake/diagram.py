@@ -14,13 +14,14 @@ from pydrake.systems.primitives import Adder, Multiplexer, VectorLogSink
 from .scenario import (DynamicReels as DynamicReelsConfig, ResolvedScenario, Scenario,
                        SimulatedReels as SimulatedReelsConfig, check_dynamic_reels,
                        resolve_scenario)
-from .systems import JacobianVelocityMapping, WorkspaceWallForce, add_simulated_world
+from .systems import WorkspaceWallForce, add_simulated_world
 from .systems.simulated_reels import add_measured_force
 from .systems._wiring import FlatBlock
 from .systems.admittance import ADMITTANCE_MAIN, build_admittance
 from .systems.force_sensor import FORCE_SENSOR_MAIN, build_force_sensor
 from .systems.forward_kinematics import FORWARD_KINEMATICS_MAIN, build_forward_kinematics
 from .systems.interference_force import INTERFERENCE_FORCE_MAIN, build_interference_force
+from .systems.jacobian_mapping import JACOBIAN_MAPPING_MAIN, build_jacobian_mapping
 from .systems.safety_limits import SAFETY_LIMITS_MAIN, build_safety_limits
 
 # Logged signals: (logger name suffix, system name, output port name). Every signal of the
@@ -129,11 +130,11 @@ def build_diagram(scenario: Scenario | ResolvedScenario,
     # Anti-windup: the admittance integrates from the velocity actually commanded.
     admittance.connect_input(limits.GetOutputPort("velocity_command"), "velocity_command")
 
-    mapping = blocks["jacobian_mapping"] = builder.AddNamedSystem(
-        "jacobian_mapping", JacobianVelocityMapping(robot))
-    builder.Connect(p_WP, mapping.GetInputPort("p_WP"))
-    builder.Connect(limits.GetOutputPort("velocity_command"),
-                    mapping.GetInputPort("velocity_command"))
+    mapping = blocks["jacobian_mapping"] = FlatBlock(
+        builder, "jacobian_mapping", JACOBIAN_MAPPING_MAIN,
+        lambda b: build_jacobian_mapping(b, robot))
+    mapping.connect_input(p_WP, "p_WP")
+    mapping.connect_input(limits.GetOutputPort("velocity_command"), "velocity_command")
     builder.Connect(mapping.GetOutputPort("reel_velocity_command"),
                     plant.GetInputPort("reel_velocity_command"))
 

@@ -234,7 +234,7 @@ def simulated_reel_step(offsets, time_step, lag, max_reel_speed, command, state,
         speed = state[m + 6 + i] + lag * (c - state[m + 6 + i])
         out[m + 6 + i] = speed
         out[i] = state[i] + time_step * speed
-    p = np.empty(3)
+    p = out[m:m + 3]  # a view: no allocation per tick
     if not gauss_newton_warm(offsets, out[:m], state[m:m + 3], 1e-10, np.inf, 8, p):
         return False
     for i in range(m):
@@ -242,7 +242,6 @@ def simulated_reel_step(offsets, time_step, lag, max_reel_speed, command, state,
         out[i] = math.sqrt(x * x + y * y + z * z)
     for k in range(3):
         out[m + 3 + k] = (p[k] - state[m + k]) / time_step
-        out[m + k] = p[k]
     return True
 
 
@@ -251,6 +250,12 @@ def gauss_newton_warm_stacked(offsets, x, tol, max_residual, max_iterations, out
     """`gauss_newton_warm` on one stacked input x (m + 3,) = [lengths, p_guess] (m)."""
     m = offsets.shape[0]
     return gauss_newton_warm(offsets, x[:m], x[m:], tol, max_residual, max_iterations, out)
+
+
+@_jit
+def reel_rates_stacked(offsets, x, out):
+    """`reel_rates` on one stacked input x (6,) = [p m, v m/s]."""
+    reel_rates(offsets, x[:3], x[3:], out)
 
 
 @_jit

@@ -42,10 +42,9 @@ def limit_velocity_into(v_desired, v_previous, p, bounds, max_velocity, max_acce
     if speed > max_velocity:
         k = max_velocity / speed
         vx, vy, vz = vx * k, vy * k, vz * k
-    caps = np.empty((3, 2))
     if virtual_wall:
-        _wall_caps(p, bounds, max_acceleration, time_step, caps)
-        vx, vy, vz = _clip(vx, caps[0]), _clip(vy, caps[1]), _clip(vz, caps[2])
+        lx, ux_, ly, uy_, lz, uz_ = _wall_caps(p, bounds, max_acceleration, time_step)
+        vx, vy, vz = _clip(vx, lx, ux_), _clip(vy, ly, uy_), _clip(vz, lz, uz_)
     ux, uy, uz = v_previous[0], v_previous[1], v_previous[2]
     dx, dy, dz = vx - ux, vy - uy, vz - uz
     step = math.sqrt(dx * dx + dy * dy + dz * dz)
@@ -54,30 +53,37 @@ def limit_velocity_into(v_desired, v_previous, p, bounds, max_velocity, max_acce
         k = max_step / step
         vx, vy, vz = ux + dx * k, uy + dy * k, uz + dz * k
     if virtual_wall:
-        vx, vy, vz = _clip(vx, caps[0]), _clip(vy, caps[1]), _clip(vz, caps[2])
+        vx, vy, vz = _clip(vx, lx, ux_), _clip(vy, ly, uy_), _clip(vz, lz, uz_)
     out[0], out[1], out[2] = vx, vy, vz
 
 
 @_jit
-def _clip(x, cap):
-    return min(max(x, -cap[0]), cap[1])
+def _clip(x, cap_lower, cap_upper):
+    return min(max(x, -cap_lower), cap_upper)
 
 
 @_jit
-def _wall_caps(p, bounds, a, T, caps):
-    """Per axis (cap towards the lower face, cap towards the upper face), m/s, both >= 0."""
+def _wall_caps(p, bounds, a, T):
+    """Per axis (cap towards the lower face, cap towards the upper face), m/s, both >= 0:
+    (x lower, x upper, y lower, y upper, z lower, z upper). Scalars, not an array: no
+    allocation per tick."""
     # Each axis brakes on its own curve; at a/sqrt(3) per axis the vector deceleration stays
     # within a even where three faces meet (a corner), at the price of braking earlier at a face.
     a = a / math.sqrt(3.0)
-    for k in range(3):
-        gap_up = max(bounds[1, k] - p[k], 0.0)
-        gap_lo = max(p[k] - bounds[0, k], 0.0)
-        # Braking curve and one-tick bound (no overshoot). The continuous curve sqrt(2 a gap)
-        # is not enough at 500 Hz: braking by a T per tick from v covers T (v + (v - aT) +
-        # ...), at most (v + aT/2)^2 / (2a), so the cap is sqrt(2 a gap) - aT/2; on it, the
-        # next tick's cap is exactly v - aT.
-        caps[k, 0] = max(min(math.sqrt(2.0 * a * gap_lo) - 0.5 * a * T, gap_lo / T), 0.0)
-        caps[k, 1] = max(min(math.sqrt(2.0 * a * gap_up) - 0.5 * a * T, gap_up / T), 0.0)
+    return (_face_cap(p[0] - bounds[0, 0], a, T), _face_cap(bounds[1, 0] - p[0], a, T),
+            _face_cap(p[1] - bounds[0, 1], a, T), _face_cap(bounds[1, 1] - p[1], a, T),
+            _face_cap(p[2] - bounds[0, 2], a, T), _face_cap(bounds[1, 2] - p[2], a, T))
+
+
+@_jit
+def _face_cap(gap, a, T):
+    """The speed cap (m/s, >= 0) towards a face `gap` m away, per-axis deceleration a."""
+    gap = max(gap, 0.0)
+    # Braking curve and one-tick bound (no overshoot). The continuous curve sqrt(2 a gap)
+    # is not enough at 500 Hz: braking by a T per tick from v covers T (v + (v - aT) +
+    # ...), at most (v + aT/2)^2 / (2a), so the cap is sqrt(2 a gap) - aT/2; on it, the
+    # next tick's cap is exactly v - aT.
+    return max(min(math.sqrt(2.0 * a * gap) - 0.5 * a * T, gap / T), 0.0)
 
 
 def wall_force(p, lower, upper, *, margin, max_force) -> np.ndarray:

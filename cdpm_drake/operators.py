@@ -21,6 +21,11 @@ class OperatorError(ValueError):
     """A bad operator description; the message names the field and the value."""
 
 
+# The shipped models as one compiled kernel (operator_force_into), by kind: a block that
+# ticks the person with the reels calls it inside its own kernel (see world.py).
+NO_FORCE, FORCE_PROFILE, SPRING_HAND = 0, 1, 2
+
+
 class NoForce:
     """Nobody touches the handle."""
 
@@ -29,6 +34,10 @@ class NoForce:
 
     def force_into(self, t: float, p, v, out) -> None:
         out[:] = 0.0
+
+    def compiled(self):
+        """(kind, times (n,) s, rows (n, 3), params (4,)) for operator_force_into."""
+        return NO_FORCE, np.zeros(1), np.zeros((1, 3)), np.zeros(4)
 
 
 class ForceProfile:
@@ -63,6 +72,10 @@ class ForceProfile:
     def force_into(self, t: float, p, v, out) -> None:
         """`force` written into out (3,): the simulated operator's tick."""
         _interp_into(self.times, self.forces, t, out)
+
+    def compiled(self):
+        """(kind, times (n,) s, rows (n, 3), params (4,)) for operator_force_into."""
+        return FORCE_PROFILE, self.times, self.forces, np.zeros(4)
 
 
 @_jit
@@ -165,6 +178,26 @@ class SpringHand:
         release = math.inf if self.release_time is None else self.release_time
         _spring_force_into(self.profile.times, self.profile.forces, self.K, self.D, self.F_max,
                            release, t, p, v, out)
+
+    def compiled(self):
+        """(kind, times (n,) s, rows (n, 3) m, params [K, D, F_max, release]) for
+        operator_force_into."""
+        release = math.inf if self.release_time is None else self.release_time
+        return (SPRING_HAND, self.profile.times, self.profile.forces,
+                np.array([self.K, self.D, self.F_max, release]))
+
+
+@_jit
+def operator_force_into(kind, times, rows, params, t, p, v, out):
+    """The force (N) of a shipped model at time t (s) on p (m), v (m/s), into out (3,), from
+    its `compiled()` form: the same kernels as the models' own force_into."""
+    if kind == SPRING_HAND:
+        _spring_force_into(times, rows, params[0], params[1], params[2], params[3], t, p, v,
+                           out)
+    elif kind == FORCE_PROFILE:
+        _interp_into(times, rows, t, out)
+    else:
+        out[0] = out[1] = out[2] = 0.0
 
 
 # --- Typed descriptions (the scenario's `operator:` entry) -----------------------------------

@@ -4,6 +4,7 @@ import numpy as np
 from pydrake.systems.framework import Diagram, LeafSystem
 from pydrake.systems.primitives import LinearSystem
 
+from ..kernel_call import bind, owned
 from ..sensor import clip_into, clip_to_sensor_range
 from ._wiring import sub_diagram
 
@@ -25,17 +26,19 @@ class SensorRange(LeafSystem):
     def __init__(self, *, axial_axis, axial_range, transverse_range):
         super().__init__()
         axis = np.asarray(axial_axis, dtype=float)
-        self._axis = axis / np.linalg.norm(axis)
+        self._axis = owned(axis / np.linalg.norm(axis))
         self._axial_range = float(axial_range)
         self._transverse_range = float(transverse_range)
         self._measured = self.DeclareVectorInputPort("measured_force", 3)
         self.DeclareVectorOutputPort("clipped_force", 3, self._calc_clipped_force,
                                      prerequisites_of_calc={self._measured.ticket()})
-        clip_into(np.zeros(3), self._axis, 1.0, 1.0, np.empty(3))  # compile now, not in a tick
+        # Compiled (or loaded) now, not in the first tick.
+        self._clip = bind(clip_into, np.zeros(3), self._axis, self._axial_range,
+                          self._transverse_range, np.empty(3))
 
     def _calc_clipped_force(self, context, output):
-        clip_into(self._measured.Eval(context), self._axis, self._axial_range,
-                  self._transverse_range, output.get_mutable_value())
+        self._clip(self._measured.Eval(context), self._axis, self._axial_range,
+                   self._transverse_range, output.get_mutable_value())
 
 
 def sliding_average(window: int, time_step: float) -> LinearSystem:

@@ -4,6 +4,7 @@ import numpy as np
 from pydrake.systems.framework import Diagram, LeafSystem
 from pydrake.systems.primitives import Multiplexer
 
+from ..kernel_call import bind, owned
 from ..kinematics import forward_kinematics, gauss_newton_warm_stacked
 from ._wiring import sub_diagram, unit_delay
 
@@ -24,21 +25,22 @@ class ForwardKinematicsSolve(LeafSystem):
     def __init__(self, robot, *, max_residual):
         super().__init__()
         self._robot = robot
-        self._offsets = np.ascontiguousarray(robot.attachments - robot.reels)
+        self._offsets = owned(robot.attachments - robot.reels)
         self._max_residual = float(max_residual)
         self._m = m = robot.num_cables
         self._inputs = self.DeclareVectorInputPort("inputs", m + 3)
         self.DeclareVectorOutputPort("p_WP", 3, self._calc_p_WP,
                                      prerequisites_of_calc={self._inputs.ticket()})
-        # Compile (or load) the kernel now, not in the first tick.
-        gauss_newton_warm_stacked(self._offsets, np.ones(m + 3), 1e-10, 1.0, 1, np.empty(3))
+        # Compiled (or loaded) now, not in the first tick.
+        self._solve = bind(gauss_newton_warm_stacked, self._offsets, np.ones(m + 3), 1e-10,
+                           self._max_residual, 8, np.empty(3))
 
     def _calc_p_WP(self, context, output):
         x = self._inputs.Eval(context)
         out = output.get_mutable_value()
         # Plain Gauss-Newton from a tick away converges in two or three steps; anything else
         # (and every error message) goes through kinematics.forward_kinematics.
-        if not gauss_newton_warm_stacked(self._offsets, x, 1e-10, self._max_residual, 8, out):
+        if not self._solve(self._offsets, x, 1e-10, self._max_residual, 8, out):
             out[:] = forward_kinematics(self._robot, x[:self._m], p_guess=x[self._m:],
                                         max_residual=self._max_residual)
 

@@ -5,6 +5,7 @@ from pydrake.systems.framework import Diagram, LeafSystem
 from pydrake.systems.primitives import Demultiplexer, Multiplexer
 
 from ..interference import interference_tick_stacked, pair_geometry, result_layout
+from ..kernel_call import bind, owned
 from ._wiring import sub_diagram, unit_delay
 
 # The ports of the block, in the order of the flat result (interference.result_layout).
@@ -31,19 +32,19 @@ class InterferencePairs(LeafSystem):
     def __init__(self, robot, params):
         super().__init__()
         P = robot.num_pairs
-        self._geo = pair_geometry(robot)
-        self._par = params.packed
-        self._floor, self._F_max = params.gradient_floor, params.F_max
+        self._geo = owned(pair_geometry(robot))
+        self._par = owned(params.packed)
+        self._floor, self._F_max = float(params.gradient_floor), float(params.F_max)
         self._inputs = self.DeclareVectorInputPort("inputs", 3 + P)
         self.DeclareVectorOutputPort("result", 3 + 13 * P, self._calc_result,
                                      prerequisites_of_calc={self._inputs.ticket()})
-        # Compile (or load) the kernel now, not in the first tick.
-        interference_tick_stacked(self._geo, self._par, self._floor, self._F_max,
-                                  np.zeros(3 + P), np.empty(3 + 13 * P))
+        # Compiled (or loaded) now, not in the first tick.
+        self._tick = bind(interference_tick_stacked, self._geo, self._par, self._floor,
+                          self._F_max, np.zeros(3 + P), np.empty(3 + 13 * P))
 
     def _calc_result(self, context, output):
-        interference_tick_stacked(self._geo, self._par, self._floor, self._F_max,
-                                  self._inputs.Eval(context), output.get_mutable_value())
+        self._tick(self._geo, self._par, self._floor, self._F_max, self._inputs.Eval(context),
+                   output.get_mutable_value())
 
 
 class InterferenceForce(Diagram):

@@ -1,12 +1,43 @@
 """The Jacobian velocity mapping of Fig. 5 (eq. 3, eq. 7)."""
 
 import numpy as np
-from pydrake.systems.framework import LeafSystem
+from pydrake.systems.framework import Diagram, LeafSystem
+from pydrake.systems.primitives import Multiplexer
 
-from ..kinematics import reel_rates
+from ..kernel_call import bind, owned
+from ..kinematics import reel_rates_stacked
+from ._wiring import sub_diagram
 
 
-class JacobianVelocityMapping(LeafSystem):
+class ReelRates(LeafSystem):
+    """l_dot = J(p) v (eq. 3) in one compiled call; stateless. Its inputs arrive stacked by a
+    C++ Multiplexer (one evaluation from Python, not two).
+
+    .. pydrake_system::
+
+        name: map
+        input_ports:
+        - inputs ([p_WP m, velocity_command m/s], base frame)
+        output_ports:
+        - reel_velocity_command (m/s, one per cable)
+    """
+
+    def __init__(self, robot):
+        super().__init__()
+        self._offsets = owned(robot.attachments - robot.reels)
+        self._inputs = self.DeclareVectorInputPort("inputs", 6)
+        self.DeclareVectorOutputPort(
+            "reel_velocity_command", robot.num_cables, self._calc_reel_velocity_command,
+            prerequisites_of_calc={self._inputs.ticket()})
+        # Compiled (or loaded) now, not in the first tick.
+        self._map = bind(reel_rates_stacked, self._offsets, np.ones(6),
+                         np.empty(robot.num_cables))
+
+    def _calc_reel_velocity_command(self, context, output):
+        self._map(self._offsets, self._inputs.Eval(context), output.get_mutable_value())
+
+
+class JacobianVelocityMapping(Diagram):
     """Reel velocities l_dot = J(p) v (eq. 3): m/s of cable, positive pays cable out.
 
     .. pydrake_system::
@@ -21,15 +52,19 @@ class JacobianVelocityMapping(LeafSystem):
 
     def __init__(self, robot):
         super().__init__()
-        self._offsets = np.ascontiguousarray(robot.attachments - robot.reels)
-        self._p = self.DeclareVectorInputPort("p_WP", 3)
-        self._v = self.DeclareVectorInputPort("velocity_command", 3)
-        self.DeclareVectorOutputPort(
-            "reel_velocity_command", robot.num_cables, self._calc_reel_velocity_command,
-            prerequisites_of_calc={self._p.ticket(), self._v.ticket()})
-        # Compile (or load) the kernel now, not in the first tick.
-        reel_rates(self._offsets, np.ones(3), np.zeros(3), np.empty(robot.num_cables))
+        sub_diagram(self, lambda builder: build_jacobian_mapping(builder, robot))
 
-    def _calc_reel_velocity_command(self, context, output):
-        reel_rates(self._offsets, self._p.Eval(context), self._v.Eval(context),
-                   output.get_mutable_value())
+
+# The system a flat build (FlatBlock) names after the block.
+JACOBIAN_MAPPING_MAIN = "map"
+
+
+def build_jacobian_mapping(builder, robot):
+    """JacobianVelocityMapping's systems and exported ports, into `builder` (a DiagramBuilder
+    or a FlatBlock)."""
+    rates = builder.AddNamedSystem("map", ReelRates(robot))
+    inputs = builder.AddNamedSystem("inputs", Multiplexer([3, 3]))
+    builder.Connect(inputs.get_output_port(), rates.GetInputPort("inputs"))
+    builder.ExportInput(inputs.get_input_port(0), "p_WP")
+    builder.ExportInput(inputs.get_input_port(1), "velocity_command")
+    builder.ExportOutput(rates.GetOutputPort("reel_velocity_command"), "reel_velocity_command")

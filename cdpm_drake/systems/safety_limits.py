@@ -4,6 +4,7 @@ import numpy as np
 from pydrake.systems.framework import Diagram, LeafSystem
 from pydrake.systems.primitives import Multiplexer
 
+from ..kernel_call import bind, owned
 from ..limits import limit_velocity_stacked
 from ._wiring import sub_diagram, unit_delay
 
@@ -24,20 +25,20 @@ class VelocityLimit(LeafSystem):
     def __init__(self, *, lower, upper, max_velocity, max_acceleration, virtual_wall,
                  time_step):
         super().__init__()
-        self._bounds = np.array([np.asarray(lower, dtype=float),
-                                 np.asarray(upper, dtype=float)])
+        self._bounds = owned([np.asarray(lower, dtype=float), np.asarray(upper, dtype=float)])
         self._args = (float(max_velocity), float(max_acceleration), float(time_step),
                       bool(virtual_wall))
         self._inputs = self.DeclareVectorInputPort("inputs", 9)
         self.DeclareVectorOutputPort(
             "velocity_command", 3, self._calc_velocity_command,
             prerequisites_of_calc={self._inputs.ticket()})
-        # Compile (or load) the kernel now, not in the first tick.
-        limit_velocity_stacked(np.zeros(9), self._bounds, *self._args, np.empty(3))
+        # Compiled (or loaded) now, not in the first tick.
+        self._limit = bind(limit_velocity_stacked, np.zeros(9), self._bounds, *self._args,
+                           np.empty(3))
 
     def _calc_velocity_command(self, context, output):
-        limit_velocity_stacked(self._inputs.Eval(context), self._bounds, *self._args,
-                               output.get_mutable_value())
+        self._limit(self._inputs.Eval(context), self._bounds, *self._args,
+                    output.get_mutable_value())
 
 
 class SafetyLimits(Diagram):

@@ -4,8 +4,10 @@ import numpy as np
 from pydrake.systems.framework import Diagram, LeafSystem
 from pydrake.systems.primitives import Adder, Demultiplexer, Multiplexer
 
-from ..kinematics import cable_lengths, forward_kinematics, simulated_reel_step_stacked
-from ..operators import NoForce
+from ..kernel_call import bind, owned
+from ..kinematics import cable_lengths, forward_kinematics
+from ..operators import ForceProfile, NoForce, SpringHand
+from ..world import world_tick
 from ._wiring import sub_diagram, unit_delay
 
 
@@ -28,39 +30,52 @@ class ReelStep(LeafSystem):
         super().__init__()
         self._robot = robot
         m = self._m = robot.num_cables
-        self._offsets = np.ascontiguousarray(robot.attachments - robot.reels)
+        self._offsets = owned(robot.attachments - robot.reels)
         self._T = float(time_step)
-        self._lag = 1.0 - np.exp(-self._T / time_constant) if time_constant > 0 else 1.0
-        self._vmax = float(max_reel_speed)
+        lag = 1.0 - np.exp(-self._T / time_constant) if time_constant > 0 else 1.0
+        self._reel = owned([self._T, lag, float(max_reel_speed)])
         self._operator = operator
-        # The shipped models write into the state directly (operators.*.force_into).
         self._force_into = getattr(operator, "force_into", None)
+        # The shipped models (exactly these classes: a subclass may change the force) are
+        # ticked inside the world's kernel; any other model is called from Python after it.
+        if type(operator) in (NoForce, ForceProfile, SpringHand):
+            kind, times, rows, params = operator.compiled()
+            self._person = (int(kind), owned(times), owned(rows), owned(params))
+        else:
+            self._person = (-1, owned(np.zeros(1)), owned(np.zeros((1, 3))), owned(np.zeros(4)))
         self._inputs = self.DeclareVectorInputPort("inputs", m + state_size(m))
         self.DeclareVectorOutputPort(
             "next_state", state_size(m), self._calc_next_state,
             prerequisites_of_calc={self.time_ticket(), self._inputs.ticket()})
-        # Compile (or load) the kernels now, not in the first tick.
-        simulated_reel_step_stacked(self._offsets, self._T, self._lag, self._vmax,
-                                    np.ones(m + state_size(m)), np.empty(state_size(m)))
+        # Compiled (or loaded) now, not in the first tick.
+        self._tick = bind(world_tick, self._offsets, self._reel, *self._person, 0.0,
+                          np.ones(m + state_size(m)), np.empty(state_size(m)))
         if self._force_into is not None:
             self._force_into(0.0, np.zeros(3), np.zeros(3), np.empty(3))
 
     def _calc_next_state(self, context, output):
-        m = self._m
         x = self._inputs.Eval(context)
         out = output.get_mutable_value()
-        if not simulated_reel_step_stacked(self._offsets, self._T, self._lag, self._vmax, x,
-                                           out):
-            # Gauss-Newton did not settle: the damped solver (and its error messages).
-            p = x[2 * m:2 * m + 3]
-            p_new = forward_kinematics(self._robot, out[:m].copy(), p_guess=p,
-                                       max_residual=np.inf)
-            out[:m] = cable_lengths(self._robot, p_new)
-            out[m:m + 3] = p_new
-            out[m + 3:m + 6] = (p_new - p) / self._T
-        # The hand force the sensor samples at the next tick, t + T, on the new pose.
-        hand_force(self._operator, self._force_into, context.get_time() + self._T,
-                   out[m:m + 3], out[m + 3:m + 6], out[2 * m + 6:])
+        # The hand force is the sample the sensor reads at the next tick, t + T, on the new
+        # pose; the kernel writes it for the shipped models.
+        t_next = context.get_time() + self._T
+        if self._tick(self._offsets, self._reel, *self._person, t_next, x, out):
+            if self._person[0] < 0:
+                self._add_hand_force(t_next, out)
+            return
+        # Gauss-Newton did not settle: the damped solver (and its error messages).
+        m = self._m
+        p = x[2 * m:2 * m + 3]
+        p_new = forward_kinematics(self._robot, out[:m].copy(), p_guess=p, max_residual=np.inf)
+        out[:m] = cable_lengths(self._robot, p_new)
+        out[m:m + 3] = p_new
+        out[m + 3:m + 6] = (p_new - p) / self._T
+        self._add_hand_force(t_next, out)
+
+    def _add_hand_force(self, t, out):
+        m = self._m
+        hand_force(self._operator, self._force_into, t, out[m:m + 3], out[m + 3:m + 6],
+                   out[2 * m + 6:])
 
 
 def state_size(m: int) -> int:
