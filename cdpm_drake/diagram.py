@@ -9,14 +9,14 @@ import dataclasses
 
 import numpy as np
 from pydrake.systems.framework import Diagram, DiagramBuilder
-from pydrake.systems.primitives import Adder, Multiplexer, VectorLogSink
+from pydrake.systems.primitives import Adder, VectorLogSink
 
 from .scenario import (DynamicReels as DynamicReelsConfig, ResolvedScenario, Scenario,
                        SimulatedReels as SimulatedReelsConfig, check_dynamic_reels,
                        resolve_scenario)
 from .systems import WorkspaceWallForce, add_simulated_world
 from .systems.simulated_reels import add_measured_force
-from .systems._wiring import FlatBlock
+from .systems._wiring import FlatBlock, wiring
 from .systems.admittance import ADMITTANCE_MAIN, build_admittance
 from .systems.force_sensor import FORCE_SENSOR_MAIN, build_force_sensor
 from .systems.forward_kinematics import FORWARD_KINEMATICS_MAIN, build_forward_kinematics
@@ -203,10 +203,23 @@ def build_simulated_plant(scenario: Scenario | ResolvedScenario, robot=None) -> 
 
 
 def _add_loggers(builder, blocks, T):
-    ports = [port for _, port in _logged_ports(blocks)]
-    signals = builder.AddNamedSystem("log_signals", Multiplexer([p.size() for p in ports]))
-    for k, port in enumerate(ports):
-        builder.Connect(port, signals.get_input_port(k))
+    # Every logged signal, read where it is computed: a block output that is a piece of
+    # another port (FlatBlock.pieces, e.g. the interference block's result) is selected
+    # from that port, so the logger evaluates no splitting of its own.
+    sources, pieces = {}, []
+    for key, system_name, port_name in LOGGED:
+        block = blocks.get(system_name)
+        if block is None:
+            continue
+        port = block.GetOutputPort(port_name)
+        source, offset = getattr(block, "pieces", {}).get(port_name, (port, 0))
+        name = f"{source.get_system().get_name()}.{source.get_name()}"
+        sources.setdefault(name, source)
+        pieces.append((name, offset, port.size()))
+    signals = builder.AddNamedSystem("log_signals", wiring(
+        [(name, port.size()) for name, port in sources.items()], [("y0", pieces)]))
+    for name, port in sources.items():
+        builder.Connect(port, signals.GetInputPort(name))
     sink = builder.AddNamedSystem(LOG_SINK, VectorLogSink(signals.get_output_port().size(), T))
     builder.Connect(signals.get_output_port(), sink.get_input_port())
 

@@ -3,7 +3,7 @@ block as a named sub-diagram."""
 
 import numpy as np
 from pydrake.systems.framework import DiagramBuilder
-from pydrake.systems.primitives import LinearSystem, ZeroOrderHold
+from pydrake.systems.primitives import LinearSystem, Selector, SelectorParams, ZeroOrderHold
 
 
 def unit_delay(size: int, time_step: float, initial=None):
@@ -40,6 +40,8 @@ class FlatBlock:
         self.name, self._builder, self._main = name, builder, main
         self.inputs: dict[str, list] = {}
         self.outputs: dict[str, object] = {}
+        # {output name: (source port, offset)} for outputs that are a piece of another port.
+        self.pieces: dict[str, tuple] = {}
         self.systems: list[str] = []
         build(self)
 
@@ -75,3 +77,35 @@ class FlatBlock:
         return {"systems": tuple(self.systems),
                 "inputs": {name: [where(p) for p in ports] for name, ports in self.inputs.items()},
                 "outputs": {name: where(port) for name, port in self.outputs.items()}}
+
+
+
+def wiring(inputs, outputs):
+    """A C++ Selector that routes pieces of its inputs to its outputs: inputs [(name, size)],
+    outputs [(name, [(input name, offset, count), ...])], each output the listed pieces in
+    order. One system can stack a block's inputs and split its result (a Multiplexer and a
+    Demultiplexer are a system each), and each output depends only on the inputs it reads
+    (a Multiplexer's depends on every source, time included: each tick's time change
+    invalidates it and everything it feeds)."""
+    S = SelectorParams
+    index = {name: k for k, (name, _) in enumerate(inputs)}
+    ports = []
+    for name, pieces in outputs:
+        ports.append(S.OutputPortParams(name=name, selections=[
+            S.OutputSelection(input_port_index=index[source], input_offset=offset + j)
+            for source, offset, count in pieces for j in range(int(count))]))
+    return Selector(S(inputs=[S.InputPortParams(name=n, size=int(k)) for n, k in inputs],
+                      outputs=ports))
+
+
+def stack(sizes):
+    """`wiring` stacking inputs u0, u1, ... (sizes) into one output y0, as a Multiplexer."""
+    names = [f"u{k}" for k in range(len(sizes))]
+    return wiring(list(zip(names, sizes)), [("y0", [(n, 0, k) for n, k in zip(names, sizes)])])
+
+
+def note_piece(builder, name, source, offset):
+    """Note that the block's exported output `name` is `source` from `offset` on, when
+    `builder` is a FlatBlock (the logger then reads the piece from `source` itself)."""
+    if isinstance(builder, FlatBlock):
+        builder.pieces[name] = (source, int(offset))

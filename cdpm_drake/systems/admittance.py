@@ -3,9 +3,9 @@
 import numpy as np
 from pydrake.systems.analysis import DiscreteTimeApproximation
 from pydrake.systems.framework import Diagram
-from pydrake.systems.primitives import LinearSystem, Multiplexer
+from pydrake.systems.primitives import LinearSystem
 
-from ._wiring import sub_diagram
+from ._wiring import stack, sub_diagram
 
 
 def make_admittance(mass: float, damping: float, time_step: float):
@@ -71,7 +71,7 @@ ADMITTANCE_MAIN = "dynamics"
 def build_admittance(builder, mass: float, damping: float, time_step: float):
     """Admittance's systems and exported ports, into `builder` (a DiagramBuilder or a
     FlatBlock)."""
-    inputs = builder.AddNamedSystem("inputs", Multiplexer([3, 3]))
+    inputs = builder.AddNamedSystem("inputs", stack([3, 3]))
     dynamics = builder.AddNamedSystem("dynamics", make_anti_windup_admittance(
         mass, damping, time_step))
     builder.Connect(inputs.get_output_port(), dynamics.get_input_port())

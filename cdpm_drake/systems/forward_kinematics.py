@@ -2,11 +2,10 @@
 
 import numpy as np
 from pydrake.systems.framework import Diagram, LeafSystem
-from pydrake.systems.primitives import Multiplexer
 
 from ..kernel_call import bind, owned
 from ..kinematics import forward_kinematics, gauss_newton_warm_stacked
-from ._wiring import sub_diagram, unit_delay
+from ._wiring import stack, sub_diagram, unit_delay
 
 
 class ForwardKinematicsSolve(LeafSystem):
@@ -80,7 +79,7 @@ def build_forward_kinematics(builder, robot, *, initial_position, max_residual=1
         robot, max_residual=max_residual))
     previous = builder.AddNamedSystem("previous", unit_delay(
         3, time_step, np.asarray(initial_position, dtype=float)))
-    inputs = builder.AddNamedSystem("inputs", Multiplexer([robot.num_cables, 3]))
+    inputs = builder.AddNamedSystem("inputs", stack([robot.num_cables, 3]))
     builder.Connect(solve.GetOutputPort("p_WP"), previous.get_input_port())
     builder.Connect(previous.get_output_port(), inputs.get_input_port(1))
     builder.Connect(inputs.get_output_port(), solve.GetInputPort("inputs"))

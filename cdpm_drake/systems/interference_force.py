@@ -2,11 +2,10 @@
 
 import numpy as np
 from pydrake.systems.framework import Diagram, LeafSystem
-from pydrake.systems.primitives import Demultiplexer, Multiplexer
 
 from ..interference import interference_tick_stacked, pair_geometry, result_layout
 from ..kernel_call import bind, owned
-from ._wiring import sub_diagram, unit_delay
+from ._wiring import note_piece, sub_diagram, unit_delay, wiring
 
 # The ports of the block, in the order of the flat result (interference.result_layout).
 OUTPUTS = ("F_int", "pair_distances", "active", "crossed", "side")
@@ -85,17 +84,21 @@ def build_interference_force(builder, robot, params, *, time_step=0.002):
     a FlatBlock)."""
     P = robot.num_pairs
     layout = result_layout(P)
-    sizes = [layout[name][1] - layout[name][0] for name in
-             ("force", "distance", "active", "crossed", "side")]
-    sizes.append(3 + 13 * P - sum(sizes))  # s, t, intensities, gradients, directions
+    fields = dict(zip(OUTPUTS, ("force", "distance", "active", "crossed", "side")))
     pairs = builder.AddNamedSystem("pairs", InterferencePairs(robot, params))
-    split = builder.AddNamedSystem("split", Demultiplexer(sizes))
     side = builder.AddNamedSystem("side_memory", unit_delay(P, time_step))
-    inputs = builder.AddNamedSystem("inputs", Multiplexer([3, P]))
-    builder.Connect(pairs.GetOutputPort("result"), split.get_input_port())
-    builder.Connect(split.get_output_port(OUTPUTS.index("side")), side.get_input_port())
-    builder.Connect(side.get_output_port(), inputs.get_input_port(1))
-    builder.Connect(inputs.get_output_port(), pairs.GetInputPort("inputs"))
-    builder.ExportInput(inputs.get_input_port(0), "p_WP")
-    for k, name in enumerate(OUTPUTS[:-1]):
-        builder.ExportOutput(split.get_output_port(k), name)
+    # One C++ Selector stacks the position and the memory for `pairs` and splits its result.
+    route = builder.AddNamedSystem("wiring", wiring(
+        [("p_WP", 3), ("side_previous", P), ("result", 3 + 13 * P)],
+        [("inputs", [("p_WP", 0, 3), ("side_previous", 0, P)])]
+        + [(name, [("result", layout[field][0], layout[field][1] - layout[field][0])])
+           for name, field in fields.items()]))
+    result = pairs.GetOutputPort("result")
+    builder.Connect(result, route.GetInputPort("result"))
+    builder.Connect(route.GetOutputPort("side"), side.get_input_port())
+    builder.Connect(side.get_output_port(), route.GetInputPort("side_previous"))
+    builder.Connect(route.GetOutputPort("inputs"), pairs.GetInputPort("inputs"))
+    builder.ExportInput(route.GetInputPort("p_WP"), "p_WP")
+    for name in OUTPUTS[:-1]:
+        builder.ExportOutput(route.GetOutputPort(name), name)
+        note_piece(builder, name, result, layout[fields[name]][0])

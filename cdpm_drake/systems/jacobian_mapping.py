@@ -2,11 +2,10 @@
 
 import numpy as np
 from pydrake.systems.framework import Diagram, LeafSystem
-from pydrake.systems.primitives import Multiplexer
 
 from ..kernel_call import bind, owned
 from ..kinematics import reel_rates_stacked
-from ._wiring import sub_diagram
+from ._wiring import stack, sub_diagram
 
 
 class ReelRates(LeafSystem):
@@ -63,7 +62,7 @@ def build_jacobian_mapping(builder, robot):
     """JacobianVelocityMapping's systems and exported ports, into `builder` (a DiagramBuilder
     or a FlatBlock)."""
     rates = builder.AddNamedSystem("map", ReelRates(robot))
-    inputs = builder.AddNamedSystem("inputs", Multiplexer([3, 3]))
+    inputs = builder.AddNamedSystem("inputs", stack([3, 3]))
     builder.Connect(inputs.get_output_port(), rates.GetInputPort("inputs"))
     builder.ExportInput(inputs.get_input_port(0), "p_WP")
     builder.ExportInput(inputs.get_input_port(1), "velocity_command")

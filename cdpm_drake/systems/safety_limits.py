@@ -2,11 +2,10 @@
 
 import numpy as np
 from pydrake.systems.framework import Diagram, LeafSystem
-from pydrake.systems.primitives import Multiplexer
 
 from ..kernel_call import bind, owned
 from ..limits import limit_velocity_stacked
-from ._wiring import sub_diagram, unit_delay
+from ._wiring import stack, sub_diagram, unit_delay
 
 
 class VelocityLimit(LeafSystem):
@@ -76,7 +75,7 @@ def build_safety_limits(builder, *, lower, upper, max_velocity, max_acceleration
         lower=lower, upper=upper, max_velocity=max_velocity,
         max_acceleration=max_acceleration, virtual_wall=virtual_wall, time_step=time_step))
     previous = builder.AddNamedSystem("previous", unit_delay(3, time_step))
-    inputs = builder.AddNamedSystem("inputs", Multiplexer([3, 3, 3]))
+    inputs = builder.AddNamedSystem("inputs", stack([3, 3, 3]))
     command = limit.GetOutputPort("velocity_command")
     builder.Connect(command, previous.get_input_port())
     builder.Connect(previous.get_output_port(), inputs.get_input_port(2))

@@ -2,13 +2,13 @@
 
 import numpy as np
 from pydrake.systems.framework import Diagram, LeafSystem
-from pydrake.systems.primitives import Adder, Demultiplexer, Multiplexer
+from pydrake.systems.primitives import Adder
 
 from ..kernel_call import bind, owned
 from ..kinematics import cable_lengths, forward_kinematics
 from ..operators import ForceProfile, NoForce, SpringHand
 from ..world import world_tick
-from ._wiring import sub_diagram, unit_delay
+from ._wiring import sub_diagram, unit_delay, wiring
 
 
 class ReelStep(LeafSystem):
@@ -107,15 +107,19 @@ def add_simulated_world(builder, robot, operator, *, initial_position, time_step
     hand_force(operator, getattr(operator, "force_into", None), 0.0, p0, np.zeros(3),
                x0[2 * m + 6:])
     state = builder.AddNamedSystem("state", unit_delay(state_size(m), time_step, x0))
-    split = builder.AddNamedSystem("split", Demultiplexer([m, 3, 3, m, 3]))
-    inputs = builder.AddNamedSystem("inputs", Multiplexer([m, state_size(m)]))
+    n = state_size(m)
+    pieces = {"cable_lengths": (0, m), "p_WP_true": (m, 3), "v_WP_true": (m + 3, 3),
+              "hand_force": (2 * m + 6, 3)}
+    # One C++ Selector stacks the command and the state for the step and splits the state.
+    route = builder.AddNamedSystem("wiring", wiring(
+        [("reel_velocity_command", m), ("state", n)],
+        [("inputs", [("reel_velocity_command", 0, m), ("state", 0, n)])]
+        + [(name, [("state", offset, count)]) for name, (offset, count) in pieces.items()]))
     builder.Connect(step.GetOutputPort("next_state"), state.get_input_port())
-    builder.Connect(state.get_output_port(), inputs.get_input_port(1))
-    builder.Connect(inputs.get_output_port(), step.GetInputPort("inputs"))
-    builder.Connect(state.get_output_port(), split.get_input_port())
-    names = ("cable_lengths", "p_WP_true", "v_WP_true", None, "hand_force")
-    return (inputs.get_input_port(0),
-            {name: split.get_output_port(k) for k, name in enumerate(names) if name})
+    builder.Connect(state.get_output_port(), route.GetInputPort("state"))
+    builder.Connect(route.GetOutputPort("inputs"), step.GetInputPort("inputs"))
+    return (route.GetInputPort("reel_velocity_command"),
+            {name: route.GetOutputPort(name) for name in pieces})
 
 
 class SimulatedReels(Diagram):
