@@ -16,7 +16,7 @@ from .scenario import (DynamicReels as DynamicReelsConfig, ResolvedScenario, Sce
                        resolve_scenario)
 from .systems import WorkspaceWallForce, add_simulated_world
 from .systems.simulated_reels import add_measured_force
-from .systems._wiring import FlatBlock, wiring
+from .systems._wiring import FUSED_WIRING, FlatBlock, fuse_wiring, wiring
 from .systems.admittance import ADMITTANCE_MAIN, build_admittance
 from .systems.force_sensor import FORCE_SENSOR_MAIN, build_force_sensor
 from .systems.forward_kinematics import FORWARD_KINEMATICS_MAIN, build_forward_kinematics
@@ -60,6 +60,10 @@ class BuildOptions:
     # Also stream every logged signal to this file as the run goes (hardware/tick_log.py):
     # a real-time run must not lose its log if the process dies.
     tick_log: str | None = None
+    # Fuse the blocks' and the logger's C++ wiring (Selectors) into one system
+    # (systems._wiring.fuse_wiring): the same connections and values, about 5 % less time a
+    # tick. False keeps each block's own wiring, as the blocks build it.
+    fuse_wiring: bool = True
 
 
 def build_diagram(scenario: Scenario | ResolvedScenario,
@@ -138,16 +142,29 @@ def build_diagram(scenario: Scenario | ResolvedScenario,
     builder.Connect(mapping.GetOutputPort("reel_velocity_command"),
                     plant.GetInputPort("reel_velocity_command"))
 
+    wirings = {}
     if options.loggers:
-        _add_loggers(builder, blocks, T)
+        wirings.update(_add_loggers(builder, blocks, T))
     if options.tick_log is not None:
         _add_tick_log(builder, blocks, T, options.tick_log, robot, scenario)
+    flat = {name: block for name, block in blocks.items() if isinstance(block, FlatBlock)}
+    moved, fused = {}, None
+    if options.fuse_wiring:
+        for block in flat.values():
+            wirings.update(block.wirings)
+        exported = {at[:2] for block in flat.values() for at in block.layout()["outputs"].values()}
+        moved, fused = fuse_wiring(builder, wirings, keep=exported)
     diagram = builder.Build()
     diagram.set_name("cdpm_controller")
     # The flat blocks: which systems make each one and where its ports are
     # (block_output_port; the overview draws each as one block).
-    diagram.flat_blocks = {name: block.layout() for name, block in blocks.items()
-                           if isinstance(block, FlatBlock)}
+    diagram.flat_blocks = {name: block.layout(moved) for name, block in flat.items()}
+    # The fused wiring, for the overview (which draws through it): {output index: the input
+    # indices it reads}.
+    diagram.fused_wiring = None if fused is None else {
+        "system": FUSED_WIRING,
+        "reads": {k: sorted({[n for n, _ in fused[0]].index(src) for src, _, _ in pieces})
+                  for k, (_, pieces) in enumerate(fused[1])}}
     return diagram
 
 
@@ -216,12 +233,14 @@ def _add_loggers(builder, blocks, T):
         name = f"{source.get_system().get_name()}.{source.get_name()}"
         sources.setdefault(name, source)
         pieces.append((name, offset, port.size()))
-    signals = builder.AddNamedSystem("log_signals", wiring(
-        [(name, port.size()) for name, port in sources.items()], [("y0", pieces)]))
+    signals = wiring([(name, port.size()) for name, port in sources.items()], [("y0", pieces)])
+    spec = signals.wiring_spec
+    signals = builder.AddNamedSystem("log_signals", signals)
     for name, port in sources.items():
         builder.Connect(port, signals.GetInputPort(name))
     sink = builder.AddNamedSystem(LOG_SINK, VectorLogSink(signals.get_output_port().size(), T))
     builder.Connect(signals.get_output_port(), sink.get_input_port())
+    return {"log_signals": spec}
 
 
 def logged_signals(diagram, context) -> tuple[np.ndarray, dict]:

@@ -1,5 +1,6 @@
-"""Helpers the blocks share: a one-tick delay in C++ to hold a block's state, and building a
-block as a named sub-diagram."""
+"""Helpers the blocks share: a one-tick delay in C++ to hold a block's state, C++ wiring
+(Selectors) to stack a block's inputs and split its result, building a block as a named
+sub-diagram or flat into its parent, and fusing the flat blocks' wiring into one system."""
 
 import numpy as np
 from pydrake.systems.framework import DiagramBuilder
@@ -40,15 +41,23 @@ class FlatBlock:
         self.name, self._builder, self._main = name, builder, main
         self.inputs: dict[str, list] = {}
         self.outputs: dict[str, object] = {}
+        self.systems: list[str] = []
         # {output name: (source port, offset)} for outputs that are a piece of another port.
         self.pieces: dict[str, tuple] = {}
-        self.systems: list[str] = []
+        # {system name: wiring spec} of the block's `wiring` Selectors (see fuse_wiring).
+        self.wirings: dict[str, tuple] = {}
+        # Where the exported ports are, by (system name, port index): ports of a system that
+        # fuse_wiring removes must not be touched again, only their names remapped.
+        self._input_at: dict[str, list] = {}
+        self._output_at: dict[str, tuple] = {}
         build(self)
 
     # The builder calls a block's build function makes.
     def AddNamedSystem(self, name, system):
         full = self.name if name == self._main else f"{self.name}_{name}"
         self.systems.append(full)
+        if hasattr(system, "wiring_spec"):
+            self.wirings[full] = system.wiring_spec
         return self._builder.AddNamedSystem(full, system)
 
     def Connect(self, source, destination):
@@ -56,9 +65,11 @@ class FlatBlock:
 
     def ExportInput(self, port, name):
         self.inputs.setdefault(name, []).append(port)
+        self._input_at.setdefault(name, []).append(_where(port))
 
     def ExportOutput(self, port, name):
         self.outputs[name] = port
+        self._output_at[name] = _where(port)
 
     # The block's ports, for the parent.
     def GetOutputPort(self, name):
@@ -68,16 +79,25 @@ class FlatBlock:
         for port in self.inputs[name]:
             self._builder.Connect(source, port)
 
-    def layout(self) -> dict:
+    def layout(self, moved=None) -> dict:
         """{"systems": names, "inputs": {port: [(system name, input index)]}, "outputs":
-        {port: (system name, output index)}}: the block in a built diagram, by names."""
-        def where(port):
-            return port.get_system().get_name(), int(port.get_index())
+        {port: (system name, output index)}}: the block in a built diagram, by names. After
+        `fuse_wiring` (`moved`: what it returned), the block's wiring is no longer among its
+        systems and its ports on that wiring are where they went."""
+        moved = moved or {}
+        fused = tuple(name for name in self.systems if name in self.wirings and moved)
+        return {"systems": tuple(name for name in self.systems if name not in fused),
+                # The block's wiring that fuse_wiring took over, and the order of all its
+                # parts (for drawing the block as built).
+                "wired": fused, "order": tuple(self.systems),
+                "inputs": {name: [moved.get((*at, "in"), at) for at in ats]
+                           for name, ats in self._input_at.items()},
+                "outputs": {name: moved.get((*at, "out"), at)
+                            for name, at in self._output_at.items()}}
 
-        return {"systems": tuple(self.systems),
-                "inputs": {name: [where(p) for p in ports] for name, ports in self.inputs.items()},
-                "outputs": {name: where(port) for name, port in self.outputs.items()}}
 
+def _where(port):
+    return port.get_system().get_name(), int(port.get_index())
 
 
 def wiring(inputs, outputs):
@@ -86,7 +106,8 @@ def wiring(inputs, outputs):
     order. One system can stack a block's inputs and split its result (a Multiplexer and a
     Demultiplexer are a system each), and each output depends only on the inputs it reads
     (a Multiplexer's depends on every source, time included: each tick's time change
-    invalidates it and everything it feeds)."""
+    invalidates it and everything it feeds). The spec stays on the system (`wiring_spec`)
+    for `fuse_wiring`."""
     S = SelectorParams
     index = {name: k for k, (name, _) in enumerate(inputs)}
     ports = []
@@ -94,8 +115,11 @@ def wiring(inputs, outputs):
         ports.append(S.OutputPortParams(name=name, selections=[
             S.OutputSelection(input_port_index=index[source], input_offset=offset + j)
             for source, offset, count in pieces for j in range(int(count))]))
-    return Selector(S(inputs=[S.InputPortParams(name=n, size=int(k)) for n, k in inputs],
-                      outputs=ports))
+    system = Selector(S(inputs=[S.InputPortParams(name=n, size=int(k)) for n, k in inputs],
+                        outputs=ports))
+    system.wiring_spec = (tuple((n, int(k)) for n, k in inputs),
+                          tuple((n, tuple(pieces)) for n, pieces in outputs))
+    return system
 
 
 def stack(sizes):
@@ -109,3 +133,60 @@ def note_piece(builder, name, source, offset):
     `builder` is a FlatBlock (the logger then reads the piece from `source` itself)."""
     if isinstance(builder, FlatBlock):
         builder.pieces[name] = (source, int(offset))
+
+
+# The one system fuse_wiring leaves in a diagram.
+FUSED_WIRING = "wiring"
+
+
+def fuse_wiring(builder, wirings: dict, keep=()) -> dict:
+    """Replace the `wiring` Selectors {system name: wiring spec} of `builder` (every one
+    connected, none exported) by one Selector named FUSED_WIRING that makes the same
+    connections: each of its inputs is one source port (named "system.port"), each output
+    one of the old outputs (named "old system.old output"), reading the same elements.
+    Every system costs Drake work each tick whatever it computes (events, caching, time), so
+    seven Selectors cost about seven times one; the values are bit for bit the same.
+    Outputs that are neither connected nor in `keep` ({(system name, output index)}) go.
+
+    Returns (moved, spec): moved {(old system name, port index, "in" | "out"):
+    (FUSED_WIRING, new index)}, spec the fused Selector's `wiring_spec`."""
+    connections = builder.connection_map()
+    source_of, destinations = {}, {}
+    for (dst, dst_k), (src, src_k) in connections.items():
+        d, s = (dst.get_name(), int(dst_k)), (src.get_name(), int(src_k))
+        source_of[d] = (src, int(src_k))
+        destinations.setdefault(s, []).append((dst, int(dst_k)))
+    inputs, sources, outputs, targets, moved = [], {}, [], [], {}
+    for name, (ins, outs) in wirings.items():
+        local = {}
+        for k, (input_name, size) in enumerate(ins):
+            if (name, k) not in source_of:
+                raise ValueError(f"fuse_wiring: input {input_name!r} of {name!r} is not "
+                                 "connected")
+            src, src_k = source_of[(name, k)]
+            key = f"{src.get_name()}.{src.get_output_port(src_k).get_name()}"
+            if key not in sources:
+                sources[key] = (src, src_k)
+                inputs.append((key, size))
+            local[input_name] = key
+            moved[(name, k, "in")] = list(sources).index(key)
+        for k, (output_name, pieces) in enumerate(outs):
+            dsts = destinations.get((name, k), [])
+            if not dsts and (name, k) not in keep:
+                continue
+            moved[(name, k, "out")] = len(outputs)
+            outputs.append((f"{name}.{output_name}",
+                            [(local[src], offset, count) for src, offset, count in pieces]))
+            targets.append(dsts)
+    for name in wirings:
+        builder.RemoveSystem(builder.GetMutableSubsystemByName(name))
+    fused = wiring(inputs, outputs)
+    spec = fused.wiring_spec
+    fused = builder.AddNamedSystem(FUSED_WIRING, fused)
+    for key, (src, src_k) in sources.items():
+        builder.Connect(src.get_output_port(src_k), fused.GetInputPort(key))
+    for k, dsts in enumerate(targets):
+        for dst, dst_k in dsts:
+            builder.Connect(fused.get_output_port(k), dst.get_input_port(dst_k))
+    return {(name, k, kind): (FUSED_WIRING, index)
+            for (name, k, kind), index in moved.items()}, spec

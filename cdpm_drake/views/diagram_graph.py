@@ -97,10 +97,16 @@ def overview_graphviz(diagram, title: str | None = None) -> str:
     by_name = {s.get_name(): k for k, s in enumerate(systems)}
     flat = getattr(diagram, "flat_blocks", {})
     in_block = {by_name[name]: block for block, info in flat.items() for name in info["systems"]}
-    # Nodes: [name, kind, inputs, outputs, shaded]; where each system's ports land on them.
+    # The blocks' fused wiring (diagram.fused_wiring) is not drawn: edges go through it.
+    fused = getattr(diagram, "fused_wiring", None)
+    wiring_k = by_name[fused["system"]] if fused else None
+    # Nodes: [name, kind, inputs, outputs, shaded]; where each system's ports land on them
+    # (in_at: a list, as one input of the fused wiring can be several blocks' inputs).
     nodes, node_of, in_at, out_at = [], {}, {}, {}
     for k, system in enumerate(systems):
         block = in_block.get(k)
+        if k == wiring_k:
+            continue
         if block is None:
             kind = _short_type(system)
             if hasattr(system, "GetSystems"):  # a sub-diagram, collapsed: say what is inside
@@ -112,7 +118,7 @@ def overview_graphviz(diagram, title: str | None = None) -> str:
                            for p in range(system.num_output_ports())],
                           hasattr(system, "GetSystems")])
             for p in range(system.num_input_ports()):
-                in_at[(k, p)] = (node_of[k], p)
+                in_at.setdefault((k, p), []).append((node_of[k], p))
             for p in range(system.num_output_ports()):
                 out_at[(k, p)] = (node_of[k], p)
         elif block not in (n[0] for n in nodes):
@@ -120,23 +126,42 @@ def overview_graphviz(diagram, title: str | None = None) -> str:
             j = len(nodes)
             # Its parts by their own names (the block's main system: by its class).
             parts = [name[len(block) + 1:] if name != block else
-                     _short_type(systems[by_name[name]]) for name in info["systems"]]
+                     _short_type(systems[by_name[name]])
+                     for name in sorted(info["systems"] + info.get("wired", ()),
+                                        key=info.get("order", ()).index)]
             nodes.append([block, _inside(parts), list(info["inputs"]),
                           list(info["outputs"]), True])
             for i, ports in enumerate(info["inputs"].values()):
                 for name, p in ports:
-                    in_at[(by_name[name], p)] = (j, i)
+                    in_at.setdefault((by_name[name], p), []).append((j, i))
             for i, (name, p) in enumerate(info["outputs"].values()):
                 out_at[(by_name[name], p)] = (j, i)
             for name in info["systems"]:
                 node_of[by_name[name]] = j
     index = {id(s): k for k, s in enumerate(systems)}
     edges = set()
-    for (dst, dst_k), (src, src_k) in diagram.connection_map().items():
-        s, d = (index[id(src)], int(src_k)), (index[id(dst)], int(dst_k))
-        if node_of[s[0]] == node_of[d[0]] or s not in out_at or d not in in_at:
-            continue  # inside one flat block
-        edges.add(out_at[s] + in_at[d])
+    connections = [((index[id(src)], int(src_k)), (index[id(dst)], int(dst_k)))
+                   for (dst, dst_k), (src, src_k) in diagram.connection_map().items()]
+    # Through the fused wiring: each of its outputs is an edge from every source it reads.
+    wired = {d[1]: s for s, d in connections if d[0] == wiring_k}
+    direct = []
+    for s, d in connections:
+        if d[0] == wiring_k:
+            continue
+        if s[0] != wiring_k:
+            direct.append((s, in_at.get(d, [])))
+            continue
+        if s in out_at:  # a block's output, where the block exported it
+            direct.append((s, in_at.get(d, [])))
+            continue
+        for i in fused["reads"][s[1]]:
+            # The input of d's block that this wiring input is, else d's own input.
+            targets = [t for t in in_at.get((wiring_k, i), []) if t[0] == node_of.get(d[0])]
+            direct.append((wired[i], targets or in_at.get(d, [])))
+    for s, targets in direct:
+        for t in targets:
+            if s in out_at and out_at[s][0] != t[0]:  # not inside one flat block
+                edges.add(out_at[s] + t)
     connections = sorted(edges)
     source_of = {(d, dk): (s, sk) for s, sk, d, dk in connections}
     for j, node in enumerate(nodes):
@@ -169,8 +194,8 @@ def overview_graphviz(diagram, title: str | None = None) -> str:
     for p in range(diagram.num_input_ports()):
         lines.append(f'  in{p} [shape=cds, label="{_html(diagram.get_input_port(p).get_name())}"];')
         for system, port in diagram.GetInputPortLocators(diagram.get_input_port(p).get_index()):
-            j, i = in_at[(index[id(system)], int(port))]
-            lines.append(f'  in{p} -> n{j}:i{i}:n;')
+            for j, i in in_at[(index[id(system)], int(port))]:
+                lines.append(f'  in{p} -> n{j}:i{i}:n;')
     for p in range(diagram.num_output_ports()):
         system, port = diagram.get_output_port_locator(diagram.get_output_port(p).get_index())
         j, i = out_at[(index[id(system)], int(port))]
