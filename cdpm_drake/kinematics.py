@@ -256,10 +256,3 @@ def gauss_newton_warm_stacked(offsets, x, tol, max_residual, max_iterations, out
 def reel_rates_stacked(offsets, x, out):
     """`reel_rates` on one stacked input x (6,) = [p m, v m/s]."""
     reel_rates(offsets, x[:3], x[3:], out)
-
-
-@_jit
-def simulated_reel_step_stacked(offsets, time_step, lag, max_reel_speed, x, out):
-    """`simulated_reel_step` on one stacked input x = [command (m), state]."""
-    m = offsets.shape[0]
-    return simulated_reel_step(offsets, time_step, lag, max_reel_speed, x[:m], x[m:], out)

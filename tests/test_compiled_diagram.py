@@ -16,18 +16,18 @@ from pydrake.systems.analysis import Simulator
 from pydrake.systems.framework import LeafSystem
 
 import cdpm_drake.systems
-from cdpm_drake import interference, kinematics, limits, operators, scenario, sensor
+from cdpm_drake import interference, kinematics, limits, operators, scenario, sensor, world
 from cdpm_drake.diagram import build_diagram
 from cdpm_drake.scenario import ResolvedScenario, load_scenario, resolve_scenario
 from cdpm_drake.simulation import simulate
 
 KERNELS = (interference.interference_tick, interference.interference_tick_stacked,
            kinematics.gauss_newton_warm, kinematics.gauss_newton_warm_stacked,
-           kinematics.reel_rates, kinematics.simulated_reel_step,
-           kinematics.simulated_reel_step_stacked, limits.limit_velocity_into,
+           kinematics.reel_rates, kinematics.reel_rates_stacked,
+           kinematics.simulated_reel_step, limits.limit_velocity_into,
            limits.limit_velocity_stacked,
            limits.wall_force_into, sensor.clip_into, operators._spring_force_into,
-           operators._interp_into)
+           operators._interp_into, operators.operator_force_into, world.world_tick)
 
 
 def _leaf_classes():

@@ -96,7 +96,9 @@ def test_committed_overview_fits_the_readme_and_is_shown_there():
 @pytest.mark.parametrize("plant", [SimulatedReels(), HardwareReels()], ids=["sim", "hw"])
 def test_overview_has_every_top_level_system_and_connection_with_short_names(plant):
     scenario = dataclasses.replace(load_scenario("exp3_two_pairs"), plant=plant)
-    diagram = build_diagram(scenario, BuildOptions(loggers=False))
+    # Unfused, so that every connection is one between the systems drawn; the fused diagram
+    # (the product) draws the same (tests/test_fast_calls.py).
+    diagram = build_diagram(scenario, BuildOptions(loggers=False, fuse_wiring=False))
     dot = overview_graphviz(diagram)
     nodes = _nodes(dot)
     systems = diagram.GetSystems()

@@ -1,10 +1,12 @@
 """One named Drake system per block of the paper's Fig. 5.
 
-A block is a LeafSystem (the Jacobian mapping) or a small sub-diagram: one stateless Python
-LeafSystem calling the block's compiled kernel (numba, in the math modules) once per tick,
-its state held by C++ primitives fed back (ZeroOrderHold, a discrete LinearSystem), results
-split by a C++ Demultiplexer; the admittance and the sliding average are C++ LinearSystems.
-Contexts clone and simulations repeat exactly: nothing that changes lives in Python.
+A block is a small sub-diagram: one stateless Python LeafSystem calling the block's compiled
+kernel (numba, in the math modules, bound once: kernel_call) once per tick, its state held
+by C++ primitives fed back (ZeroOrderHold, a discrete LinearSystem), its inputs stacked and
+its result split by a C++ Selector (_wiring.wiring); the admittance and the sliding average
+are C++ LinearSystems. In the product diagram the blocks are added flat and their Selectors
+fused into one (_wiring.fuse_wiring). Contexts clone and simulations repeat exactly: nothing
+that changes lives in Python.
 """
 
 from .admittance import Admittance, make_admittance

@@ -39,7 +39,7 @@ def make_anti_windup_admittance(mass: float, damping: float, time_step: float):
 class Admittance(Diagram):
     """The admittance of Fig. 5 with anti-windup: v_{k+1} = A_d u_k + B_d F_d,k, where A_d,
     B_d are `make_admittance`'s zero-order-hold matrices and u_k is the velocity actually
-    commanded at tick k (after the safety limits). All C++: a Multiplexer and a discrete
+    commanded at tick k (after the safety limits). All C++: a Selector and a discrete
     LinearSystem.
 
     While no limit acts, u_k = v_k and this is exactly 1/(M s + C). When a limit holds the

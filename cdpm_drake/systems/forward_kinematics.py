@@ -10,7 +10,7 @@ from ._wiring import stack, sub_diagram, unit_delay
 
 class ForwardKinematicsSolve(LeafSystem):
     """p from the lengths, warm-started at the previous estimate; stateless. Its inputs
-    arrive stacked by a C++ Multiplexer (one evaluation from Python, not two).
+    arrive stacked by a C++ Selector (one evaluation from Python, not two).
 
     .. pydrake_system::
 

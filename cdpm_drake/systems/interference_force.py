@@ -17,7 +17,7 @@ class InterferencePairs(LeafSystem):
     The output is `interference.result_layout`'s flat vector: F_int (3), distances, active,
     crossed, the updated side memory (P each), then s, t, intensities, gradients and
     directions. The position and the previous side memory arrive stacked by a C++
-    Multiplexer (one evaluation from Python, not two).
+    Selector (one evaluation from Python, not two).
 
     .. pydrake_system::
 

@@ -10,7 +10,7 @@ from ._wiring import stack, sub_diagram
 
 class ReelRates(LeafSystem):
     """l_dot = J(p) v (eq. 3) in one compiled call; stateless. Its inputs arrive stacked by a
-    C++ Multiplexer (one evaluation from Python, not two).
+    C++ Selector (one evaluation from Python, not two).
 
     .. pydrake_system::
 

@@ -10,7 +10,7 @@ from ._wiring import stack, sub_diagram, unit_delay
 
 class VelocityLimit(LeafSystem):
     """`limits.limit_velocity` of the desired velocity, given the previous command; stateless.
-    Its inputs arrive stacked by a C++ Multiplexer (one evaluation from Python, not three).
+    Its inputs arrive stacked by a C++ Selector (one evaluation from Python, not three).
 
     .. pydrake_system::
 

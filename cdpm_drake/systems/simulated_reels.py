@@ -15,7 +15,7 @@ class ReelStep(LeafSystem):
     """The world's next state from the reel command and the present state: one call of
     `kinematics.simulated_reel_step` per tick, then the person's hand force at the next tick
     on the new pose (the force sensor's next sample); stateless. Its inputs arrive stacked by
-    a C++ Multiplexer (one evaluation from Python, not two).
+    a C++ Selector (one evaluation from Python, not two).
 
     .. pydrake_system::
 

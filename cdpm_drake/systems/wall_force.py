@@ -3,6 +3,7 @@
 import numpy as np
 from pydrake.systems.framework import LeafSystem
 
+from ..kernel_call import bind, owned
 from ..limits import wall_force_into
 
 
@@ -21,14 +22,15 @@ class WorkspaceWallForce(LeafSystem):
 
     def __init__(self, *, lower, upper, margin, max_force):
         super().__init__()
-        self._bounds = np.array([np.asarray(lower, dtype=float), np.asarray(upper, dtype=float)])
+        self._bounds = owned([np.asarray(lower, dtype=float), np.asarray(upper, dtype=float)])
         self._margin, self._max_force = float(margin), float(max_force)
         self._p = self.DeclareVectorInputPort("p_WP", 3)
         self.DeclareVectorOutputPort("F_wall", 3, self._calc_F_wall,
                                      prerequisites_of_calc={self._p.ticket()})
-        # Compile (or load) the kernel now, not in the first tick.
-        wall_force_into(np.zeros(3), self._bounds, 1.0, 1.0, np.empty(3))
+        # Compiled (or loaded) now, not in the first tick.
+        self._wall = bind(wall_force_into, np.zeros(3), self._bounds, self._margin,
+                          self._max_force, np.empty(3))
 
     def _calc_F_wall(self, context, output):
-        wall_force_into(self._p.Eval(context), self._bounds, self._margin, self._max_force,
-                        output.get_mutable_value())
+        self._wall(self._p.Eval(context), self._bounds, self._margin, self._max_force,
+                   output.get_mutable_value())
