@@ -12,7 +12,7 @@ from pathlib import Path
 import numpy as np
 from pydrake.systems.analysis import Simulator
 
-from .diagram import build_diagram, logged_signals
+from .diagram import build_diagram, logged_signals, reserve_log
 from .scenario import (DynamicReels, ResolvedScenario, Scenario, ScenarioError, SimulatedReels,
                        resolve_scenario, scenario_to_yaml)
 
@@ -57,6 +57,7 @@ def simulate(*, scenario: Scenario | ResolvedScenario, duration: float | None = 
     if realtime_rate is not None:
         simulator.set_target_realtime_rate(float(realtime_rate))
     simulator.Initialize()
+    reserve_log(diagram, context, int(duration / scenario.time_step) + 2)  # rows 0..n, + slack
     bar = None
     if progress:
         from tqdm import tqdm

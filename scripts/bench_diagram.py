@@ -42,7 +42,7 @@ from pydrake.systems.framework import Diagram, DiagramBuilder, LeafSystem
 from pydrake.systems.primitives import MatrixGain, Multiplexer
 
 import cdpm_drake.systems
-from cdpm_drake.diagram import BuildOptions, build_diagram
+from cdpm_drake.diagram import BuildOptions, build_diagram, reserve_log
 from cdpm_drake.scenario import load_scenario
 from cdpm_drake.text import format_table
 
@@ -54,6 +54,8 @@ def run_once(scenario, options, duration):
     diagram = build_diagram(scenario, options)
     simulator = Simulator(diagram)
     simulator.Initialize()
+    # As `cdpm simulate` does (simulation.simulate): the log's rows reserved before the run.
+    reserve_log(diagram, simulator.get_mutable_context(), int(duration / 0.002) + 2)
     start = time.perf_counter()
     simulator.AdvanceTo(duration)
     return time.perf_counter() - start
