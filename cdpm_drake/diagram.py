@@ -16,7 +16,8 @@ from .scenario import (DynamicReels as DynamicReelsConfig, ResolvedScenario, Sce
                        resolve_scenario)
 from .systems import WorkspaceWallForce, add_simulated_world
 from .systems.simulated_reels import add_measured_force
-from .systems._wiring import FUSED_WIRING, FlatBlock, fuse_wiring, wiring
+from .systems._wiring import (FUSED_DELAY, FUSED_WIRING, FlatBlock, fuse_delays, fuse_wiring,
+                             wiring)
 from .systems.admittance import ADMITTANCE_MAIN, build_admittance
 from .systems.force_sensor import FORCE_SENSOR_MAIN, build_force_sensor
 from .systems.forward_kinematics import FORWARD_KINEMATICS_MAIN, build_forward_kinematics
@@ -148,21 +149,26 @@ def build_diagram(scenario: Scenario | ResolvedScenario,
     if options.tick_log is not None:
         _add_tick_log(builder, blocks, T, options.tick_log, robot, scenario)
     flat = {name: block for name, block in blocks.items() if isinstance(block, FlatBlock)}
-    moved, fused = {}, None
+    moved, fused, gone = {}, None, set()
     if options.fuse_wiring:
+        delays = {}
         for block in flat.values():
             wirings.update(block.wirings)
+            delays.update(block.delays)
+        wirings.update(fuse_delays(builder, delays))
+        gone = set(wirings) | set(delays)
         exported = {at[:2] for block in flat.values() for at in block.layout()["outputs"].values()}
         moved, fused = fuse_wiring(builder, wirings, keep=exported)
     diagram = builder.Build()
     diagram.set_name("cdpm_controller")
     # The flat blocks: which systems make each one and where its ports are
     # (block_output_port; the overview draws each as one block).
-    diagram.flat_blocks = {name: block.layout(moved) for name, block in flat.items()}
+    diagram.flat_blocks = {name: block.layout(moved, gone) for name, block in flat.items()}
     # The fused wiring, for the overview (which draws through it): {output index: the input
     # indices it reads}.
     diagram.fused_wiring = None if fused is None else {
-        "system": FUSED_WIRING,
+        "system": FUSED_WIRING, "memory": FUSED_DELAY if FUSED_DELAY in
+        {s.get_name() for s in diagram.GetSystems()} else None,
         "reads": {k: sorted({[n for n, _ in fused[0]].index(src) for src, _, _ in pieces})
                   for k, (_, pieces) in enumerate(fused[1])}}
     return diagram

@@ -25,7 +25,7 @@ from cdpm_drake.diagram import LOGGED, BuildOptions, block_output_port, build_di
 from cdpm_drake.hardware.config import HardwareReels
 from cdpm_drake.kinematics import reel_rates
 from cdpm_drake.scenario import SimulatedReels, load_scenario
-from cdpm_drake.systems._wiring import FUSED_WIRING
+from cdpm_drake.systems._wiring import FUSED_DELAY, FUSED_WIRING
 from cdpm_drake.views.diagram_graph import overview_graphviz
 
 WALL_AND_SCRIPT = ("{wall_force: {enabled: true}, operator: !ScriptedOperator "
@@ -166,9 +166,21 @@ def test_the_fused_diagram_has_one_selector_and_no_multiplexers():
     assert diagram.GetSubsystemByName(FUSED_WIRING).num_output_ports() >= 9
     assert "Multiplexer" not in kinds and "Demultiplexer" not in kinds
     plain = build_diagram(load_scenario("exp2_interaction"), BuildOptions(fuse_wiring=False))
-    # exp2: five blocks' wiring and the logger's become one system.
+    # exp2: five blocks' wiring and the logger's become one system, and the three blocks'
+    # memories (FK warm start, crossing sides, previous command) one delay.
     assert [type(s).__name__ for s in plain.GetSystems()].count("Selector") == 6
-    assert len(list(plain.GetSystems())) - len(list(diagram.GetSystems())) == 5
+    assert len(list(plain.GetSystems())) - len(list(diagram.GetSystems())) == 5 + 2
+    names = {s.get_name() for s in diagram.GetSystems()}
+    assert FUSED_DELAY in names and not names & {
+        "forward_kinematics_previous", "interference_force_side_memory",
+        "safety_limits_previous"}
+    # Its start: the FK warm start at the scenario's initial position, the rest zero.
+    context = diagram.CreateDefaultContext()
+    memory = diagram.GetSubsystemByName(FUSED_DELAY)
+    state = memory.GetMyContextFromRoot(context).get_discrete_state_vector().get_value()
+    scenario = load_scenario("exp2_interaction")
+    np.testing.assert_array_equal(state[:3], scenario.initial_position)
+    assert state.size == 3 + 21 + 3 and not np.any(state[3:])
 
 
 @pytest.mark.parametrize("plant", [SimulatedReels(), HardwareReels()], ids=["sim", "hw"])

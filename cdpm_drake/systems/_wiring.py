@@ -15,11 +15,13 @@ def unit_delay(size: int, time_step: float, initial=None):
     a cloned context and SetDefaultContext all start there."""
     x0 = np.zeros(size) if initial is None else np.asarray(initial, dtype=float)
     if not np.any(x0):
-        return ZeroOrderHold(time_step, size)
-    eye = np.eye(size)
-    delay = LinearSystem(A=np.zeros((size, size)), B=eye, C=eye, D=np.zeros((size, size)),
-                         time_period=time_step)
-    delay.configure_default_state(x0)
+        delay = ZeroOrderHold(time_step, size)
+    else:
+        eye = np.eye(size)
+        delay = LinearSystem(A=np.zeros((size, size)), B=eye, C=eye, D=np.zeros((size, size)),
+                             time_period=time_step)
+        delay.configure_default_state(x0)
+    delay.delay_spec = (float(time_step), x0.copy())  # for fuse_delays
     return delay
 
 
@@ -44,8 +46,10 @@ class FlatBlock:
         self.systems: list[str] = []
         # {output name: (source port, offset)} for outputs that are a piece of another port.
         self.pieces: dict[str, tuple] = {}
-        # {system name: wiring spec} of the block's `wiring` Selectors (see fuse_wiring).
+        # {system name: spec} of the block's `wiring` Selectors and `unit_delay`s (see
+        # fuse_wiring, fuse_delays).
         self.wirings: dict[str, tuple] = {}
+        self.delays: dict[str, tuple] = {}
         # Where the exported ports are, by (system name, port index): ports of a system that
         # fuse_wiring removes must not be touched again, only their names remapped.
         self._input_at: dict[str, list] = {}
@@ -58,6 +62,8 @@ class FlatBlock:
         self.systems.append(full)
         if hasattr(system, "wiring_spec"):
             self.wirings[full] = system.wiring_spec
+        if hasattr(system, "delay_spec"):
+            self.delays[full] = system.delay_spec
         return self._builder.AddNamedSystem(full, system)
 
     def Connect(self, source, destination):
@@ -79,17 +85,18 @@ class FlatBlock:
         for port in self.inputs[name]:
             self._builder.Connect(source, port)
 
-    def layout(self, moved=None) -> dict:
+    def layout(self, moved=None, fused=()) -> dict:
         """{"systems": names, "inputs": {port: [(system name, input index)]}, "outputs":
         {port: (system name, output index)}}: the block in a built diagram, by names. After
-        `fuse_wiring` (`moved`: what it returned), the block's wiring is no longer among its
-        systems and its ports on that wiring are where they went."""
+        `fuse_wiring` and `fuse_delays` (`moved`: what fuse_wiring returned; `fused`: the
+        names of the systems both took over), those systems are no longer among the block's
+        and its ports on the wiring are where they went."""
         moved = moved or {}
-        fused = tuple(name for name in self.systems if name in self.wirings and moved)
-        return {"systems": tuple(name for name in self.systems if name not in fused),
-                # The block's wiring that fuse_wiring took over, and the order of all its
-                # parts (for drawing the block as built).
-                "wired": fused, "order": tuple(self.systems),
+        gone = tuple(name for name in self.systems if name in fused)
+        return {"systems": tuple(name for name in self.systems if name not in gone),
+                # The block's systems that the fused ones took over, and the order of all
+                # its parts (for drawing the block as built).
+                "wired": gone, "order": tuple(self.systems),
                 "inputs": {name: [moved.get((*at, "in"), at) for at in ats]
                            for name, ats in self._input_at.items()},
                 "outputs": {name: moved.get((*at, "out"), at)
@@ -143,7 +150,8 @@ def fuse_wiring(builder, wirings: dict, keep=()) -> dict:
     """Replace the `wiring` Selectors {system name: wiring spec} of `builder` (every one
     connected, none exported) by one Selector named FUSED_WIRING that makes the same
     connections: each of its inputs is one source port (named "system.port"), each output
-    one of the old outputs (named "old system.old output"), reading the same elements.
+    one of the old outputs (named "old system.old output"), reading the same elements
+    (through any chain of the old wirings feeding each other).
     Every system costs Drake work each tick whatever it computes (events, caching, time), so
     seven Selectors cost about seven times one; the values are bit for bit the same.
     Outputs that are neither connected nor in `keep` ({(system name, output index)}) go.
@@ -156,37 +164,108 @@ def fuse_wiring(builder, wirings: dict, keep=()) -> dict:
         d, s = (dst.get_name(), int(dst_k)), (src.get_name(), int(src_k))
         source_of[d] = (src, int(src_k))
         destinations.setdefault(s, []).append((dst, int(dst_k)))
-    inputs, sources, outputs, targets, moved = [], {}, [], [], {}
+    # Every output element of every wiring, traced back through wiring feeding wiring to an
+    # outside source: (source key "system.port", element index).
+    sources, moved, resolved = {}, {}, {}
+
+    def source_key(name, k, input_name):
+        if (name, k) not in source_of:
+            raise ValueError(f"fuse_wiring: input {input_name!r} of {name!r} is not connected")
+        src, src_k = source_of[(name, k)]
+        key = f"{src.get_name()}.{src.get_output_port(src_k).get_name()}"
+        sources.setdefault(key, (src, src_k, src.get_output_port(src_k).size()))
+        return key
+
+    def elements(name, k):
+        if (name, k) not in resolved:
+            ins, outs = wirings[name]
+            index = {n: j for j, (n, _) in enumerate(ins)}
+            out = []
+            for input_name, offset, count in outs[k][1]:
+                src, src_k = source_of.get((name, index[input_name]), (None, None))
+                if src is not None and src.get_name() in wirings:
+                    out += elements(src.get_name(), src_k)[offset:offset + count]
+                else:
+                    key = source_key(name, index[input_name], input_name)
+                    out += [(key, offset + j) for j in range(int(count))]
+            resolved[(name, k)] = out
+        return resolved[(name, k)]
+
+    outputs, targets = [], []
     for name, (ins, outs) in wirings.items():
-        local = {}
-        for k, (input_name, size) in enumerate(ins):
-            if (name, k) not in source_of:
-                raise ValueError(f"fuse_wiring: input {input_name!r} of {name!r} is not "
-                                 "connected")
-            src, src_k = source_of[(name, k)]
-            key = f"{src.get_name()}.{src.get_output_port(src_k).get_name()}"
-            if key not in sources:
-                sources[key] = (src, src_k)
-                inputs.append((key, size))
-            local[input_name] = key
-            moved[(name, k, "in")] = list(sources).index(key)
-        for k, (output_name, pieces) in enumerate(outs):
-            dsts = destinations.get((name, k), [])
+        for k, (input_name, _) in enumerate(ins):
+            src = source_of.get((name, k), (None,))[0]
+            if src is None or src.get_name() not in wirings:
+                key = source_key(name, k, input_name)
+                moved[(name, k, "in")] = list(sources).index(key)
+        for k, (output_name, _) in enumerate(outs):
+            dsts = [(dst, dst_k) for dst, dst_k in destinations.get((name, k), [])
+                    if dst.get_name() not in wirings]
             if not dsts and (name, k) not in keep:
                 continue
+            pieces = []  # consecutive elements of one source as one piece
+            for key, j in elements(name, k):
+                if pieces and pieces[-1][0] == key and pieces[-1][1] + pieces[-1][2] == j:
+                    pieces[-1][2] += 1
+                else:
+                    pieces.append([key, j, 1])
             moved[(name, k, "out")] = len(outputs)
-            outputs.append((f"{name}.{output_name}",
-                            [(local[src], offset, count) for src, offset, count in pieces]))
+            outputs.append((f"{name}.{output_name}", [tuple(piece) for piece in pieces]))
             targets.append(dsts)
     for name in wirings:
         builder.RemoveSystem(builder.GetMutableSubsystemByName(name))
-    fused = wiring(inputs, outputs)
+    fused = wiring([(key, size) for key, (_, _, size) in sources.items()], outputs)
     spec = fused.wiring_spec
     fused = builder.AddNamedSystem(FUSED_WIRING, fused)
-    for key, (src, src_k) in sources.items():
+    for key, (src, src_k, _) in sources.items():
         builder.Connect(src.get_output_port(src_k), fused.GetInputPort(key))
     for k, dsts in enumerate(targets):
         for dst, dst_k in dsts:
             builder.Connect(fused.get_output_port(k), dst.get_input_port(dst_k))
     return {(name, k, kind): (FUSED_WIRING, index)
             for (name, k, kind), index in moved.items()}, spec
+
+
+# The one delay fuse_delays leaves in a diagram.
+FUSED_DELAY = "memory"
+
+
+def fuse_delays(builder, delays: dict) -> dict:
+    """Replace the `unit_delay`s {system name: delay spec} of `builder` (same period, every
+    one connected) by one `unit_delay` named FUSED_DELAY holding all their states, end to
+    end, from their initial values, with two `wiring` Selectors to stack its input and split
+    its output; returns those wirings {name: spec}, for fuse_wiring. The blocks' memories
+    then change in one state update a tick instead of one each: Drake invalidates everything
+    downstream of a state at every update. The values are bit for bit the same."""
+    if len(delays) < 2:
+        return {}
+    periods = {spec[0] for spec in delays.values()}
+    if len(periods) != 1:
+        raise ValueError(f"fuse_delays: the delays have different periods {sorted(periods)}")
+    connections = builder.connection_map()
+    source_of, destinations = {}, {}
+    for (dst, dst_k), (src, src_k) in connections.items():
+        source_of[(dst.get_name(), int(dst_k))] = src.get_output_port(src_k)
+        destinations.setdefault(src.get_name(), []).append(dst.get_input_port(dst_k))
+    sizes = {name: spec[1].size for name, spec in delays.items()}
+    sources = {name: source_of[(name, 0)] for name in delays}
+    targets = {name: destinations.get(name, []) for name in delays}
+    for name in delays:
+        builder.RemoveSystem(builder.GetMutableSubsystemByName(name))
+    start = np.concatenate([spec[1] for spec in delays.values()])
+    memory = builder.AddNamedSystem(FUSED_DELAY, unit_delay(start.size, periods.pop(), start))
+    stacked = wiring(list(sizes.items()), [("y0", [(n, 0, k) for n, k in sizes.items()])])
+    offsets = np.cumsum([0] + list(sizes.values()))
+    split = wiring([("u0", start.size)],
+                   [(n, [("u0", int(o), k)]) for (n, k), o in zip(sizes.items(), offsets)])
+    specs = {f"{FUSED_DELAY}_inputs": stacked.wiring_spec,
+             f"{FUSED_DELAY}_outputs": split.wiring_spec}
+    stacked = builder.AddNamedSystem(f"{FUSED_DELAY}_inputs", stacked)
+    split = builder.AddNamedSystem(f"{FUSED_DELAY}_outputs", split)
+    builder.Connect(stacked.get_output_port(), memory.get_input_port())
+    builder.Connect(memory.get_output_port(), split.get_input_port())
+    for name in delays:
+        builder.Connect(sources[name], stacked.GetInputPort(name))
+        for port in targets[name]:
+            builder.Connect(split.GetOutputPort(name), port)
+    return specs

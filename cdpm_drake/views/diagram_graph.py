@@ -100,12 +100,14 @@ def overview_graphviz(diagram, title: str | None = None) -> str:
     # The blocks' fused wiring (diagram.fused_wiring) is not drawn: edges go through it.
     fused = getattr(diagram, "fused_wiring", None)
     wiring_k = by_name[fused["system"]] if fused else None
+    # Nor the fused memory: the blocks' delays, drawn inside the blocks as unfused.
+    memory_k = by_name.get(fused.get("memory")) if fused else None
     # Nodes: [name, kind, inputs, outputs, shaded]; where each system's ports land on them
     # (in_at: a list, as one input of the fused wiring can be several blocks' inputs).
     nodes, node_of, in_at, out_at = [], {}, {}, {}
     for k, system in enumerate(systems):
         block = in_block.get(k)
-        if k == wiring_k:
+        if k in (wiring_k, memory_k):
             continue
         if block is None:
             kind = _short_type(system)
