@@ -5,7 +5,7 @@ Rows (best of --repeat interleaved runs each; ratios are against the product's w
 - product: the diagram as `cdpm simulate` builds it (120 s of exp2 by default, loggers on);
 - without loggers: the same, BuildOptions(loggers=False);
 - floor, Python blocks: the same diagram with every Python block's compiled math replaced by
-  a Python no-op (the LeafSystems, ports, C++ delays, Demultiplexers, LinearSystems and
+  a Python no-op (the LeafSystems, ports, C++ delays, Selectors, LinearSystems and
   loggers all still run): no optimisation of the math can beat it;
 - floor, all C++: the same shape with every Python block replaced by a C++ stand-in with
   the same ports (a Multiplexer and a zero MatrixGain in a sub-diagram): Drake's own floor
