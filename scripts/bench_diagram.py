@@ -12,7 +12,7 @@ Rows (best of --repeat interleaved runs each; ratios are against the product's w
   for this many systems, ports and events.
 
 Then where the product's time goes: one instrumented run charges each Python block's
-`_calc_*` callbacks their exclusive wall time (the wrapper costs ~0.3 us a call, so the
+output callbacks their exclusive wall time (the wrapper costs ~0.3 us a call, so the
 instrumented run is a little slower); the rest is Drake (event dispatch, caching, the C++
 blocks).
 
@@ -170,13 +170,17 @@ class BlockTimer:
         return timed
 
     def patch(self):
-        changes = []
-        for module, name, cls in _python_leaves():
-            for attr, function in list(vars(cls).items()):
-                if callable(function) and attr.startswith(("_calc_", "_update_")):
-                    label = f"{module.__name__.rsplit('.', 1)[-1]}.{name}"
-                    changes.append((cls, attr, self._wrap(label, function)))
-        return Patch(changes)
+        """Wrap every output callback a block declares (closures or methods alike)."""
+        leaves = {cls: f"{module.__name__.rsplit('.', 1)[-1]}.{name}"
+                  for module, name, cls in _python_leaves()}
+        declare = LeafSystem.DeclareVectorOutputPort
+
+        def timed_declare(system, name, size, calc, *args, **kwargs):
+            label = leaves.get(type(system))
+            if label is not None:
+                calc = self._wrap(label, calc)
+            return declare(system, name, size, calc, *args, **kwargs)
+        return Patch([(LeafSystem, "DeclareVectorOutputPort", timed_declare)])
 
 
 def _subprocess_seconds(code, env=None, repeat=1):

@@ -192,3 +192,24 @@ def test_the_overview_draws_the_fused_diagram_as_the_unfused_one(plant):
         scenario, dataclasses.replace(options, fuse_wiring=False)))
     assert fused == plain
     assert "F_int" in fused and "-> n4:i1" in fused  # F_int into the adder, through the wiring
+
+
+@pytest.mark.parametrize("module_name", ["forward_kinematics", "simulated_reels"])
+def test_the_damped_fallback_gives_the_compiled_answer(monkeypatch, module_name):
+    # When the warm Gauss-Newton does not settle, FK and the world's step finish with the
+    # damped solver of kinematics.forward_kinematics. Force that path every tick (the
+    # kernel runs, then reports failure): the logs agree with the compiled path to 1e-9.
+    module = importlib.import_module(f"cdpm_drake.systems.{module_name}")
+    scenario = load_scenario("exp2_interaction")
+    _, reference = logged_signals(*_run(scenario, BuildOptions(), 0.5))
+    real_bind = module.bind
+
+    def failing_bind(kernel, *example):
+        entry = real_bind(kernel, *example)
+        return lambda *args: entry(*args) and False
+
+    monkeypatch.setattr(module, "bind", failing_bind)
+    _, fallback = logged_signals(*_run(scenario, BuildOptions(), 0.5))
+    for key in ("p", "lengths", "F_H", "F_d", "velocity"):
+        np.testing.assert_allclose(fallback[key], reference[key], atol=1e-9, rtol=0,
+                                   err_msg=key)

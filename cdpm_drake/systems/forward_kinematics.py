@@ -28,20 +28,23 @@ class ForwardKinematicsSolve(LeafSystem):
         self._max_residual = float(max_residual)
         self._m = m = robot.num_cables
         self._inputs = self.DeclareVectorInputPort("inputs", m + 3)
-        self.DeclareVectorOutputPort("p_WP", 3, self._calc_p_WP,
-                                     prerequisites_of_calc={self._inputs.ticket()})
         # Compiled (or loaded) now, not in the first tick.
-        self._solve = bind(gauss_newton_warm_stacked, self._offsets, np.ones(m + 3), 1e-10,
-                           self._max_residual, 8, np.empty(3))
+        solve = bind(gauss_newton_warm_stacked, self._offsets, np.ones(m + 3), 1e-10,
+                     self._max_residual, 8, np.empty(3))
+        # The tick's callback is a closure over locals, not a method reading self: attribute
+        # lookups on a pybind LeafSystem cost ~0.2 us each (scripts/count_instructions.py).
+        offsets, residual, inputs = self._offsets, self._max_residual, self._inputs.Eval
 
-    def _calc_p_WP(self, context, output):
-        x = self._inputs.Eval(context)
-        out = output.get_mutable_value()
-        # Plain Gauss-Newton from a tick away converges in two or three steps; anything else
-        # (and every error message) goes through kinematics.forward_kinematics.
-        if not self._solve(self._offsets, x, 1e-10, self._max_residual, 8, out):
-            out[:] = forward_kinematics(self._robot, x[:self._m], p_guess=x[self._m:],
-                                        max_residual=self._max_residual)
+        def calc_p_WP(context, output):
+            x = inputs(context)
+            out = output.get_mutable_value()
+            # Plain Gauss-Newton from a tick away converges in two or three steps; anything
+            # else (and every error message) goes through kinematics.forward_kinematics.
+            if not solve(offsets, x, 1e-10, residual, 8, out):
+                out[:] = forward_kinematics(robot, x[:m], p_guess=x[m:], max_residual=residual)
+
+        self.DeclareVectorOutputPort("p_WP", 3, calc_p_WP,
+                                     prerequisites_of_calc={self._inputs.ticket()})
 
 
 class ForwardKinematicsEstimator(Diagram):

@@ -35,15 +35,19 @@ class InterferencePairs(LeafSystem):
         self._par = owned(params.packed)
         self._floor, self._F_max = float(params.gradient_floor), float(params.F_max)
         self._inputs = self.DeclareVectorInputPort("inputs", 3 + P)
-        self.DeclareVectorOutputPort("result", 3 + 13 * P, self._calc_result,
-                                     prerequisites_of_calc={self._inputs.ticket()})
         # Compiled (or loaded) now, not in the first tick.
-        self._tick = bind(interference_tick_stacked, self._geo, self._par, self._floor,
-                          self._F_max, np.zeros(3 + P), np.empty(3 + 13 * P))
+        tick = bind(interference_tick_stacked, self._geo, self._par, self._floor, self._F_max,
+                    np.zeros(3 + P), np.empty(3 + 13 * P))
+        # The tick's callback is a closure over locals, not a method reading self: attribute
+        # lookups on a pybind LeafSystem cost ~0.2 us each (scripts/count_instructions.py).
+        geo, par, floor, F_max, inputs = (self._geo, self._par, self._floor, self._F_max,
+                                          self._inputs.Eval)
 
-    def _calc_result(self, context, output):
-        self._tick(self._geo, self._par, self._floor, self._F_max, self._inputs.Eval(context),
-                   output.get_mutable_value())
+        def calc_result(context, output):
+            tick(geo, par, floor, F_max, inputs(context), output.get_mutable_value())
+
+        self.DeclareVectorOutputPort("result", 3 + 13 * P, calc_result,
+                                     prerequisites_of_calc={self._inputs.ticket()})
 
 
 class InterferenceForce(Diagram):

@@ -44,26 +44,35 @@ class ReelStep(LeafSystem):
         else:
             self._person = (-1, owned(np.zeros(1)), owned(np.zeros((1, 3))), owned(np.zeros(4)))
         self._inputs = self.DeclareVectorInputPort("inputs", m + state_size(m))
-        self.DeclareVectorOutputPort(
-            "next_state", state_size(m), self._calc_next_state,
-            prerequisites_of_calc={self.time_ticket(), self._inputs.ticket()})
         # Compiled (or loaded) now, not in the first tick.
-        self._tick = bind(world_tick, self._offsets, self._reel, *self._person, 0.0,
-                          np.ones(m + state_size(m)), np.empty(state_size(m)))
+        tick = bind(world_tick, self._offsets, self._reel, *self._person, 0.0,
+                    np.ones(m + state_size(m)), np.empty(state_size(m)))
         if self._force_into is not None:
             self._force_into(0.0, np.zeros(3), np.zeros(3), np.empty(3))
+        # The tick's callback is a closure over locals, not a method reading self: attribute
+        # lookups on a pybind LeafSystem cost ~0.2 us each (scripts/count_instructions.py).
+        offsets, reel, T, inputs = self._offsets, self._reel, self._T, self._inputs.Eval
+        kind, times, rows, params = self._person
+        add_hand_force, unsettled = self._add_hand_force, self._finish_unsettled
 
-    def _calc_next_state(self, context, output):
-        x = self._inputs.Eval(context)
-        out = output.get_mutable_value()
-        # The hand force is the sample the sensor reads at the next tick, t + T, on the new
-        # pose; the kernel writes it for the shipped models.
-        t_next = context.get_time() + self._T
-        if self._tick(self._offsets, self._reel, *self._person, t_next, x, out):
-            if self._person[0] < 0:
-                self._add_hand_force(t_next, out)
-            return
-        # Gauss-Newton did not settle: the damped solver (and its error messages).
+        def calc_next_state(context, output):
+            x = inputs(context)
+            out = output.get_mutable_value()
+            # The hand force is the sample the sensor reads at the next tick, t + T, on the
+            # new pose; the kernel writes it for the shipped models.
+            t_next = context.get_time() + T
+            if tick(offsets, reel, kind, times, rows, params, t_next, x, out):
+                if kind < 0:
+                    add_hand_force(t_next, out)
+            else:
+                unsettled(x, out, t_next)
+
+        self.DeclareVectorOutputPort(
+            "next_state", state_size(m), calc_next_state,
+            prerequisites_of_calc={self.time_ticket(), self._inputs.ticket()})
+
+    def _finish_unsettled(self, x, out, t_next):
+        """Gauss-Newton did not settle: the damped solver (and its error messages)."""
         m = self._m
         p = x[2 * m:2 * m + 3]
         p_new = forward_kinematics(self._robot, out[:m].copy(), p_guess=p, max_residual=np.inf)

@@ -25,12 +25,15 @@ class WorkspaceWallForce(LeafSystem):
         self._bounds = owned([np.asarray(lower, dtype=float), np.asarray(upper, dtype=float)])
         self._margin, self._max_force = float(margin), float(max_force)
         self._p = self.DeclareVectorInputPort("p_WP", 3)
-        self.DeclareVectorOutputPort("F_wall", 3, self._calc_F_wall,
-                                     prerequisites_of_calc={self._p.ticket()})
         # Compiled (or loaded) now, not in the first tick.
-        self._wall = bind(wall_force_into, np.zeros(3), self._bounds, self._margin,
-                          self._max_force, np.empty(3))
+        wall = bind(wall_force_into, np.zeros(3), self._bounds, self._margin, self._max_force,
+                    np.empty(3))
+        # The tick's callback is a closure over locals, not a method reading self: attribute
+        # lookups on a pybind LeafSystem cost ~0.2 us each (scripts/count_instructions.py).
+        bounds, margin, max_force, p = self._bounds, self._margin, self._max_force, self._p.Eval
 
-    def _calc_F_wall(self, context, output):
-        self._wall(self._p.Eval(context), self._bounds, self._margin, self._max_force,
-                   output.get_mutable_value())
+        def calc_F_wall(context, output):
+            wall(p(context), bounds, margin, max_force, output.get_mutable_value())
+
+        self.DeclareVectorOutputPort("F_wall", 3, calc_F_wall,
+                                     prerequisites_of_calc={self._p.ticket()})
