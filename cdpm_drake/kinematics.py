@@ -253,6 +253,14 @@ def gauss_newton_warm_stacked(offsets, x, tol, max_residual, max_iterations, out
 
 
 @_jit
+def simulated_reel_step_stacked(offsets, reel, x, out):
+    """`simulated_reel_step` on one stacked input x = [command (m), state]; reel =
+    [time_step s, lag factor, max_reel_speed m/s]."""
+    m = offsets.shape[0]
+    return simulated_reel_step(offsets, reel[0], reel[1], reel[2], x[:m], x[m:], out)
+
+
+@_jit
 def reel_rates_stacked(offsets, x, out):
     """`reel_rates` on one stacked input x (6,) = [p m, v m/s]."""
     reel_rates(offsets, x[:3], x[3:], out)

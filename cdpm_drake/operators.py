@@ -21,8 +21,8 @@ class OperatorError(ValueError):
     """A bad operator description; the message names the field and the value."""
 
 
-# The shipped models as one compiled kernel (operator_force_into), by kind: a block that
-# ticks the person with the reels calls it inside its own kernel (see world.py).
+# The shipped models as one compiled kernel (operator_force_into), by kind: the simulated
+# reels tick the person with it (operator_force_on_state), no Python model call per tick.
 NO_FORCE, FORCE_PROFILE, SPRING_HAND = 0, 1, 2
 
 
@@ -185,6 +185,14 @@ class SpringHand:
         release = math.inf if self.release_time is None else self.release_time
         return (SPRING_HAND, self.profile.times, self.profile.forces,
                 np.array([self.K, self.D, self.F_max, release]))
+
+
+@_jit
+def operator_force_on_state(kind, times, rows, params, t, state, m):
+    """`operator_force_into` on the simulated world's state (systems.simulated_reels: p at
+    m, v at m + 3, the force written at 2 m + 6, for m cables)."""
+    operator_force_into(kind, times, rows, params, t, state[m:m + 3], state[m + 3:m + 6],
+                        state[2 * m + 6:2 * m + 9])
 
 
 @_jit

@@ -375,7 +375,7 @@ MUTANTS = [
       "the braking cap at the faces is the continuous curve, not the discrete one",
       ("tests/test_limits.py",)),
     M("hand_force_a_tick_early", "cdpm_drake/systems/simulated_reels.py",
-      "t_next = context.get_time() + self._T",
+      "t_next = context.get_time() + T",
       "t_next = context.get_time()",
       "the world's kernel samples the person at this tick, not at the next one",
       ("tests/test_reference_logs.py", "tests/test_systems.py")),

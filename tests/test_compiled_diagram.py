@@ -16,7 +16,7 @@ from pydrake.systems.analysis import Simulator
 from pydrake.systems.framework import LeafSystem
 
 import cdpm_drake.systems
-from cdpm_drake import interference, kinematics, limits, operators, scenario, sensor, world
+from cdpm_drake import interference, kinematics, limits, operators, scenario, sensor
 from cdpm_drake.diagram import build_diagram
 from cdpm_drake.scenario import ResolvedScenario, load_scenario, resolve_scenario
 from cdpm_drake.simulation import simulate
@@ -27,7 +27,8 @@ KERNELS = (interference.interference_tick, interference.interference_tick_stacke
            kinematics.simulated_reel_step, limits.limit_velocity_into,
            limits.limit_velocity_stacked,
            limits.wall_force_into, sensor.clip_into, operators._spring_force_into,
-           operators._interp_into, operators.operator_force_into, world.world_tick)
+           operators._interp_into, operators.operator_force_into,
+           operators.operator_force_on_state, kinematics.simulated_reel_step_stacked)
 
 
 def _leaf_classes():

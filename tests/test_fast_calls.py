@@ -4,8 +4,8 @@
   per call; safe only while every tick passes the argument types it was bound for, which is
   checked here call by call.
 - kernel_call.owned: constants in numba-managed memory, same values.
-- world.world_tick: the simulated reels and the shipped operator models in one kernel; the
-  force equals each model's own `force` exactly.
+- operators.operator_force_into: the shipped operator models as one kernel, ticked by the
+  simulated reels; the force equals each model's own `force` exactly.
 - fuse_wiring: the blocks' Selectors fused into one system; the logs are bit for bit those of
   the unfused diagram, every block port reads the same, and the overview draws the same.
 The speed itself is measured by scripts/bench_diagram.py and scripts/count_instructions.py.
@@ -85,7 +85,8 @@ def test_every_bound_call_passes_the_types_it_was_bound_for(monkeypatch, name, o
     simulator.Initialize()
     simulator.AdvanceTo(0.1)
     expected = {"clip_into", "gauss_newton_warm_stacked", "interference_tick_stacked",
-                "limit_velocity_stacked", "reel_rates_stacked", "world_tick"}
+                "limit_velocity_stacked", "reel_rates_stacked", "simulated_reel_step_stacked",
+                "operator_force_on_state"}
     expected |= {"wall_force_into"} if overlay else set()
     assert set(calls) == expected
     assert min(calls.values()) >= 50  # every tick went through the checks

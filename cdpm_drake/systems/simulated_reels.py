@@ -5,9 +5,8 @@ from pydrake.systems.framework import Diagram, LeafSystem
 from pydrake.systems.primitives import Adder
 
 from ..kernel_call import bind, owned
-from ..kinematics import cable_lengths, forward_kinematics
-from ..operators import ForceProfile, NoForce, SpringHand
-from ..world import world_tick
+from ..kinematics import cable_lengths, forward_kinematics, simulated_reel_step_stacked
+from ..operators import ForceProfile, NoForce, SpringHand, operator_force_on_state
 from ._wiring import sub_diagram, unit_delay, wiring
 
 
@@ -37,7 +36,7 @@ class ReelStep(LeafSystem):
         self._operator = operator
         self._force_into = getattr(operator, "force_into", None)
         # The shipped models (exactly these classes: a subclass may change the force) are
-        # ticked inside the world's kernel; any other model is called from Python after it.
+        # ticked by a compiled kernel; any other model is called from Python.
         if type(operator) in (NoForce, ForceProfile, SpringHand):
             kind, times, rows, params = operator.compiled()
             self._person = (int(kind), owned(times), owned(rows), owned(params))
@@ -45,8 +44,12 @@ class ReelStep(LeafSystem):
             self._person = (-1, owned(np.zeros(1)), owned(np.zeros((1, 3))), owned(np.zeros(4)))
         self._inputs = self.DeclareVectorInputPort("inputs", m + state_size(m))
         # Compiled (or loaded) now, not in the first tick.
-        tick = bind(world_tick, self._offsets, self._reel, *self._person, 0.0,
+        # Two kernels, each in the file of the functions it calls: numba's cache does not see
+        # a change in a function of another file (a kernel calling across files would keep
+        # running the old code after an edit).
+        step = bind(simulated_reel_step_stacked, self._offsets, self._reel,
                     np.ones(m + state_size(m)), np.empty(state_size(m)))
+        person = bind(operator_force_on_state, *self._person, 0.0, np.zeros(state_size(m)), m)
         if self._force_into is not None:
             self._force_into(0.0, np.zeros(3), np.zeros(3), np.empty(3))
         # The tick's callback is a closure over locals, not a method reading self: attribute
@@ -59,19 +62,20 @@ class ReelStep(LeafSystem):
             x = inputs(context)
             out = output.get_mutable_value()
             # The hand force is the sample the sensor reads at the next tick, t + T, on the
-            # new pose; the kernel writes it for the shipped models.
+            # new pose.
             t_next = context.get_time() + T
-            if tick(offsets, reel, kind, times, rows, params, t_next, x, out):
-                if kind < 0:
-                    add_hand_force(t_next, out)
+            if not step(offsets, reel, x, out):
+                unsettled(x, out)
+            if kind >= 0:
+                person(kind, times, rows, params, t_next, out, m)
             else:
-                unsettled(x, out, t_next)
+                add_hand_force(t_next, out)
 
         self.DeclareVectorOutputPort(
             "next_state", state_size(m), calc_next_state,
             prerequisites_of_calc={self.time_ticket(), self._inputs.ticket()})
 
-    def _finish_unsettled(self, x, out, t_next):
+    def _finish_unsettled(self, x, out):
         """Gauss-Newton did not settle: the damped solver (and its error messages)."""
         m = self._m
         p = x[2 * m:2 * m + 3]
@@ -79,7 +83,6 @@ class ReelStep(LeafSystem):
         out[:m] = cable_lengths(self._robot, p_new)
         out[m:m + 3] = p_new
         out[m + 3:m + 6] = (p_new - p) / self._T
-        self._add_hand_force(t_next, out)
 
     def _add_hand_force(self, t, out):
         m = self._m
