@@ -157,7 +157,7 @@ def build_diagram(scenario: Scenario | ResolvedScenario,
             delays.update(block.delays)
         wirings.update(fuse_delays(builder, delays))
         gone = set(wirings) | set(delays)
-        exported = {at[:2] for block in flat.values() for at in block.layout()["outputs"].values()}
+        exported = {at for block in flat.values() for at in block.layout()["outputs"].values()}
         moved, fused = fuse_wiring(builder, wirings, keep=exported)
     diagram = builder.Build()
     diagram.set_name("cdpm_controller")
@@ -166,11 +166,16 @@ def build_diagram(scenario: Scenario | ResolvedScenario,
     diagram.flat_blocks = {name: block.layout(moved, gone) for name, block in flat.items()}
     # The fused wiring, for the overview (which draws through it): {output index: the input
     # indices it reads}.
-    diagram.fused_wiring = None if fused is None else {
-        "system": FUSED_WIRING, "memory": FUSED_DELAY if FUSED_DELAY in
-        {s.get_name() for s in diagram.GetSystems()} else None,
-        "reads": {k: sorted({[n for n, _ in fused[0]].index(src) for src, _, _ in pieces})
-                  for k, (_, pieces) in enumerate(fused[1])}}
+    if fused is None:
+        diagram.fused_wiring = None
+    else:
+        inputs, outputs = fused
+        index = {name: k for k, (name, _) in enumerate(inputs)}
+        diagram.fused_wiring = {
+            "system": FUSED_WIRING,
+            "memory": FUSED_DELAY if diagram.HasSubsystemNamed(FUSED_DELAY) else None,
+            "reads": {k: sorted({index[src] for src, _, _ in pieces})
+                      for k, (_, pieces) in enumerate(outputs)}}
     return diagram
 
 
@@ -230,11 +235,7 @@ def _add_loggers(builder, blocks, T):
     # another port (FlatBlock.pieces, e.g. the interference block's result) is selected
     # from that port, so the logger evaluates no splitting of its own.
     sources, pieces = {}, []
-    for key, system_name, port_name in LOGGED:
-        block = blocks.get(system_name)
-        if block is None:
-            continue
-        port = block.GetOutputPort(port_name)
+    for _, block, port_name, port in _logged_ports(blocks):
         source, offset = getattr(block, "pieces", {}).get(port_name, (port, 0))
         name = f"{source.get_system().get_name()}.{source.get_name()}"
         sources.setdefault(name, source)
@@ -251,8 +252,7 @@ def _add_loggers(builder, blocks, T):
 
 def reserve_log(diagram, context, ticks: int) -> None:
     """Make room in the logger for `ticks` rows before a run (no-op without a logger): a
-    growing log is copied at each doubling, and on this kind of machine touching fresh
-    memory mid-run costs more than the copy (2 % of a 120 s run of exp2)."""
+    growing log is copied at each doubling (2 % of a 120 s run of exp2)."""
     if diagram.HasSubsystemNamed(LOG_SINK):
         diagram.GetSubsystemByName(LOG_SINK).FindMutableLog(context).Reserve(int(ticks))
 
@@ -274,15 +274,17 @@ def logged_signals(diagram, context) -> tuple[np.ndarray, dict]:
 
 
 def _logged_ports(blocks):
+    """(key, block, port name, port) of every LOGGED signal whose block the diagram has."""
     for key, system_name, port_name in LOGGED:
         if system_name in blocks:
-            yield key, blocks[system_name].GetOutputPort(port_name)
+            block = blocks[system_name]
+            yield key, block, port_name, block.GetOutputPort(port_name)
 
 
 def _add_tick_log(builder, blocks, T, path, robot, scenario):
     from .hardware.tick_log_sink import TickLogSink
 
-    ports = dict(_logged_ports(blocks))
+    ports = {key: port for key, _, _, port in _logged_ports(blocks)}
     sink = builder.AddNamedSystem("tick_log", TickLogSink(
         path, {key: port.size() for key, port in ports.items()}, time_step=T,
         metadata={"robot": robot.name, "scenario": scenario.name, "time_step": T}))

@@ -32,8 +32,7 @@ def bind(kernel, *example):
     Returns `kernel` itself where there is no compiled entry (NUMBA_DISABLE_JIT)."""
     kernel(*example)
     try:
-        signature = tuple(numba.typeof(value) for value in example)
-        return kernel.overloads[signature].entry_point
+        return kernel.overloads[signature_of(*example)].entry_point
     except (AttributeError, KeyError):
         return kernel
 

@@ -92,11 +92,10 @@ class FlatBlock:
         names of the systems both took over), those systems are no longer among the block's
         and its ports on the wiring are where they went."""
         moved = moved or {}
-        gone = tuple(name for name in self.systems if name in fused)
-        return {"systems": tuple(name for name in self.systems if name not in gone),
-                # The block's systems that the fused ones took over, and the order of all
-                # its parts (for drawing the block as built).
-                "wired": gone, "order": tuple(self.systems),
+        return {"systems": tuple(name for name in self.systems if name not in fused),
+                # All the block's systems as built, the fused ones' parts included (for
+                # drawing the block as built).
+                "parts": tuple(self.systems),
                 "inputs": {name: [moved.get((*at, "in"), at) for at in ats]
                            for name, ats in self._input_at.items()},
                 "outputs": {name: moved.get((*at, "out"), at)
@@ -146,7 +145,7 @@ def note_piece(builder, name, source, offset):
 FUSED_WIRING = "wiring"
 
 
-def fuse_wiring(builder, wirings: dict, keep=()) -> dict:
+def fuse_wiring(builder, wirings: dict, keep=()) -> tuple[dict, tuple]:
     """Replace the `wiring` Selectors {system name: wiring spec} of `builder` (every one
     connected, none exported) by one Selector named FUSED_WIRING that makes the same
     connections: each of its inputs is one source port (named "system.port"), each output
@@ -166,14 +165,16 @@ def fuse_wiring(builder, wirings: dict, keep=()) -> dict:
         destinations.setdefault(s, []).append((dst, int(dst_k)))
     # Every output element of every wiring, traced back through wiring feeding wiring to an
     # outside source: (source key "system.port", element index).
-    sources, moved, resolved = {}, {}, {}
+    sources, index_of, moved, resolved = {}, {}, {}, {}
 
     def source_key(name, k, input_name):
         if (name, k) not in source_of:
             raise ValueError(f"fuse_wiring: input {input_name!r} of {name!r} is not connected")
         src, src_k = source_of[(name, k)]
         key = f"{src.get_name()}.{src.get_output_port(src_k).get_name()}"
-        sources.setdefault(key, (src, src_k, src.get_output_port(src_k).size()))
+        if key not in sources:
+            index_of[key] = len(sources)
+            sources[key] = (src, src_k, src.get_output_port(src_k).size())
         return key
 
     def elements(name, k):
@@ -196,8 +197,7 @@ def fuse_wiring(builder, wirings: dict, keep=()) -> dict:
         for k, (input_name, _) in enumerate(ins):
             src = source_of.get((name, k), (None,))[0]
             if src is None or src.get_name() not in wirings:
-                key = source_key(name, k, input_name)
-                moved[(name, k, "in")] = list(sources).index(key)
+                moved[(name, k, "in")] = index_of[source_key(name, k, input_name)]
         for k, (output_name, _) in enumerate(outs):
             dsts = [(dst, dst_k) for dst, dst_k in destinations.get((name, k), [])
                     if dst.get_name() not in wirings]

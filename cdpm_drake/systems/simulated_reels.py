@@ -50,7 +50,7 @@ class ReelStep(LeafSystem):
         step = bind(simulated_reel_step_stacked, self._offsets, self._reel,
                     np.ones(m + state_size(m)), np.empty(state_size(m)))
         person = bind(operator_force_on_state, *self._person, 0.0, np.zeros(state_size(m)), m)
-        if self._force_into is not None:
+        if self._person[0] < 0 and self._force_into is not None:  # ticked from Python
             self._force_into(0.0, np.zeros(3), np.zeros(3), np.empty(3))
         # The tick's callback is a closure over locals, not a method reading self: attribute
         # lookups on a pybind LeafSystem cost ~0.2 us each (scripts/count_instructions.py).

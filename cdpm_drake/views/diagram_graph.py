@@ -129,8 +129,7 @@ def overview_graphviz(diagram, title: str | None = None) -> str:
             # Its parts by their own names (the block's main system: by its class).
             parts = [name[len(block) + 1:] if name != block else
                      _short_type(systems[by_name[name]])
-                     for name in sorted(info["systems"] + info.get("wired", ()),
-                                        key=info.get("order", ()).index)]
+                     for name in info.get("parts", info["systems"])]
             nodes.append([block, _inside(parts), list(info["inputs"]),
                           list(info["outputs"]), True])
             for i, ports in enumerate(info["inputs"].values()):
