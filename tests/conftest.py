@@ -59,3 +59,20 @@ def write_robot(tmp_path):
         return path
 
     return write
+
+
+def case_registry(cases: dict):
+    """A `covers(*keys)` decorator that registers the keys a test checks in `cases` ({key:
+    test name}), refusing a key registered twice (the wiring walks then find every key's
+    case)."""
+
+    def covers(*keys):
+        def mark(fn):
+            for key in keys:
+                assert key not in cases, f"{key} registered twice"
+                cases[key] = fn.__name__
+            return fn
+
+        return mark
+
+    return covers

@@ -58,6 +58,19 @@ def _residual(robot, log, k):
 # --- The pieces ------------------------------------------------------------------------------
 
 
+
+def _pretensioned(scenario):
+    """(robot, robot.dynamics, check_dynamic_reels' distribution, p0 m, L0 m): the rest
+    lengths that stretch each cable at p0 to its pretension (L = L0 (1 + T / EA)), computed
+    here from the distribution, not taken from the plant."""
+    robot = scenario_robot(scenario)
+    d = robot.dynamics
+    dist = check_dynamic_reels(scenario, robot)
+    p0 = np.asarray(scenario.initial_position)
+    L0 = np.linalg.norm(robot.reels - (p0 + robot.attachments), axis=1) * d.EA / (
+        d.EA + dist.tensions)
+    return robot, d, dist, p0, L0
+
 def test_reel_step_fixed_points_are_the_drive_law_closed_forms():
     # inertia dw/dt = K (u - w) - b w - F_c sgn w, K = bandwidth * inertia. Running: the
     # fixed point w = (K u - F_c sgn u) / (K + b); stuck: |K u| <= F_c keeps w = 0.
@@ -158,12 +171,7 @@ def test_a_pull_unloads_the_cable_statics_predicts_when_it_predicts():
     scenario = load_scenario("exp2_interaction", f"{{{EXP2_START}, operator: !ScriptedOperator "
                              "{times: [0.0, 4.0], forces: [[0, 0, 0], [0, 0, 100.0]]}, "
                              "plant: !DynamicReels {}}")
-    robot = scenario_robot(scenario)
-    d = robot.dynamics
-    dist = check_dynamic_reels(scenario, robot)
-    p0 = np.asarray(scenario.initial_position)
-    L0 = np.linalg.norm(robot.reels - (p0 + robot.attachments), axis=1) * d.EA / (
-        d.EA + dist.tensions)
+    robot, d, dist, p0, L0 = _pretensioned(scenario)
 
     def tensions(x):
         R = _rodrigues(x[3:])
@@ -228,12 +236,7 @@ def test_undamped_free_oscillation_keeps_its_energy_within_the_integration_error
                              "{viscous_friction: 0.0, coulomb_friction: 0.0}")
     scenario = load_scenario("exp2_interaction", f"{{{EXP2_START}, robot: {robot_file}, "
                              "operator: !NoOperator {}, plant: !DynamicReels {}}")
-    robot = scenario_robot(scenario)
-    d = robot.dynamics
-    dist = check_dynamic_reels(scenario, robot)
-    p0 = np.asarray(scenario.initial_position)
-    L0 = np.linalg.norm(robot.reels - (p0 + robot.attachments), axis=1) * d.EA / (
-        d.EA + dist.tensions)
+    robot, d, dist, p0, L0 = _pretensioned(scenario)
     diagram, _ = _plant_only(scenario)
     mbp = diagram.GetSubsystemByName("reels").GetSubsystemByName("platform_plant")
     simulator = Simulator(diagram)

@@ -39,6 +39,18 @@ def _hardware(scenario_name, server, extra=""):
         f"{extra}}}"))
 
 
+
+def _run_against(server, out, duration, *, watchdog_ticks=None):
+    """`cdpm run exp1_no_interaction` for `duration` s into `out` against `server` (stopped
+    afterwards, whatever happens); returns the exit code."""
+    extra = "" if watchdog_ticks is None else f", watchdog_ticks: {watchdog_ticks}"
+    try:
+        return main(["run", "exp1_no_interaction", "--duration", str(duration), "--out",
+                     str(out), "--scenario-text",
+                     f"plant: !HardwareReels {{port: {server.address[1]}{extra}}}"])
+    finally:
+        server.stop()
+
 def test_a_run_against_the_emulator_matches_the_simulation(tmp_path):
     """Experiment 1 (the interference force alone moves the platform) for 5 s, on the emulated
     bridge and in pure simulation: positions agree within 1 mm at every tick. What differs is
@@ -143,12 +155,7 @@ def _shutdown_burst(server) -> int:
 def test_a_completed_run_logs_compute_time_and_ends_with_one_shutdown_burst(tmp_path, capsys):
     scenario = load_scenario("exp1_no_interaction")
     server = _server(scenario)
-    try:
-        code = main(["run", "exp1_no_interaction", "--duration", "0.5", "--out",
-                     str(tmp_path / "run"), "--scenario-text",
-                     f"plant: !HardwareReels {{port: {server.address[1]}, watchdog_ticks: 25}}"])
-    finally:
-        server.stop()
+    code = _run_against(server, tmp_path / "run", 0.5, watchdog_ticks=25)
     out = capsys.readouterr().out
     assert code == 0, out
     assert _shutdown_burst(server) == 3
@@ -198,12 +205,7 @@ def test_refusing_to_enable_hints_at_an_emulator_playing_something_else(tmp_path
     lengths = cable_lengths(robot, np.array(scenario.initial_position))
     lengths[2] += 0.05
     server = ReelBridgeServer(ReelBridge(robot, lengths, time_constant=0.0)).start()
-    try:
-        code = main(["run", "exp1_no_interaction", "--duration", "1", "--out",
-                     str(tmp_path / "run"), "--scenario-text",
-                     f"plant: !HardwareReels {{port: {server.address[1]}}}"])
-    finally:
-        server.stop()
+    code = _run_against(server, tmp_path / "run", 1)
     err = capsys.readouterr().err
     assert code == 1
     assert "do not fit robot" in err
@@ -216,12 +218,7 @@ def test_a_bridge_fault_at_startup_hints_at_a_reset(tmp_path, capsys):
 
     server = _server(load_scenario("exp1_no_interaction"))
     server.bridge.raise_fault(FAULT_COMMAND_TIMEOUT)  # left by a controller killed earlier
-    try:
-        code = main(["run", "exp1_no_interaction", "--duration", "1", "--out",
-                     str(tmp_path / "run"), "--scenario-text",
-                     f"plant: !HardwareReels {{port: {server.address[1]}}}"])
-    finally:
-        server.stop()
+    code = _run_against(server, tmp_path / "run", 1)
     err = capsys.readouterr().err
     assert code == 1
     assert "reports fault bits 0x0010 (COMMAND_TIMEOUT) at startup" in err
@@ -236,12 +233,7 @@ def test_a_fault_log_is_plotted_and_a_killed_run_is_recovered(tmp_path, capsys):
     server = _server(scenario)
     server.inject(FaultPlan(stop=True, after=0.4))
     run_dir = tmp_path / "run"
-    try:
-        code = main(["run", "exp1_no_interaction", "--duration", "5", "--out", str(run_dir),
-                     "--scenario-text",
-                     f"plant: !HardwareReels {{port: {server.address[1]}, watchdog_ticks: 25}}"])
-    finally:
-        server.stop()
+    code = _run_against(server, run_dir, 5, watchdog_ticks=25)
     assert code == 1
     capsys.readouterr()
     # The bridge went silent but still reads: one burst of 3 zero commands, although the
@@ -301,12 +293,7 @@ def test_run_refuses_a_simulated_plant(tmp_path):
 def test_cdpm_run_cli_reports_timing_and_packets(tmp_path, capsys):
     scenario = load_scenario("exp1_no_interaction")
     server = _server(scenario)
-    try:
-        code = main(["run", "exp1_no_interaction", "--duration", "1", "--out", str(tmp_path),
-                     "--scenario-text",
-                     f"plant: !HardwareReels {{port: {server.address[1]}, watchdog_ticks: 25}}"])
-    finally:
-        server.stop()
+    code = _run_against(server, tmp_path, 1, watchdog_ticks=25)
     out = capsys.readouterr().out
     assert code == 0, out
     assert "run ended: completed" in out

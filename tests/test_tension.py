@@ -83,17 +83,22 @@ def _one_dim_reference(W, wrench, floor):
     return least, -res.fun
 
 
-@pytest.mark.parametrize("swaps,p,floor", [
-    ([(1, 3)], EXP2_START, 5.0), ([(1, 3)], EXP2_START, 0.0), ([(1, 3)], EXP2_START, 8.0),
-    ([], [1.5, 2.08, 1.56], 5.0), ([(1, 3), (5, 7)], [1.5, 2.72, 1.56], 2.0)])
-def test_feasible_distribution_is_the_least_norm_one_with_the_floor(swaps, p, floor):
+def _distribution_and_reference(swaps, p, floor):
+    """(W, wrench, tension_distribution, _one_dim_reference) for the paper robot with these
+    attachment swaps at p, holding a 2.5 kg platform with tensions >= floor (N)."""
     robot = PAPER
     for s in swaps:
         robot = robot.with_swapped_attachments(*s)
     W = wrench_matrix(robot, p)
     wrench = gravity_wrench(2.5)
-    d = tension_distribution(W, wrench, floor)
-    least, _ = _one_dim_reference(W, wrench, floor)
+    return W, wrench, tension_distribution(W, wrench, floor), _one_dim_reference(W, wrench, floor)
+
+
+@pytest.mark.parametrize("swaps,p,floor", [
+    ([(1, 3)], EXP2_START, 5.0), ([(1, 3)], EXP2_START, 0.0), ([(1, 3)], EXP2_START, 8.0),
+    ([], [1.5, 2.08, 1.56], 5.0), ([(1, 3), (5, 7)], [1.5, 2.72, 1.56], 2.0)])
+def test_feasible_distribution_is_the_least_norm_one_with_the_floor(swaps, p, floor):
+    W, wrench, d, (least, _) = _distribution_and_reference(swaps, p, floor)
     assert least is not None and d.feasible
     np.testing.assert_allclose(d.tensions, least, atol=1e-7)
     assert d.tensions.min() >= floor
@@ -108,13 +113,7 @@ def test_feasible_distribution_is_the_least_norm_one_with_the_floor(swaps, p, fl
     ([(1, 3), (5, 7)], [2.22, 3.22, 1.03], 1.0, (4, 5))])  # exp3's start
 def test_infeasible_distribution_reports_the_best_minimum_and_its_cables(swaps, p, floor,
                                                                           slack):
-    robot = PAPER
-    for s in swaps:
-        robot = robot.with_swapped_attachments(*s)
-    W = wrench_matrix(robot, p)
-    wrench = gravity_wrench(2.5)
-    d = tension_distribution(W, wrench, floor)
-    least, best = _one_dim_reference(W, wrench, floor)
+    W, wrench, d, (least, best) = _distribution_and_reference(swaps, p, floor)
     assert least is None and not d.feasible
     assert d.best_min == pytest.approx(best, abs=1e-4)
     assert tuple(k + 1 for k in d.slack) == slack

@@ -18,6 +18,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from conftest import case_registry
 
 from cdpm_drake import cli
 from cdpm_drake.hardware import emulator as E
@@ -31,19 +32,9 @@ T = 0.002
 # The figures every log gets (views/plots.py may add more).
 PAPER_FIGURES = {"distances.png", "forces.png", "trajectory.png", "logistic.png"}
 CASES: dict[str, str] = {}
-
-
-def covers(*keys):
-    """Register the options a test checks: "<command> --option", or "<command> <dest>" for a
-    positional argument."""
-
-    def mark(fn):
-        for key in keys:
-            assert key not in CASES, f"{key} registered twice"
-            CASES[key] = fn.__name__
-        return fn
-
-    return mark
+# Registers the options a test checks: "<command> --option", or "<command> <dest>" for a
+# positional argument.
+covers = case_registry(CASES)
 
 
 # --- where a run's files are (one place to adapt when the layout changes) ------------------

@@ -38,7 +38,7 @@ from cdpm_drake.scenario import (Admittance, Interference, Limits, Logistic, Pai
 from cdpm_drake.simulation import save_log, simulate
 from cdpm_drake.systems.dynamic_plant import reel_step
 
-from conftest import to_yaml
+from conftest import case_registry, to_yaml
 
 T = 0.002
 # Inside paper_7cable's box [0.5, 0.8, 0.3]..[3.0, 4.0, 2.4] m, away from every face and with
@@ -54,17 +54,8 @@ CASES: dict[str, str] = {}
 # remove it here) or is gone.
 NO_CASE_YET: set[str] = set()
 
-
-def covers(*keys):
-    """Register the schema fields a test checks (see test_every_schema_field_has_a_case)."""
-
-    def mark(fn):
-        for key in keys:
-            assert key not in CASES, f"{key} registered twice"
-            CASES[key] = fn.__name__
-        return fn
-
-    return mark
+# Registers the schema fields a test checks (see test_every_schema_field_has_a_case).
+covers = case_registry(CASES)
 
 
 def base(**changes) -> Scenario:
