@@ -750,7 +750,7 @@ def main(argv=None) -> int:
     if argv[:1] == ["emulate"]:
         # argparse cannot hand options through a sub-command untouched; the emulator parses
         # its own.
-        from .hardware.emulator import main as emulator_main
+        from .emulator import main as emulator_main
         return emulator_main(argv[1:])
     args = _parser().parse_args(argv)
     with prefixed_log_records(), terminate_raises():

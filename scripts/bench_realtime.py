@@ -69,7 +69,7 @@ def run_case(scenario, duration, tick_path):
 
 def start_emulator(scenario_name, port):
     process = subprocess.Popen(
-        [sys.executable, "-m", "cdpm_drake.hardware.emulator", "--scenario", scenario_name,
+        [sys.executable, "-m", "cdpm_drake.emulator", "--scenario", scenario_name,
          "--port", str(port)], stdout=subprocess.PIPE, text=True)
     banner = process.stdout.readline()
     if "cdpm-reel-emulator:" not in banner:

@@ -11,8 +11,8 @@ import time
 import numpy as np
 import pytest
 
-from cdpm_drake.hardware import emulator as E
-from cdpm_drake.hardware.emulator import FaultPlan, ReelBridge, ReelBridgeServer
+from cdpm_drake import emulator as E
+from cdpm_drake.emulator import FaultPlan, ReelBridge, ReelBridgeServer
 from cdpm_drake.hardware.protocol import (FAULT_COMMAND_TIMEOUT, FAULT_DRIVE, FAULT_OVERSPEED,
                                           Command, ProtocolError, decode_status,
                                           encode_command)
@@ -339,7 +339,7 @@ def test_cli_errors_name_the_flag(capsys):
 
 
 def test_cli_runs_as_a_process_for_a_bounded_time():
-    out = subprocess.run([sys.executable, "-m", "cdpm_drake.hardware.emulator", "--port", "0",
+    out = subprocess.run([sys.executable, "-m", "cdpm_drake.emulator", "--port", "0",
                           "--duration", "0.1"], capture_output=True, text=True, timeout=60)
     assert out.returncode == 0, out.stderr
     assert "robot 'paper_7cable' (7 cables) on 127.0.0.1:" in out.stdout

@@ -17,7 +17,7 @@ from pydrake.systems.framework import DiagramBuilder, LeafSystem
 from pydrake.systems.primitives import ConstantVectorSource
 
 from cdpm_drake.hardware.config import HardwareReels, check_hardware_reels
-from cdpm_drake.hardware.emulator import FaultPlan, ReelBridge, ReelBridgeServer
+from cdpm_drake.emulator import FaultPlan, ReelBridge, ReelBridgeServer
 from cdpm_drake.hardware.protocol import FAULT_DRIVE, FAULT_ESTOP
 from cdpm_drake.hardware.reels import HardwareReelsSystem, ReelFault, start_realtime
 from cdpm_drake.kinematics import cable_lengths

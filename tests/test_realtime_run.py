@@ -14,7 +14,7 @@ import numpy as np
 import pytest
 
 from cdpm_drake.cli import main
-from cdpm_drake.hardware.emulator import ReelBridge, ReelBridgeServer
+from cdpm_drake.emulator import ReelBridge, ReelBridgeServer
 from cdpm_drake.kinematics import cable_lengths
 from cdpm_drake.realtime import run
 from cdpm_drake.scenario import ScenarioError, load_scenario, scenario_operator, scenario_robot
@@ -227,7 +227,7 @@ def test_a_bridge_fault_at_startup_hints_at_a_reset(tmp_path, capsys):
 
 
 def test_a_fault_log_is_plotted_and_a_killed_run_is_recovered(tmp_path, capsys):
-    from cdpm_drake.hardware.emulator import FaultPlan
+    from cdpm_drake.emulator import FaultPlan
 
     scenario = load_scenario("exp1_no_interaction")
     server = _server(scenario)

@@ -87,7 +87,7 @@ def test_a_signal_during_cdpm_run_exits_130_or_143(tmp_path, capsys, sig, code):
     # In this process: the run's own handler catches the signal between ticks, zero velocity
     # is sent, the log is written; the exit code says which signal stopped it.
     from cdpm_drake.cli import main
-    from cdpm_drake.hardware.emulator import ReelBridge, ReelBridgeServer
+    from cdpm_drake.emulator import ReelBridge, ReelBridgeServer
     from cdpm_drake.kinematics import cable_lengths
     from cdpm_drake.scenario import load_scenario, scenario_robot
 

@@ -21,8 +21,8 @@ import pytest
 from conftest import case_registry
 
 from cdpm_drake import cli
-from cdpm_drake.hardware import emulator as E
-from cdpm_drake.hardware.emulator import FaultPlan, ReelBridge, ReelBridgeServer
+from cdpm_drake import emulator as E
+from cdpm_drake.emulator import FaultPlan, ReelBridge, ReelBridgeServer
 from cdpm_drake.hardware.protocol import Command, encode_command
 from cdpm_drake.kinematics import cable_lengths
 from cdpm_drake.robot import load_robot

@@ -26,7 +26,7 @@ import pytest
 
 from cdpm_drake import scenario as scenario_module
 from cdpm_drake.hardware.config import HardwareReels
-from cdpm_drake.hardware.emulator import FaultPlan, ReelBridge, ReelBridgeServer
+from cdpm_drake.emulator import FaultPlan, ReelBridge, ReelBridgeServer
 from cdpm_drake.interference import InterferenceParams, interference_force
 from cdpm_drake.kinematics import KinematicsError, cable_lengths, forward_kinematics
 from cdpm_drake.operators import CsvOperator, NoOperator, ScriptedOperator, SpringHandOperator

@@ -4,9 +4,10 @@
   link.py           the controller's non-blocking UDP endpoint, with counters
   config.py         `HardwareReels`, the scenario's `!HardwareReels` plant entry
   reels.py          HardwareReelsSystem, the Drake plant talking to the bridge (imports Drake)
-  emulator.py       cdpm-reel-emulator: the bridge on loopback, with fault injection
   tick_log.py       the streaming per-tick log; tick_log_sink.py its Drake wrapper
 
 Only reels.py and tick_log_sink.py import Drake; the rest runs in the emulator process and
-in plain tests.
+in plain tests. The emulator (`cdpm_drake/emulator.py`, cdpm-reel-emulator) is a rehearsal
+tool, not part of the driver: it uses this package's protocol, never the other way round, and
+nothing here imports the scenario, the builder or the CLI.
 """

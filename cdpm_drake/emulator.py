@@ -25,11 +25,11 @@ import time
 
 import numpy as np
 
-from ..kinematics import KinematicsError, cable_lengths, forward_kinematics, jacobian
-from .config import DEFAULT_BRIDGE_PORT
-from .link import resolve_ipv4
-from .priority import set_realtime_priority
-from .protocol import (FAULT_COMMAND_TIMEOUT, FAULT_OVERSPEED, MAX_FORCE, REASONS,
+from .kinematics import KinematicsError, cable_lengths, forward_kinematics, jacobian
+from .hardware.config import DEFAULT_BRIDGE_PORT
+from .hardware.link import resolve_ipv4
+from .hardware.priority import set_realtime_priority
+from .hardware.protocol import (FAULT_COMMAND_TIMEOUT, FAULT_OVERSPEED, MAX_FORCE, REASONS,
                        ProtocolError, SequenceTracker, Status, decode_command, encode_status,
                        next_sequence)
 
@@ -583,12 +583,12 @@ def _parser() -> argparse.ArgumentParser:
 
 def build_server(args, log=None) -> ReelBridgeServer:
     """The server described by parsed command-line arguments; `log` as ReelBridgeServer's."""
-    from ..robot import load_robot
+    from .robot import load_robot
 
     force = None
     address, port = "127.0.0.1", DEFAULT_BRIDGE_PORT
     if args.scenario:
-        from ..scenario import load_scenario, scenario_operator, scenario_robot
+        from .scenario import load_scenario, scenario_operator, scenario_robot
 
         scenario = load_scenario(args.scenario, args.scenario_text)
         robot = scenario_robot(scenario)
@@ -635,16 +635,16 @@ def build_server(args, log=None) -> ReelBridgeServer:
 def main(argv=None) -> int:
     """Exit codes as `cdpm`'s: 0 done (--duration), 1 error (robot, scenario, cannot bind),
     2 bad usage, 130 / 143 after Ctrl-C / SIGTERM (the summary is printed first)."""
-    from ..text import prefixed_log_records
+    from .text import prefixed_log_records
 
     with prefixed_log_records():
         return _main(argv)
 
 
 def _main(argv) -> int:
-    from ..interrupt import exit_code, terminate_raises
-    from ..robot import RobotError
-    from ..scenario import ScenarioError
+    from .interrupt import exit_code, terminate_raises
+    from .robot import RobotError
+    from .scenario import ScenarioError
 
     parser = _parser()
     args = parser.parse_args(argv)
