@@ -92,6 +92,27 @@ def _cmd_info(args) -> int:
 # --- simulate --------------------------------------------------------------------------------
 
 
+def tension_control_summary(log) -> str:
+    """One line on the tension control of a log (controller.tension_control): on how many
+    ticks the floor held, was lowered to what the pose allows (t*), and on how many no
+    distribution held at all (t* < 0: outside the wrench-feasible workspace)."""
+    status = np.asarray(log["tension_status"]).reshape(-1)
+    t_star = np.asarray(log["t_star"], dtype=float).reshape(-1)
+    T = status.size
+    held = int(np.sum(status == 0))
+    lowered = status == 1
+    none = int(np.sum(lowered & (t_star < 0)))
+    text = (f"tension control: the floor held on {held} of {T} ticks, lowered to the pose's "
+            f"largest minimum tension t* on {int(lowered.sum())}")
+    if lowered.any():
+        text += f" (smallest t* {t_star[lowered].min():.2f} N)"
+    if none:
+        text += (f"; NO tension distribution held on {none} ticks (t* < 0: outside the "
+                 "wrench-feasible workspace, a cable must go slack)")
+    estimate = np.asarray(log["tension_estimate"], dtype=float)
+    return text + (f"; estimated tensions {estimate.min():.2f} to {estimate.max():.1f} N")
+
+
 def _print_dynamic_summary(log, out) -> None:
     from .rotation import rotation_angle, rotations_from_rpy
 
@@ -164,6 +185,8 @@ def simulate_main(*, scenario, duration=None, out_dir=None, progress=True, out=N
               "controller's estimate", file=out)
     else:
         print(f"pairs that crossed: {crossings}", file=out)
+    if T and "tension_status" in log:  # controller.tension_control
+        print(tension_control_summary(log), file=out)
     if T and "tensions" in log:  # the dynamic plant's ground truth
         _print_dynamic_summary(log, out)
     print(f"log: {path}", file=out)
