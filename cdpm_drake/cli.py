@@ -527,6 +527,18 @@ def diagram_main(*, scenario, out_dir, depth=1, svg=True, out=None) -> int:
         diagrams["plant_dynamic"] = diagrams["controller_dynamic"].GetSubsystemByName("reels")
     except ScenarioError as e:  # a start the cables cannot hold level: say so, draw the rest
         print(f"skipped controller_dynamic: {e}", file=out)
+    # The full-pose controller with its tension control (controller.pose: full), on the
+    # dynamic plant: the pose forward kinematics, the tension distribution, the orientation
+    # hold.
+    from .scenario import check_scenario
+    full = dataclasses.replace(
+        scenario, plant=dynamic, controller=dataclasses.replace(
+            scenario.controller, pose="full", tension_control=True))
+    try:
+        check_scenario(full)
+        diagrams["controller_full_pose"] = build_diagram(full, options)
+    except ScenarioError as e:
+        print(f"skipped controller_full_pose: {e}", file=out)
     for path in write_diagrams(diagrams, out_dir, svg=svg, max_depth=depth):
         print(f"wrote {path}", file=out)
     return 0

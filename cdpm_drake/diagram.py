@@ -276,6 +276,14 @@ def block_output_port(diagram, block: str, port_name: str):
     return diagram.GetSubsystemByName(block).GetOutputPort(port_name)
 
 
+def logged_ports(diagram):
+    """(key, block, port name) of every LOGGED signal the diagram has (its block, and the port:
+    the full-pose blocks have ports the paper's do not), in LOGGED order."""
+    for key, block, port_name in LOGGED:
+        if diagram.HasSubsystemNamed(block) and _block_has_output(diagram, block, port_name):
+            yield key, block, port_name
+
+
 def _block_has_output(diagram, block: str, port_name: str) -> bool:
     flat = getattr(diagram, "flat_blocks", {}).get(block)
     if flat is not None:
@@ -359,12 +367,10 @@ def logged_signals(diagram, context) -> tuple[np.ndarray, dict]:
     log = diagram.GetSubsystemByName(LOG_SINK).FindLog(context)
     rows = log.data().T
     signals, k = {}, 0
-    for key, system_name, port_name in LOGGED:
-        if diagram.HasSubsystemNamed(system_name) and _block_has_output(
-                diagram, system_name, port_name):
-            width = block_output_port(diagram, system_name, port_name).size()
-            signals[key] = rows[:, k:k + width].copy()
-            k += width
+    for key, system_name, port_name in logged_ports(diagram):
+        width = block_output_port(diagram, system_name, port_name).size()
+        signals[key] = rows[:, k:k + width].copy()
+        k += width
     return log.sample_times().copy(), signals
 
 

@@ -44,6 +44,26 @@ class KernelSystem(LeafSystem):
                                      prerequisites_of_calc={self._inputs.ticket()})
 
 
+class PoseSolve(KernelSystem):
+    """forward_kinematics (pose: full): the pose fitted to the stretch-corrected lengths."""
+
+
+class TensionSolve(KernelSystem):
+    """tension_distribution: the target tensions at the pose, and their estimate."""
+
+
+class OrientationSolve(KernelSystem):
+    """orientation_hold: the angular velocity back to the orientation held."""
+
+
+class PoseRates(KernelSystem):
+    """jacobian_mapping (pose: full): l_dot = J(p, R) [v; w] + K_l (l_d - l)."""
+
+
+class PosedInterference(KernelSystem):
+    """interference_force (pose: full): the interference tick on the cables of the pose."""
+
+
 def build_kernel_block(builder, system, *, inputs, memory, outputs, memory_at, time_step,
                        memory_outputs=()):
     """Add `system` (a KernelSystem) as "solve", a one-tick delay "memory" (`memory`: its size
@@ -129,7 +149,7 @@ def build_pose_forward_kinematics(builder, robot, *, initial_position, max_resid
 
     start = np.concatenate([np.asarray(initial_position, dtype=float), np.eye(3).ravel()])
     build_kernel_block(
-        builder, KernelSystem(s["fk_x"], s["fk_out"], tick),
+        builder, PoseSolve(s["fk_x"], s["fk_out"], tick),
         inputs=[("cable_lengths", m), ("tension_estimate", m)], memory=(12, start),
         outputs=[("p_WP", 0, 3), ("R_WP", 3, 9), ("rpy_WP", 12, 3), ("residual", 15, m)],
         memory_at=0, time_step=time_step)
@@ -165,7 +185,7 @@ def build_tension_distribution(builder, robot, *, min_tension, trim_gain, initia
 
     start = np.concatenate([np.asarray(initial_tensions, dtype=float), np.zeros(5)])
     build_kernel_block(
-        builder, KernelSystem(s["tension_x"], s["tension_out"], tick),
+        builder, TensionSolve(s["tension_x"], s["tension_out"], tick),
         inputs=[("p_WP", 3), ("R_WP", 9), ("F_H", 3), ("velocity_command", 3),
                 ("residual", m), ("cable_lengths", m)],
         memory=(s["tension_memory"], start),
@@ -191,7 +211,7 @@ def build_orientation_hold(builder, *, gain, time_step):
         hold(gain, x, out)
 
     build_kernel_block(
-        builder, KernelSystem(s["orientation_x"], s["orientation_out"], tick),
+        builder, OrientationSolve(s["orientation_x"], s["orientation_out"], tick),
         inputs=[("R_WP", 9)], memory=(s["orientation_memory"], None),
         outputs=[("omega_command", 0, 3), ("R_WP_held", 3, 9)], memory_at=12,
         time_step=time_step)
@@ -224,7 +244,7 @@ def build_pose_jacobian_mapping(builder, robot, *, length_gain, tension, time_st
     inputs = [("p_WP", 3), ("R_WP", 9), ("velocity_command", 3), ("omega_command", 3),
               ("R_WP_held", 9), ("cable_lengths", m)]
     route = build_kernel_block(
-        builder, KernelSystem(s["rates_x"], s["rates_out"], tick),
+        builder, PoseRates(s["rates_x"], s["rates_out"], tick),
         inputs=inputs + ([("tension_command", m)] if tension else [("tension_slot", m)]),
         memory=(s["rates_memory"], None),
         outputs=[("reel_velocity_command", 0, m), ("commanded_lengths", m, m)],
@@ -261,7 +281,7 @@ def build_posed_interference_force(builder, robot, params, *, time_step):
     fields = dict(zip(OUTPUTS, ("force", "distance", "active", "crossed", "side")))
     side_at = layout["side"][0]
     build_kernel_block(
-        builder, KernelSystem(12 + P, 3 + 13 * P, tick),
+        builder, PosedInterference(12 + P, 3 + 13 * P, tick),
         inputs=[("p_WP", 3), ("R_WP", 9)], memory=(P, None),
         outputs=[(name, layout[field][0], layout[field][1] - layout[field][0])
                  for name, field in fields.items() if name != "side"],
