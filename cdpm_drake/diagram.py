@@ -45,6 +45,7 @@ LOGGED = (
     ("omega", "orientation_hold", "omega_command"),
     ("tension_command", "tension_distribution", "tension_command"),
     ("tension_estimate", "tension_distribution", "tension_estimate"),
+    ("tension_target", "tension_distribution", "tension_target"),
     ("t_star", "tension_distribution", "t_star"),
     ("tension_status", "tension_distribution", "status"),
     ("lengths", "reels", "cable_lengths"),
@@ -217,7 +218,11 @@ def build_diagram(scenario: Scenario | ResolvedScenario,
 
 # The internal-tension trim's gain (pose_control.tension_tick), 1/s: slow beside the length
 # loop (20 1/s), so it corrects model errors and does not fight the loop.
-TRIM_GAIN = 2.0
+TRIM_GAIN = 1.0
+# How fast the commanded tensions may change, N/s per cable (pose_control.tension_tick).
+TENSION_SLEW_RATE = 50.0
+# The full-pose length loop's integral gain, 1/s^2 (pose_control.pose_rates_tick).
+LENGTH_INTEGRAL_GAIN = 100.0
 
 
 def _add_pose_blocks(builder, blocks, resolved, fk, force_sensor, lengths, velocity_command,
@@ -237,8 +242,8 @@ def _add_pose_blocks(builder, blocks, resolved, fk, force_sensor, lengths, veloc
     tension_control = controller.tension_control
     mapping = blocks["jacobian_mapping"] = FlatBlock(
         builder, "jacobian_mapping", POSE_MAIN, lambda b: build_pose_jacobian_mapping(
-            b, robot, length_gain=controller.length_gain, tension=tension_control,
-            time_step=T))
+            b, robot, length_gain=controller.length_gain,
+            integral_gain=LENGTH_INTEGRAL_GAIN, tension=tension_control, time_step=T))
     for name, port in (("R_WP", R_WP), ("omega_command", hold.GetOutputPort("omega_command")),
                        ("R_WP_held", hold.GetOutputPort("R_WP_held")),
                        ("cable_lengths", lengths)):
@@ -255,7 +260,7 @@ def _add_pose_blocks(builder, blocks, resolved, fk, force_sensor, lengths, veloc
     tension = blocks["tension_distribution"] = FlatBlock(
         builder, "tension_distribution", POSE_MAIN, lambda b: build_tension_distribution(
             b, robot, min_tension=controller.min_tension, trim_gain=TRIM_GAIN,
-            initial_tensions=start, time_step=T))
+            slew_rate=TENSION_SLEW_RATE, initial_tensions=start, time_step=T))
     for name, port in (("p_WP", fk.GetOutputPort("p_WP")), ("R_WP", R_WP),
                        ("F_H", force_sensor.GetOutputPort("F_H")),
                        ("velocity_command", velocity_command),

@@ -49,9 +49,9 @@ def sizes(m: int) -> dict:
     """Input (x) and output (out) sizes of the kernels for m cables, and their memories."""
     return {
         "fk_x": 2 * m + 12, "fk_out": 15 + m,
-        "tension_x": 3 * m + 23, "tension_out": 3 * m + 7, "tension_memory": m + 5,
+        "tension_x": 4 * m + 23, "tension_out": 5 * m + 7, "tension_memory": 2 * m + 5,
         "orientation_x": 19, "orientation_out": 22, "orientation_memory": 10,
-        "rates_x": 3 * m + 31, "rates_out": 3 * m + 4, "rates_memory": m + 4,
+        "rates_x": 4 * m + 31, "rates_out": 4 * m + 4, "rates_memory": 2 * m + 4,
     }
 
 
@@ -92,11 +92,16 @@ def pose_fk_tick(reels, attachments, EA, max_residual, x, out):
 @_jit
 def tension_tick(reels, attachments, params, x, out):
     """params = [mass kg, handle (3, m, platform frame), EA N, floor N, trim gain 1/s, time
-    step s]. x = [p (3), R (9), F_H (3), v (3), residual (m), L0 (m), memory: T_assumed (m),
-    v_previous (3), trim (1), started (1)]. out = [T_command (m), T_estimate (m), t* (1),
-    status (1), next memory (m + 5)]. status: FEASIBLE, BELOW_FLOOR (the floor lowered to t*)
-    or GENERAL (not one redundant cable: T_command and the estimate are the minimum-norm
-    distribution, nothing is controlled)."""
+    step s, slew rate N/s]. x = [p (3), R (9), F_H (3), v (3), residual (m), L0 (m), memory:
+    T_assumed (m), v_previous (3), trim (1), started (1), T_command_previous (m)]. out =
+    [T_command (m), T_estimate (m), T_target (m), t* (1), status (1), next memory (2 m + 5)]:
+    T_target the distribution, T_command the target plus the internal trim, moved towards
+    at the slew rate. status:
+    FEASIBLE, BELOW_FLOOR (the floor lowered to t*) or GENERAL (not one redundant cable:
+    T_command and the estimate are the minimum-norm distribution, nothing is controlled).
+    The command moves towards the target at most `slew rate` N/s per cable, from the
+    estimate at the first tick: the plant's tensions when the controller takes over are
+    whatever they are, and a jump to the target would shake the platform."""
     m = reels.shape[0]
     mass, EA, floor, gain, step = params[0], params[4], params[5], params[6], params[7]
     p = x[0:3]
@@ -110,6 +115,8 @@ def tension_tick(reels, attachments, params, x, out):
     v_prev = x[mem + m:mem + m + 3]
     trim = x[mem + m + 3]
     started = x[mem + m + 4] != 0.0
+    T_before = x[mem + m + 5:mem + 2 * m + 5]
+    max_change = params[8] * step
     u, Rb, L = np.empty((m, 3)), np.empty((m, 3)), np.empty(m)
     posed_cables(reels, attachments, p, R, u, Rb, L)
     W = np.empty((6, m))
@@ -129,7 +136,8 @@ def tension_tick(reels, attachments, params, x, out):
     w[5] = hx * F[1] - hy * F[0]
     T_cmd = out[0:m]
     T_est = out[m:2 * m]
-    nxt = 2 * m + 2
+    T_target = out[2 * m:3 * m]
+    nxt = 3 * m + 2
     status, t_star = GENERAL, math.nan
     new_trim = 0.0
     A, V = np.empty((m, 6)), np.empty((6, m))
@@ -138,20 +146,20 @@ def tension_tick(reels, attachments, params, x, out):
     if m == 7 and _pivoted_qr(W, A, V, beta, perm) >= RANK_TOL:
         _particular(A, V, beta, perm, w, T_p)
         _null_vector(V, beta, n)
-        status, t_star = distribution_1d(T_p, n, floor, T_cmd)
+        status, t_star = distribution_1d(T_p, n, floor, T_target)
         num = den = target = 0.0
         for i in range(m):
             d = L0[i] / EA
             num += n[i] * (d * (T_assumed[i] - T_p[i]) + r[i])
             den += n[i] * n[i] * d
-            target += n[i] * T_cmd[i]
+            target += n[i] * T_target[i]
         lam = num / den
         for i in range(m):
             T_est[i] = T_p[i] + lam * n[i]
         if started:
             new_trim = min(MAX_TRIM, max(-MAX_TRIM, trim + step * gain * (target - lam)))
         for i in range(m):
-            T_cmd[i] += new_trim * n[i]
+            T_cmd[i] = T_target[i] + new_trim * n[i]
     else:
         # No single redundant cable: the minimum-norm distribution by the normal equations.
         G = np.empty((6, 6))
@@ -174,12 +182,17 @@ def tension_tick(reels, attachments, params, x, out):
                 s += W[a, i] * y[a]
             T_cmd[i] = s
             T_est[i] = s
+            T_target[i] = s
             lowest = min(lowest, s)
         t_star = lowest
-    out[2 * m] = t_star
-    out[2 * m + 1] = status
+    for i in range(m):
+        before = T_before[i] if started else T_est[i]
+        T_cmd[i] = min(before + max_change, max(before - max_change, T_cmd[i]))
+    out[3 * m] = t_star
+    out[3 * m + 1] = status
     for i in range(m):
         out[nxt + i] = T_est[i]
+        out[nxt + m + 5 + i] = T_cmd[i]
     for k in range(3):
         out[nxt + m + k] = v[k]
     out[nxt + m + 3] = new_trim
@@ -208,16 +221,26 @@ def orientation_tick(gain, x, out):
     out[21] = 1.0
 
 
-@_jit
-def pose_rates_tick(reels, attachments, gain, step, EA, tension, x, out):
-    """x = [p (3), R (9), v (3), w (3), R_ref (9), L0 (m), T_command (m), memory: p_d (3),
-    delta (m), started (1)]; out = [l_dot (m), l_d (m), next memory (m + 4)].
+# The length loop's integral term may add at most this reel speed, m/s: enough to break the
+# drives' stiction and take up their lag, never a runaway after a long stall.
+MAX_INTEGRAL_SPEED = 0.05
+FRICTION_SPEED = 0.0
+FRICTION_ERROR = 2e-5
 
-    l_dot = J(p, R) [v; w] + gain (l_d - L0): the twist through the m x 6 Jacobian at the
-    estimated pose plus the cable-length loop. l_d: the lengths of the commanded pose (p_d,
-    R_ref) unstretched by the commanded tensions (`tension`: L EA / (EA + T)), else its rigid
-    lengths plus the offsets delta latched at the first tick (the loop then starts with no
-    error). p_d starts at the first tick's estimate and integrates v."""
+
+@_jit
+def pose_rates_tick(reels, attachments, gain, integral_gain, step, EA, tension, x, out):
+    """x = [p (3), R (9), v (3), w (3), R_ref (9), L0 (m), T_command (m), memory: p_d (3),
+    delta (m), integral (m), started (1)]; out = [l_dot (m), l_d (m), next memory (2 m + 4)].
+
+    l_dot = J(p, R) [v; w] + gain e + integral_gain I, e = l_d - L0, I its integral (m s,
+    clipped so the term stays within MAX_INTEGRAL_SPEED): the twist through the m x 6
+    Jacobian at the estimated pose plus the cable-length loop, a PI loop here so that the
+    drives' stiction and lag leave no lasting length error (with 70 kN cables 0.1 mm is ~2 N
+    of tension). l_d: the lengths of the commanded pose (p_d, R_ref) unstretched by the
+    commanded tensions (`tension`: L EA / (EA + T)), else its rigid lengths plus the offsets
+    delta latched at the first tick (the loop then starts with no error). p_d starts at the
+    first tick's estimate and integrates v."""
     m = reels.shape[0]
     p = x[0:3]
     R = x[3:12].reshape((3, 3))
@@ -227,7 +250,8 @@ def pose_rates_tick(reels, attachments, gain, step, EA, tension, x, out):
     L0 = x[27:27 + m]
     T = x[27 + m:27 + 2 * m]
     mem = 27 + 2 * m
-    started = x[mem + m + 3] != 0.0
+    started = x[mem + 2 * m + 3] != 0.0
+    limit = MAX_INTEGRAL_SPEED / integral_gain if integral_gain > 0.0 else 0.0
     u, Rb, L = np.empty((m, 3)), np.empty((m, 3)), np.empty(m)
     posed_cables(reels, attachments, p, R, u, Rb, L)
     p_d = out[2 * m:2 * m + 3]
@@ -248,10 +272,15 @@ def pose_rates_tick(reels, attachments, gain, step, EA, tension, x, out):
                   + (Rb[i, 1] * u[i, 2] - Rb[i, 2] * u[i, 1]) * w[0]
                   + (Rb[i, 2] * u[i, 0] - Rb[i, 0] * u[i, 2]) * w[1]
                   + (Rb[i, 0] * u[i, 1] - Rb[i, 1] * u[i, 0]) * w[2])
-        out[i] = twist + gain * (target - L0[i])
+        error = target - L0[i]
+        integral = x[mem + 3 + m + i] + step * error if started else 0.0
+        integral = min(limit, max(-limit, integral))
+        out[3 * m + 3 + i] = integral
+        out[i] = (twist + gain * error + integral_gain * integral
+                  + FRICTION_SPEED * math.tanh(error / FRICTION_ERROR))
     for k in range(3):
         p_d[k] += step * v[k]
-    out[3 * m + 3] = 1.0
+    out[4 * m + 3] = 1.0
 
 
 @_jit

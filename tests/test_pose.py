@@ -126,13 +126,14 @@ def test_pose_fk_tick_reports_lengths_no_pose_fits():
 
 
 def _tension(p, R, F, r, L0, T_assumed, v=np.zeros(3), v_prev=np.zeros(3), trim=0.0,
-             started=0.0, floor=10.0, gain=2.0, mass=2.5, handle=(0.0, 0.0, -0.15)):
-    params = np.array([mass, *handle, EA, floor, gain, 0.002])
+             started=0.0, floor=10.0, gain=2.0, mass=2.5, handle=(0.0, 0.0, -0.15),
+             slew=1e9, T_before=None):
+    params = np.array([mass, *handle, EA, floor, gain, 0.002, slew])
     x = np.concatenate([p, np.asarray(R).ravel(), F, v, r, L0, T_assumed, v_prev, [trim],
-                        [started]])
+                        [started], T_before if T_before is not None else np.zeros(M)])
     out = np.empty(S["tension_out"])
     status = pc.tension_tick(REELS, ATTACH, params, x, out)
-    return status, out[:M], out[M:2 * M], out[2 * M], out[2 * M + 2:]
+    return status, out[:M], out[M:2 * M], out[3 * M], out[3 * M + 2:]
 
 
 def _linprog_t_star(W, w):
@@ -239,11 +240,12 @@ def test_the_orientation_hold_latches_and_turns_back_at_its_gain():
 # --- the Jacobian mapping of a pose --------------------------------------------------------------
 
 
-def _rates(p, R, v, w, R_ref, L0, T, memory, gain=20.0, tension=False):
+def _rates(p, R, v, w, R_ref, L0, T, memory, gain=20.0, tension=False, integral=0.0):
     x = np.concatenate([p, np.asarray(R).ravel(), v, w, np.asarray(R_ref).ravel(), L0, T,
                         memory])
     out = np.empty(S["rates_out"])
-    pc.pose_rates_tick(REELS, ATTACH, gain, 0.002, EA if tension else 0.0, tension, x, out)
+    pc.pose_rates_tick(REELS, ATTACH, gain, integral, 0.002, EA if tension else 0.0, tension,
+                       x, out)
     return out[:M], out[M:2 * M], out[2 * M:]
 
 
@@ -251,7 +253,7 @@ def test_the_first_tick_sends_the_twist_through_the_pose_jacobian():
     p, R = random_poses(7, 1)[0]
     v, w = np.array([0.1, -0.05, 0.02]), np.array([0.01, 0.0, -0.02])
     L0 = pose_lengths(ROBOT, p, R) + 0.003  # offsets latched: no loop error
-    cmd, l_d, memory = _rates(p, R, v, w, R, L0, np.zeros(M), np.zeros(M + 4))
+    cmd, l_d, memory = _rates(p, R, v, w, R, L0, np.zeros(M), np.zeros(2 * M + 4))
     np.testing.assert_allclose(cmd, pose_jacobian(ROBOT, p, R) @ np.r_[v, w], atol=1e-14)
     np.testing.assert_allclose(l_d, L0, atol=1e-14)
     np.testing.assert_allclose(memory[:3], p + 0.002 * v, atol=1e-15)
@@ -261,7 +263,7 @@ def test_tension_control_commands_the_unstretched_lengths_of_the_commanded_pose(
     p, R = random_poses(8, 1)[0]
     T = np.linspace(8.0, 30.0, M)
     L0 = pose_lengths(ROBOT, p, R) * EA / (EA + T) + 1e-4  # encoders 0.1 mm long
-    memory = np.r_[p, np.zeros(M), 1.0]
+    memory = np.r_[p, np.zeros(2 * M), 1.0]
     cmd, l_d, _ = _rates(p, R, np.zeros(3), np.zeros(3), R, L0, T, memory, tension=True)
     np.testing.assert_allclose(l_d, pose_lengths(ROBOT, p, R) * EA / (EA + T), atol=1e-14)
     np.testing.assert_allclose(cmd, 20.0 * (l_d - L0), atol=1e-14)  # at rest: the loop alone

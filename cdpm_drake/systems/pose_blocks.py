@@ -158,12 +158,14 @@ def build_pose_forward_kinematics(builder, robot, *, initial_position, max_resid
 # --- tension distribution ----------------------------------------------------------------------
 
 
-def build_tension_distribution(builder, robot, *, min_tension, trim_gain, initial_tensions,
-                               time_step):
+def build_tension_distribution(builder, robot, *, min_tension, trim_gain, slew_rate,
+                               initial_tensions, time_step):
     """The target tensions at the estimated pose (pose_control.tension_tick) and the tension
     estimate. Inputs p_WP, R_WP, F_H (N), velocity_command (m/s), residual (m), cable_lengths
-    (m); outputs tension_command (m, N: the distribution the Jacobian block stretches the
-    cables for), tension_estimate (m, N), t_star (N: the largest achievable minimum tension at
+    (m); outputs tension_command (m, N: what the Jacobian block stretches the cables for: the
+    target plus the internal trim, at most slew_rate N/s from the last), tension_estimate (m,
+    N), tension_target (m, N: the distribution), t_star (N: the largest achievable minimum
+    tension at
     the pose, inf where an internal force raises every tension), status (0: the floor holds,
     1: lowered to t*, 2: no single redundant cable, nothing controlled), and
     tension_estimate_previous (the memory's, for the forward kinematics)."""
@@ -172,7 +174,7 @@ def build_tension_distribution(builder, robot, *, min_tension, trim_gain, initia
     d = robot.dynamics
     reels, attachments = _constants(robot)
     params = owned(np.array([d.mass, *d.handle, d.EA, float(min_tension), float(trim_gain),
-                             float(time_step)]))
+                             float(time_step), float(slew_rate)]))
     example = np.zeros(s["tension_x"])
     example[:3] = robot.workspace.center
     example[3:12] = np.eye(3).ravel()
@@ -183,15 +185,16 @@ def build_tension_distribution(builder, robot, *, min_tension, trim_gain, initia
     def tick(x, out):
         solve(reels, attachments, params, x, out)
 
-    start = np.concatenate([np.asarray(initial_tensions, dtype=float), np.zeros(5)])
+    start = np.concatenate([np.asarray(initial_tensions, dtype=float), np.zeros(5 + m)])
     build_kernel_block(
         builder, TensionSolve(s["tension_x"], s["tension_out"], tick),
         inputs=[("p_WP", 3), ("R_WP", 9), ("F_H", 3), ("velocity_command", 3),
                 ("residual", m), ("cable_lengths", m)],
         memory=(s["tension_memory"], start),
         outputs=[("tension_command", 0, m), ("tension_estimate", m, m),
-                 ("t_star", 2 * m, 1), ("status", 2 * m + 1, 1)],
-        memory_at=2 * m + 2, time_step=time_step,
+                 ("tension_target", 2 * m, m), ("t_star", 3 * m, 1),
+                 ("status", 3 * m + 1, 1)],
+        memory_at=3 * m + 2, time_step=time_step,
         memory_outputs=[("tension_estimate_previous", 0, m)])
 
 
@@ -220,24 +223,25 @@ def build_orientation_hold(builder, *, gain, time_step):
 # --- the Jacobian mapping of a pose ------------------------------------------------------------------
 
 
-def build_pose_jacobian_mapping(builder, robot, *, length_gain, tension, time_step):
+def build_pose_jacobian_mapping(builder, robot, *, length_gain, integral_gain, tension,
+                                time_step):
     """l_dot = J(p, R) [v; w] + K_l (l_d - l) (pose_control.pose_rates_tick). Inputs p_WP,
     R_WP, velocity_command, omega_command, R_WP_held, cable_lengths and, with `tension`,
     tension_command; outputs reel_velocity_command, commanded_lengths."""
     m = robot.num_cables
     s = sizes(m)
     reels, attachments = _constants(robot)
-    gain, step = float(length_gain), float(time_step)
+    gain, integral, step = float(length_gain), float(integral_gain), float(time_step)
     EA = float(robot.dynamics.EA) if tension else 0.0
     tension = bool(tension)
     example = np.zeros(s["rates_x"])
     example[:3] = robot.workspace.center
     example[3:12] = example[18:27] = np.eye(3).ravel()
-    rates = bind(pose_rates_tick, reels, attachments, gain, step, EA, tension, example,
-                 np.empty(s["rates_out"]))
+    rates = bind(pose_rates_tick, reels, attachments, gain, integral, step, EA, tension,
+                 example, np.empty(s["rates_out"]))
 
     def tick(x, out):
-        rates(reels, attachments, gain, step, EA, tension, x, out)
+        rates(reels, attachments, gain, integral, step, EA, tension, x, out)
 
     # Without tension control the kernel ignores its tensions: the lengths fill the slot
     # (a Selector can only route inputs; a constant source would be a system more a tick).
