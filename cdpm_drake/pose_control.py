@@ -79,7 +79,9 @@ def pose_fk_tick(reels, attachments, EA, max_residual, x, out):
     p_guess = x[2 * m:2 * m + 3]
     R_guess = x[2 * m + 3:2 * m + 12].reshape((3, 3))
     if not pose_fk(reels, attachments, lengths, p_guess, R_guess, 1e-10, 8, p, R, residual):
-        if not pose_fk(reels, attachments, lengths, p_guess, R_guess, 1e-10, 50, p, R,
+        # Lengths far from any pose (slack or overstretched cables) slow Gauss-Newton down to
+        # a linear rate: more steps, and a looser step at which it counts as settled.
+        if not pose_fk(reels, attachments, lengths, p_guess, R_guess, 1e-8, 50, p, R,
                        residual):
             return FK_NOT_SETTLED
     _rpy(R, out[12:15])

@@ -534,6 +534,71 @@ def test_length_gain_sets_the_cable_length_loop():
     assert np.abs(error).max() > 1e-4  # 1e8 x the tolerance: the loop acts
 
 
+@covers("Scenario.controller.pose")
+def test_pose_full_estimates_the_orientation_and_holds_it():
+    """pose: full adds the orientation to the estimate (logged rpy) and the orientation hold;
+    on the kinematic plant (a level platform) the estimate is level and the position the
+    translating estimate's."""
+    log = sim(push([1.0, 0, 0], controller=scenario_module.Controller(pose="full")), 0.1)
+    reference = sim(push([1.0, 0, 0]), 0.1)
+    assert np.abs(log["rpy"]).max() < 1e-9 and np.abs(log["omega"]).max() < 1e-8
+    np.testing.assert_allclose(log["p"], reference["p"], rtol=0, atol=1e-9)
+    assert "rpy" not in reference and "omega" not in reference
+
+
+def _full_dynamic(**controller):
+    c = scenario_module.Controller(pose="full", **controller)
+    # P0, where the cables hold the platform with a few tens of newtons.
+    return dataclasses.replace(_dynamic(), initial_position=list(P0), controller=c,
+                               operator=ScriptedOperator(times=[0.0], forces=[[2.0, -1.0, 1.0]]))
+
+
+@covers("Scenario.controller.orientation_gain")
+def test_orientation_gain_scales_the_angular_velocity_command():
+    """omega = K_R log(R_ref R^T) with R_ref the first tick's estimate: recomputed from the
+    logged orientation estimate with K_R = 3.7 1/s."""
+    from cdpm_drake.pose import rotation_log
+    from cdpm_drake.rotation import rotation_from_rpy
+
+    log = sim(_full_dynamic(orientation_gain=3.7), 0.2)
+    R_ref = rotation_from_rpy(log["rpy"][0])
+    expected = np.array([3.7 * np.array(rotation_log(R_ref @ rotation_from_rpy(rpy).T))
+                         for rpy in log["rpy"]])
+    np.testing.assert_allclose(log["omega"], expected, rtol=0, atol=1e-12)
+    assert np.abs(log["omega"]).max() > 1e-6  # the platform did turn a little
+
+
+@covers("Scenario.controller.tension_control")
+def test_tension_control_commands_the_unstretched_lengths():
+    """At the first tick the commanded pose is the estimate (p, R of the log), so the
+    commanded lengths are its rigid lengths unstretched by the commanded tensions,
+    L EA / (EA + T) with the robot file's EA."""
+    from cdpm_drake.pose import pose_lengths
+    from cdpm_drake.rotation import rotation_from_rpy
+
+    s = _full_dynamic(tension_control=True)
+    log = sim(s, 0.02)
+    robot = scenario_robot(s)
+    EA = robot.dynamics.EA
+    L = pose_lengths(robot, log["p"][0], rotation_from_rpy(log["rpy"][0]))
+    np.testing.assert_allclose(log["lengths_commanded"][0],
+                               L * EA / (EA + log["tension_command"][0]), rtol=0, atol=1e-9)
+    plain = sim(_full_dynamic(), 0.02)
+    assert "tension_command" not in plain
+
+
+@covers("Scenario.controller.min_tension")
+def test_min_tension_is_the_floor_of_the_target():
+    """Where the pose allows (status 0) every target tension is at least 7.5 N and the
+    least-norm distribution puts some cable on that floor."""
+    log = sim(_full_dynamic(tension_control=True, min_tension=7.5), 0.1)
+    held = log["tension_status"][:, 0] == 0
+    assert held.any()
+    target = log["tension_target"][held]
+    assert target.min() >= 7.5 - 1e-9
+    np.testing.assert_allclose(target.min(axis=1), 7.5, atol=1e-9)
+
+
 def _reel_speeds(log):
     return np.abs(np.diff(log["lengths"], axis=0)) / T
 
