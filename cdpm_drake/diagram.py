@@ -218,7 +218,7 @@ def build_diagram(scenario: Scenario | ResolvedScenario,
 
 # The internal-tension trim's gain (pose_control.tension_tick), 1/s: slow beside the length
 # loop (20 1/s), so it corrects model errors and does not fight the loop.
-TRIM_GAIN = 1.0
+TRIM_GAIN = 0.0
 # How fast the commanded tensions may change, N/s per cable (pose_control.tension_tick).
 TENSION_SLEW_RATE = 50.0
 # The full-pose length loop's integral gain, 1/s^2 (pose_control.pose_rates_tick).

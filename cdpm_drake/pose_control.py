@@ -158,7 +158,7 @@ def tension_tick(reels, attachments, params, x, out):
         lam = num / den
         for i in range(m):
             T_est[i] = T_p[i] + lam * n[i]
-        if started:
+        if started and gain > 0.0:
             new_trim = min(MAX_TRIM, max(-MAX_TRIM, trim + step * gain * (target - lam)))
         for i in range(m):
             T_cmd[i] = T_target[i] + new_trim * n[i]
@@ -226,7 +226,7 @@ def orientation_tick(gain, x, out):
 # The length loop's integral term may add at most this reel speed, m/s: enough to break the
 # drives' stiction and take up their lag, never a runaway after a long stall.
 MAX_INTEGRAL_SPEED = 0.05
-FRICTION_SPEED = 0.0
+FRICTION_SPEED = 0.0045
 FRICTION_ERROR = 2e-5
 
 
