@@ -158,7 +158,7 @@ def tension_tick(reels, attachments, params, x, out):
         lam = num / den
         for i in range(m):
             T_est[i] = T_p[i] + lam * n[i]
-        if started and gain > 0.0:
+        if started:
             new_trim = min(MAX_TRIM, max(-MAX_TRIM, trim + step * gain * (target - lam)))
         for i in range(m):
             T_cmd[i] = T_target[i] + new_trim * n[i]
@@ -226,24 +226,42 @@ def orientation_tick(gain, x, out):
 # The length loop's integral term may add at most this reel speed, m/s: enough to break the
 # drives' stiction and take up their lag, never a runaway after a long stall.
 MAX_INTEGRAL_SPEED = 0.05
-FRICTION_SPEED = 0.0045
+# The drives' dead band is compensated to this fraction (a drive whose friction the robot
+# file overstates would otherwise hunt), and switched in smoothly over this length error, m.
+FRICTION_SHARE = 0.9
 FRICTION_ERROR = 2e-5
 
 
-@_jit
-def pose_rates_tick(reels, attachments, gain, integral_gain, step, EA, tension, x, out):
-    """x = [p (3), R (9), v (3), w (3), R_ref (9), L0 (m), T_command (m), memory: p_d (3),
-    delta (m), integral (m), started (1)]; out = [l_dot (m), l_d (m), next memory (2 m + 4)].
+def drive_dead_band(dynamics) -> float:
+    """The reel speed command (m/s of cable) below which a drive at rest does not move:
+    its Coulomb friction over its velocity loop's gain (robot file reel_drives:
+    coulomb_friction / (bandwidth x inertia); systems/dynamic_plant.reel_step's law)."""
+    return float(dynamics.coulomb_friction) / (float(dynamics.bandwidth)
+                                               * float(dynamics.reel_inertia))
 
-    l_dot = J(p, R) [v; w] + gain e + integral_gain I, e = l_d - L0, I its integral (m s,
-    clipped so the term stays within MAX_INTEGRAL_SPEED): the twist through the m x 6
+
+@_jit
+def pose_rates_tick(reels, attachments, params, x, out):
+    """params = [gain 1/s, integral_gain 1/s^2, step s, EA N, tension (0 or 1), dead band
+    m/s]. x = [p (3), R (9), v (3), w (3), R_ref (9), L0 (m), T_command (m), memory: p_d
+    (3), delta (m), integral (m), started (1)]; out = [l_dot (m), l_d (m), next memory
+    (2 m + 4)].
+
+    l_dot = J(p, R) [v; w] + gain e + integral_gain I + FRICTION_SHARE dead_band
+    tanh(e / FRICTION_ERROR), e = l_d - L0, I its integral (m s, clipped so the term stays
+    within MAX_INTEGRAL_SPEED): the twist through the m x 6
     Jacobian at the estimated pose plus the cable-length loop, a PI loop here so that the
     drives' stiction and lag leave no lasting length error (with 70 kN cables 0.1 mm is ~2 N
-    of tension). l_d: the lengths of the commanded pose (p_d, R_ref) unstretched by the
+    of tension), and the drives' dead band (their Coulomb friction holds a reel commanded
+    slower than dead_band) made up where the error asks for motion. l_d: the lengths of the
+    commanded pose (p_d, R_ref) unstretched by the
     commanded tensions (`tension`: L EA / (EA + T)), else its rigid lengths plus the offsets
     delta latched at the first tick (the loop then starts with no error). p_d starts at the
     first tick's estimate and integrates v."""
     m = reels.shape[0]
+    gain, integral_gain, step, EA = params[0], params[1], params[2], params[3]
+    tension = params[4] != 0.0
+    friction = FRICTION_SHARE * params[5]
     p = x[0:3]
     R = x[3:12].reshape((3, 3))
     v = x[12:15]
@@ -279,7 +297,7 @@ def pose_rates_tick(reels, attachments, gain, integral_gain, step, EA, tension, 
         integral = min(limit, max(-limit, integral))
         out[3 * m + 3 + i] = integral
         out[i] = (twist + gain * error + integral_gain * integral
-                  + FRICTION_SPEED * math.tanh(error / FRICTION_ERROR))
+                  + friction * math.tanh(error / FRICTION_ERROR))
     for k in range(3):
         p_d[k] += step * v[k]
     out[4 * m + 3] = 1.0

@@ -240,12 +240,14 @@ def test_the_orientation_hold_latches_and_turns_back_at_its_gain():
 # --- the Jacobian mapping of a pose --------------------------------------------------------------
 
 
-def _rates(p, R, v, w, R_ref, L0, T, memory, gain=20.0, tension=False, integral=0.0):
+def _rates(p, R, v, w, R_ref, L0, T, memory, gain=20.0, tension=False, integral=0.0,
+           dead_band=0.0):
     x = np.concatenate([p, np.asarray(R).ravel(), v, w, np.asarray(R_ref).ravel(), L0, T,
                         memory])
     out = np.empty(S["rates_out"])
-    pc.pose_rates_tick(REELS, ATTACH, gain, integral, 0.002, EA if tension else 0.0, tension,
-                       x, out)
+    params = np.array([gain, integral, 0.002, EA if tension else 0.0, float(tension),
+                       dead_band])
+    pc.pose_rates_tick(REELS, ATTACH, params, x, out)
     return out[:M], out[M:2 * M], out[2 * M:]
 
 
@@ -292,3 +294,49 @@ def test_posed_interference_is_the_translating_tick_on_rotated_attachments():
         interference_tick(pair_geometry(rotated), params.packed, params.gradient_floor,
                           params.F_max, p, np.zeros(P), True, ref)
         np.testing.assert_allclose(out, ref, rtol=0, atol=1e-12)
+
+
+def test_the_length_loop_is_pi_with_the_drives_dead_band_made_up():
+    """At rest with a 1 mm error on one cable: l_dot = K_l e + K_i (I + T e) + 0.9 u_c
+    tanh(e / 20 um), with u_c the drives' dead band (m/s); the integral is clipped so its
+    term stays within MAX_INTEGRAL_SPEED."""
+    p, R = random_poses(9, 1)[0]
+    L = pose_lengths(ROBOT, p, R)
+    e = np.zeros(M)
+    e[3] = 0.001
+    integral = np.full(M, 2e-5)
+    memory = np.r_[p, np.zeros(M), integral, 1.0]
+    cmd, _, nxt = _rates(p, R, np.zeros(3), np.zeros(3), R, L - e, np.zeros(M), memory,
+                         gain=20.0, integral=100.0, dead_band=0.005)
+    new_integral = integral + 0.002 * e
+    expected = 20.0 * e + 100.0 * new_integral + 0.9 * 0.005 * np.tanh(e / 2e-5)
+    np.testing.assert_allclose(cmd, expected, rtol=0, atol=1e-12)  # lengths ~3 m: 1e-16 rel
+    np.testing.assert_allclose(nxt[3 + M:3 + 2 * M], new_integral, rtol=0, atol=1e-18)
+    # A long stall: the integral stops at MAX_INTEGRAL_SPEED / K_i.
+    memory = np.r_[p, np.zeros(M), np.full(M, 1.0), 1.0]
+    _, _, nxt = _rates(p, R, np.zeros(3), np.zeros(3), R, L - e, np.zeros(M), memory,
+                       integral=100.0)
+    assert nxt[3 + M + 3] == pytest.approx(pc.MAX_INTEGRAL_SPEED / 100.0)
+
+
+def test_the_dead_band_comes_from_the_robot_files_drives():
+    d = ROBOT.dynamics
+    # reel_step: a drive at rest moves only when K u > F_c, K = bandwidth x inertia.
+    assert pc.drive_dead_band(d) == pytest.approx(
+        d.coulomb_friction / (d.bandwidth * d.reel_inertia))
+
+
+def test_the_tension_command_slews_from_the_estimate():
+    p, R = random_poses(10, 1)[0]
+    L0 = pose_lengths(ROBOT, p, R)
+    # First tick: from the estimate; the target is far (floor 60 N) but the command moves at
+    # most 50 N/s x 2 ms = 0.1 N.
+    _, T_cmd, T_est, _, memory = _tension(p, R, np.zeros(3), np.zeros(M), L0,
+                                          np.full(M, 20.0), floor=60.0, slew=50.0, gain=0.0)
+    assert np.abs(T_cmd - T_est).max() <= 0.1 + 1e-12
+    assert np.abs(T_cmd - T_est).max() == pytest.approx(0.1)
+    # Next tick: from the last command.
+    _, T_next, _, _, _ = _tension(p, R, np.zeros(3), np.zeros(M), L0, memory[:M],
+                                  started=1.0, floor=60.0, slew=50.0, gain=0.0,
+                                  T_before=memory[M + 5:])
+    assert np.abs(T_next - T_cmd).max() == pytest.approx(0.1)

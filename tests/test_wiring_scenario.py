@@ -542,7 +542,9 @@ def test_pose_full_estimates_the_orientation_and_holds_it():
     log = sim(push([1.0, 0, 0], controller=scenario_module.Controller(pose="full")), 0.1)
     reference = sim(push([1.0, 0, 0]), 0.1)
     assert np.abs(log["rpy"]).max() < 1e-9 and np.abs(log["omega"]).max() < 1e-8
-    np.testing.assert_allclose(log["p"], reference["p"], rtol=0, atol=1e-9)
+    # The full pose's PI loop and dead-band compensation act on round-off-level length errors
+    # (1e-12 m), which moves the platform by nanometres, no more.
+    np.testing.assert_allclose(log["p"], reference["p"], rtol=0, atol=1e-7)
     assert "rpy" not in reference and "omega" not in reference
 
 

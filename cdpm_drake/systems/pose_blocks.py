@@ -14,7 +14,8 @@ from pydrake.systems.framework import LeafSystem
 from ..interference import result_layout
 from ..kernel_call import bind, owned
 from ..kinematics import KinematicsError
-from ..pose_control import (FK_INCONSISTENT, FK_NOT_SETTLED, interference_posed_tick,
+from ..pose_control import (FK_INCONSISTENT, FK_NOT_SETTLED, drive_dead_band,
+                            interference_posed_tick,
                             orientation_tick, pose_fk_tick, pose_rates_tick, sizes,
                             tension_tick)
 from ._wiring import note_piece, unit_delay, wiring
@@ -231,17 +232,17 @@ def build_pose_jacobian_mapping(builder, robot, *, length_gain, integral_gain, t
     m = robot.num_cables
     s = sizes(m)
     reels, attachments = _constants(robot)
-    gain, integral, step = float(length_gain), float(integral_gain), float(time_step)
-    EA = float(robot.dynamics.EA) if tension else 0.0
-    tension = bool(tension)
+    params = owned(np.array([length_gain, integral_gain, time_step,
+                             robot.dynamics.EA if tension else 0.0, 1.0 if tension else 0.0,
+                             drive_dead_band(robot.dynamics)], dtype=float))
     example = np.zeros(s["rates_x"])
     example[:3] = robot.workspace.center
     example[3:12] = example[18:27] = np.eye(3).ravel()
-    rates = bind(pose_rates_tick, reels, attachments, gain, integral, step, EA, tension,
-                 example, np.empty(s["rates_out"]))
+    rates = bind(pose_rates_tick, reels, attachments, params, example,
+                 np.empty(s["rates_out"]))
 
     def tick(x, out):
-        rates(reels, attachments, gain, integral, step, EA, tension, x, out)
+        rates(reels, attachments, params, x, out)
 
     # Without tension control the kernel ignores its tensions: the lengths fill the slot
     # (a Selector can only route inputs; a constant source would be a system more a tick).
