@@ -53,7 +53,8 @@ class _StopRequest:
 
     def __enter__(self):
         if threading.current_thread() is threading.main_thread():
-            for sig in (signal.SIGINT, signal.SIGTERM):
+            from .interrupt import honoured
+            for sig in filter(honoured, (signal.SIGINT, signal.SIGTERM)):  # ignored stays so
                 self._previous[sig] = signal.signal(sig, self._handle)
         return self
 

@@ -1160,9 +1160,12 @@ def _run_sweep(sweep, out_dir, *, workers, ray, ray_address, ray_chunk, ray_init
 
     installed = {}
     import threading
+
+    from .interrupt import honoured
     if threading.current_thread() is threading.main_thread():
         for s in (signal.SIGINT, signal.SIGTERM):
-            installed[s] = signal.signal(s, on_signal)
+            if honoured(s):  # one ignored when the sweep started stays ignored
+                installed[s] = signal.signal(s, on_signal)
     bar = None
     failed = [0]
     start = time.perf_counter()
