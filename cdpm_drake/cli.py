@@ -13,7 +13,12 @@ from .text import format_table, prefixed_log_records
 
 
 class CliError(Exception):
-    """A bad command-line argument; printed without a traceback."""
+    """A bad command-line argument (usage, exit 2); printed without a traceback."""
+
+
+class InputError(Exception):
+    """A file or folder named on the command line that cannot be found or read (exit 1, as
+    for a scenario or robot that cannot be found); printed without a traceback."""
 
 
 def _fmt(v, digits=3) -> str:
@@ -217,6 +222,7 @@ def _cmd_simulate(args) -> int:
     if realtime is not None and not (realtime > 0 and np.isfinite(realtime)):
         raise CliError(f"--realtime must be a rate > 0 (1: real time), got {realtime!r}")
     scenario = _load_scenario_arg(args)
+    _check_html(args.html)
     if args.meshcat:
         on_chunk = _live_meshcat(scenario)
         # Something to watch: paced at real time unless told otherwise.
@@ -240,6 +246,16 @@ def _writable_dir(path: Path, field: str) -> None:
         writable_dir(path, field)
     except RunFolderError as e:
         raise CliError(str(e)) from None
+
+
+def _check_html(path) -> None:
+    """--html FILE must be writable before a run starts, not found wanting after it."""
+    if path is None:
+        return
+    if path.is_dir():
+        raise CliError(f"--html {str(path)!r} is a folder; give a file name, e.g. "
+                       f"{str(path / 'replay.html')!r}")
+    _writable_dir(path.parent if str(path.parent) else Path("."), "--html's folder")
 
 
 def _save_replay(log, path):
@@ -370,7 +386,10 @@ def _cmd_plot(args) -> int:
     try:
         log = load_log(target)
     except LogError as e:
-        raise CliError(str(e)) from None
+        raise InputError(str(e)) from None
+    if args.out is not None:
+        _writable_dir(args.out, "--out")
+    _check_html(args.html)
     out_dir = args.out if args.out is not None else (
         target if target.is_dir() else target.parent)
     for png in plot_log(log, out_dir):
@@ -390,7 +409,7 @@ def _recover(run_dir, out=None) -> None:
     try:
         path, tail = recover(run_dir)
     except RecoverError as e:
-        raise CliError(str(e)) from None
+        raise InputError(str(e)) from None
     cut = (f"the tail was cut: a partial last row of {tail['cut_bytes']} bytes left out"
            if tail["cut_bytes"] else "the tail was whole (no partial row)")
     print(f"recovered {tail['ticks']} ticks of {tail['expected']} ({tail['ending']}); {cut}; "
@@ -512,6 +531,8 @@ def _cmd_plot_sweep(args) -> int:
     from .sweep import SweepError, plot_main
     from .views.sweep_plots import plot_sweep
 
+    if args.out is not None:
+        _writable_dir(args.out, "--out")
     try:
         return plot_main(sweep_dir=args.log, plot=plot_sweep, out_dir=args.out)
     except SweepError as e:  # a bad sweep file or results: an error (1), as for scenarios
@@ -759,7 +780,8 @@ def main(argv=None) -> int:
         except CliError as e:
             print(f"cdpm {args.command}: error: {e}", file=sys.stderr)
             return 2
-        except (RobotError, KinematicsError, ScenarioError, OperatorError, TickLogError) as e:
+        except (InputError, RobotError, KinematicsError, ScenarioError, OperatorError,
+                TickLogError) as e:
             print(f"cdpm {args.command}: error: {e}", file=sys.stderr)
             return 1
         except KeyboardInterrupt as e:
