@@ -222,6 +222,7 @@ def _cmd_simulate(args) -> int:
     if realtime is not None and not (realtime > 0 and np.isfinite(realtime)):
         raise CliError(f"--realtime must be a rate > 0 (1: real time), got {realtime!r}")
     scenario = _load_scenario_arg(args)
+    _check_duration_tick(args.duration, scenario)
     _check_html(args.html)
     if args.meshcat:
         on_chunk = _live_meshcat(scenario)
@@ -277,6 +278,17 @@ def _save_replay(log, path):
 def _check_duration(duration):
     if duration is not None and not (duration > 0 and np.isfinite(duration)):
         raise CliError(f"--duration must be a number of seconds > 0, got {duration!r}")
+
+
+def _check_duration_tick(duration, resolved) -> None:
+    """--duration of at least one tick of the scenario's time_step."""
+    from .scenario import ScenarioError, check_duration
+
+    if duration is not None:
+        try:
+            check_duration(duration, resolved.time_step, "--duration")
+        except ScenarioError as e:
+            raise CliError(str(e)) from None
 
 
 def _live_meshcat(scenario):
@@ -364,6 +376,7 @@ def _cmd_run(args) -> int:
         except (PriorityError, ValueError) as e:
             raise CliError(f"--rt-priority {args.rt_priority!r}: {e}") from None
     scenario = _load_scenario_arg(args)
+    _check_duration_tick(args.duration, scenario)
     on_view = _live_meshcat(scenario) if args.meshcat else None
     return run_main(scenario=scenario, duration=args.duration, out_dir=args.out,
                     on_view=on_view, force=args.force)

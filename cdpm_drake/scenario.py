@@ -489,11 +489,42 @@ def interference_params(scenario: Scenario, robot: Robot):
             if value is not None:
                 arrays[key][k] = float(value)
     F_max = float(cfg.F_max) if cfg.F_max is not None else (float(arrays["F_u"].max()) if P else 0.0)
+    # Checked here, field by field, so a message names what the user wrote (the default set,
+    # or a pair's override) rather than the first pair the default reaches.
+    default = {k: f"interference.default.{k}" for k in arrays}
+    _check_logistic_set({k: getattr(cfg.default, k) for k in arrays}, default, "")
+    for n, override in enumerate(cfg.pairs):
+        k = robot.pair_position(int(override.pair[0]), int(override.pair[1]))
+        names = {key: (f"interference.pairs[{n}].{key}" if getattr(override, key) is not None
+                       else default[key]) for key in arrays}
+        _check_logistic_set({key: arrays[key][k] for key in arrays}, names,
+                            f" (pair ({override.pair[0]},{override.pair[1]}))")
     try:
         extra = {} if cfg.gradient_floor is None else {"gradient_floor": cfg.gradient_floor}
         return InterferenceParams(F_max=F_max, pairs=tuple(robot.pairs), **arrays, **extra)
     except ValueError as e:
         raise ScenarioError(f"interference: {e}") from None
+
+
+def _check_logistic_set(values: dict, names: dict, pair: str) -> None:
+    """ScenarioError unless d_l, d_u (m), F_u, eps (N) of `values` form a logistic (eqs.
+    26-28: 0 <= d_l < d_u, 0 < eps < F_u / 2); the message names each value by `names` (its
+    field path), with `pair` after the first."""
+    d_l, d_u, F_u, eps = (values[k] for k in ("d_l", "d_u", "F_u", "eps"))
+    for key, value in values.items():
+        if not (isinstance(value, (int, float)) and math.isfinite(value)):
+            raise ScenarioError(f"{names[key]}{pair} must be a finite number, got {value!r}")
+    if d_l < 0:
+        raise ScenarioError(f"{names['d_l']}{pair} must be >= 0 m, got {float(d_l)!r}")
+    if d_u <= d_l:
+        raise ScenarioError(f"{names['d_u']} = {float(d_u)!r} m{pair} must be above "
+                            f"{names['d_l']} = {float(d_l)!r} m")
+    if F_u <= 0:
+        raise ScenarioError(f"{names['F_u']}{pair} must be > 0 N, got {float(F_u)!r}")
+    if not 0 < eps < F_u / 2:
+        raise ScenarioError(f"{names['eps']} = {float(eps)!r} N{pair} must lie in (0, F_u/2) "
+                            f"= (0, {float(F_u) / 2!r}) N, F_u being {names['F_u']} = "
+                            f"{float(F_u)!r} N")
 
 
 @dataclasses.dataclass(frozen=True, eq=False)
@@ -542,6 +573,7 @@ def _resolve(scenario: Scenario, source: str) -> ResolvedScenario:
     robot = scenario_robot(scenario)
     _positive(scenario.duration, "duration")
     _positive(scenario.time_step, "time_step")
+    check_duration(scenario.duration, scenario.time_step, "duration")
     _positive(scenario.admittance.mass, "admittance.mass")
     _positive(scenario.admittance.damping, "admittance.damping")
     p0 = scenario.initial_position
@@ -601,6 +633,16 @@ def _resolve(scenario: Scenario, source: str) -> ResolvedScenario:
                                  robot.limits.max_reel_speed)),
         fk_max_residual=1e-6 if simulated else float(getattr(plant, "max_length_residual",
                                                              0.005)))
+
+
+def check_duration(duration: float, time_step: float, field: str) -> None:
+    """ScenarioError when `duration` (s) is shorter than one tick of `time_step` (s): the run
+    would be the start tick alone."""
+    # A hair of round-off (0.1 / 0.002 = 49.99...) does not make a whole tick shorter.
+    if duration < time_step * (1 - 1e-9):
+        raise ScenarioError(f"{field} {duration!r} s is shorter than one tick (time_step "
+                            f"{time_step!r} s): a run needs at least one tick, e.g. "
+                            f"{field} {time_step!r}")
 
 
 def _or(value, default):

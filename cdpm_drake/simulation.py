@@ -14,7 +14,7 @@ from pydrake.systems.analysis import Simulator
 
 from .diagram import build_diagram, logged_signals, reserve_log
 from .scenario import (DynamicReels, ResolvedScenario, Scenario, ScenarioError, SimulatedReels,
-                       resolve_scenario, scenario_to_yaml)
+                       check_duration, resolve_scenario, scenario_to_yaml)
 
 
 @dataclasses.dataclass
@@ -51,6 +51,7 @@ def simulate(*, scenario: Scenario | ResolvedScenario, duration: float | None = 
     duration = scenario.duration if duration is None else float(duration)
     if not (duration > 0 and np.isfinite(duration)):
         raise ValueError(f"duration must be a finite number > 0 s, got {duration!r}")
+    check_duration(duration, scenario.time_step, "duration")
     diagram = build_diagram(resolved) if diagram is None else diagram
     simulator = Simulator(diagram)
     context = simulator.get_mutable_context()

@@ -291,12 +291,36 @@ def test_unknown_field_in_a_scenario_file_names_the_file(tmp_path):
     ("plant: !SimulatedReels {max_reel_speed: 0.0}", "plant.max_reel_speed must be a finite "
                                                      "number > 0, got 0.0"),
     ("{interference: {default: {d_l: 0.07}}}", "d_u"),  # d_l above d_u = 0.061
+    # Issue 22, point 6: an error in the default set names the default's fields, not the
+    # first pair it reaches; a pair's override names the override and the pair.
+    ("{interference: {default: {d_l: 0.07, d_u: 0.06}}}",
+     "interference.default.d_u = 0.06 m must be above interference.default.d_l = 0.07 m"),
+    ("{interference: {default: {F_u: -1.0}}}", "interference.default.F_u must be > 0 N, "
+                                               "got -1.0"),
+    ("{interference: {default: {eps: 2.0}}}", "interference.default.eps = 2.0 N must lie in "
+                                              "(0, F_u/2) = (0, 1.0) N"),
+    ("{interference: {pairs: [{pair: [1, 3], d_u: 0.04}]}}",
+     "interference.pairs[0].d_u = 0.04 m (pair (1,3)) must be above "
+     "interference.default.d_l = 0.05 m"),
+    ("{interference: {pairs: [{pair: [1, 2]}, {pair: [3, 1], d_l: -0.01}]}}",
+     "interference.pairs[1].d_l (pair (3,1)) must be >= 0 m, got -0.01"),
+    # Issue 22, point 7: less than one tick of time_step (0.002 s) is refused, naming the tick.
+    ("{duration: 0.001}", "duration 0.001 s is shorter than one tick (time_step 0.002 s)"),
+    ("{duration: 0.01, time_step: 0.02}", "duration 0.01 s is shorter than one tick "
+                                          "(time_step 0.02 s)"),
     ("operator: !ScriptedOperator {times: [0, 0], forces: [[0, 0, 0], [1, 1, 1]]}",
      "operator.times must increase strictly"),
     ("operator: !CsvOperator {path: no_such.csv}", "no_such.csv' does not exist"),
 ])
 def test_bad_values_are_rejected_naming_field_and_value(overlay, message):
     assert message in error_of(overlay)
+
+
+def test_a_duration_of_one_tick_is_enough():
+    # Exactly one tick (and one tick less a round-off hair, 0.1 / 0.002 * 0.002) is a run.
+    from cdpm_drake.scenario import check_duration
+    load_scenario("exp1_no_interaction", overlay_text="{duration: 0.002}")
+    check_duration(0.002 * (1 - 1e-12), 0.002, "duration")
 
 
 def test_initial_position_outside_names_the_box():
