@@ -149,7 +149,9 @@ def load_sweep_file(name_or_path) -> tuple[SweepFile, Path]:
     sweep.variants = variants
     for k, (axis, raw_axis) in enumerate(zip(sweep.axes, raw.get("axes") or [])):
         axis.values = raw_axis.get("values") or []
-        _check_axis(axis, f"{path}: axes[{k}]")
+        _check_axis(axis, f"{path}: axes[{k}]",
+                    given=[key for key in ("values", "linspace", "geomspace")
+                           if raw_axis.get(key) is not None])
     if sweep.random is not None:
         _check_random(sweep.random, f"{path}: random")
     for k, s in enumerate(sweep.seeds):
@@ -165,15 +167,19 @@ def load_sweep_file(name_or_path) -> tuple[SweepFile, Path]:
     return sweep, path
 
 
-def _check_axis(axis: Axis, where: str) -> None:
+def _check_axis(axis: Axis, where: str, given=None) -> None:
+    """`given`: the keys of values, linspace, geomspace the file wrote (default: those set)."""
     if not axis.field:
         raise SweepError(f"{where}.field must name a scenario field, e.g. "
                          "interference.default.d_u")
     parse_field_path(axis.field, where=f"{where}.field")
-    given = [k for k in ("values", "linspace", "geomspace") if getattr(axis, k)]
+    if given is None:
+        given = [k for k in ("values", "linspace", "geomspace") if getattr(axis, k)]
     if len(given) != 1:
         raise SweepError(f"{where} ({axis.field}) needs exactly one of values, linspace, "
                          f"geomspace; got {given or 'none'}")
+    if given == ["values"] and not axis.values:
+        raise SweepError(f"{where}.values ({axis.field}) is empty: list at least one value")
     if axis.values:
         if not isinstance(axis.values, list):
             raise SweepError(f"{where}.values must be a list, got {axis.values!r}")
@@ -412,7 +418,7 @@ class Variant:
     scenario_hash: str
 
     def label(self) -> str:
-        parts = [f"{k}={_cell(v)}" for k, v in self.values.items()]
+        parts = [f"{k}={_shown(v)}" for k, v in self.values.items()]
         if self.overlay is not None:
             parts.append(f"variant={_flow(self.overlay)}")
         parts.append(f"random_seed={self.random_seed}")
@@ -533,7 +539,7 @@ def _resolve_variant(index, base, values, overlay, seed, path) -> Variant:
     coords = {"values": values, "overlay": overlay, "random_seed": seed}
     run = "r" + hashlib.sha1(json.dumps(coords, sort_keys=True, default=repr).encode()
                              ).hexdigest()[:10]
-    shown = ", ".join([f"{k}={_cell(v)}" for k, v in values.items()]
+    shown = ", ".join([f"{k}={_shown(v)}" for k, v in values.items()]
                       + ([f"variant={_flow(overlay)}"] if overlay is not None else [])
                       + ([f"random_seed={seed}"] if seed is not None else []))
     where = f"{path}: variant {index + 1} (run {run}: {shown or 'the base'})"
@@ -594,6 +600,14 @@ def _flow(value) -> str:
         return f"{tag} {inner}" if tag else inner
     if isinstance(value, list):
         return "[" + ", ".join(_flow(v) for v in value) + "]"
+    return _shown(value)
+
+
+def _shown(value) -> str:
+    """A value in a message: as a CSV cell, but a NaN or infinite float spelled out (an
+    empty cell would read as no value at all)."""
+    if isinstance(value, float) and not math.isfinite(value):
+        return repr(value)
     return _cell(value)
 
 

@@ -167,6 +167,9 @@ variants: [{admittance: {damping: 3.0}}, {limits: {max_velocity: 0.2}}]
     (SMALL + "seeds: [a]\n", "seeds[0] must be an integer, got 'a'"),
     (SMALL.replace("linspace: [5.0, 7.0, 2]", "linspace: [5.0, 7.0, 2.5]"),
      "must be [start, stop, count] with an integer count >= 1"),
+    # Issue 22, point 5: an empty list is a list given, and a NaN value is spelled out.
+    (SMALL.replace("linspace: [5.0, 7.0, 2]", "values: []"),
+     "axes[1].values (admittance.damping) is empty: list at least one value"),
 ])
 def test_bad_sweep_file_is_reported(tmp_path, text, expected):
     with pytest.raises(sw.SweepError) as e:
@@ -185,6 +188,15 @@ def test_rejected_value_names_the_variant_before_any_run(tmp_path, capsys):
     assert "interference.default.F_u=-1.0, admittance.damping=5.0" in err
     assert "F_u" in err and "-1" in err
     assert not (out / "runs").exists() and not (out / "results.csv").exists()
+
+
+def test_a_nan_axis_value_is_spelled_out_in_the_variant(tmp_path):
+    # Issue 22, point 5: not `interference.default.F_u=` (an empty CSV cell).
+    with pytest.raises(sw.SweepError) as e:
+        sw.load_sweep(write(tmp_path, SMALL.replace("[2.0, 4.0]", "[2.0, .nan]")))
+    assert "(run r" in str(e.value)
+    assert "interference.default.F_u=nan, admittance.damping=5.0)" in str(e.value)
+    assert "interference.default.F_u must be a finite number, got nan" in str(e.value)
 
 
 def test_unknown_pair_names_the_robot_pairs(tmp_path):
