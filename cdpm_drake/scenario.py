@@ -310,7 +310,8 @@ def _warn_reel_saturation(scenario, robot):
 def _check_yaml_text(source: str, **where) -> None:
     """Check raw YAML against the Scenario schema before yaml_load_typed, whose messages do not
     say which nested field is wrong (`The fields ['mas'] were unknown to the schema`,
-    `could not convert string to float: 'a'`) nor list the valid fields."""
+    `could not convert string to float: 'a'`) nor list the valid fields. A file's message
+    gives the line of the field."""
     from pydrake.common.yaml import yaml_load
 
     try:
@@ -322,7 +323,38 @@ def _check_yaml_text(source: str, **where) -> None:
     try:
         _check_yaml(raw, Scenario, "")
     except ScenarioError as e:
-        raise ScenarioError(f"{source}: {e}") from None
+        raise ScenarioError(f"{source}: {with_line(e, where.get('filename'))}") from None
+
+
+# Fields the loader fills in, not for users to write: accepted, never listed as choices.
+INTERNAL_FIELDS = ("base_dir",)
+
+
+def _field_error(field: str, message: str) -> ScenarioError:
+    """A ScenarioError about the YAML field at `field` (e.g. interference.pairs[0].du)."""
+    error = ScenarioError(message)
+    error.field = field
+    return error
+
+
+def field_keys(field: str) -> list:
+    """`interference.pairs[0].du` -> ["interference", "pairs", 0, "du"] (text.yaml_line's
+    key path)."""
+    import re
+
+    return [int(index) if index else name
+            for name, index in re.findall(r"([^.\[\]]+)|\[(\d+)\]", field)]
+
+
+def with_line(error: Exception, filename=None) -> str:
+    """The message of a _check_yaml error, prefixed with `line N: ` where the file `filename`
+    writes the field it names."""
+    from .text import yaml_line
+
+    field = getattr(error, "field", None)
+    line = (yaml_line(field_keys(field), filename=filename)
+            if filename is not None and field else None)
+    return f"line {line}: {error}" if line is not None else str(error)
 
 
 def _is_number(v) -> bool:
@@ -340,18 +372,22 @@ def _is_number(v) -> bool:
 def _check_yaml(value, schema, field: str) -> None:
     """Raise ScenarioError naming the field, the value and the valid choices where raw YAML
     data `value` does not fit the type `schema`."""
+    from .text import did_you_mean
+
     name = field or "the scenario"
     if dataclasses.is_dataclass(schema):
         if not isinstance(value, dict):
-            raise ScenarioError(f"{name} must be a mapping, got {value!r}")
-        valid = [f.name for f in dataclasses.fields(schema)]
+            raise _field_error(field, f"{name} must be a mapping, got {value!r}")
+        fields = [f.name for f in dataclasses.fields(schema)]
+        valid = [f for f in fields if f not in INTERNAL_FIELDS]
         for key, item in value.items():
             if key == "_tag":
                 continue
-            if key not in valid:
+            if key not in fields:
                 where = f"{field}.{key}" if field else str(key)
-                raise ScenarioError(f"unknown field {where!r}; valid fields"
-                                    f"{' of ' + field if field else ''}: {valid}")
+                raise _field_error(where, f"unknown field {where!r}{did_you_mean(key, valid)} "
+                                          f"(valid fields{' of ' + field if field else ''}: "
+                                          f"{valid})")
         types = typing.get_type_hints(schema)
         for key, item in value.items():
             if key != "_tag":
@@ -371,24 +407,26 @@ def _check_yaml(value, schema, field: str) -> None:
             try:  # an untagged entry is the first member, as yaml_load_typed reads it
                 return _check_yaml(value, args[0], field)
             except ScenarioError as e:
-                raise ScenarioError(_untagged_hint(e, value, args, tags, field)) from None
+                raise _field_error(getattr(e, "field", field),
+                                   _untagged_hint(e, value, args, tags, field)) from None
         if tag not in tags:
-            raise ScenarioError(f"{field}: unknown type {tag!r}; valid {field} types: {tags}")
+            raise _field_error(field, f"{field}: unknown type {tag!r}{did_you_mean(tag, tags)} "
+                                      f"(valid {field} types: {tags})")
         return _check_yaml(value, args[tags.index(tag)], field)
     if origin is list:
         if not isinstance(value, list):
-            raise ScenarioError(f"{name} must be a list, got {value!r}")
+            raise _field_error(field, f"{name} must be a list, got {value!r}")
         for k, item in enumerate(value):
             _check_yaml(item, args[0], f"{field}[{k}]")
         return
     if schema is float and not _is_number(value):
-        raise ScenarioError(f"{name} must be a number, got {value!r}")
+        raise _field_error(field, f"{name} must be a number, got {value!r}")
     if schema is int and not (isinstance(value, int) and not isinstance(value, bool)):
-        raise ScenarioError(f"{name} must be an integer, got {value!r}")
+        raise _field_error(field, f"{name} must be an integer, got {value!r}")
     if schema is bool and not isinstance(value, bool):
-        raise ScenarioError(f"{name} must be true or false, got {value!r}")
+        raise _field_error(field, f"{name} must be true or false, got {value!r}")
     if schema is str and not isinstance(value, str):
-        raise ScenarioError(f"{name} must be a string, got {value!r}")
+        raise _field_error(field, f"{name} must be a string, got {value!r}")
 
 
 def _untagged_hint(e: ScenarioError, value, args, tags, field: str) -> str:

@@ -32,8 +32,9 @@ from pathlib import Path
 import numpy as np
 
 from .robot import resolve_named_yaml
-from .scenario import (Scenario, ScenarioError, check_scenario, interference_params,
-                       load_scenario, resolve_scenario_path, scenario_robot, scenario_to_yaml)
+from .scenario import (INTERNAL_FIELDS, Scenario, ScenarioError, check_scenario,
+                       interference_params, load_scenario, resolve_scenario_path,
+                       scenario_robot, scenario_to_yaml)
 
 SWEEPS_DIR = Path(__file__).resolve().parent / "sweeps"
 
@@ -113,7 +114,8 @@ def load_sweep_file(name_or_path) -> tuple[SweepFile, Path]:
     """The typed sweep file (a shipped sweep's name or a path) and its path."""
     from pydrake.common.yaml import yaml_dump, yaml_load, yaml_load_typed
 
-    from .scenario import _check_yaml  # the scenario's checker: same wording for both files
+    # The scenario's checker: same wording for both files.
+    from .scenario import _check_yaml, with_line
 
     path = resolve_sweep_path(name_or_path)
     try:
@@ -126,7 +128,7 @@ def load_sweep_file(name_or_path) -> tuple[SweepFile, Path]:
     try:
         _check_yaml(raw, SweepFile, "")
     except ScenarioError as e:
-        raise SweepError(f"{path}: {e}") from None
+        raise SweepError(f"{path}: {with_line(e, str(path))}") from None
     typed = copy.deepcopy(raw)
     for key in _RAW_FIELDS:
         typed.pop(key, None)
@@ -291,10 +293,11 @@ def _put(node: dict, obj, segs: list[_Seg], value, path: str) -> None:
     if not dataclasses.is_dataclass(obj):
         raise SweepError(f"field {path!r}: {seg.name!r} is below a value that is not a "
                          f"mapping ({obj!r})")
-    names = [f.name for f in dataclasses.fields(obj)]
+    names = [f.name for f in dataclasses.fields(obj) if f.name not in INTERNAL_FIELDS]
     if seg.name not in names:
-        raise SweepError(f"field {path!r}: unknown field {seg.name!r}; valid fields there: "
-                         f"{names}")
+        from .text import did_you_mean
+        raise SweepError(f"field {path!r}: unknown field {seg.name!r}"
+                         f"{did_you_mean(seg.name, names)} (valid fields there: {names})")
     schema = typing.get_type_hints(type(obj))[seg.name]
     child = getattr(obj, seg.name)
     if not seg.selectors:

@@ -255,6 +255,26 @@ def test_unknown_field_in_a_scenario_file_names_the_file(tmp_path):
     assert "unknown field 'limits.max_speed'" in str(info.value)
 
 
+def test_an_unknown_field_in_a_file_gives_its_line_and_the_closest_name(tmp_path):
+    # Issue 22, point 15: the line of the field (from 1), "did you mean", and the loader's
+    # internal base_dir is no field to offer.
+    path = tmp_path / "bad.yaml"
+    path.write_text("name: bad\nduration: 1.0\ninterference:\n  default:\n    d_l: 0.05\n"
+                    "    du: 0.07\n")
+    msg = str(pytest.raises(ScenarioError, load_scenario, path).value)
+    assert f"{path}: line 6: unknown field 'interference.default.du'; did you mean 'd_u'? " \
+           "(valid fields of interference.default: ['d_l', 'd_u', 'F_u', 'eps'])" in msg, msg
+    path.write_text("name: bad\nbasedir: x\n")
+    msg = str(pytest.raises(ScenarioError, load_scenario, path).value)
+    assert "line 2: unknown field 'basedir' (valid fields: ['name'," in msg, msg
+    assert "base_dir" not in msg
+    # A value error in a list, in a tagged operator: the line of the entry.
+    path.write_text("name: bad\noperator: !SpringHandOperator\n  waypoints:\n"
+                    "    - [1.0, 2.0, 1.0]\n    - [1.0, x, 1.0]\n  times: [0, 1]\n")
+    msg = str(pytest.raises(ScenarioError, load_scenario, path).value)
+    assert "line 5: operator.waypoints[1][1] must be a number, got 'x'" in msg, msg
+
+
 @pytest.mark.parametrize("overlay,message", [
     # Types, checked on the raw YAML.
     ("{duration: abc}", "duration must be a number, got 'abc'"),

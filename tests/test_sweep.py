@@ -155,7 +155,8 @@ variants: [{admittance: {damping: 3.0}}, {limits: {max_velocity: 0.2}}]
 @pytest.mark.parametrize("text, expected", [
     (SMALL + "colour: red\n", "unknown field 'colour'"),
     (SMALL.replace("admittance.damping", "admittance.dampnig"),
-     "unknown field 'dampnig'; valid fields there: ['mass', 'damping']"),
+     "unknown field 'dampnig'; did you mean 'damping'? (valid fields there: ['mass', "
+     "'damping'])"),
     (SMALL.replace("linspace: [5.0, 7.0, 2]", "values: [5.0], linspace: [5.0, 7.0, 2]"),
      "needs exactly one of values, linspace, geomspace"),
     (SMALL.replace("[2.0, 4.0]", "[2.0, 2.0]"), "lists 2.0 twice"),
