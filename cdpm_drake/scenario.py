@@ -192,8 +192,9 @@ class Scenario:
     # Cable pairs whose platform attachment points are swapped, 1-based (the paper swaps
     # [1, 3] and [5, 7] to provoke interference).
     swaps: list[list[int]] = dataclasses.field(default_factory=list)
-    # Platform start p, base frame, m.
-    initial_position: list[float] = dataclasses.field(default_factory=lambda: [1.77, 3.65, 1.22])
+    # Platform start p, base frame, m; left out (null): the centre of the robot's workspace
+    # box, whichever robot the scenario names (resolve_scenario fills it in).
+    initial_position: typing.Optional[list[float]] = None
     # Simulated time, s.
     duration: float = 10.0
     # Control period, s (500 Hz in the paper).
@@ -303,8 +304,14 @@ def _warn_reel_saturation(scenario, robot):
     v_max = scenario.limits.max_velocity or robot.limits.max_velocity
     reel = getattr(scenario.plant, "max_reel_speed", None) or robot.limits.max_reel_speed
     if v_max > reel:
-        _log.warning("the platform speed limit %g m/s is above the reel speed limit %g m/s: "
-                     "fast motions will be slowed by the reels", v_max, reel)
+        # Each value says where it comes from: a left-out field takes the robot file's.
+        v_from = ("limits.max_velocity" if scenario.limits.max_velocity else
+                  f"default: limits.max_velocity of robot {robot.name!r}")
+        reel_from = ("plant.max_reel_speed" if getattr(scenario.plant, "max_reel_speed", None)
+                     else f"default: limits.max_reel_speed of robot {robot.name!r}")
+        _log.warning("the platform speed limit %g m/s (%s) is above the reel speed limit %g "
+                     "m/s (%s): fast motions will be slowed by the reels", v_max, v_from, reel,
+                     reel_from)
 
 
 def _check_yaml_text(source: str, **where) -> None:
@@ -569,8 +576,11 @@ def _check_logistic_set(values: dict, names: dict, pair: str) -> None:
 class ResolvedScenario:
     """A scenario checked and resolved once (`resolve_scenario`): what the builder, the runners
     and the views take, so that none of them goes back to the scenario's fields to derive
-    these again. The scenario itself is kept as given."""
+    these again. The scenario is kept as given but for the robot's defaults (initial_position)
+    filled in."""
 
+    # The scenario with what depends on its robot filled in: a left-out initial_position is
+    # the robot's workspace centre.
     scenario: Scenario
     # The robot with the scenario's cable swaps applied.
     robot: Robot
@@ -587,6 +597,8 @@ class ResolvedScenario:
     # How far measured lengths may disagree with the geometry, m: the simulated plant keeps
     # them consistent to round-off; real encoders and cable stretch do not.
     fk_max_residual: float
+    # The fields the scenario left out whose value came from the robot (for messages).
+    defaulted: tuple = ()
 
     @property
     def time_step(self) -> float:
@@ -615,6 +627,10 @@ def _resolve(scenario: Scenario, source: str) -> ResolvedScenario:
     _positive(scenario.admittance.mass, "admittance.mass")
     _positive(scenario.admittance.damping, "admittance.damping")
     p0 = scenario.initial_position
+    defaulted = ()
+    if p0 is None:  # the robot's workspace centre, whichever robot the scenario names
+        scenario = dataclasses.replace(scenario, initial_position=default_start(robot))
+        p0, defaulted = scenario.initial_position, ("initial_position",)
     if len(p0) != 3 or not all(math.isfinite(x) for x in p0):
         raise ScenarioError(f"initial_position must be [x, y, z] in m, got {p0!r}")
     if not robot.workspace.contains(p0):
@@ -643,7 +659,7 @@ def _resolve(scenario: Scenario, source: str) -> ResolvedScenario:
         _positive(scenario.wall_force.margin, "wall_force.margin")
         _positive(scenario.wall_force.max_force, "wall_force.max_force")
     if isinstance(scenario.plant, DynamicReels):
-        check_dynamic_reels(scenario, robot)
+        check_dynamic_reels(scenario, robot, defaulted=defaulted)
     elif not isinstance(scenario.plant, SimulatedReels):
         from .hardware.config import check_hardware_reels
         try:
@@ -670,7 +686,8 @@ def _resolve(scenario: Scenario, source: str) -> ResolvedScenario:
         max_reel_speed=float(_or(getattr(plant, "max_reel_speed", None),
                                  robot.limits.max_reel_speed)),
         fk_max_residual=1e-6 if simulated else float(getattr(plant, "max_length_residual",
-                                                             0.005)))
+                                                             0.005)),
+        defaulted=defaulted)
 
 
 def check_duration(duration: float, time_step: float, field: str) -> None:
@@ -687,10 +704,36 @@ def _or(value, default):
     return default if value is None else value
 
 
-def check_dynamic_reels(scenario: Scenario, robot: Robot):
+def default_start(robot: Robot) -> list[float]:
+    """The start of a scenario that leaves initial_position out: the centre of the robot's
+    workspace box, m, to 12 significant digits (1.35, not the 1.3499999999999999 of
+    (0.3 + 2.4) / 2, in messages and in the scenario.yaml a run writes)."""
+    return [float(f"{x:.12g}") for x in robot.workspace.center]
+
+
+def start_text(scenario: Scenario, robot: Robot, defaulted=()) -> str:
+    """"initial_position [x, y, z] m" for messages, saying "default" when the scenario left
+    it out (`defaulted` names it, or it is None: the robot's workspace centre)."""
+    p0 = scenario.initial_position
+    if p0 is None or "initial_position" in defaulted:
+        centre = default_start(robot) if p0 is None else p0
+        return (f"initial_position {centre!r} m (the default: the centre of the workspace box "
+                f"of robot {robot.name!r})")
+    return f"initial_position {p0!r} m"
+
+
+def _default_note(config, field: str) -> str:
+    """" (default)" when `config`'s field has its dataclass default value."""
+    default = next(f for f in dataclasses.fields(config) if f.name == field)
+    value = (default.default_factory() if default.default_factory is not dataclasses.MISSING
+             else default.default)
+    return " (default)" if getattr(config, field) == value else ""
+
+
+def check_dynamic_reels(scenario: Scenario, robot: Robot, defaulted=()):
     """Check a !DynamicReels plant and its start; returns the start tension distribution
     (tension.Distribution). A start pose no positive tension distribution holds is refused,
-    naming the pose and the cables that would go slack."""
+    naming the pose (and whether it is the default) and the cables that would go slack."""
     from .rotation import rotation_from_rpy
     from .tension import (balancing_rotation, gravity_wrench, stable_time_step,
                           tension_distribution, wrench_matrix)
@@ -712,7 +755,9 @@ def check_dynamic_reels(scenario: Scenario, robot: Robot):
     if cfg.max_reel_speed is not None:
         _positive(cfg.max_reel_speed, "plant.max_reel_speed")
     _positive(cfg.max_length_residual, "plant.max_length_residual")
-    p0 = np.asarray(scenario.initial_position, dtype=float)
+    start = start_text(scenario, robot, defaulted)
+    p0 = np.asarray(scenario.initial_position if scenario.initial_position is not None
+                    else default_start(robot), dtype=float)
     dyn = robot.dynamics
     W, wrench = wrench_matrix(robot, p0, rotation_from_rpy(rpy)), gravity_wrench(dyn.mass)
     if cfg.lock_rotation:  # the lock takes the moments; the cables balance the force
@@ -720,14 +765,13 @@ def check_dynamic_reels(scenario: Scenario, robot: Robot):
     dist = tension_distribution(W, wrench, cfg.min_tension)
     if not dist.feasible:
         cables = [k + 1 for k in dist.slack]
-        msg = (f"initial_position {scenario.initial_position!r} m with plant.initial_rpy "
-               f"{list(rpy)!r} rad: no tension distribution of robot {robot.name!r} holds the "
-               f"platform's {dyn.mass:g} kg with every cable >= plant.min_tension = "
-               f"{cfg.min_tension:g} N; cable(s) {cables} would go slack (the best "
-               f"distribution leaves them at {dist.best_min:.2f} N)")
+        rpy_text = f"plant.initial_rpy {list(rpy)!r} rad{_default_note(cfg, 'initial_rpy')}"
+        msg = (f"{start} with {rpy_text}: no tension distribution of robot {robot.name!r} holds "
+               f"the platform's {dyn.mass:g} kg with every cable >= plant.min_tension = "
+               f"{cfg.min_tension:g} N{_default_note(cfg, 'min_tension')}; cable(s) {cables} "
+               f"would go slack (the best distribution leaves them at {dist.best_min:.2f} N)")
         if dist.residual > 1e-6:
-            msg = (f"initial_position {scenario.initial_position!r} m with plant.initial_rpy "
-                   f"{list(rpy)!r} rad: the cables of robot {robot.name!r} cannot balance the "
+            msg = (f"{start} with {rpy_text}: the cables of robot {robot.name!r} cannot balance the "
                    f"platform's weight at all (force/moment residual {dist.residual:.3g}): "
                    f"their {robot.num_cables} lines of action leave a moment unbalanced; "
                    "plant.lock_rotation: true models the platform as only translating")
@@ -745,7 +789,9 @@ def check_dynamic_reels(scenario: Scenario, robot: Robot):
             f"{robot.name!r} (cables.EA {dyn.EA:g} N, platform.mass {dyn.mass:g} kg): their "
             f"stiffest mode is stable up to {h_max:.3g} s and accurate to half of that; use "
             f"plant.time_step <= {0.5 * h_max:.2g} s (dividing time_step "
-            f"{scenario.time_step:g} s)")
+            f"{scenario.time_step:g} s)"
+            + (f"; {cfg.time_step!r} s is plant.time_step's default"
+               if _default_note(cfg, "time_step") else ""))
     return dist
 
 

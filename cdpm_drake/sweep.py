@@ -32,9 +32,8 @@ from pathlib import Path
 import numpy as np
 
 from .robot import resolve_named_yaml
-from .scenario import (INTERNAL_FIELDS, Scenario, ScenarioError, check_scenario,
-                       interference_params, load_scenario, resolve_scenario_path,
-                       scenario_robot, scenario_to_yaml)
+from .scenario import (INTERNAL_FIELDS, Scenario, ScenarioError, interference_params, load_resolved_scenario, resolve_scenario,
+                       resolve_scenario_path, scenario_robot, scenario_to_yaml)
 
 SWEEPS_DIR = Path(__file__).resolve().parent / "sweeps"
 
@@ -383,7 +382,8 @@ def apply_overlay(scenario: Scenario, overlay: dict) -> Scenario:
 
 
 def _apply(scenario: Scenario, overlay: dict):
-    """apply_overlay, also returning check_scenario's robot (None for an empty overlay)."""
+    """apply_overlay, also returning the result's resolve_scenario (None for an empty
+    overlay)."""
     from pydrake.common.yaml import yaml_dump, yaml_load_typed
 
     from .scenario import _check_yaml, _explain
@@ -395,7 +395,7 @@ def _apply(scenario: Scenario, overlay: dict):
         result = yaml_load_typed(schema=Scenario, data=yaml_dump(overlay), defaults=scenario)
     except Exception as e:
         raise ScenarioError(_explain(e)) from None
-    return result, check_scenario(result)
+    return result, resolve_scenario(result)
 
 
 # --- Variants --------------------------------------------------------------------------------
@@ -456,9 +456,13 @@ def load_sweep(name_or_path, *, on_warning=None) -> Sweep:
                          "relative to the sweep file)")
     try:
         resolve_scenario_path(base_path)
-        base = load_scenario(base_path)
+        resolved = load_resolved_scenario(base_path)
     except ScenarioError as e:
         raise SweepError(f"{path}: base: {e}") from None
+    base = resolved.scenario
+    if "initial_position" in resolved.defaulted:
+        # Left out: each variant starts at its own robot's centre (an axis may change robots).
+        base = dataclasses.replace(base, initial_position=None)
     try:
         base = apply_overlay(base, sweep_file.overlay)
     except ScenarioError as e:
@@ -551,12 +555,17 @@ def _resolve_variant(index, base, values, overlay, seed, path) -> Variant:
         if overlay is not None:
             scenario = apply_overlay(scenario, overlay)
         assign = {}
+        if scenario.initial_position is None and any(
+                f.startswith("initial_position") for f in values):
+            # One coordinate of a left-out start edits the robot's centre.
+            scenario = resolve_scenario(scenario).scenario
         for field, value in values.items():
             _put(assign, scenario, parse_field_path(field), value, field)
         if seed is not None:
             assign["random_seed"] = seed
-        scenario, robot = _apply(scenario, assign)
-        robot = robot or check_scenario(scenario)
+        scenario, resolved = _apply(scenario, assign)
+        resolved = resolved or resolve_scenario(scenario)
+        robot = resolved.robot
         if scenario.interference.enabled and robot.num_pairs:
             _warn_unreachable_d_u(robot, interference_params(scenario, robot))
         _warn_reel_saturation(scenario, robot)
@@ -565,6 +574,7 @@ def _resolve_variant(index, base, values, overlay, seed, path) -> Variant:
     if _is_hardware(scenario.plant):
         raise SweepError(f"{where}: plant is !{type(scenario.plant).__name__}; a sweep "
                          "simulates, so it needs a simulated plant (plant: !SimulatedReels {})")
+    scenario = resolved.scenario  # as run: a left-out start is its robot's centre
     text = scenario_to_yaml(scenario)
     return Variant(index=index, run=run, values=values, overlay=overlay,
                    random_seed=scenario.random_seed, scenario=scenario, scenario_yaml=text,

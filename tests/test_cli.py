@@ -185,7 +185,9 @@ def test_warnings_start_with_warning(capsys, tmp_path):
                      "--out", str(tmp_path), "--scenario-text", "{limits: {max_velocity: 5}}"])
     assert code == 0
     err = capsys.readouterr().err
-    assert ("warning: the platform speed limit 5 m/s is above the reel speed limit 1 m/s"
+    # Each value says where it comes from: the reel speed is the robot file's (issue 22).
+    assert ("warning: the platform speed limit 5 m/s (limits.max_velocity) is above the reel "
+            "speed limit 1 m/s (default: limits.max_reel_speed of robot 'paper_7cable')"
             in err), err
 
 

@@ -354,10 +354,53 @@ def test_invalid_yaml_is_a_scenario_error():
 
 def test_default_scenario_is_valid():
     # The dataclass defaults alone describe a runnable scenario (STYLE: defaults that work).
-    from cdpm_drake.scenario import check_scenario
-    robot = check_scenario(Scenario())
-    assert robot.num_cables == 7
-    assert np.all(robot.workspace.contains(Scenario().initial_position))
+    from cdpm_drake.scenario import resolve_scenario
+    resolved = resolve_scenario(Scenario())
+    assert resolved.robot.num_cables == 7
+    assert np.all(resolved.robot.workspace.contains(resolved.scenario.initial_position))
+
+
+def test_a_left_out_start_is_the_workspace_centre_of_the_scenario_s_robot(tmp_path):
+    # Issue 22, point 10: not the paper robot's start, whichever robot the scenario names.
+    # cube_8cable's box is [0.5, 0.5, 0.5] to [3.5, 2.5, 2.5] m (its robot file): centre
+    from cdpm_drake.scenario import load_resolved_scenario
+    path = tmp_path / "cube.yaml"
+    path.write_text("name: cube\nrobot: cube_8cable\nduration: 0.1\n")
+    resolved = load_resolved_scenario(path)
+    # [2.0, 1.5, 1.5] m.
+    assert resolved.scenario.initial_position == [2.0, 1.5, 1.5]
+    assert resolved.defaulted == ("initial_position",)
+    assert Scenario().initial_position is None  # the schema's default is "left out"
+    # The paper robot's box is [0.5, 0.8, 0.3] to [3.0, 4.0, 2.4] m: centre [1.75, 2.4, 1.35].
+    resolved = load_resolved_scenario(path, "{robot: paper_7cable}")
+    # Written to 12 significant digits: 1.35, not (0.3 + 2.4) / 2 = 1.3499999999999999.
+    assert resolved.scenario.initial_position == [1.75, 2.4, 1.35]
+    # Written explicitly, it is what was written, and nothing is said to be defaulted.
+    resolved = load_resolved_scenario(path, "{initial_position: [1.9, 1.0, 1.1]}")
+    assert resolved.scenario.initial_position == [1.9, 1.0, 1.1] and not resolved.defaulted
+
+
+@pytest.mark.parametrize("name", scenario_names())
+def test_every_shipped_scenario_writes_its_start(name):
+    # A shipped scenario never relies on the default, so its paper reproduction (and the
+    # reference logs, tests/test_reference_logs.py) cannot move with it.
+    from cdpm_drake.scenario import SCENARIOS_DIR
+    from pydrake.common.yaml import yaml_load
+    assert len(yaml_load(filename=str(SCENARIOS_DIR / f"{name}.yaml"))["initial_position"]) == 3
+
+
+def test_a_message_about_a_defaulted_start_says_default(tmp_path):
+    # No tension distribution holds the paper robot's platform with every cable above 1 kN
+    # (its weight is 25 N); the start, at the workspace centre, is the default and the
+    # message says so, as for the start tilt; the floor was written, and is not a default.
+    path = tmp_path / "dyn.yaml"
+    path.write_text("name: dyn\nduration: 0.1\nplant: !DynamicReels {min_tension: 1000}\n")
+    with pytest.raises(ScenarioError) as e:
+        load_scenario(path)
+    assert ("initial_position [1.75, 2.4, 1.35] m (the default: the centre of the workspace "
+            "box of robot 'paper_7cable') with plant.initial_rpy [0.0, 0.0, 0.0] rad "
+            "(default)") in str(e.value), str(e.value)
+    assert "plant.min_tension = 1000 N;" in str(e.value)
 
 
 def test_a_negative_random_seed_is_refused_at_load():

@@ -122,6 +122,22 @@ axes:
         assert isinstance(v.scenario.sensor.filter_window, int)
 
 
+def test_a_left_out_start_is_each_variant_s_own_robot_centre(tmp_path):
+    # Issue 22, point 10: a base without initial_position starts every variant at the centre
+    # of its robot's workspace box (robot files: paper_7cable [1.75, 2.4, 1.35] m,
+    # cube_8cable [2.0, 1.5, 1.5] m), also when an axis changes the robot, and a coordinate
+    # axis edits that centre.
+    write(tmp_path, "name: free\nduration: 0.1\n", name="free.yaml")
+    s = sw.load_sweep(write(tmp_path, "name: robots\nbase: free.yaml\naxes:\n"
+                                      "  - {field: robot, values: [paper_7cable, cube_8cable]}\n"))
+    assert [v.scenario.initial_position for v in s.variants] == [[1.75, 2.4, 1.35],
+                                                                [2.0, 1.5, 1.5]]
+    assert "initial_position: [2.0, 1.5, 1.5]" in s.variants[1].scenario_yaml  # as it ran
+    s = sw.load_sweep(write(tmp_path, "name: z\nbase: free.yaml\naxes:\n"
+                                      '  - {field: "initial_position[2]", values: [1.0]}\n'))
+    assert s.variants[0].scenario.initial_position == [1.75, 2.4, 1.0]
+
+
 def test_random_samples_are_seeded_and_in_range(tmp_path):
     text = """\
 base: exp2_interaction
