@@ -139,7 +139,7 @@ def simulate_main(*, scenario, duration=None, out_dir=None, progress=True, out=N
         folder.discard()  # an early error (bad scenario, bad plant) leaves no folder
         raise
     log = result.log
-    path = save_log(log, out_dir, scenario)
+    path = save_log(log, out_dir, resolved)
     folder.finish()
     T = log["time"].size
     print(f"scenario {scenario.name!r}: {T} ticks, {log['time'][-1] if T else 0:.3f} s simulated "

@@ -211,8 +211,9 @@ class Scenario:
     # Seed of every random number generator (sensor noise), for repeatable runs.
     random_seed: int = 0
     # The directory relative paths resolve against; the loader sets it to the scenario
-    # file's directory unless the file names one (as a resolved scenario does).
-    base_dir: str = ""
+    # file's directory. Internal: not written by scenario_to_yaml, not compared (a loaded
+    # scenario's paths are absolute already).
+    base_dir: str = dataclasses.field(default="", compare=False)
 
 
 def scenario_names() -> list[str]:
@@ -599,6 +600,9 @@ class ResolvedScenario:
     fk_max_residual: float
     # The fields the scenario left out whose value came from the robot (for messages).
     defaulted: tuple = ()
+    # The contents of the files the scenario reads, as loaded ({"robot": bytes,
+    # "operator.path": bytes}, scenario_files): what a run folder keeps a copy of.
+    files: dict = dataclasses.field(default_factory=dict)
 
     @property
     def time_step(self) -> float:
@@ -687,7 +691,9 @@ def _resolve(scenario: Scenario, source: str) -> ResolvedScenario:
                                  robot.limits.max_reel_speed)),
         fk_max_residual=1e-6 if simulated else float(getattr(plant, "max_length_residual",
                                                              0.005)),
-        defaulted=defaulted)
+        defaulted=defaulted,
+        # Read right after the robot and the operator were loaded from them.
+        files={field: path.read_bytes() for field, path in scenario_files(scenario).items()})
 
 
 def check_duration(duration: float, time_step: float, field: str) -> None:
@@ -810,7 +816,56 @@ def _warn_unreachable_d_u(robot, params):
 
 
 def scenario_to_yaml(scenario: Scenario) -> str:
-    """The resolved scenario as YAML (written beside every log)."""
+    """The resolved scenario as YAML (written beside every log), without the loader's
+    internal base_dir (a loaded file's paths are resolved already)."""
     from pydrake.common.yaml import yaml_dump_typed
 
-    return yaml_dump_typed(scenario)
+    text = yaml_dump_typed(dataclasses.replace(scenario, base_dir=""))
+    return text.replace("\nbase_dir: ''\n", "\n")
+
+
+# The copies of a scenario's own files in the run folders (write_run_scenario).
+RUN_ROBOT_FILE = "robot.yaml"
+RUN_FORCE_FILE = "force.csv"
+
+
+def scenario_files(scenario: Scenario) -> dict:
+    """{field: Path} of the files the scenario reads, "robot" (a robot file, not a built-in
+    robot's name) and "operator.path" (a CSV operator's), as it resolves them."""
+    from .robot import is_path_like
+
+    base = Path(scenario.base_dir) if scenario.base_dir else None
+    files = {}
+    if is_path_like(scenario.robot):
+        files["robot"] = _under(scenario.robot, base)
+    if isinstance(scenario.operator, CsvOperator) and scenario.operator.path:
+        files["operator.path"] = _under(scenario.operator.path, base)
+    return files
+
+
+def _under(ref: str, base) -> Path:
+    path = Path(ref)
+    return path if path.is_absolute() or base is None else base / path
+
+
+def write_run_scenario(out_dir, scenario, **changes) -> Path:
+    """Write DIR/scenario.yaml, the resolved scenario (with `changes`, e.g. the duration that
+    ran), and copies of the robot file and force CSV it reads, DIR/robot.yaml and
+    DIR/force.csv, which it refers to instead of the originals: the folder can be moved,
+    shared and rerun alone. The copies are of the files as the run loaded them (a
+    ResolvedScenario's `files`), so a rerun into its own folder with --force (which empties
+    it first) still has them. Returns the scenario.yaml path."""
+    resolved = resolve_scenario(scenario)
+    out = Path(out_dir)
+    recorded = dataclasses.replace(resolved.scenario, **changes)
+    names = {"robot": RUN_ROBOT_FILE, "operator.path": RUN_FORCE_FILE}
+    for field, data in resolved.files.items():
+        (out / names[field]).write_bytes(data)
+    if "robot" in resolved.files:
+        recorded = dataclasses.replace(recorded, robot=RUN_ROBOT_FILE)
+    if "operator.path" in resolved.files:
+        recorded = dataclasses.replace(recorded, operator=dataclasses.replace(
+            recorded.operator, path=RUN_FORCE_FILE))
+    path = out / "scenario.yaml"
+    path.write_text(scenario_to_yaml(recorded))
+    return path

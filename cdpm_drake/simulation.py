@@ -14,7 +14,7 @@ from pydrake.systems.analysis import Simulator
 
 from .diagram import build_diagram, logged_signals, reserve_log
 from .scenario import (DynamicReels, ResolvedScenario, Scenario, ScenarioError, SimulatedReels,
-                       check_duration, resolve_scenario, scenario_to_yaml)
+                       check_duration, resolve_scenario, write_run_scenario)
 
 
 @dataclasses.dataclass
@@ -168,16 +168,17 @@ def assemble_log(time_column, signals: dict, scenario: Scenario | ResolvedScenar
     return log
 
 
-def save_log(log: dict, out_dir, scenario: Scenario) -> Path:
-    """Write DIR/log.npz and the resolved scenario DIR/scenario.yaml; returns the npz path.
-    The scenario's duration is set to what the log covers, so the file reproduces the run."""
-    if len(log["time"]):
-        scenario = dataclasses.replace(scenario, duration=float(log["time"][-1]))
+def save_log(log: dict, out_dir, scenario: Scenario | ResolvedScenario) -> Path:
+    """Write DIR/log.npz and the resolved scenario DIR/scenario.yaml, with copies of the
+    robot file and force CSV it reads (scenario.write_run_scenario: the folder reruns alone);
+    returns the npz path. The scenario's duration is set to what the log covers, so the file
+    reproduces the run."""
+    changes = {"duration": float(log["time"][-1])} if len(log["time"]) else {}
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     path = out / "log.npz"
     np.savez_compressed(path, **log)
-    (out / "scenario.yaml").write_text(scenario_to_yaml(scenario))
+    write_run_scenario(out, scenario, **changes)
     return path
 
 

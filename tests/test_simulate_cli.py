@@ -90,6 +90,45 @@ def test_resolved_scenario_is_written_beside_the_log_and_loads_back(exp1_run):
     assert back == load_scenario("exp1_no_interaction", overlay_text="duration: 0.2")
 
 
+def test_a_run_folder_moves_and_reruns_bit_for_bit(capsys, tmp_path, write_robot, valid_spec):
+    # Issue 22, point 14: the robot file and the force CSV are copied into the run folder and
+    # its scenario.yaml refers to the copies, so the folder alone reruns the run exactly.
+    src = tmp_path / "src"
+    src.mkdir()
+    write_robot(valid_spec, "src/tetra.yaml")
+    (src / "push.csv").write_text("t,fx,fy,fz\n0,0,0,0\n0.1,2,1,0\n0.3,-1,2,1\n")
+    (src / "push.yaml").write_text("name: push\nrobot: tetra.yaml\ninitial_position: "
+                                   "[2.0, 1.5, 1.5]\nduration: 0.3\noperator: !CsvOperator "
+                                   "{path: push.csv}\nsensor: {noise_std: 0.5}\n")
+    first = tmp_path / "first"
+    assert simulate_cli(capsys, str(src / "push.yaml"), "--out", str(first),
+                        "--no-progress")[0] == 0
+    text = (first / "scenario.yaml").read_text()
+    assert "robot: robot.yaml" in text and "path: force.csv" in text
+    assert str(tmp_path) not in text and "base_dir" not in text  # nothing points outside
+    assert (first / "robot.yaml").read_bytes() == (src / "tetra.yaml").read_bytes()
+    assert (first / "force.csv").read_bytes() == (src / "push.csv").read_bytes()
+    # Moved, with the originals gone, and rerun from another directory.
+    moved = tmp_path / "elsewhere" / "shared"
+    moved.parent.mkdir()
+    first.rename(moved)
+    for f in src.iterdir():
+        f.unlink()
+    src.rmdir()
+    again = tmp_path / "again"
+    assert simulate_cli(capsys, str(moved / "scenario.yaml"), "--out", str(again),
+                        "--no-progress")[0] == 0
+    with np.load(moved / "log.npz") as a, np.load(again / "log.npz") as b:
+        assert sorted(a.files) == sorted(b.files)
+        for key in a.files:
+            np.testing.assert_array_equal(a[key], b[key], err_msg=key)
+    assert (again / "scenario.yaml").read_text() == text
+    # Into its own folder, with --force (which empties it first): the copies are kept.
+    assert simulate_cli(capsys, str(moved / "scenario.yaml"), "--out", str(moved), "--force",
+                        "--no-progress")[0] == 0
+    assert (moved / "robot.yaml").is_file() and (moved / "scenario.yaml").read_text() == text
+
+
 def test_summary_reports_ticks_and_the_logged_minimum_distances(exp1_run):
     _, out, out_dir = exp1_run
     assert re.search(r"scenario 'exp1_no_interaction': 101 ticks, 0\.200 s simulated", out), out
