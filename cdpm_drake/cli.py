@@ -385,21 +385,30 @@ def _cmd_run(args) -> int:
 # --- plot ------------------------------------------------------------------------------------
 
 
-def _cmd_plot(args) -> int:
+def _find_log(path: Path, command: str):
+    """(the log, the run folder or .npz it came from) for a command's LOG argument: a
+    log.npz, its run folder, runs/<name> (its latest run); a folder with only ticks.bin is
+    recovered first."""
     from .run_folder import resolve_latest
-    from .views.plots import LogError, load_log, plot_log
+    from .views.plots import LogError, load_log
+
+    target = resolve_latest(path)
+    if target.is_dir() and not (target / "log.npz").exists() and (target / "ticks.bin").exists():
+        print(f"cdpm {command}: {str(target)!r} has ticks.bin but no log.npz (the run was "
+              "killed before converting it): recovering first", file=sys.stderr)
+        _recover(target)
+    try:
+        return load_log(target), target
+    except LogError as e:
+        raise InputError(str(e)) from None
+
+
+def _cmd_plot(args) -> int:
+    from .views.plots import plot_log
 
     if _is_sweep_dir(args.log):
         return _cmd_plot_sweep(args)
-    target = resolve_latest(args.log)
-    if target.is_dir() and not (target / "log.npz").exists() and (target / "ticks.bin").exists():
-        print(f"cdpm plot: {str(target)!r} has ticks.bin but no log.npz (the run was killed "
-              "before converting it): recovering first", file=sys.stderr)
-        _recover(target)
-    try:
-        log = load_log(target)
-    except LogError as e:
-        raise InputError(str(e)) from None
+    log, target = _find_log(args.log, "plot")
     if args.out is not None:
         _writable_dir(args.out, "--out")
     _check_html(args.html)
@@ -410,6 +419,51 @@ def _cmd_plot(args) -> int:
     if args.html is not None:
         print(f"3D replay: {_save_replay(log, args.html)} (open it in a browser)")
     return 0
+
+
+# --- export ----------------------------------------------------------------------------------
+
+
+def _cmd_export(args) -> int:
+    from .views.log_csv import log_to_csv
+
+    if _is_sweep_dir(args.log):
+        raise InputError(f"{str(args.log)!r} is a sweep's folder: its results.csv is the "
+                         "table already (one row per run); export a run's log.npz")
+    log, target = _find_log(args.log, "export")
+    text = log_to_csv(log)
+    if args.out is not None and str(args.out) == "-":
+        sys.stdout.write(text)
+        return 0
+    path = args.out if args.out is not None else (
+        (target if target.is_dir() else target.parent) / "log.csv")
+    if path.is_dir():
+        raise CliError(f"--out {str(path)!r} is a folder; give a file name, e.g. "
+                       f"{str(path / 'log.csv')!r}")
+    _writable_dir(path.parent if str(path.parent) else Path("."), "--out's folder")
+    path.write_text(text)
+    header = text.partition("\n")[0]  # names hold no commas
+    print(f"csv: {path} ({text.count(chr(10)) - 1} rows, one per tick; "
+          f"{header.count(',') + 1} columns)")
+    return 0
+
+
+def _export_parser(sub) -> None:
+    p = sub.add_parser(
+        "export", help="write a log as CSV: one row per tick, named columns with units",
+        description="Write a log.npz as CSV for spreadsheets and other tools: one row per "
+                    "tick, one column per value, named with its unit (p_x [m], F_H_z [N], "
+                    "lengths_1 [m], pair_distances_1-3 [m], active_1-3 [0/1]), cables and "
+                    "pairs numbered from 1 (views/log_csv.py). The per-run constants (robot, "
+                    "logistic parameters, how the run ended) stay in log.npz.")
+    p.add_argument("log", type=Path,
+                   help="a log.npz, the run folder holding it (or only ticks.bin: recovered "
+                        "first), or runs/<name> (its latest run)")
+    fmt = p.add_mutually_exclusive_group(required=True)
+    fmt.add_argument("--csv", action="store_true", help="comma-separated values")
+    p.add_argument("--out", type=Path, metavar="FILE",
+                   help="output file (default: log.csv beside the log; - for stdout)")
+    p.set_defaults(func=_cmd_export)
 
 
 # --- recover ---------------------------------------------------------------------------------
@@ -735,6 +789,7 @@ def _parser() -> argparse.ArgumentParser:
     p.set_defaults(func=_cmd_diagram)
 
     _sweep_parser(sub)
+    _export_parser(sub)
 
     p = sub.add_parser("recover", help="turn a killed run's ticks.bin into log.npz",
                        description="Convert the tick stream of a `cdpm run` that was killed "

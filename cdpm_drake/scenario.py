@@ -307,9 +307,9 @@ def _warn_reel_saturation(scenario, robot):
     if v_max > reel:
         # Each value says where it comes from: a left-out field takes the robot file's.
         v_from = ("limits.max_velocity" if scenario.limits.max_velocity else
-                  f"default: limits.max_velocity of robot {robot.name!r}")
+                  "default: the robot file's limits.max_velocity")
         reel_from = ("plant.max_reel_speed" if getattr(scenario.plant, "max_reel_speed", None)
-                     else f"default: limits.max_reel_speed of robot {robot.name!r}")
+                     else "default: the robot file's limits.max_reel_speed")
         _log.warning("the platform speed limit %g m/s (%s) is above the reel speed limit %g "
                      "m/s (%s): fast motions will be slowed by the reels", v_max, v_from, reel,
                      reel_from)

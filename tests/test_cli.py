@@ -187,7 +187,7 @@ def test_warnings_start_with_warning(capsys, tmp_path):
     err = capsys.readouterr().err
     # Each value says where it comes from: the reel speed is the robot file's (issue 22).
     assert ("warning: the platform speed limit 5 m/s (limits.max_velocity) is above the reel "
-            "speed limit 1 m/s (default: limits.max_reel_speed of robot 'paper_7cable')"
+            "speed limit 1 m/s (default: the robot file's limits.max_reel_speed)"
             in err), err
 
 
