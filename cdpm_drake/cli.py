@@ -674,8 +674,8 @@ def _sweep_parser(sub) -> None:
 EXIT_CODES = """\
 exit codes (every command):
   0    done
-  1    error: the scenario or robot cannot be loaded or is invalid, the run failed or
-       faulted, cdpm run never enabled the reels
+  1    error: a scenario, robot, sweep, log or run folder that cannot be found or is
+       invalid, a run that failed or faulted, cdpm run that never enabled the reels
   2    bad usage: an unknown option, a missing or malformed argument, an option value
        out of range (--duration, --realtime, --out, ...)
   130  interrupted by Ctrl-C (SIGINT); whatever was logged is written
