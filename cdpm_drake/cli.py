@@ -654,7 +654,8 @@ def _sweep_parser(sub) -> None:
                    help="runs per Ray task (default: chosen so a task lasts ~2 s)")
     p.add_argument("--keep-logs", action="store_true", help="also keep each run's log.npz")
     p.add_argument("--retry-errors", action="store_true",
-                   help="rerun the rows that ended in an error (a resume skips them)")
+                   help="rerun the rows that faulted or ended in an error (a resume skips "
+                        "them)")
     p.add_argument("--plot", action="store_true",
                    help="write the heatmap, metric-vs-axis and Pareto pictures")
     p.add_argument("--metric", choices=NUMERIC_METRICS, metavar="NAME",

@@ -655,6 +655,9 @@ METRICS = {
     "rtf": ("-", "max", "real-time factor: sim_s / wall_s"),
 }
 NUMERIC_METRICS = [m for m in METRICS if m != "min_distance_pair"]
+# A row's status: "ok"; "fault": the run stopped part-way, its metrics cover the ticks it
+# logged; "error": it did not run (or its worker died), no metrics.
+FAILED = ("fault", "error")
 
 # A limit "acts" when the commanded velocity differs from the admittance's by more than this,
 # m/s: the limits pass an unlimited velocity through exactly, so this only absorbs round-off.
@@ -730,7 +733,8 @@ def tasks_for(variants, keep_logs: bool = False) -> list[RunTask]:
 def execute_run(task: RunTask, before_run=None) -> dict:
     """Run one variant: load its resolved scenario from its YAML (the file written beside the
     row), simulate it, and return its row (and the compressed log bytes with keep_log).
-    Never raises for a failing run: the row says `error`."""
+    Never raises for a failing run: the row says `error` (it did not run, or its worker
+    died), or `fault` (it stopped part-way: the metrics are those of the ticks it logged)."""
     from pydrake.common.yaml import yaml_load_typed
 
     from .simulation import simulate
@@ -747,12 +751,10 @@ def execute_run(task: RunTask, before_run=None) -> dict:
         wall = time.perf_counter() - start
         log = result.log
         metrics = run_metrics(log, scenario)
+        row.update(metrics)  # a faulted run's too: what it logged up to the fault
         if result.error is not None:
-            row.update(status="error", error=f"the run stopped at t = {metrics['sim_s']:.3f} s: "
-                                             f"{type(result.error).__name__}: {result.error}",
-                       sim_s=metrics["sim_s"])
-        else:
-            row.update(metrics)
+            row.update(status="fault", error=f"the run stopped at t = {metrics['sim_s']:.3f} s: "
+                                             f"{type(result.error).__name__}: {result.error}")
         row["wall_s"] = wall
         row["rtf"] = metrics["sim_s"] / wall if wall > 0 else math.nan
     except Exception as e:
@@ -1163,7 +1165,7 @@ def _run_sweep(sweep, out_dir, *, workers, ray, ray_address, ray_chunk, ray_init
     for v in sweep.variants:
         row = previous.get(v.run)
         if row is not None and row.get("scenario_hash") == v.scenario_hash and (
-                row.get("status") == "ok" or (row.get("status") == "error"
+                row.get("status") == "ok" or (row.get("status") in FAILED
                                               and not retry_errors)):
             store.adopt(v, row)
         else:
@@ -1345,12 +1347,14 @@ def sweep_main(*, sweep, out_dir=None, workers=None, ray=False, ray_address=None
                         retry_errors=retry_errors, progress=progress, before_run=before_run)
     ok = sum(r["status"] == "ok" for r in outcome.rows)
     errors = [r for r in outcome.rows if r["status"] != "ok"]
+    faults = sum(r["status"] == "fault" for r in errors)
     print(f"{outcome.ran} run(s) done now"
           + (f" on {outcome.runner}" if outcome.runner else "")
           + f", {outcome.skipped} already done (resumed), in {outcome.wall_s:.1f} s wall; "
-          f"{ok} ok, {len(errors)} error(s); results: {outcome.results}", file=out)
+          f"{ok} ok, {faults} faulted, {len(errors) - faults} error(s); results: "
+          f"{outcome.results}", file=out)
     for r in errors[:10]:
-        print(f"  error {r['run']}: {r['error']}", file=out)
+        print(f"  {r['status']} {r['run']}: {r['error']}", file=out)
     if len(errors) > 10:
         print(f"  ... and {len(errors) - 10} more (see the error column)", file=out)
     columns = columns_for(s)
@@ -1358,9 +1362,14 @@ def sweep_main(*, sweep, out_dir=None, workers=None, ray=False, ray_address=None
         print(f"best runs by {metric} ({METRICS[metric][0]}, "
               f"{'largest' if _better(metric) == 'max' else 'smallest'} first):", file=out)
         print(best_table(columns, outcome.rows, metric, top), file=out)
-    if plot is not None and ok:  # the views hang off the CLI, which passes them in
-        for png in plot(columns, outcome.rows, out_dir, metric=metric):
-            print(f"plot: {png}", file=out)
+    if plot is not None:  # the views hang off the CLI, which passes them in
+        why = nothing_to_draw(outcome.rows, metric)
+        if why:
+            print(f"cdpm sweep: error: no pictures: {why}", file=sys.stderr)
+            errors = errors or [why]
+        else:
+            for png in plot(columns, outcome.rows, out_dir, metric=metric):
+                print(f"plot: {png}", file=out)
     if outcome.ending == "interrupted":
         print(f"cdpm sweep: interrupted; {len(outcome.rows)} finished row(s) kept in "
               f"{outcome.results}; rerun the same command to resume", file=sys.stderr)
@@ -1384,9 +1393,29 @@ def plot_main(*, sweep_dir, plot, out_dir=None, metric=None, out=None) -> int:
             metric = load_sweep_file(sweep_dir / "sweep.yaml")[0].metric
         except (SweepError, ScenarioError):
             pass
+    why = nothing_to_draw(rows, metric)
+    if why:  # no empty axes: say why there is no picture
+        raise SweepError(f"{str(sweep_dir)!r}: no pictures: {why}")
     for png in plot(columns, rows, out_dir or sweep_dir, metric=metric):
         print(f"plot: {png}", file=out)
     if any(r["status"] == "ok" for r in rows):
         print(f"best runs by {metric}:", file=out)
         print(best_table(columns, rows, metric), file=out)
     return 0
+
+
+def nothing_to_draw(rows: list[dict], metric: str) -> str:
+    """Why a sweep's pictures of `metric` would have nothing to draw ("" when they would
+    not): they show the rows that finished ok with a value of the metric."""
+    if not rows:
+        return "results.csv has no rows yet"
+    ok = [r for r in rows if r.get("status") == "ok"]
+    if not ok:
+        faults = sum(r.get("status") == "fault" for r in rows)
+        return (f"none of the {len(rows)} runs finished ok ({faults} faulted, "
+                f"{len(rows) - faults} error(s): see the status and error columns of "
+                "results.csv)")
+    if not any(math.isfinite(metric_value(r, metric)) for r in ok):
+        return (f"none of the {len(ok)} ok runs has a value of {metric} (see docs/"
+                "SWEEP_FORMAT.md; e.g. crossings needs the interference block)")
+    return ""

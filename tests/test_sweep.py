@@ -449,7 +449,7 @@ def test_the_readme_sweep_example_loads(tmp_path):
     assert last.random_seed == 2 and last.duration == 5.0
 
 
-def test_a_run_that_stops_part_way_is_an_error_row_with_how_far_it_got(tmp_path, monkeypatch):
+def test_a_run_that_stops_part_way_is_a_fault_row_with_its_metrics(tmp_path, monkeypatch):
     """simulate() returns the log up to a failure with the exception in `error` (as when the
     forward kinematics finds no pose): the row says error, where, and why."""
     from cdpm_drake import simulation
@@ -461,13 +461,60 @@ def test_a_run_that_stops_part_way_is_an_error_row_with_how_far_it_got(tmp_path,
         result.error = RuntimeError("no platform pose fits the cable lengths")
         return result
 
+    # The same run, 0.1 s long and ending normally.
+    whole = sw.execute_run(sw.tasks_for([sw.load_sweep(write(
+        tmp_path, SMALL.replace("{duration: 0.2}", "{duration: 0.1}"))).variants[0]])[0])
+    assert whole["status"] == "ok"
     monkeypatch.setattr(simulation, "simulate", stops_at_0_1)
     v = sw.load_sweep(write(tmp_path, SMALL)).variants[0]
     row = sw.execute_run(sw.tasks_for([v])[0])
-    assert row["status"] == "error"
+    assert row["status"] == "fault"
     assert row["error"] == ("the run stopped at t = 0.100 s: RuntimeError: no platform pose "
                             "fits the cable lengths")
-    assert row["sim_s"] == pytest.approx(0.1) and "min_distance" not in row
+    # Issue 22, point 3: the metrics of the ticks it logged, as the 0.1 s run has them.
+    for metric in ("min_distance", "operator_effort", "peak_F_d", "time_below_d_l", "sim_s"):
+        assert row[metric] == whole[metric], metric
+
+
+# A sweep whose every run faults part-way: the dynamic plant's cables stretch, and the
+# controller's kinematics stop the run once the lengths disagree with a rigid platform by more
+# than max_length_residual (both values are reached within 0.5 s of experiment 2's push).
+ALL_FAULT = """\
+name: all_fault
+base: exp2_interaction
+overlay: {duration: 1.0, plant: !DynamicReels {}}
+axes:
+  - {field: plant.max_length_residual, values: [1.0e-3, 1.2e-3]}
+"""
+
+
+def test_a_sweep_where_every_run_faults_draws_nothing_and_says_why(tmp_path, capsys):
+    path = write(tmp_path, ALL_FAULT)
+    out = tmp_path / "out"
+    assert main(["sweep", str(path), "--out", str(out), "--workers", "1", "--no-progress",
+                 "--plot"]) == 1
+    text, err = capsys.readouterr()
+    assert "0 ok, 2 faulted, 0 error(s)" in text
+    assert ("cdpm sweep: error: no pictures: none of the 2 runs finished ok (2 faulted, "
+            "0 error(s)") in err, err
+    assert not list(out.glob("*.png"))
+    rows = csv_rows(out / "results.csv")
+    for r in rows:  # faulted, with the metrics of the ticks logged up to the fault
+        assert r["status"] == "fault" and "the run stopped at t = " in r["error"]
+        assert 0 < float(r["sim_s"]) < 1.0 and float(r["min_distance"]) > 0.05
+    # cdpm plot of that folder: the same reason, exit 1, no empty axes.
+    assert main(["plot", str(out)]) == 1
+    assert "no pictures: none of the 2 runs finished ok" in capsys.readouterr().err
+    assert not list(out.glob("*.png"))
+
+
+def test_nothing_to_draw_says_why():
+    ok = {"status": "ok", "min_distance": "0.06", "crossings": ""}
+    assert sw.nothing_to_draw([ok], "min_distance") == ""
+    assert "none of the 1 ok runs has a value of crossings" in sw.nothing_to_draw([ok],
+                                                                                 "crossings")
+    assert "none of the 2 runs finished ok (1 faulted, 1 error(s)" in sw.nothing_to_draw(
+        [{"status": "fault"}, {"status": "error"}], "min_distance")
 
 
 def test_spaced_axes():
