@@ -828,6 +828,47 @@ def _scenario_args(p, default="exp2_interaction"):
                         "'{duration: 5, interference: {default: {F_u: 4.0}}}'")
 
 
+COMPILE_NOTICE = ("cdpm: compiling the per-tick math (numba): once after installing, a few "
+                  "seconds; later runs load it from the cache")
+
+
+class _compile_notice:
+    """Within the block, the first compilation of a kernel (numba's "numba:compile" event:
+    a cache miss, never a load from the cache) prints COMPILE_NOTICE once on `stream`, so the
+    seconds of a first run after installing are explained; a run that loads everything from
+    numba's cache says nothing."""
+
+    def __init__(self, stream=None):
+        self._stream = stream
+        self.said = False
+        self._installed = None
+
+    def __enter__(self):
+        try:
+            from numba.core import event
+        except ImportError:  # no numba event API: no notice, nothing else changes
+            return self
+        notice = self
+
+        class _Listener(event.Listener):
+            def on_start(self, ev):
+                if not notice.said:
+                    notice.said = True
+                    print(COMPILE_NOTICE, file=notice._stream or sys.stderr, flush=True)
+
+            def on_end(self, ev):
+                pass
+
+        self._installed = event.install_listener("numba:compile", _Listener())
+        self._installed.__enter__()
+        return self
+
+    def __exit__(self, *exc):
+        if self._installed is not None:
+            self._installed.__exit__(*exc)
+            self._installed = None
+
+
 def main(argv=None) -> int:
     from .hardware.tick_log import TickLogError
     from .interrupt import Terminated, exit_code, terminate_raises
@@ -841,9 +882,10 @@ def main(argv=None) -> int:
         # argparse cannot hand options through a sub-command untouched; the emulator parses
         # its own.
         from .emulator import main as emulator_main
-        return emulator_main(argv[1:])
+        with _compile_notice():
+            return emulator_main(argv[1:])
     args = _parser().parse_args(argv)
-    with prefixed_log_records(), terminate_raises():
+    with prefixed_log_records(), terminate_raises(), _compile_notice():
         try:
             return int(args.func(args) or 0)
         except CliError as e:
