@@ -106,6 +106,22 @@ def _print_dynamic_summary(log, out) -> None:
           f"FK error {error:.2f} mm", file=out)
 
 
+def _print_clipped(log, scenario, out) -> None:
+    """The ticks whose raw hand force (F_measured) the sensor model clipped, if any."""
+    from .scenario import sensor_range_text
+    from .sensor import beyond_range
+
+    if "F_measured" not in log or not len(log["time"]):
+        return
+    s = scenario.sensor
+    clipped = beyond_range(log["F_measured"], s.axial_axis, s.axial_range, s.transverse_range)
+    if clipped.any():
+        k = int(np.argmax(clipped))
+        print(f"hand force beyond the sensor's range ({sensor_range_text(s)}), clipped: "
+              f"{int(clipped.sum())} of {len(clipped)} ticks, the first at t = "
+              f"{log['time'][k]:.3f} s ({_fmt(log['F_measured'][k], 1)} N)", file=out)
+
+
 def _load_scenario_arg(args):
     from .scenario import load_resolved_scenario
 
@@ -155,6 +171,7 @@ def simulate_main(*, scenario, duration=None, out_dir=None, progress=True, out=N
           file=out)
     crossings = int(np.any(log["crossed"], axis=0).sum()) if T else 0
     print(f"pairs that crossed: {crossings}", file=out)
+    _print_clipped(log, scenario, out)
     if T and "tensions" in log:  # the dynamic plant's ground truth
         _print_dynamic_summary(log, out)
     print(f"log: {path}", file=out)

@@ -265,7 +265,36 @@ def load_resolved_scenario(name_or_path="exp2_interaction",
     if resolved.interference is not None:
         _warn_unreachable_d_u(resolved.robot, resolved.interference)
     _warn_reel_saturation(scenario, resolved.robot)
+    _warn_sensor_range(resolved)
     return resolved
+
+
+def sensor_range_text(sensor: Sensor) -> str:
+    """"axial 100 N, transverse 80 N": the sensor's range, for messages."""
+    return f"axial {sensor.axial_range:g} N, transverse {sensor.transverse_range:g} N"
+
+
+def _warn_sensor_range(resolved) -> None:
+    """Once, before a run: a hand force the operator will apply beyond the sensor's range is
+    clipped by the sensor model (as the real FSE103 saturates), so the controller never sees
+    it. A force table says where; a spring hand, its max_force."""
+    from .operators import ForceProfile, SpringHand
+    from .sensor import beyond_range
+
+    s = resolved.scenario.sensor
+    op = resolved.operator
+    if isinstance(op, ForceProfile):
+        beyond = beyond_range(op.forces, s.axial_axis, s.axial_range, s.transverse_range)
+        if beyond.any():
+            k = int(np.argmax(beyond))
+            _log.warning("%s: the hand force %s N is beyond the sensor's range (%s): the "
+                         "controller sees it clipped (%d of the %d rows are beyond it; the "
+                         "summary counts the clipped ticks)", op.rows[k], op.forces[k].tolist(),
+                         sensor_range_text(s), int(beyond.sum()), len(beyond))
+    elif isinstance(op, SpringHand) and op.F_max > min(s.axial_range, s.transverse_range):
+        _log.warning("operator.max_force %g N is above the sensor's range (%s): a larger hand "
+                     "force is clipped (the summary counts the clipped ticks)", op.F_max,
+                     sensor_range_text(s))
 
 
 def _resolve_paths(scenario: Scenario, base: Path, source: str, base_what: str, *,

@@ -350,3 +350,27 @@ def test_latest_points_at_a_run_as_it_starts_and_back_if_it_writes_nothing(tmp_p
     lone.create()
     lone.discard()
     assert not (tmp_path / "fresh").exists()
+
+
+def test_a_hand_force_beyond_the_sensor_range_is_warned_once_and_counted(capsys, tmp_path):
+    # Issue 22, point 12. The CSV ramps the force along x from 0 N at t = 0 to 1e9 N at 1 s and
+    # back to 1 N at 2 s (held after): beyond the sensor's 80 N across its axis (z) from the
+    # first tick after 0 (2e6 N at 2 ms) to t < 2 - 79 / (1e9 - 1) s, i.e. ticks 1 to 999.
+    (tmp_path / "big.csv").write_text("t,fx,fy,fz\n0,0,0,0\n1,1e9,0,0\n2,1,0,0\n")
+    code, out, err = simulate_cli(capsys, "exp1_no_interaction", "--duration", "3",
+                                  "--no-progress", "--out", str(tmp_path / "run"),
+                                  "--scenario-text", "operator: !CsvOperator {path: "
+                                  f"{tmp_path / 'big.csv'}}}")
+    assert code == 0
+    assert err.count("beyond the sensor's range") == 1, err  # warned once, before the run
+    assert f"'{tmp_path / 'big.csv'}' line 3: the hand force [1000000000.0, 0.0, 0.0] N is " \
+           "beyond the sensor's range (axial 100 N, transverse 80 N)" in err, err
+    assert ("hand force beyond the sensor's range (axial 100 N, transverse 80 N), clipped: "
+            "999 of 1501 ticks, the first at t = 0.002 s" in out), out
+    with np.load(tmp_path / "run" / "log.npz") as log:
+        assert log["F_measured"][250, 0] == pytest.approx(5e8)  # raw, at 0.5 s: logged
+        assert np.abs(log["F_H"]).max() <= 80.0 + 1e-9  # what the controller saw: clipped
+    # Within the range: no warning, no summary line.
+    code, out, err = simulate_cli(capsys, "exp2_interaction", "--duration", "0.1",
+                                  "--no-progress", "--out", str(tmp_path / "calm"))
+    assert code == 0 and "sensor's range" not in out + err
