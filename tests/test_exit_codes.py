@@ -12,14 +12,17 @@ from cdpm_drake import cli
 README = (Path(__file__).resolve().parent.parent / "README.md").read_text()
 
 # Every command: (arguments, exit code, what stderr says). "MISSING" is a path in an empty
-# folder; "EMPTY" an empty folder (a run folder without its files).
+# folder; "EMPTY" an empty folder (a run folder without its files); "FILE" a file.
 CASES = {
     "info": [(["MISSING/robot.yaml"], 1, "does not exist"),
              (["--bogus"], 2, "unrecognized arguments: --bogus")],
     "simulate": [(["MISSING/s.yaml"], 1, "does not exist"),
                  (["exp1_no_interaction", "--duration", "-1"], 2, "--duration must be"),
                  (["exp1_no_interaction", "--duration", "0.001"], 2,
-                  "shorter than one tick")],
+                  "shorter than one tick"),
+                 # Refused before the run: a replay that cannot be written (FILE is a file).
+                 (["exp1_no_interaction", "--duration", "0.01", "--html", "FILE/replay.html"],
+                  2, "--html's folder 'FILE' is not a writable directory")],
     "run": [(["MISSING/s.yaml"], 1, "does not exist"),
             ([], 2, "the following arguments are required: scenario")],
     "emulate": [(["--scenario", "MISSING/s.yaml"], 1, "does not exist"),
@@ -65,12 +68,13 @@ def test_exit_codes_agree_across_commands(tmp_path, capsys, monkeypatch, command
                                           message):
     monkeypatch.chdir(tmp_path)
     (tmp_path / "EMPTY").mkdir()
+    (tmp_path / "FILE").write_text("")
     assert _exit_code([command, *args]) == code
     err = capsys.readouterr().err
     assert message in err, err
     if code == 1:
         assert err.startswith(("cdpm ", "cdpm-reel-emulator")) and ": error: " in err, err
-    assert sorted(p.name for p in tmp_path.iterdir()) == ["EMPTY"]  # nothing left behind
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["EMPTY", "FILE"]  # nothing left
 
 
 def _codes(text):
