@@ -33,8 +33,8 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parent.parent
 # What a copy of the tree needs to run the suite (the package, the robot files, the tests and
 # the files tests read); not the virtual environment, git, caches or run outputs.
-COPY = ("cdpm_drake", "hardware", "tests", "scripts", "docs", "diagrams", "README.md",
-        "pyproject.toml")
+COPY = ("cdpm_drake", "hardware", "sweeps", "tests", "scripts", "docs", "diagrams",
+        "README.md", "pyproject.toml")
 IGNORE = shutil.ignore_patterns("__pycache__", "*.pyc", ".pytest_cache", "runs", "*.egg-info")
 # One pytest run may not take longer than this (a mutant that hangs the suite is killed).
 TIMEOUT = 900.0
@@ -539,7 +539,7 @@ MUTANTS = [
       "a NaN is written as the text nan, not an empty cell",
       ("tests/test_export.py",)),
     M("fault_row_drops_metrics", "cdpm_drake/sweep.py",
-      "row.update(metrics)  # a faulted run's too",
+      "row.update(metrics)  # a faulted run's too: what it logged up to the fault",
       "row.update(metrics if result.error is None else {})",
       "a sweep's faulted run loses the metrics of the ticks it logged",
       ("tests/test_sweep.py",)),
@@ -637,7 +637,9 @@ def stale_reason(mutant: Mutant, root: Path = ROOT) -> str | None:
 def copy_tree(dest: Path) -> Path:
     for name in COPY:
         src = ROOT / name
-        if src.is_dir():
+        if src.is_symlink():  # sweeps -> cdpm_drake/sweeps: a link in the copy too
+            os.symlink(os.readlink(src), dest / name)
+        elif src.is_dir():
             shutil.copytree(src, dest / name, ignore=IGNORE)
         elif src.is_file():
             shutil.copy2(src, dest / name)
