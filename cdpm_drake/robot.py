@@ -564,7 +564,7 @@ def _check_keys(raw: dict, schema, prefix: str, src: str) -> None:
     valid = [f.name for f in dataclasses.fields(schema)]
     unknown = [k for k in raw if k not in valid]
     if unknown:
-        # The first one's line, and the closest valid name of each (issue 22).
+        # The first one's line, and the closest valid name of each.
         line = yaml_line(prefix.split(".")[:-1] + [str(unknown[0])], filename=src)
         hints = "".join(did_you_mean(k, valid).replace("'", f"'{prefix}", 1)
                         for k in unknown)

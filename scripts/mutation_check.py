@@ -472,7 +472,7 @@ MUTANTS = [
       "s = (d - d_l) / d_u",
       "the colour steps span [d_l, d_l + d_u] instead of [d_l, d_u]",
       ("tests/test_meshcat_view.py",)),
-    # --- issue 22: everyday use, round 2 -------------------------------------------------
+    # --- everyday use: exit codes, messages, run folders, export, plots ---------------------
     M("sigint_ignored_is_overridden", "cdpm_drake/interrupt.py",
       "return signal.getsignal(sig) is not signal.SIG_IGN",
       "return True",
