@@ -729,7 +729,9 @@ def _parser() -> argparse.ArgumentParser:
 
     p = sub.add_parser("simulate", help="simulate a scenario and write its log",
                        description="Simulate a scenario's Fig. 5 diagram with Drake's Simulator "
-                                   "at 500 Hz; write DIR/log.npz and DIR/scenario.yaml.")
+                                   "at 500 Hz; write DIR/log.npz and DIR/scenario.yaml (with "
+                                   "copies of the robot file and force CSV it reads, so DIR "
+                                   "reruns alone).")
     _scenario_args(p)
     p.add_argument("--duration", type=float, help="simulated time, s (default: the scenario's)")
     p.add_argument("--out", type=Path,
