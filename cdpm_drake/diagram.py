@@ -37,6 +37,7 @@ LOGGED = (
     ("velocity", "safety_limits", "velocity_command"),
     ("reel_velocity", "jacobian_mapping", "reel_velocity_command"),
     ("lengths", "reels", "cable_lengths"),
+    ("F_measured", "reels", "measured_force"),
     ("pair_distances", "interference_force", "pair_distances"),
     ("active", "interference_force", "active"),
     ("crossed", "interference_force", "crossed"),

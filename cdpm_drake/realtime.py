@@ -17,7 +17,7 @@ from pydrake.systems.analysis import Simulator
 
 from .diagram import LOGGED, BuildOptions, build_diagram
 from .scenario import (DynamicReels, ResolvedScenario, Scenario, ScenarioError, SimulatedReels,
-                       resolve_scenario, scenario_to_yaml)
+                       resolve_scenario, write_run_scenario)
 from .simulation import assemble_log, mark_ending, tick_targets
 
 
@@ -53,7 +53,8 @@ class _StopRequest:
 
     def __enter__(self):
         if threading.current_thread() is threading.main_thread():
-            for sig in (signal.SIGINT, signal.SIGTERM):
+            from .interrupt import honoured
+            for sig in filter(honoured, (signal.SIGINT, signal.SIGTERM)):  # ignored stays so
                 self._previous[sig] = signal.signal(sig, self._handle)
         return self
 
@@ -100,7 +101,7 @@ def run(*, scenario: Scenario | ResolvedScenario, out_dir, duration: float | Non
     context = simulator.get_context()
     # Written before the run (`cdpm recover` needs it after a kill), once nothing can fail early.
     scenario_path = out / "scenario.yaml"
-    scenario_path.write_text(scenario_to_yaml(dataclasses.replace(scenario, duration=duration)))
+    write_run_scenario(out, resolved, duration=duration)  # with its robot file and CSV
     T = scenario.time_step
     error, ending, enabled = None, "completed", False
     with _StopRequest() as stop:

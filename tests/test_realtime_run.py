@@ -263,7 +263,7 @@ def test_a_fault_log_is_plotted_and_a_killed_run_is_recovered(tmp_path, capsys):
     assert str(back["ending"]) == "interrupted"
     # `cdpm recover` itself, on the whole stream; never over a log.npz that is there.
     (run_dir / "ticks.bin").write_bytes(data)
-    assert main(["recover", str(run_dir)]) == 2
+    assert main(["recover", str(run_dir)]) == 1  # an error, not bad usage (issue 22)
     assert "already has its log.npz" in capsys.readouterr().err
     (run_dir / "log.npz").unlink()
     assert main(["recover", str(run_dir)]) == 0
@@ -273,7 +273,7 @@ def test_a_fault_log_is_plotted_and_a_killed_run_is_recovered(tmp_path, capsys):
 
 
 def test_recover_names_what_is_missing(tmp_path, capsys):
-    assert main(["recover", str(tmp_path)]) == 2
+    assert main(["recover", str(tmp_path)]) == 1  # cannot be found: 1 (issue 22)
     assert "has no ticks.bin" in capsys.readouterr().err
 
 
