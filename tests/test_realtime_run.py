@@ -353,3 +353,106 @@ def test_a_second_run_against_the_same_bridge_is_a_new_session(tmp_path):
         server.stop()
     assert server.counters["sessions"] == 1
     assert server.counters["rejected"]["sequence"] == 0
+
+
+# --- nothing that can take milliseconds inside a tick (realtime.py's module docstring) --------
+
+
+class _Node:
+    me = None
+
+
+def test_the_garbage_collector_runs_between_steps_only_and_is_restored(tmp_path):
+    """During the loop the automatic collector is off and the objects alive at the start are
+    frozen; garbage made meanwhile (cycles, here from the status thread) is collected by the
+    loop's own collect() between steps; afterwards the collector is on and nothing is frozen."""
+    import gc
+    import sys
+    import weakref
+
+    scenario = load_scenario("exp1_no_interaction")
+    server = _server(scenario)
+    in_loop, first_cycle, starts = [], [], []
+
+    def status(line):
+        in_loop.append((gc.isenabled(), gc.get_freeze_count() > 0,
+                        bool(first_cycle) and first_cycle[0]() is None))
+        for _ in range(3000):  # cyclic garbage: only a collection frees it
+            cycle = _Node()
+            cycle.me = cycle
+        if not first_cycle:
+            first_cycle.append(weakref.ref(cycle))
+
+    def on_gc(phase, info):
+        if phase == "start" and not gc.isenabled():
+            starts.append(sys._getframe(1).f_code.co_name)
+
+    gc.callbacks.append(on_gc)
+    try:
+        result = run(scenario=_hardware("exp1_no_interaction", server), out_dir=tmp_path,
+                     duration=1.0, status=status, status_period=0.02)
+    finally:
+        gc.callbacks.remove(on_gc)
+        server.stop()
+    assert result.ending == "completed", result.error
+    assert len(in_loop) > 3
+    assert all(not enabled and frozen for enabled, frozen, _ in in_loop), in_loop
+    # The first status call's garbage was collected while the run went on.
+    assert any(dead for _, _, dead in in_loop)
+    # Every collection while the collector was off: start_realtime's full one before the
+    # reels are enabled, and the loop's between steps (at least one: the garbage above
+    # asked for it); none inside a tick, none in another thread.
+    assert set(starts) <= {"start_realtime", "collect"}, starts
+    assert "collect" in starts
+    assert gc.isenabled() and gc.get_freeze_count() == 0
+
+
+def test_a_status_line_that_blocks_does_not_hold_up_the_run(tmp_path):
+    # A terminal that stops reading: the first status line never returns. The run goes on
+    # (the line is printed by a thread of its own; later lines are dropped, not queued).
+    scenario = load_scenario("exp1_no_interaction")
+    server = _server(scenario)
+    release = threading.Event()
+    callers = []
+
+    def status(line):
+        callers.append(threading.current_thread().name)
+        release.wait(60)
+
+    try:
+        result = run(scenario=_hardware("exp1_no_interaction", server), out_dir=tmp_path,
+                     duration=1.0, status=status, status_period=0.1)
+    finally:
+        release.set()
+        server.stop()
+    assert result.ending == "completed", result.error
+    assert len(result.log["time"]) == 501  # every tick of 1 s at 500 Hz
+    # Only from the status thread: the blocked first line, and at most the one line waiting
+    # when it was released.
+    assert set(callers) == {"status-line"} and len(callers) <= 2, callers
+
+
+def test_the_tick_log_is_written_by_its_writer_thread_only(tmp_path, monkeypatch):
+    # Every os.write of the tick log, its header included, comes from the writer thread: the
+    # loop's thread never waits for the file system.
+    from cdpm_drake.hardware import tick_log
+
+    real_write = os.write
+    writers = []
+
+    def write(fd, data):
+        writers.append(threading.current_thread().name)
+        return real_write(fd, data)
+
+    scenario = load_scenario("exp1_no_interaction")
+    server = _server(scenario)
+    monkeypatch.setattr(tick_log.os, "write", write)
+    try:
+        result = run(scenario=_hardware("exp1_no_interaction", server), out_dir=tmp_path,
+                     duration=0.5)
+    finally:
+        monkeypatch.setattr(tick_log.os, "write", real_write)
+        server.stop()
+    assert result.ending == "completed", result.error
+    # The header and 251 rows in blocks of 50 (the last one partial): at least 7 writes.
+    assert len(writers) >= 7 and set(writers) == {"tick-log-writer"}, writers
