@@ -465,14 +465,15 @@ def test_the_watchdog_stops_at_once_and_resumes_when_the_bridge_answers(monkeypa
 
 
 def test_a_bridge_that_does_not_answer_the_stop_ends_the_run(monkeypatch, robot, p0):
-    # Statuses keep coming during the hold, but echo the last command before the stop: the
-    # bridge never read it. After resume_within = 15 ms (8 ticks of 2 ms after the stop;
-    # 7 ticks are 14 ms) the fault latches, timed at the stop.
+    # Statuses keep coming during the hold, but echo the last command before the stop (the
+    # one sent right before tick 52's update): the bridge never read the stop. After
+    # resume_within = 15 ms (8 ticks of 2 ms after the stop; 7 ticks are 14 ms) the fault
+    # latches, timed at the stop.
     before = {}
 
     def stale(k, link):
         if k in (50, 51, 52):
-            before.setdefault("echo", link.sequence)
+            before["echo"] = link.sequence
             return []
         return [(0, before.get("echo", link.sequence), 0)]
 
@@ -502,7 +503,8 @@ def test_statuses_lost_during_the_silence_end_the_run(monkeypatch, robot, p0):
 
     simulator, reels, link = _scripted(monkeypatch, robot, p0, lossy)
     with pytest.raises(ReelFault, match=r"for 3 ticks \(6 ms; watchdog_ticks = 3\), and the "
-                                        r"statuses that came back had lost 2 on the way"):
+                                        r"statuses that came back had skipped 2 \(lost or "
+                                        r"rejected on the way: a faulty link"):
         simulator.AdvanceTo(0.2)
     assert link.tick == 54 and link.sent[-1][0] == TRIP_TICK
 

@@ -377,7 +377,7 @@ def test_the_garbage_collector_runs_between_steps_only_and_is_restored(tmp_path)
     def status(line):
         in_loop.append((gc.isenabled(), gc.get_freeze_count() > 0,
                         bool(first_cycle) and first_cycle[0]() is None))
-        for _ in range(3000):  # cyclic garbage: only a collection frees it
+        for _ in range(1000):  # cyclic garbage (> the 700 of a young collection)
             cycle = _Node()
             cycle.me = cycle
         if not first_cycle:
@@ -390,7 +390,7 @@ def test_the_garbage_collector_runs_between_steps_only_and_is_restored(tmp_path)
     gc.callbacks.append(on_gc)
     try:
         result = run(scenario=_hardware("exp1_no_interaction", server), out_dir=tmp_path,
-                     duration=1.0, status=status, status_period=0.02)
+                     duration=1.0, status=status, status_period=0.05)
     finally:
         gc.callbacks.remove(on_gc)
         server.stop()
@@ -417,7 +417,7 @@ def test_a_status_line_that_blocks_does_not_hold_up_the_run(tmp_path):
 
     def status(line):
         callers.append(threading.current_thread().name)
-        release.wait(60)
+        release.wait(10)
 
     try:
         result = run(scenario=_hardware("exp1_no_interaction", server), out_dir=tmp_path,

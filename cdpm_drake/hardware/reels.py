@@ -350,8 +350,8 @@ class HardwareReelsSystem(LeafSystem):
                    f"({n * self._T * 1e3:.0f} ms; watchdog_ticks = {c.watchdog_ticks})")
             if book[FAULT] == FAULT_WATCHDOG_LOSS:
                 lost = self._link.counters.lost - int(book[HOLD_LOST]) if self._link else 0
-                why += (f", and the statuses that came back had lost {lost} on the way (a "
-                        f"lossy link, not a paused bridge)")
+                why += (f", and the statuses that came back had skipped {lost} (lost or "
+                        f"rejected on the way: a faulty link, not a paused bridge)")
             elif c.resume_within > 0:
                 why += (f", and none answered the stop within resume_within = "
                         f"{c.resume_within * 1e3:g} ms")
