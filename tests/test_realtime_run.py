@@ -358,6 +358,21 @@ def test_a_second_run_against_the_same_bridge_is_a_new_session(tmp_path):
 # --- nothing that can take milliseconds inside a tick (realtime.py's module docstring) --------
 
 
+def _patient(scenario_name):
+    """A bridge thread and a controller that wait long for each other (1 s): these tests are
+    about where work happens, not about timing, and share a loaded host (and, the bridge
+    being a thread here, the controller's GIL)."""
+    scenario = load_scenario(scenario_name)
+    robot = scenario_robot(scenario)
+    bridge = ReelBridge(robot, cable_lengths(robot, np.array(scenario.initial_position)),
+                        force=scenario_operator(scenario).force, time_constant=0.0)
+    server = ReelBridgeServer(bridge, address=("127.0.0.1", 0), command_timeout=1.0).start()
+    hardware = load_scenario(scenario_name, overlay_text=(
+        f"{{plant: !HardwareReels {{port: {server.address[1]}, watchdog_ticks: 500, "
+        f"ramp_time: 0.0}}}}"))
+    return server, hardware
+
+
 class _Node:
     me = None
 
@@ -370,8 +385,7 @@ def test_the_garbage_collector_runs_between_steps_only_and_is_restored(tmp_path)
     import sys
     import weakref
 
-    scenario = load_scenario("exp1_no_interaction")
-    server = _server(scenario)
+    server, hardware = _patient("exp1_no_interaction")
     in_loop, first_cycle, starts = [], [], []
 
     def status(line):
@@ -389,8 +403,8 @@ def test_the_garbage_collector_runs_between_steps_only_and_is_restored(tmp_path)
 
     gc.callbacks.append(on_gc)
     try:
-        result = run(scenario=_hardware("exp1_no_interaction", server), out_dir=tmp_path,
-                     duration=1.0, status=status, status_period=0.05)
+        result = run(scenario=hardware, out_dir=tmp_path, duration=1.0, status=status,
+                     status_period=0.05)
     finally:
         gc.callbacks.remove(on_gc)
         server.stop()
@@ -410,18 +424,17 @@ def test_the_garbage_collector_runs_between_steps_only_and_is_restored(tmp_path)
 def test_a_status_line_that_blocks_does_not_hold_up_the_run(tmp_path):
     # A terminal that stops reading: the first status line never returns. The run goes on
     # (the line is printed by a thread of its own; later lines are dropped, not queued).
-    scenario = load_scenario("exp1_no_interaction")
-    server = _server(scenario)
+    server, hardware = _patient("exp1_no_interaction")
     release = threading.Event()
     callers = []
 
     def status(line):
         callers.append(threading.current_thread().name)
-        release.wait(10)
+        release.wait(10)  # longer than the bridge's 1 s command timeout
 
     try:
-        result = run(scenario=_hardware("exp1_no_interaction", server), out_dir=tmp_path,
-                     duration=1.0, status=status, status_period=0.1)
+        result = run(scenario=hardware, out_dir=tmp_path, duration=1.0, status=status,
+                     status_period=0.1)
     finally:
         release.set()
         server.stop()
@@ -444,12 +457,10 @@ def test_the_tick_log_is_written_by_its_writer_thread_only(tmp_path, monkeypatch
         writers.append(threading.current_thread().name)
         return real_write(fd, data)
 
-    scenario = load_scenario("exp1_no_interaction")
-    server = _server(scenario)
+    server, hardware = _patient("exp1_no_interaction")
     monkeypatch.setattr(tick_log.os, "write", write)
     try:
-        result = run(scenario=_hardware("exp1_no_interaction", server), out_dir=tmp_path,
-                     duration=0.5)
+        result = run(scenario=hardware, out_dir=tmp_path, duration=0.5)
     finally:
         monkeypatch.setattr(tick_log.os, "write", real_write)
         server.stop()
