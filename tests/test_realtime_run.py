@@ -467,3 +467,18 @@ def test_the_tick_log_is_written_by_its_writer_thread_only(tmp_path, monkeypatch
     assert result.ending == "completed", result.error
     # The header and 251 rows in blocks of 50 (the last one partial): at least 7 writes.
     assert len(writers) >= 7 and set(writers) == {"tick-log-writer"}, writers
+
+
+def test_the_report_counts_the_watchdog_stops_that_resumed():
+    from cdpm_drake.realtime import RunResult, report_lines
+
+    def lines(holds):
+        link = {"sent": 10, "received": 9, "accepted": 9, "lost": 0, "rejected": {},
+                "foreign": 0, "commands_lost_at_bridge": 0, "watchdog_holds": holds,
+                "longest_hold": 0.0093}
+        return report_lines(RunResult(log={}, timing={}, link=link, error=None,
+                                      ending="completed", log_path=None, tick_log_path=None))
+
+    assert ("watchdog: stopped the reels 2 time(s) for a silent bridge that answered within "
+            "resume_within, and resumed (longest stop 9.3 ms)") in lines(2)
+    assert not any(line.startswith("watchdog") for line in lines(0))
