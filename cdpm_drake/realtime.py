@@ -31,7 +31,7 @@ about one period minus that tick's compute (~1.8 ms) before the next tick is due
   milliseconds, which delays the next tick (the bridge's statuses wait in the socket): a
   rehearsal feature, not for the robot.
 
-Measured (scripts/soak_realtime.py, README "Before trusting a host"): with this, a tick comes
+Measured (scripts/soak_realtime.py; README, "On the robot", point 4): with this, a tick comes
 late only when the host holds the process's virtual CPU (a higher-priority sentinel thread on
 that CPU is late by the same amount every time); a bridge silenced that way is what the
 watchdog's hold and resume (hardware/reels.py, `resume_within`) rides out.
@@ -125,7 +125,8 @@ def _collector_between_steps():
     """Automatic garbage collection off for the block; yields `collect()`, which the loop
     calls between steps: it collects the young generation(s) when the allocation counts
     reach the collector's own thresholds (what an automatic collection would have done, in
-    a tick), a few hundred objects at most, well under a millisecond. Afterwards the frozen
+    a tick); only the objects that survived since (a tick's temporaries are freed by
+    reference counting), 0.1-0.2 ms for the few hundred the soak saw. Afterwards the frozen
     objects (start_realtime) go back to the collector and it is on again if it was."""
     threshold0, threshold1, _ = gc.get_threshold()
 

@@ -8,15 +8,24 @@ forwards to the emulator and back), and `cdpm run` (a separate process, the same
 user types, with a stall tracer, below). It reports, per run:
 
 * how the run ended, and whether the watchdog stopped it (a clean run must not stop);
+* the watchdog's holds: stops (zero velocity, enable off) that the bridge answered within
+  `resume_within`, after which the run went on, as the relay saw them (and as the controller's
+  report counts them), with the bridge's silence around each and the host's delays then;
 * the controller-side latency: from the relay forwarding a status to the controller to the
-  relay receiving the first command that echoes it (or a newer status), p50 / p99 / max, ms.
-  By design it is below one period plus the tick's compute: the status waits in the socket
-  for the next tick's update, whose command leaves in the same step;
+  relay receiving the first command that echoes it (or a newer status), p50 / p99 / max, ms,
+  over the statuses forwarded while the reels were enabled. By design it is below one period
+  plus the tick's compute (and the relay's hop): the status waits in the socket for the next
+  tick's update, whose command leaves in the same step;
 * the tick period (the wall time between consecutive ticks' log rows, ticks.bin), p50 / max;
 * the largest gap between two statuses the bridge sent (who was late: the bridge or the
   controller);
 * every tick whose period exceeded `--slow` (4 ms: two ticks late, one short of the 3-tick
-  watchdog) with what the controller was doing then.
+  watchdog) with what the controller was doing then, and whether the host was late then.
+
+The host sentinel is a process with one thread pinned to each CPU at SCHED_FIFO 99 (ahead of
+everything the soak runs), waking every 1 ms: a wake-up more than 1 ms late means the host
+held that CPU (a hypervisor descheduling the virtual CPU, the kernel busy), not the
+controller. A late tick the sentinel saw too is the host's.
 
 The stall tracer is a thread in the controller process (`--no-trace` runs the plain `cdpm
 run`): every 1 ms it checks that the tick log gained a row; when none came for 3 ms it records
@@ -28,6 +37,7 @@ three processes), so the relay's, the tracer's and the tick log's times line up.
 
 Usage: python scripts/soak_realtime.py [--runs 10] [--duration 15] [--rt-priority 50]
            [--scenario exp2_interaction] [--slow 0.004] [--no-trace] [--keep DIR]
+           [--json FILE]
 
 Exit code 0 when every run completed, 1 when any ended otherwise (a watchdog stop included).
 --rt-priority 50 (the default) is what the README tells users on a busy host; it needs root or
@@ -65,8 +75,9 @@ class Relay:
     second socket as its controller. Records go into preallocated arrays (no allocation per
     datagram) of `capacity` rows each way."""
 
-    def __init__(self, bridge_port: int, capacity: int):
+    def __init__(self, bridge_port: int, capacity: int, rt_priority: int = 0):
         self.bridge = ("127.0.0.1", int(bridge_port))
+        self.rt_priority = rt_priority
         self._front = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
         self._front.bind(("127.0.0.1", 0))
         self._back = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
@@ -97,6 +108,9 @@ class Relay:
         self._back.close()
 
     def _run(self) -> None:
+        if self.rt_priority:
+            # This thread only (Linux applies the policy per thread).
+            os.sched_setscheduler(0, os.SCHED_FIFO, os.sched_param(self.rt_priority))
         front, back = self._front, self._back
         now = time.monotonic
         while not self._stop.is_set():
@@ -389,7 +403,8 @@ def soak_run(k: int, args, folder: Path) -> dict:
     if "cdpm-reel-emulator:" not in banner or "error" in banner:
         emulator.kill()
         raise RuntimeError(f"the emulator did not start: {banner!r}")
-    relay = Relay(emu_port, capacity=int((args.duration + 10) / 0.002) * 2).start()
+    relay = Relay(emu_port, capacity=int((args.duration + 10) / 0.002) * 2,
+                  rt_priority=args.rt_priority).start()
     run_dir = folder / f"run{k:03d}"
     trace_path = folder / f"run{k:03d}.trace.json"
     cli_args = ["run", args.scenario, "--duration", f"{args.duration:g}", "--out",
@@ -538,8 +553,6 @@ def _describe(snap: dict) -> str:
             f"(ctx vol {k.get('vol', '?')}, preempted {k.get('nonvol', '?')})"
             f"{' IN GC' if snap['in_gc'] else ''}: {where}")
     for name, other in snap["others"].items():
-        if name in ("relay",):
-            continue
         ok = other["kernel"]
         text += (f"; {name} {ok.get('state', '?')}/{ok.get('syscall', '?')}: "
                  f"{other['stack'][0] if other['stack'] else '?'}")
@@ -580,7 +593,10 @@ def main(argv=None) -> int:
     if args.rt_priority:
         from cdpm_drake.hardware.priority import set_realtime_priority
 
-        set_realtime_priority(args.rt_priority)  # the relay thread's; the children set theirs
+        # Fail early without root; the relay thread sets its own (per thread: the children
+        # start at normal priority and raise theirs with --rt-priority, as a user's do).
+        set_realtime_priority(args.rt_priority)
+        os.sched_setscheduler(0, os.SCHED_OTHER, os.sched_param(0))
     import gc
 
     from cdpm_drake.text import format_table
