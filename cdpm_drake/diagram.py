@@ -38,6 +38,7 @@ LOGGED = (
     ("reel_velocity", "jacobian_mapping", "reel_velocity_command"),
     ("lengths_commanded", "jacobian_mapping", "commanded_lengths"),
     ("lengths", "reels", "cable_lengths"),
+    ("F_measured", "reels", "measured_force"),
     ("pair_distances", "interference_force", "pair_distances"),
     ("active", "interference_force", "active"),
     ("crossed", "interference_force", "crossed"),
