@@ -98,12 +98,21 @@ def _cmd_info(args) -> int:
 
 
 def _print_dynamic_summary(log, out) -> None:
+    from .rotation import rotation_angle, rotations_from_rpy
+
+    T = len(log["time"])
     slack = [f"{i + 1} ({int(n)} ticks)" for i, n in enumerate(log["slack"].sum(axis=0)) if n]
+    slack_ticks = int(np.any(log["slack"], axis=1).sum())
     error = 1000 * np.linalg.norm(log["p"] - log["p_true"], axis=1).max()
-    rotation = np.degrees(np.abs(log["rpy_true"]).max())
-    print(f"tensions {log['tensions'].min():.2f} to {log['tensions'].max():.1f} N; slack "
-          f"cables: {', '.join(slack) or 'none'}; largest rotation {rotation:.2f} deg; largest "
-          f"FK error {error:.2f} mm", file=out)
+    rotation = np.degrees(rotation_angle(rotations_from_rpy(log["rpy_true"])).max())
+    print(f"dynamic plant (true): tensions {log['tensions'].min():.2f} to "
+          f"{log['tensions'].max():.1f} N; a cable slack on {slack_ticks} of {T} ticks "
+          f"({100 * slack_ticks / T:.2f} %), cables: {', '.join(slack) or 'none'}; largest "
+          f"rotation {rotation:.2f} deg; largest FK error {error:.2f} mm", file=out)
+    if "lengths_commanded" in log:
+        drift = 1000 * np.abs(log["lengths_commanded"] - log["lengths"]).max()
+        print(f"length loop: largest |l_d - l| {drift:.2f} mm (commanded vs encoder lengths)",
+              file=out)
 
 
 def _print_clipped(log, scenario, out) -> None:
@@ -139,7 +148,7 @@ def simulate_main(*, scenario, duration=None, out_dir=None, progress=True, out=N
     same, and the plots and replay asked for)."""
     from .run_folder import RUNS_DIR, RunFolder
     from .scenario import resolve_scenario
-    from .simulation import save_log, simulate, summary_rows
+    from .simulation import save_log, simulate, summary_header, summary_rows
 
     out = sys.stdout if out is None else out
     resolved = resolve_scenario(scenario)
@@ -162,7 +171,7 @@ def simulate_main(*, scenario, duration=None, out_dir=None, progress=True, out=N
           f"in {result.wall_time:.2f} s wall ({result.realtime_factor:.1f}x real time)", file=out)
     rows = summary_rows(log)
     if rows:
-        print(format_table(["pair", "min distance (mm)", "ticks active", "crossed"], rows), file=out)
+        print(format_table(summary_header(log), rows), file=out)
     else:
         print("no cable pair came within its d_u", file=out)
     norms = {k: np.linalg.norm(log[k], axis=1).max() if T else 0.0
@@ -170,7 +179,12 @@ def simulate_main(*, scenario, duration=None, out_dir=None, progress=True, out=N
     print("peak |F_H| {F_H:.2f} N, |F_int| {F_int:.2f} N, |F_d| {F_d:.2f} N".format(**norms),
           file=out)
     crossings = int(np.any(log["crossed"], axis=0).sum()) if T else 0
-    print(f"pairs that crossed: {crossings}", file=out)
+    if "crossed_true" in log:  # the controller's estimate beside the plant's truth
+        truly = int(np.any(log["crossed_true"], axis=0).sum()) if T else 0
+        print(f"pairs that crossed: {truly} truly (from the true pose), {crossings} by the "
+              "controller's estimate", file=out)
+    else:
+        print(f"pairs that crossed: {crossings}", file=out)
     _print_clipped(log, scenario, out)
     if T and "tensions" in log:  # the dynamic plant's ground truth
         _print_dynamic_summary(log, out)
@@ -196,7 +210,8 @@ def simulate_main(*, scenario, duration=None, out_dir=None, progress=True, out=N
               "written", file=sys.stderr)
         return exit_code(result.error)
     if result.error is not None:
-        print(f"cdpm simulate: error: the run stopped at {stopped}: {result.error}",
+        cause = f"; {result.diagnosis}" if result.diagnosis else ""
+        print(f"cdpm simulate: error: the run stopped at {stopped}: {result.error}{cause}",
               file=sys.stderr)
         return 1
     return 0

@@ -125,6 +125,19 @@ class Sensor:
     noise_std: float = 0.0
 
 
+@dataclasses.dataclass
+class Controller:
+    """Beyond the paper's Fig. 5: how the controller drives the reels."""
+
+    # Gain K_l of the cable-length loop in the Jacobian velocity mapping, 1/s: the reels get
+    # l_dot = J v + K_l (l_d - l), l_d the lengths of the commanded position, l the measured
+    # ones, so the drives' velocity error and stiction do not integrate into length drift
+    # (on a robot with 70 kN cables 1 mm of drift is ~26 N of tension). 0 is the paper's open
+    # loop; on the kinematic plant's ideal reels l == l_d and the loop changes nothing. At
+    # most 1 / time_step (the loop would overshoot within a tick).
+    length_gain: float = 20.0
+
+
 # --- Plants ----------------------------------------------------------------------------------
 
 
@@ -203,6 +216,7 @@ class Scenario:
     interference: Interference = dataclasses.field(default_factory=Interference)
     limits: Limits = dataclasses.field(default_factory=Limits)
     wall_force: WallForce = dataclasses.field(default_factory=WallForce)
+    controller: Controller = dataclasses.field(default_factory=Controller)
     # The person at the handle (simulation and the emulator; on the robot, a real person).
     operator: OperatorConfig = dataclasses.field(default_factory=NoOperator)
     sensor: Sensor = dataclasses.field(default_factory=Sensor)
@@ -688,6 +702,12 @@ def _resolve(scenario: Scenario, source: str) -> ResolvedScenario:
                             f"{s.axial_axis!r}")
     if not (math.isfinite(s.noise_std) and s.noise_std >= 0):
         raise ScenarioError(f"sensor.noise_std must be >= 0 N, got {s.noise_std!r}")
+    gain = scenario.controller.length_gain
+    if not (_is_number(gain) and math.isfinite(float(gain)) and 0 <= float(gain)
+            and float(gain) * scenario.time_step < 1.0):
+        raise ScenarioError(
+            f"controller.length_gain must be a number >= 0 1/s and below 1 / time_step = "
+            f"{1.0 / scenario.time_step:g} 1/s (0: the paper's open loop), got {gain!r}")
     if scenario.wall_force.enabled:
         _positive(scenario.wall_force.margin, "wall_force.margin")
         _positive(scenario.wall_force.max_force, "wall_force.max_force")

@@ -650,11 +650,20 @@ METRICS = {
     "peak_speed": ("m/s", None, "largest |velocity| commanded after the limits"),
     "operator_effort": ("N s", "min", "integral of |F_H| dt (what the operator pushed)"),
     "limit_time": ("s", "min", "time during which the limits changed the admittance velocity"),
+    # The plant's ground truth (the dynamic plant, which logs its true pose); empty for the
+    # kinematic plant, whose pose is the controller's estimate.
+    "min_distance_true": ("m", "max", "smallest TRUE distance of any watched cable pair, from "
+                                      "the plant's true (rotated) pose (dynamic plant)"),
+    "min_distance_true_pair": ("-", None, "the pair where min_distance_true occurred"),
+    "crossings_true": ("-", "min", "number of pairs that truly crossed (dynamic plant)"),
+    "slack_ticks": ("-", "min", "ticks with at least one slack cable (dynamic plant)"),
+    "min_tension": ("N", "max", "smallest cable tension over the run (dynamic plant)"),
+    "max_rotation": ("deg", "min", "largest platform rotation from level (dynamic plant)"),
     "sim_s": ("s", None, "simulated time the run covered"),
     "wall_s": ("s", "min", "wall-clock time of the run (build and simulate)"),
     "rtf": ("-", "max", "real-time factor: sim_s / wall_s"),
 }
-NUMERIC_METRICS = [m for m in METRICS if m != "min_distance_pair"]
+NUMERIC_METRICS = [m for m in METRICS if not m.endswith("_pair")]
 # A row's status: "ok"; "fault": the run stopped part-way, its metrics cover the ticks it
 # logged; "error": it did not run (or its worker died), no metrics.
 FAILED = ("fault", "error")
@@ -706,7 +715,32 @@ def run_metrics(log: dict, scenario: Scenario) -> dict:
     v = np.asarray(log["velocity"], dtype=float).reshape(T, 3)
     v_adm = np.asarray(log["velocity_admittance"], dtype=float).reshape(T, 3)
     out["limit_time"] = held(np.any(np.abs(v - v_adm) > LIMIT_TOLERANCE, axis=1))
+    out.update(_truth_metrics(log, T, pairs))
     out["sim_s"] = float(t[-1] - t[0]) if T > 1 else 0.0
+    return out
+
+
+def _truth_metrics(log: dict, T: int, pairs) -> dict:
+    """The dynamic plant's ground-truth metrics (METRICS), NaN / "" for a log without them."""
+    out = dict(min_distance_true=math.nan, min_distance_true_pair="", crossings_true=math.nan,
+               slack_ticks=math.nan, min_tension=math.nan, max_rotation=math.nan)
+    if not T:
+        return out
+    if "pair_distances_true" in log:
+        d = np.asarray(log["pair_distances_true"], dtype=float).reshape(T, -1)
+        if d.size:
+            flat = int(np.argmin(d))
+            k = flat % d.shape[1]
+            out["min_distance_true"] = float(d.reshape(-1)[flat])
+            out["min_distance_true_pair"] = f"{int(pairs[k][0])}-{int(pairs[k][1])}"
+        out["crossings_true"] = int(np.any(np.asarray(log["crossed_true"]), axis=0).sum())
+    if "tensions" in log:
+        out["slack_ticks"] = int(np.any(np.asarray(log["slack"], dtype=bool), axis=1).sum())
+        out["min_tension"] = float(np.min(log["tensions"]))
+    if "rpy_true" in log:
+        from .rotation import rotation_angle, rotations_from_rpy
+        out["max_rotation"] = float(np.degrees(
+            rotation_angle(rotations_from_rpy(log["rpy_true"])).max()))
     return out
 
 

@@ -28,7 +28,7 @@ from cdpm_drake import scenario as scenario_module
 from cdpm_drake.hardware.config import HardwareReels
 from cdpm_drake.emulator import FaultPlan, ReelBridge, ReelBridgeServer
 from cdpm_drake.interference import InterferenceParams, interference_force
-from cdpm_drake.kinematics import KinematicsError, cable_lengths, forward_kinematics
+from cdpm_drake.kinematics import KinematicsError, cable_lengths, forward_kinematics, jacobian
 from cdpm_drake.operators import CsvOperator, NoOperator, ScriptedOperator, SpringHandOperator
 from cdpm_drake.realtime import run as realtime_run
 from cdpm_drake.robot import RobotSchema, load_robot
@@ -503,7 +503,9 @@ def test_reel_time_constant_lags_the_motion():
     """With tau = 0.05 s each tick's actual reel speed moves 1 - exp(-T/tau) = 3.9 % of the way
     to the command; the platform velocity (the cables are consistent and J barely changes over
     millimetres) follows the commanded velocity through that same first-order filter."""
-    log = sim(push([1.0, 0, 0], plant=SimulatedReels(time_constant=0.05)), 0.3)
+    # The paper's open loop: the cable-length loop would make up the lag it measures.
+    log = sim(push([1.0, 0, 0], plant=SimulatedReels(time_constant=0.05),
+                   controller=scenario_module.Controller(length_gain=0.0)), 0.3)
     lag = 1.0 - np.exp(-T / 0.05)
     command = log["velocity"][:, 0]
     actual = np.diff(log["p"][:, 0]) / T
@@ -513,6 +515,23 @@ def test_reel_time_constant_lags_the_motion():
         predicted.append(y)
     np.testing.assert_allclose(actual, predicted, atol=2e-5)
     assert np.abs(actual - command[:-1]).max() > 0.004  # the lag is visible (100 x the tolerance)
+
+
+@covers("Scenario.controller.length_gain")
+def test_length_gain_sets_the_cable_length_loop():
+    """Every tick's reel command is J(p) v + K_l (l_d - l) with the scenario's K_l = 13.7 1/s
+    (distinct from the default 20): recomputed from the logged p, velocity, commanded and
+    measured lengths with kinematics.jacobian. Lagging drives (tau = 0.05 s) make l_d - l
+    non-zero, so the gain shows."""
+    s = push([1.0, 0, 0], plant=SimulatedReels(time_constant=0.05),
+             controller=scenario_module.Controller(length_gain=13.7))
+    log = sim(s, 0.3)
+    robot = scenario_robot(s)
+    error = log["lengths_commanded"] - log["lengths"]
+    expected = (np.einsum("kij,kj->ki", jacobian(robot, log["p"]), log["velocity"])
+                + 13.7 * error)
+    np.testing.assert_allclose(log["reel_velocity"], expected, rtol=0, atol=1e-12)
+    assert np.abs(error).max() > 1e-4  # 1e8 x the tolerance: the loop acts
 
 
 def _reel_speeds(log):
@@ -779,10 +798,10 @@ def test_dynamic_plant_max_length_residual_bounds_the_forward_kinematics_misfit(
     s = _dynamic()
     L, _, T0 = _start_geometry(s)
     L0 = L * 70000.0 / (70000.0 + T0)
-    with pytest.raises(KinematicsError, match=r"residual of 0\.00857 m on cable 3"):
+    with pytest.raises(KinematicsError, match=r"residual of 8\.57\d mm on cable 3"):
         forward_kinematics(scenario_robot(s), L0, max_residual=0.0081)
     forward_kinematics(scenario_robot(s), L0, max_residual=0.0091)
-    with pytest.raises(KinematicsError, match=r"allowed 0\.0081 m"):
+    with pytest.raises(KinematicsError, match=r"allowed 8\.100 mm"):
         sim(_dynamic(max_length_residual=0.0081), 0.004)
     sim(_dynamic(max_length_residual=0.0091), 0.004)
 

@@ -39,7 +39,8 @@ _NEEDS = {
 OPTIONAL = ("timing", "tensions", "pose_error")
 # Keys with one row per tick.
 _PER_TICK = ("time", "p", "F_H", "F_int", "F_d", "pair_distances", "active", "crossed",
-             "lengths", "reel_velocity", "wall", "tensions", "slack", "p_true", "rpy_true")
+             "lengths", "reel_velocity", "wall", "tensions", "slack", "p_true", "rpy_true",
+             "lengths_commanded", "pair_distances_true", "crossed_true")
 LOG_KEYS = ("time", "p", "F_H", "F_int", "F_wall", "F_d", "velocity_admittance", "velocity",
             "reel_velocity", "lengths", "pair_distances", "active", "crossed", "pairs", "d_l",
             "d_u", "F_u", "eps", "F_max", "reels", "attachments", "workspace_lower",
@@ -267,13 +268,30 @@ def figure_distances(log: Mapping) -> Figure:
     pairs = np.asarray(log["pairs"]).reshape(-1, 2)
     fig = Figure(figsize=(8, 4.5), layout="constrained")
     ax = fig.add_subplot()
-    shown = np.flatnonzero(np.asarray(log["active"]).reshape(len(t), -1).any(axis=0))
+    near = np.asarray(log["active"]).reshape(len(t), -1).any(axis=0)
+    truth = None
+    if "pair_distances_true" in log:
+        # The plant's ground truth (the dynamic plant's true, rotated pose) beside the
+        # controller's estimate: a pair truly within its d_u is shown even if the estimate
+        # never was.
+        truth = np.asarray(log["pair_distances_true"], dtype=float).reshape(len(t), -1)
+        d_u = np.asarray(log["d_u"], dtype=float).reshape(-1)
+        near = near | (truth <= np.where(np.isfinite(d_u), d_u, -np.inf)).any(axis=0)
+    shown = np.flatnonzero(near)
     heading = "Distance between the cables of each active pair"
     if shown.size == 0 and d.shape[1] and len(t):
-        shown = np.array([int(np.argmin(d.min(axis=0)))])
+        shown = np.array([int(np.argmin((d if truth is None else truth).min(axis=0)))])
         heading = "No pair came within d_u; the closest pair"
-    for k in shown:
-        ax.plot(t, 1000.0 * d[:, k], label=_pair_label(pairs[k]))
+    for n, k in enumerate(shown):
+        color = f"C{n % 10}"
+        label = _pair_label(pairs[k])
+        if truth is None:
+            ax.plot(t, 1000.0 * d[:, k], color=color, label=label)
+            continue
+        ax.plot(t, 1000.0 * truth[:, k], color=color, linewidth=2.2,
+                label=f"{label} true (plant's pose)")
+        ax.plot(t, 1000.0 * d[:, k], color=color, linewidth=1.2, linestyle="--",
+                label=f"{label} controller's estimate")
     for key, style in (("d_l", "--"), ("d_u", ":")):
         values = np.asarray(log[key], dtype=float).reshape(-1)[shown] if shown.size else []
         for v in np.unique(np.asarray(values)[np.isfinite(values)]):
