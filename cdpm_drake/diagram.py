@@ -49,6 +49,7 @@ LOGGED = (
     ("t_star", "tension_distribution", "t_star"),
     ("tension_status", "tension_distribution", "status"),
     ("lengths", "reels", "cable_lengths"),
+    ("F_measured", "reels", "measured_force"),
     ("pair_distances", "interference_force", "pair_distances"),
     ("active", "interference_force", "active"),
     ("crossed", "interference_force", "crossed"),

@@ -14,7 +14,7 @@ from pydrake.systems.analysis import Simulator
 
 from .diagram import build_diagram, logged_signals, reserve_log
 from .scenario import (DynamicReels, ResolvedScenario, Scenario, ScenarioError, SimulatedReels,
-                       resolve_scenario, scenario_to_yaml)
+                       check_duration, resolve_scenario, write_run_scenario)
 
 
 @dataclasses.dataclass
@@ -54,6 +54,7 @@ def simulate(*, scenario: Scenario | ResolvedScenario, duration: float | None = 
     duration = scenario.duration if duration is None else float(duration)
     if not (duration > 0 and np.isfinite(duration)):
         raise ValueError(f"duration must be a finite number > 0 s, got {duration!r}")
+    check_duration(duration, scenario.time_step, "duration")
     diagram = build_diagram(resolved) if diagram is None else diagram
     simulator = Simulator(diagram)
     context = simulator.get_mutable_context()
@@ -256,16 +257,17 @@ def true_pair_distances(robot, p_true, rpy_true, d_u=None) -> dict:
     return {"pair_distances_true": dist, "crossed_true": crossed}
 
 
-def save_log(log: dict, out_dir, scenario: Scenario) -> Path:
-    """Write DIR/log.npz and the resolved scenario DIR/scenario.yaml; returns the npz path.
-    The scenario's duration is set to what the log covers, so the file reproduces the run."""
-    if len(log["time"]):
-        scenario = dataclasses.replace(scenario, duration=float(log["time"][-1]))
+def save_log(log: dict, out_dir, scenario: Scenario | ResolvedScenario) -> Path:
+    """Write DIR/log.npz and the resolved scenario DIR/scenario.yaml, with copies of the
+    robot file and force CSV it reads (scenario.write_run_scenario: the folder reruns alone);
+    returns the npz path. The scenario's duration is set to what the log covers, so the file
+    reproduces the run."""
+    changes = {"duration": float(log["time"][-1])} if len(log["time"]) else {}
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     path = out / "log.npz"
     np.savez_compressed(path, **log)
-    (out / "scenario.yaml").write_text(scenario_to_yaml(scenario))
+    write_run_scenario(out, scenario, **changes)
     return path
 
 

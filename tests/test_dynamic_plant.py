@@ -478,8 +478,10 @@ def test_plot_log_adds_tensions_and_pose_error_for_a_dynamic_log(dynamic_log, tm
              and "slack" not in line.get_label()]
     assert len(lines) == 7
     np.testing.assert_allclose(lines[2].get_ydata(), dynamic_log["tensions"][:, 2])
-    slack_marks = [line for line in fig.axes[0].get_lines() if "slack" in line.get_label()]
+    # Slack ticks on the row of each cable, below the tensions (issue 22).
+    slack_marks = [line for line in fig.axes[1].get_lines() if "slack" in line.get_label()]
     assert [line.get_label() for line in slack_marks] == ["cable 3 slack (1 ticks)"]
+    assert list(slack_marks[0].get_ydata()) == [3]
     fig = plots.figure_pose_error(dynamic_log)
     norm = [line for line in fig.axes[0].get_lines() if line.get_label() == "|p - p_true|"][0]
     np.testing.assert_allclose(norm.get_ydata(), 1000 * np.linalg.norm(

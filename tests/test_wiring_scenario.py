@@ -1213,6 +1213,38 @@ def test_hardware_shutdown_repeats_sets_the_final_zero_commands(tmp_path):
     assert len(trailing) >= 5 and len(trailing) % 5 == 0, len(trailing)
 
 
+@covers("Scenario.plant!HardwareReels.resume_within")
+def test_hardware_resume_within_bounds_the_wait_for_the_bridge_after_a_stop(monkeypatch):
+    """The scenario's diagram on a scripted link (tests/helpers_scripted_link.py: one period
+    of clock per tick, no sockets): the bridge is silent from tick 50, the watchdog (3 ticks)
+    stops the reels in tick 52's update, and the bridge answers the stop `gap` ticks later.
+    resume_within = 6.5 ms (not the default 15 ms) takes an answer 3 ticks (6 ms) later and
+    the run goes on; 4 ticks (8 ms) later the fault has latched."""
+    from pydrake.systems.analysis import Simulator
+
+    from cdpm_drake.diagram import build_diagram
+    from cdpm_drake.hardware.reels import ReelFault
+    from helpers_scripted_link import ScriptedLink, answering, install
+
+    lengths = cable_lengths(load_robot("paper_7cable"), np.array(P0))
+    for gap, resumes in ((3, True), (4, False)):
+        diagram = build_diagram(_hw(47100, watchdog_ticks=3, resume_within=0.0065))
+        reels = diagram.GetSubsystemByName("reels")
+        link = ScriptedLink(lengths, lambda k, link, gap=gap: (
+            [] if 50 <= k < 52 + gap else answering(k, link)))
+        install(monkeypatch, reels, link)
+        simulator = Simulator(diagram)
+        simulator.Initialize()
+        if resumes:
+            simulator.AdvanceTo(0.2)
+            book = reels.book(reels.GetMyContextFromRoot(simulator.get_context()))
+            assert book["holds"] == 1 and book["fault"] == 0
+        else:
+            with pytest.raises(ReelFault, match=r"none answered the stop within "
+                                                r"resume_within = 6.5 ms"):
+                simulator.AdvanceTo(0.2)
+
+
 # --- bad values are refused by field name, for every checked field -------------------------------
 
 
