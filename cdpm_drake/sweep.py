@@ -623,6 +623,9 @@ METRICS = {
     "peak_speed": ("m/s", None, "largest |velocity| commanded after the limits"),
     "operator_effort": ("N s", "min", "integral of |F_H| dt (what the operator pushed)"),
     "limit_time": ("s", "min", "time during which the limits changed the admittance velocity"),
+    "min_tension": ("N", "max", "smallest cable tension (dynamic plant; else empty)"),
+    "slack_time": ("s", "min", "time during which any cable was slack (dynamic plant)"),
+    "max_tilt": ("rad", "min", "largest rotation of the platform from level (dynamic plant)"),
     "sim_s": ("s", None, "simulated time the run covered"),
     "wall_s": ("s", "min", "wall-clock time of the run (build and simulate)"),
     "rtf": ("-", "max", "real-time factor: sim_s / wall_s"),
@@ -676,8 +679,25 @@ def run_metrics(log: dict, scenario: Scenario) -> dict:
     v = np.asarray(log["velocity"], dtype=float).reshape(T, 3)
     v_adm = np.asarray(log["velocity_admittance"], dtype=float).reshape(T, 3)
     out["limit_time"] = held(np.any(np.abs(v - v_adm) > LIMIT_TOLERANCE, axis=1))
+    # The dynamic plant's ground truth (docs/LOG_FORMAT.md); the other plants have none.
+    if "tensions" in log and T:
+        rpy = np.asarray(log["rpy_true"], dtype=float).reshape(T, 3)
+        out["min_tension"] = float(np.min(log["tensions"]))
+        out["slack_time"] = held(np.any(np.asarray(log["slack"]), axis=1))
+        out["max_tilt"] = float(np.max(_tilt(rpy)))
+    else:
+        out.update(min_tension=math.nan, slack_time=math.nan, max_tilt=math.nan)
     out["sim_s"] = float(t[-1] - t[0]) if T > 1 else 0.0
     return out
+
+
+def _tilt(rpy) -> np.ndarray:
+    """The rotation angle (rad) from level of R = Rz(yaw) Ry(pitch) Rx(roll), per row of rpy
+    (N, 3): acos((trace R - 1) / 2), the trace written out."""
+    cr, cp, cy = np.cos(rpy[:, 0]), np.cos(rpy[:, 1]), np.cos(rpy[:, 2])
+    sr, sp, sy = np.sin(rpy[:, 0]), np.sin(rpy[:, 1]), np.sin(rpy[:, 2])
+    trace = cy * cp + (sy * sp * sr + cy * cr) + cp * cr
+    return np.arccos(np.clip((trace - 1.0) / 2.0, -1.0, 1.0))
 
 
 # --- One run (in a worker) -------------------------------------------------------------------
