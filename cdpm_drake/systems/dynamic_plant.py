@@ -157,13 +157,15 @@ class CableNet(LeafSystem):
         return out[start:start + size].copy()
 
 
-def build_dynamic_plant(scenario, robot, operator, start_tensions):
+def build_dynamic_plant(scenario, robot, operator, start_tensions, *, log_truth=True):
     """The `!DynamicReels` plant as a Diagram named `reels`, with the ports in PLANT_PORTS.
 
     `operator` is the scenario's operator model (operators.py), `start_tensions` (m,) N the
     start tension distribution (scenario.check_dynamic_reels, which also checks the time
     step): the unstretched lengths are set so the platform starts in equilibrium at the
-    scenario's initial_position and plant.initial_rpy.
+    scenario's initial_position and plant.initial_rpy. `log_truth=False` leaves out the
+    ground-truth logger (a plant that runs for hours, as in the emulator, reads
+    ground_truth_now instead).
     """
     cfg = scenario.plant
     d = robot.dynamics
@@ -244,9 +246,10 @@ def build_dynamic_plant(scenario, robot, operator, start_tensions):
     builder.ExportInput(route.GetInputPort("reel_velocity_command"), "reel_velocity_command")
     builder.ExportOutput(encoders.get_output_port(), "cable_lengths")
     add_measured_force(builder, route.GetOutputPort("measured_force"), scenario, T)
-    source = route.GetOutputPort("truth")
-    logger = builder.AddNamedSystem(TRUTH_LOG, VectorLogSink(source.size(), T))
-    builder.Connect(source, logger.get_input_port())
+    if log_truth:
+        source = route.GetOutputPort("truth")
+        logger = builder.AddNamedSystem(TRUTH_LOG, VectorLogSink(source.size(), T))
+        builder.Connect(source, logger.get_input_port())
     plant = builder.Build()
     plant.set_name("reels")
     # For the overview picture (views/diagram_graph.py): the Selector is drawn as the
