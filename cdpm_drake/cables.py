@@ -63,31 +63,28 @@ def cable_tensions(L, stretch_rate, L0, EA, damping):
     return out
 
 
-# The plant's state (the systems/dynamic_plant.py delay `plant_state` holds it), for m cables and
-# nv generalized velocities (6 for a free platform: moment about its centre, then force, base
-# frame; 3 with the rotation locked: the force): [generalized force on the platform for its
-# next step (nv) | L0 (m) | reel speeds (m)].
-def state_layout(m: int, nv: int) -> dict:
-    """{piece: (offset, size)} of the plant state cable_net_step steps."""
-    return _layout((("generalized_force", nv), ("L0", m), ("reel_speeds", m)))
+# The reel drives' state (the systems/dynamic_plant.py delay `reel_state` holds it), for m
+# cables: [unstretched lengths L0 (m) | reel speeds (m)].
+def state_layout(m: int) -> dict:
+    """{piece: (offset, size)} of the drives' state cable_net_step steps."""
+    return _layout((("L0", m), ("reel_speeds", m)))
 
 
 def step_layout(m: int, nv: int) -> dict:
-    """{piece: (offset, size)} of cable_net_step's output: the next plant state (`state`,
-    state_layout); the ground truth on the present state (tensions N, slack: 1.0 where a
-    cable carries no tension, p_WP m, rpy rad); the measured force (N, the operator now, on
-    the platform's present state) and the hand force on the next step (N)."""
-    n = sum(size for _, size in state_layout(m, nv).values())
-    return _layout((("state", n), ("tensions", m), ("slack", m), ("p_WP_true", 3),
-                    ("rpy_true", 3), ("measured_force", 3), ("hand_force", 3)))
+    """{piece: (offset, size)} of cable_net_step's output, for nv generalized velocities (6
+    for a free platform: moment about its centre, then force, base frame; 3 with the rotation
+    locked: the force): the generalized force on the platform for this step, the drives' next
+    state (state_layout), and the ground truth now (tensions N, slack: 1.0 where a cable
+    carries no tension, p_WP m, rpy rad) with the hand force (N, base frame) on entry."""
+    return _layout((("generalized_force", nv), ("next_reels", 2 * m), ("tensions", m),
+                    ("slack", m), ("p_WP_true", 3), ("rpy_true", 3), ("hand_force", 3)))
 
 
-def input_layout(m: int, nx: int, nv: int) -> dict:
+def input_layout(m: int, nx: int) -> dict:
     """{piece: (offset, size)} of cable_net_step's stacked input: the platform's state (nx:
-    [qw qx qy qz x y z, w_WB, v_WBo] free, [x y z, v] locked), the plant state
+    [qw qx qy qz x y z, w_WB, v_WBo] free, [x y z, v] locked), the drives' state
     (state_layout) and the reel velocity command (m/s)."""
-    n = sum(size for _, size in state_layout(m, nv).values())
-    return _layout((("platform_state", nx), ("state", n), ("command", m)))
+    return _layout((("platform_state", nx), ("reels", 2 * m), ("command", m)))
 
 
 def _layout(pieces) -> dict:
@@ -100,65 +97,59 @@ def _layout(pieces) -> dict:
 
 @_jit
 def cable_net_step(reels, attachments, handle, params, R, inputs, out):
-    """The reel drives' step and the cables' forces on the platform's state, into out
-    (step_layout).
+    """One plant step of the cables and the reel drives, into out (step_layout).
 
     reels (m, 3) a_i and attachments (m, 3) b_i, m; handle (3,) m, platform frame;
     params [EA N, damping N s/m, h s, bandwidth rad/s, reel inertia kg, viscous N s/m,
     Coulomb N, reel speed limit m/s, locked (1.0: rotation locked)]; R (3, 3): R_WB when
     locked, else scratch (R_WB of the state is written there); inputs as input_layout; out's
-    measured and hand forces (N, base frame) must be set on entry.
+    hand force (N, base frame) must be set on entry.
 
-    The drives: the command scaled to the speed limit (all reels alike), one `_reel_speed`
-    step of h s, L0 += h w. The forces on the platform's state with the drives' new L0 and
-    speeds and the hand force (`_cable_forces`) make the next plant state; the same with
-    the present L0, speeds and the measured force make the ground truth of the present one.
+    On the platform's state and the drives' present L0 and speeds, the cables' tensions and
+    the generalized force they and the hand put on the platform (`_cable_forces`), with the
+    ground truth; then the drives' step: the command scaled to the speed limit (all reels
+    alike), one `_reel_speed` step of h s, L0 += h w.
     """
     m = reels.shape[0]
     locked = params[8] > 0.5
     nx = 6 if locked else 13
     nv = 3 if locked else 6
-    sL0, sw = nv, nv + m
-    n_state = nv + 2 * m
-    iu = nx + n_state
-    oT = n_state
+    iL0, iw, iu = nx, nx + m, nx + 2 * m
+    o_next = nv
+    oT = nv + 2 * m
     o_slack, o_p, o_rpy = oT + m, oT + 2 * m, oT + 2 * m + 3
-    o_measured, o_hand = o_rpy + 3, o_rpy + 6
-    h = params[2]
-    # The drives: the command scaled to the speed limit, then one implicit step.
-    peak = 0.0
-    for i in range(m):
-        peak = max(peak, abs(inputs[iu + i]))
-    scale = params[7] / peak if peak > params[7] else 1.0
-    for i in range(m):
-        u = inputs[iu + i] * scale if scale != 1.0 else inputs[iu + i]
-        w = _reel_speed(inputs[nx + sw + i], u, h, params[3], params[4], params[5], params[6])
-        out[sw + i] = w
-        out[sL0 + i] = inputs[nx + sL0 + i] + h * w
+    o_hand = o_rpy + 3
     if not locked:
         _rotation_into(inputs, R)
-    # The ground truth of the present state: tensions and slack.
-    _cable_forces(reels, attachments, handle, params, R, inputs, inputs, nx + sL0, nx + sw,
-                  out, o_measured, out, -1, oT, o_slack)
-    # The next state's generalized force.
-    _cable_forces(reels, attachments, handle, params, R, inputs, out, sL0, sw, out, o_hand,
-                  out, 0, -1, -1)
+    _cable_forces(reels, attachments, handle, params, R, inputs, iL0, iw, out, o_hand, 0, oT,
+                  o_slack)
     out[o_p], out[o_p + 1], out[o_p + 2] = ((inputs[0], inputs[1], inputs[2]) if locked
                                             else (inputs[4], inputs[5], inputs[6]))
     # Roll, pitch, yaw of R (as pydrake's RollPitchYaw, pitch in [-pi/2, pi/2]).
     out[o_rpy] = math.atan2(R[2, 1], R[2, 2])
     out[o_rpy + 1] = math.atan2(-R[2, 0], math.hypot(R[0, 0], R[1, 0]))
     out[o_rpy + 2] = math.atan2(R[1, 0], R[0, 0])
+    # The drives: the command scaled to the speed limit, then one implicit step.
+    h = params[2]
+    peak = 0.0
+    for i in range(m):
+        peak = max(peak, abs(inputs[iu + i]))
+    scale = params[7] / peak if peak > params[7] else 1.0
+    for i in range(m):
+        u = inputs[iu + i] * scale if scale != 1.0 else inputs[iu + i]
+        w = _reel_speed(inputs[iw + i], u, h, params[3], params[4], params[5], params[6])
+        out[o_next + m + i] = w
+        out[o_next + i] = inputs[iL0 + i] + h * w
 
 
 @_jit
-def _cable_forces(reels, attachments, handle, params, R, x, drives, iL0, iw, force, i_force,
-                  out, o_generalized, o_tensions, o_slack):
-    """The cables' tensions and the generalized force (moment about the centre, then force;
-    the force alone when locked) they and the hand force force[i_force:i_force + 3] put on
-    the platform of state x (R: its R_WB), with the drives' L0 = drives[iL0:iL0 + m] and
-    speeds drives[iw:iw + m]. Tensions into out[o_tensions:], slack flags into out[o_slack:],
-    the generalized force into out[o_generalized:] (an offset < 0: not written).
+def _cable_forces(reels, attachments, handle, params, R, x, iL0, iw, out, o_hand, o_generalized,
+                  o_tensions, o_slack):
+    """The cables' tensions (into out[o_tensions:]), their slack flags (out[o_slack:]) and the
+    generalized force (out[o_generalized:]: moment about the centre, then force; the force
+    alone when locked) that they and the hand force out[o_hand:o_hand + 3] put on the
+    platform of state x (R: its R_WB), with the drives' L0 = x[iL0:iL0 + m] and speeds
+    x[iw:iw + m].
 
     Each cable: L_i = |a_i - (p + R b_i)|, u_i its unit vector towards the reel, stretch rate
     -u_i . (v + w x R b_i) - (reel speed); tension by `_tension`. The platform gets
@@ -190,11 +181,9 @@ def _cable_forces(reels, attachments, handle, params, R, x, drives, iL0, iw, for
         ay = vy + (wz * bx - wx * bz)
         az = vz + (wx * by - wy * bx)
         L_dot = -(ux * ax + uy * ay + uz * az)
-        T = _tension(L, L_dot - drives[iw + i], drives[iL0 + i], EA, damping)
-        if o_tensions >= 0:
-            out[o_tensions + i] = T
-        if o_slack >= 0:
-            out[o_slack + i] = 1.0 if T <= 0.0 else 0.0
+        T = _tension(L, L_dot - x[iw + i], x[iL0 + i], EA, damping)
+        out[o_tensions + i] = T
+        out[o_slack + i] = 1.0 if T <= 0.0 else 0.0
         gx, gy, gz = T * ux, T * uy, T * uz
         fx += gx
         fy += gy
@@ -202,9 +191,7 @@ def _cable_forces(reels, attachments, handle, params, R, x, drives, iL0, iw, for
         nx_ += by * gz - bz * gy
         ny_ += bz * gx - bx * gz
         nz_ += bx * gy - by * gx
-    if o_generalized < 0:
-        return
-    Fx, Fy, Fz = force[i_force], force[i_force + 1], force[i_force + 2]
+    Fx, Fy, Fz = out[o_hand], out[o_hand + 1], out[o_hand + 2]
     o = o_generalized
     if locked:
         out[o], out[o + 1], out[o + 2] = fx + Fx, fy + Fy, fz + Fz

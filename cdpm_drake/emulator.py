@@ -220,7 +220,7 @@ class DynamicBridge:
         # Per tick, the plant's state and its ground truth are read from these directly.
         cables = self._plant.GetSubsystemByName("cables")
         self._state_context = self._plant.GetSubsystemByName(
-            "plant_state").GetMyContextFromRoot(self._context)
+            "reel_state").GetMyContextFromRoot(self._context)
         self._step_port = cables.GetOutputPort("step")
         self._cables_context = cables.GetMyContextFromRoot(self._context)
         self._L0 = slice(*_span(cables.state_layout["L0"]))

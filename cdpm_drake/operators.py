@@ -196,13 +196,11 @@ def operator_force_on_state(kind, times, rows, params, t, state, m):
 
 
 @_jit
-def operator_forces_at(kind, times, rows, params, t0, t1, x, ip, iv, out, io0, io1):
-    """`operator_force_into` at t0 into out[io0:io0 + 3] and at t1 into out[io1:io1 + 3],
-    both on p = x[ip:ip + 3], v = x[iv:iv + 3] (s, m, m/s, N): the dynamic plant's step
-    (systems/dynamic_plant.py) samples the person twice in one call."""
-    p, v = x[ip:ip + 3], x[iv:iv + 3]
-    operator_force_into(kind, times, rows, params, t0, p, v, out[io0:io0 + 3])
-    operator_force_into(kind, times, rows, params, t1, p, v, out[io1:io1 + 3])
+def operator_force_at(kind, times, rows, params, t, x, ip, iv, out, io):
+    """`operator_force_into` on p = x[ip:ip + 3], v = x[iv:iv + 3], the force written to
+    out[io:io + 3] (the dynamic plant's step: systems/dynamic_plant.py)."""
+    operator_force_into(kind, times, rows, params, t, x[ip:ip + 3], x[iv:iv + 3],
+                        out[io:io + 3])
 
 
 @_jit

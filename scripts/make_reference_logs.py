@@ -115,8 +115,11 @@ def main():
                         "tests/data/reference_logs, with --dynamic tests/data/dynamic_reference)")
     parser.add_argument("--dynamic", action="store_true",
                         help="the dynamic plant's reference runs (tests/data/dynamic_reference)")
+    parser.add_argument("--commit", help="what to record as the code's commit (default: this "
+                        "checkout's git HEAD, +dirty when cdpm_drake/ has changes): for a tree "
+                        "that is not a git checkout, e.g. an old commit with a patch")
     args = parser.parse_args()
-    commit = git_commit()
+    commit = args.commit or git_commit()
     if args.dynamic:
         out = Path(args.out or DYNAMIC_DIR)
         for name in args.names or dynamic_names():

@@ -182,11 +182,11 @@ def test_the_dynamic_plant_overview_fits_the_readme_with_the_multibody_plant_col
     dot = overview_graphviz(plant)
     assert dot == (DIAGRAMS / "plant_dynamic_overview.dot").read_text()
     width, height = _svg_size((DIAGRAMS / "plant_dynamic_overview.svg").read_text())
-    assert width <= README_WIDTH_PT and height <= 900, (width, height)  # measured 360 x 422
+    assert width <= README_WIDTH_PT and height <= 900, (width, height)  # measured 348 x 432
     nodes = _nodes(dot)
     ids = {m.group(2): m.group(1) for m in re.finditer(r"^  (n\d+) \[label=<.*?<B>(\w+)</B>",
                                                         dot, flags=re.M)}
-    index = {name: ids[name] for name in ("platform_plant", "cables", "plant_state")}
+    index = {name: ids[name] for name in ("platform_plant", "cables", "reel_state")}
     label = nodes[index["platform_plant"]].split()
     # Used: the force in, the state out; the rest counted, not drawn.
     assert "applied_generalized_force" in label and "state" in label
@@ -197,14 +197,15 @@ def test_the_dynamic_plant_overview_fits_the_readme_with_the_multibody_plant_col
     assert unused_in + 1 > MAX_PORTS  # the collapse applied, not the plain port row
     # No Selector node: its connections are drawn, each edge named by the piece it carries.
     assert "wiring" not in " ".join(nodes.values()) and "Selector" not in dot
-    cables, state, mbp_node = (int(index[n][1:]) for n in ("cables", "plant_state",
+    cables, state, mbp_node = (int(index[n][1:]) for n in ("cables", "reel_state",
                                                              "platform_plant"))
     edges = re.findall(r"^  n(\d+):o\d+:s -> n(\d+):i\d+:n(?: \[label=\" (\w+)\"\])?;$", dot,
                        flags=re.M)
     assert (str(mbp_node), str(cables), "") in edges  # the state into the cables' inputs
-    assert (str(state), str(mbp_node), "generalized_force") in edges
-    assert (str(cables), str(state), "") in edges  # into its input named next_state
-    assert "next_state" in nodes[index["plant_state"]].split()
+    assert (str(cables), str(mbp_node), "generalized_force") in edges
+    assert (str(cables), str(state), "") in edges  # into its input named next_reels
+    assert (str(state), str(cables), "") in edges  # and back into the cables' inputs
+    assert "next_reels" in nodes[index["reel_state"]].split()
     assert 'in0 [shape=cds, label="reel_velocity_command"]' in dot
     assert f"in0 -> n{cables}:i0:n;" in dot and f"n{cables}:o0:s -> out1;" in dot
 

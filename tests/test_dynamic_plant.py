@@ -448,6 +448,25 @@ def test_the_log_has_the_ground_truth_for_the_dynamic_plant_only():
         assert f"`{key}`" in doc
 
 
+def test_the_logged_desired_force_is_what_the_admittance_integrated_on_the_dynamic_plant():
+    # What the user sees must be what the controller used: the admittance's recursion
+    # v_{k+1} = A_d u_k + B_d F_d,k (make_admittance's zero-order-hold matrices, u the logged
+    # commanded velocity) holds on the logged F_d to round-off, as on the kinematic plant
+    # (tests/test_diagram.py). Issue 21: with the MultibodyPlant's sampled output ports, its
+    # step ran before the controller's update at each tick, so the controller measured the hand
+    # on the platform of one plant step later than the F_d it logged (2.4e-7 m/s off here).
+    from cdpm_drake.systems.admittance import make_admittance
+
+    scenario = load_scenario("exp2_interaction", "plant: !DynamicReels {}")
+    log = simulate(scenario=scenario, duration=1.0).log
+    zoh = make_admittance(scenario.admittance.mass, scenario.admittance.damping,
+                          scenario.time_step)
+    A, B = zoh.A()[0, 0], zoh.B()[0, 0]
+    v, u, F_d = log["velocity_admittance"], log["velocity"], log["F_d"]
+    assert np.abs(B * F_d).max() > 1e-4  # the hand does push: a step's increment is 0.1 mm/s
+    np.testing.assert_allclose(v[1:], A * u[:-1] + B * F_d[:-1], rtol=0, atol=1e-12)
+
+
 # --- Views and cdpm info ---------------------------------------------------------------------
 
 

@@ -219,9 +219,9 @@ def test_the_damped_fallback_gives_the_compiled_answer(monkeypatch, module_name)
 # --- The dynamic plant (issue 21) -----------------------------------------------------------
 
 def test_every_bound_call_of_the_dynamic_plant_passes_the_types_it_was_bound_for(monkeypatch):
-    # As above, for the dynamic plant's step (cables.cable_net_step and the operator sampled
-    # twice), which runs at every 1 ms plant step: 100 calls in 0.1 s, and one per tick more
-    # for the logger.
+    # As above, for the dynamic plant's step (cables.cable_net_step and the operator model),
+    # which runs once per 1 ms plant step: the loggers read it at each tick in the same context
+    # as the next step's updates, so 100 calls in 0.1 s (plus the start).
     real_bind, calls = kernel_call.bind, {}
 
     def checking_bind(kernel, *example):
@@ -241,10 +241,9 @@ def test_every_bound_call_of_the_dynamic_plant_passes_the_types_it_was_bound_for
                                                       "plant: !DynamicReels {}")))
     simulator.Initialize()
     simulator.AdvanceTo(0.1)
-    assert {"cable_net_step", "operator_forces_at"} <= set(calls)
+    assert {"cable_net_step", "operator_force_at"} <= set(calls)
     assert "simulated_reel_step_stacked" not in calls
-    # 100 plant steps and 50 ticks' loggers (plus the start): 150 or 151 calls.
-    assert 150 <= calls["cable_net_step"] == calls["operator_forces_at"] <= 151
+    assert 100 <= calls["cable_net_step"] == calls["operator_force_at"] <= 101
 
 
 def test_a_model_without_a_compiled_form_is_ticked_from_python_on_the_dynamic_plant():
@@ -266,50 +265,3 @@ def test_a_model_without_a_compiled_form_is_ticked_from_python_on_the_dynamic_pl
     assert np.abs(logs[0]["F_H"]).max() > 0.5  # the push was measured
     for key in ("p_true", "rpy_true", "tensions", "F_H", "p", "lengths"):
         np.testing.assert_array_equal(logs[0][key], logs[1][key], err_msg=key)
-
-
-def test_our_python_systems_skip_the_witness_override_lookup():
-    # After each MultibodyPlant step (an unrestricted update) the Simulator asks every system
-    # for its witness functions; pybind11 then looks up a Python override of
-    # DoGetWitnessFunctions, which pydrake's LeafSystem does not have: a failed getattr, an
-    # AttributeError raised and cleared, ~5.6 k instructions per system per step. The
-    # project's LeafSystem (systems/_leaf.py) has the name, so the lookup succeeds and
-    # pybind11 caches "not overridden". Counted here with __getattr__, which Python calls
-    # only when normal lookup fails; the pydrake base shows the lookup the test would catch.
-    from pydrake.multibody.plant import MultibodyPlant
-    from pydrake.multibody.tree import RotationalInertia, SpatialInertia
-    from pydrake.systems.framework import DiagramBuilder, LeafSystem as DrakeLeafSystem
-
-    from cdpm_drake.systems._leaf import LeafSystem
-
-    def misses(base):
-        missed = []
-
-        class Probe(base):
-            def __init__(self):
-                super().__init__()
-                self.DeclareVectorOutputPort("f", 6, lambda c, o: o.SetFromVector(
-                    [0, 0, 0, 0, 0, 2.5 * 9.81]))
-
-            def __getattr__(self, name):
-                missed.append(name)
-                raise AttributeError(name)
-
-        builder = DiagramBuilder()
-        mbp = builder.AddSystem(MultibodyPlant(time_step=0.001))
-        mbp.AddRigidBody("body", SpatialInertia.MakeFromCentralInertia(
-            2.5, np.zeros(3), RotationalInertia(0.05, 0.05, 0.05)))
-        mbp.Finalize()
-        probe = builder.AddSystem(Probe())
-        builder.Connect(probe.get_output_port(), mbp.get_applied_generalized_force_input_port())
-        simulator = Simulator(builder.Build())
-        simulator.AdvanceTo(0.02)
-        return missed.count("DoGetWitnessFunctions")
-
-    assert misses(DrakeLeafSystem) >= 10  # once per plant step at least
-    assert misses(LeafSystem) == 0
-    for module in _system_modules():
-        for cls in vars(module).values():
-            if isinstance(cls, type) and issubclass(cls, DrakeLeafSystem) and (
-                    cls.__module__ == module.__name__):
-                assert issubclass(cls, LeafSystem), cls

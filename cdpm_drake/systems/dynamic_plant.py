@@ -7,11 +7,12 @@ inside the plant's sub-diagram (`log_truth`), never exported as ports the contro
 wire to.
 
 Per plant step (1 ms by default) one Python call: `CableNet`, which calls the compiled step
-(cables.cable_net_step: drives, cables, generalized force) and the operator model
-(operators.operator_forces_at). Everything else is C++: the MultibodyPlant takes the cables'
-force through its generalized-force input from a one-step delay (`plant_state`, which also
-holds the drives' L0 and speeds), the encoders are a delay sampled at the control tick, and
-one Selector (`wiring`) routes the pieces.
+(cables.cable_net_step: cables, generalized force, drives) and the operator model
+(operators.operator_force_at). Everything else is C++: the MultibodyPlant takes the cables'
+force through its generalized-force input, the drives' state is a one-step delay
+(`reel_state`), the encoders a delay sampled at the control tick, and one Selector (`wiring`)
+routes the pieces. Every system updates in the same discrete pass, so at each time all read
+the platform's state at that time.
 """
 
 import numpy as np
@@ -19,16 +20,15 @@ from pydrake.math import RigidTransform, RotationMatrix
 from pydrake.multibody.plant import DiscreteContactApproximation, MultibodyPlant
 from pydrake.multibody.tree import (FixedOffsetFrame, PrismaticJoint, RotationalInertia,
                                     SpatialInertia)
-from pydrake.systems.framework import DiagramBuilder
+from pydrake.systems.framework import DiagramBuilder, LeafSystem
 from pydrake.systems.primitives import VectorLogSink
 
 from ..cables import (cable_net_params, cable_net_step, cable_tensions, input_layout,
                       reel_step, state_layout, step_layout)
 from ..kernel_call import bind, owned
-from ..operators import ForceProfile, NoForce, SpringHand, operator_forces_at
+from ..operators import ForceProfile, NoForce, SpringHand, operator_force_at
 from ..rotation import rotation_from_rpy
 from ..tension import unstretched_lengths
-from ._leaf import LeafSystem
 from ._wiring import unit_delay, wiring
 from .simulated_reels import add_measured_force
 
@@ -41,18 +41,14 @@ TRUTH_LOG = "log_truth"
 
 
 class CableNet(LeafSystem):
-    """The reel drives, the cables and the person at the handle, one plant step per call
-    (`cables.cable_net_step`): the drives' next speeds and unstretched lengths L0 (command
-    scaled to the reel speed limit, one implicit step with friction), then, on the platform's
-    state at the end of the step, the hand force of the operator model (see `operators`),
-    each cable's length, stretch rate and tension, and the generalized force they put on the
-    platform for its next step. Stateless: the result is held by a C++ delay (`plant_state`)
-    whose output the MultibodyPlant reads, so no Python runs inside the platform's own step.
-
-    The MultibodyPlant steps first at each time (its update is an unrestricted one), so this
-    block, evaluated with the other discrete updates, reads the platform's state at the end
-    of the step. It also gives the force the sensor measures: the operator model at the
-    present time on the platform's present state (`measured_force`).
+    """The cables, the reel drives and the person at the handle, one plant step per call
+    (`cables.cable_net_step`): the hand force of the operator model (see `operators`) on the
+    platform's true motion, each cable's length, stretch rate and tension, the generalized
+    force they put on the platform for this step, and the drives' next state (the command
+    scaled to the reel speed limit, one implicit step with friction); also the ground truth
+    (tensions, slack, pose) and the force the sensor measures (the hand force). Stateless:
+    the drives' state is held by a C++ delay fed back from `step`, the platform's by the
+    MultibodyPlant.
 
     Platform state: quaternion floating body q = [qw qx qy qz x y z], v = [w_WB_W, v_WBo_W];
     with the rotation locked at R_WB, three prismatic joints q = p, v = p_dot. Its inputs
@@ -62,11 +58,11 @@ class CableNet(LeafSystem):
 
         name: cables
         input_ports:
-        - inputs ([platform state, plant state (cables.state_layout), reel_velocity_command
-          m/s])
+        - inputs ([platform state, L0 m, reel speeds m/s, reel_velocity_command m/s])
         output_ports:
-        - step ([next plant state, hand force on the next step (N), measured force (N)]:
-          cables.step_layout)
+        - step ([generalized force (N m, N), next L0 (m), next reel speeds (m/s), tensions
+          (N), slack (1 where a cable carries no tension), p_WP_true (m), rpy_true (rad),
+          hand force (N)]: cables.step_layout)
     """
 
     def __init__(self, robot, operator, *, time_step, max_reel_speed, locked_rotation=None):
@@ -74,87 +70,54 @@ class CableNet(LeafSystem):
         m = robot.num_cables
         locked = locked_rotation is not None
         self.nx, self.nv = (6, 3) if locked else (13, 6)
-        self.state_layout = state_layout(m, self.nv)
-        self.inputs_layout = input_layout(m, self.nx, self.nv)
+        self.state_layout = state_layout(m)
+        self.inputs_layout = input_layout(m, self.nx)
         self.layout = step_layout(m, self.nv)
         n_in = sum(size for _, size in self.inputs_layout.values())
         n_out = sum(size for _, size in self.layout.values())
         d = robot.dynamics
         reels, attachments = owned(robot.reels), owned(robot.attachments)
         handle = owned(d.handle)
-        h = float(time_step)
-        params = owned(cable_net_params(d, time_step=h, max_reel_speed=max_reel_speed,
+        params = owned(cable_net_params(d, time_step=time_step, max_reel_speed=max_reel_speed,
                                         locked=locked))
         # R_WB when locked; else the kernel's scratch for the state's rotation.
         R = owned(np.eye(3) if locked_rotation is None else locked_rotation)
         self._inputs = self.DeclareVectorInputPort("inputs", n_in)
         ip, iv = (0, 3) if locked else (4, 10)
-        io, im = self.layout["hand_force"][0], self.layout["measured_force"][0]
-        # The shipped models (exactly these classes: a subclass may change the force) are
-        # ticked by a compiled kernel; any other model is called from Python.
-        if type(operator) in (NoForce, ForceProfile, SpringHand):
-            kind, times, rows, params_op = operator.compiled()
-            person = (int(kind), owned(times), owned(rows), owned(params_op))
-        else:
-            person = None
+        io = self.layout["hand_force"][0]
         # Compiled (or loaded) now, not in the first step; called with exactly these types.
         x0 = np.zeros(n_in)
         x0[0] = 1.0
         out0 = np.zeros(n_out)
         net = bind(cable_net_step, reels, attachments, handle, params, R, x0, out0)
-        self._kernel = (net, reels, attachments, handle, params, R)
-        self._person = person
-        self._operator = operator
-        self._at = (ip, iv, io, im)
         inputs = self._inputs.Eval
 
         # A closure over locals, not a method reading self: attribute lookups on a pybind
         # LeafSystem cost ~0.2 us each (scripts/count_instructions.py).
-        if person is not None:
-            kind, times, rows, params_op = person
-            forces_at = bind(operator_forces_at, *person, 0.0, h, x0, ip, iv, out0, im, io)
+        # The shipped models (exactly these classes: a subclass may change the force) are
+        # ticked by a compiled kernel; any other model is called from Python.
+        if type(operator) in (NoForce, ForceProfile, SpringHand):
+            kind, times, rows, params_op = operator.compiled()
+            kind, times, rows, params_op = int(kind), owned(times), owned(rows), owned(params_op)
+            force_at = bind(operator_force_at, kind, times, rows, params_op, 0.0, x0, ip, iv,
+                            out0, io)
 
             def calc_step(context, output):
                 x = inputs(context)
                 out = output.get_mutable_value()
-                t = context.get_time()
-                forces_at(kind, times, rows, params_op, t, t + h, x, ip, iv, out, im, io)
+                force_at(kind, times, rows, params_op, context.get_time(), x, ip, iv, out, io)
                 net(reels, attachments, handle, params, R, x, out)
         else:
             def calc_step(context, output):
                 x = inputs(context)
                 out = output.get_mutable_value()
-                t = context.get_time()
-                p, v = x[ip:ip + 3].copy(), x[iv:iv + 3].copy()
-                out[io:io + 3] = operator.force(t + h, p, v)
-                out[im:im + 3] = operator.force(t, p, v)
+                out[io:io + 3] = operator.force(context.get_time(), x[ip:ip + 3].copy(),
+                                                x[iv:iv + 3].copy())
                 net(reels, attachments, handle, params, R, x, out)
 
         self.DeclareVectorOutputPort(
             "step", n_out, calc_step,
             prerequisites_of_calc={self.time_ticket(), self._inputs.ticket()})
-
-    def initial_state(self, platform_state, L0) -> np.ndarray:
-        """The plant state (cables.state_layout) at t = 0: the drives at rest paying out L0
-        (m), and the tensions and generalized force on the platform's start state with the
-        hand force of the operator at t = 0 (the same kernels, a step of 0 s)."""
-        net, reels, attachments, handle, params, R = self._kernel
-        ip, iv, io, im = self._at
-        x = np.zeros(sum(size for _, size in self.inputs_layout.values()))
-        x[:self.nx] = platform_state
-        at, _ = self.state_layout["L0"]
-        x[self.nx + at:self.nx + at + len(L0)] = L0
-        out = np.zeros(sum(size for _, size in self.layout.values()))
-        if self._person is not None:
-            operator_forces_at(*self._person, 0.0, 0.0, x, ip, iv, out, im, io)
-        else:
-            out[io:io + 3] = out[im:im + 3] = self._operator.force(
-                0.0, x[ip:ip + 3].copy(), x[iv:iv + 3].copy())
-        at_rest = params.copy()
-        at_rest[2] = 0.0  # h: the drives do not move
-        cable_net_step(reels, attachments, handle, at_rest, R.copy(), x, out)
-        start, size = self.layout["state"]
-        return out[start:start + size].copy()
 
 
 def build_dynamic_plant(scenario, robot, operator, start_tensions, *, log_truth=True):
@@ -178,12 +141,14 @@ def build_dynamic_plant(scenario, robot, operator, start_tensions, *, log_truth=
     tensions0 = np.asarray(start_tensions, dtype=float)
     builder = DiagramBuilder()
     mbp = builder.AddNamedSystem("platform_plant", MultibodyPlant(time_step=h))
-    # No contact here: TAMSI's step is the cheaper one (68 k instead of 74 k instructions a
-    # step, scripts/bench_dynamic_plant.py), the same numbers. The output ports stay sampled
-    # (the plant's step an unrestricted update, before the other updates of the same time):
-    # the controller and the drives read the platform's state after its step, as they always
-    # have (reference logs: tests/data/dynamic_reference/).
+    # No contact here: TAMSI's step is the cheaper one, the same numbers. Output ports read
+    # live from the state: the plant's step is a discrete update like every other, so at each
+    # time the drives, the encoders, the sensor and the loggers all see the platform's state
+    # at that time (sampled ports would make the plant an unrestricted update that runs
+    # first: the controller would then measure the hand on the platform of one plant step
+    # later than the one it logs).
     mbp.set_discrete_contact_approximation(DiscreteContactApproximation.kTamsi)
+    mbp.SetUseSampledOutputPorts(False)
     I = d.inertia
     inertia = SpatialInertia.MakeFromCentralInertia(
         d.mass, np.zeros(3),
@@ -213,35 +178,34 @@ def build_dynamic_plant(scenario, robot, operator, start_tensions, *, log_truth=
     cables = builder.AddNamedSystem("cables", CableNet(
         robot, operator, time_step=h, max_reel_speed=vmax,
         locked_rotation=R0 if cfg.lock_rotation else None))
-    # The plant's state [generalized force, L0, reel speeds] in C++, fed back
-    # from the cables' step at the plant's rate; the encoders: L0 sampled at each control
-    # tick and held (the controller reads them at its own rate).
-    x0 = mbp.GetPositionsAndVelocities(mbp.CreateDefaultContext())
-    start = cables.initial_state(x0, L0)
-    state = builder.AddNamedSystem("plant_state", unit_delay(start.size, h, start))
+    # The drives' state [L0, reel speeds] in C++, fed back from the cables' step at the
+    # plant's rate; the encoders: L0 sampled at each control tick and held (the controller
+    # reads them at its own rate).
+    drives = builder.AddNamedSystem("reel_state", unit_delay(
+        2 * m, h, np.concatenate([L0, np.zeros(m)])))
     encoders = builder.AddNamedSystem("encoders", unit_delay(m, T, L0))
-    # One C++ Selector stacks the cables' inputs and routes the pieces of the plant's state
-    # and of the cables' step (one evaluation of the Python step, whoever reads which piece).
-    layout, n = cables.state_layout, start.size
+    # One C++ Selector stacks the cables' inputs and routes the pieces of the drives' state
+    # and of the cables' step (one evaluation of the Python step per plant step, whoever reads
+    # which piece).
     step = cables.layout
     route = builder.AddNamedSystem("wiring", wiring(
-        [("platform_state", cables.nx), ("plant_state", n), ("reel_velocity_command", m),
+        [("platform_state", cables.nx), ("reels", 2 * m), ("reel_velocity_command", m),
          ("step", sum(size for _, size in step.values()))],
-        [("inputs", [("platform_state", 0, cables.nx), ("plant_state", 0, n),
+        [("inputs", [("platform_state", 0, cables.nx), ("reels", 0, 2 * m),
                      ("reel_velocity_command", 0, m)]),
-         ("generalized_force", [("plant_state", *layout["generalized_force"])]),
-         ("unstretched_lengths", [("plant_state", *layout["L0"])]),
-         ("truth", [("step", *step[_TRUTH_PIECES[key]]) for key in GROUND_TRUTH]),
-         ("next_state", [("step", *step["state"])]),
-         ("measured_force", [("step", *step["measured_force"])])]))
+         ("generalized_force", [("step", *step["generalized_force"])]),
+         ("next_reels", [("step", *step["next_reels"])]),
+         ("unstretched_lengths", [("reels", *cables.state_layout["L0"])]),
+         ("measured_force", [("step", *step["hand_force"])]),
+         ("truth", [("step", *step[_TRUTH_PIECES[key]]) for key in GROUND_TRUTH])]))
     builder.Connect(mbp.get_state_output_port(), route.GetInputPort("platform_state"))
-    builder.Connect(state.get_output_port(), route.GetInputPort("plant_state"))
+    builder.Connect(drives.get_output_port(), route.GetInputPort("reels"))
     builder.Connect(cables.GetOutputPort("step"), route.GetInputPort("step"))
     builder.Connect(route.GetOutputPort("inputs"), cables.GetInputPort("inputs"))
     builder.Connect(route.GetOutputPort("generalized_force"),
                     mbp.get_applied_generalized_force_input_port())
+    builder.Connect(route.GetOutputPort("next_reels"), drives.get_input_port())
     builder.Connect(route.GetOutputPort("unstretched_lengths"), encoders.get_input_port())
-    builder.Connect(route.GetOutputPort("next_state"), state.get_input_port())
 
     builder.ExportInput(route.GetInputPort("reel_velocity_command"), "reel_velocity_command")
     builder.ExportOutput(encoders.get_output_port(), "cable_lengths")
@@ -270,12 +234,12 @@ def _plant_of(diagram):
 
 
 def plant_state_now(diagram, context) -> dict:
-    """The dynamic plant's state ({piece of cables.state_layout: values}: the generalized
-    force on the platform's coming step, the drives' L0 m and speeds m/s) in a diagram
-    holding it as `reels` (or the plant itself), `context` the diagram's."""
+    """The dynamic plant's drives now ({piece of cables.state_layout: values}: L0 m and the
+    reel speeds m/s) in a diagram holding it as `reels` (or the plant itself), `context` the
+    diagram's."""
     plant = _plant_of(diagram)
     cables = plant.GetSubsystemByName("cables")
-    state = plant.GetSubsystemByName("plant_state")
+    state = plant.GetSubsystemByName("reel_state")
     values = state.GetMyContextFromRoot(context).get_discrete_state_vector().value()
     return {name: values[at:at + size].copy()
             for name, (at, size) in cables.state_layout.items()}

@@ -1,12 +1,11 @@
 """The force-sensor source of Fig. 5: sensor range and the sliding-average filter."""
 
 import numpy as np
-from pydrake.systems.framework import Diagram
+from pydrake.systems.framework import Diagram, LeafSystem
 from pydrake.systems.primitives import LinearSystem
 
 from ..kernel_call import bind, owned
 from ..sensor import clip_into, clip_to_sensor_range
-from ._leaf import LeafSystem
 from ._wiring import sub_diagram
 
 __all__ = ["ForceSensorSource", "SensorRange", "clip_to_sensor_range", "sliding_average"]

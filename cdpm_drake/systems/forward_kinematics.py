@@ -1,11 +1,10 @@
 """The forward-kinematics block of Fig. 5: cable lengths back to the platform position."""
 
 import numpy as np
-from pydrake.systems.framework import Diagram
+from pydrake.systems.framework import Diagram, LeafSystem
 
 from ..kernel_call import bind, owned
 from ..kinematics import forward_kinematics, gauss_newton_warm_stacked
-from ._leaf import LeafSystem
 from ._wiring import stack, sub_diagram, unit_delay
 
 

@@ -1,11 +1,10 @@
 """The interference-force block of Fig. 5 (section 4, eqs. 23-30)."""
 
 import numpy as np
-from pydrake.systems.framework import Diagram
+from pydrake.systems.framework import Diagram, LeafSystem
 
 from ..interference import interference_tick_stacked, pair_geometry, result_layout
 from ..kernel_call import bind, owned
-from ._leaf import LeafSystem
 from ._wiring import note_piece, sub_diagram, unit_delay, wiring
 
 # The ports of the block, in the order of the flat result (interference.result_layout).

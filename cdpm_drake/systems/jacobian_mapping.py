@@ -1,11 +1,10 @@
 """The Jacobian velocity mapping of Fig. 5 (eq. 3, eq. 7)."""
 
 import numpy as np
-from pydrake.systems.framework import Diagram
+from pydrake.systems.framework import Diagram, LeafSystem
 
 from ..kernel_call import bind, owned
 from ..kinematics import reel_rates_stacked
-from ._leaf import LeafSystem
 from ._wiring import stack, sub_diagram
 
 

@@ -1,11 +1,10 @@
 """The threshold block of Fig. 5: velocity, acceleration and the virtual wall."""
 
 import numpy as np
-from pydrake.systems.framework import Diagram
+from pydrake.systems.framework import Diagram, LeafSystem
 
 from ..kernel_call import bind, owned
 from ..limits import limit_velocity_stacked
-from ._leaf import LeafSystem
 from ._wiring import stack, sub_diagram, unit_delay
 
 

@@ -1,13 +1,12 @@
 """The simulated reel plant of Fig. 5, with the simulated person at the handle."""
 
 import numpy as np
-from pydrake.systems.framework import Diagram
+from pydrake.systems.framework import Diagram, LeafSystem
 from pydrake.systems.primitives import Adder
 
 from ..kernel_call import bind, owned
 from ..kinematics import cable_lengths, forward_kinematics, simulated_reel_step_stacked
 from ..operators import ForceProfile, NoForce, SpringHand, operator_force_on_state
-from ._leaf import LeafSystem
 from ._wiring import sub_diagram, unit_delay, wiring
 
 

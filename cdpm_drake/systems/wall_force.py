@@ -1,10 +1,10 @@
 """Beyond the paper: a smooth repulsion from the workspace box, added to F_d."""
 
 import numpy as np
+from pydrake.systems.framework import LeafSystem
 
 from ..kernel_call import bind, owned
 from ..limits import wall_force_into
-from ._leaf import LeafSystem
 
 
 class WorkspaceWallForce(LeafSystem):
