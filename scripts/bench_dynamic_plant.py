@@ -112,11 +112,11 @@ def no_op_math():
         out[:] = 0.0
 
     @numba.njit(cache=True)
-    def no_person(kind, times, rows, params, t0, t1, x, ip, iv, out, io0, io1):
+    def no_person(kind, times, rows, params, t, x, ip, iv, out, io):
         pass
 
     patch = bench_diagram.Patch([(dynamic_plant, "cable_net_step", zero_step),
-                                 (dynamic_plant, "operator_forces_at", no_person)])
+                                 (dynamic_plant, "operator_force_at", no_person)])
     with bench_diagram.without_math(), patch:
         yield
 

@@ -48,10 +48,11 @@ def dynamic_names() -> list[str]:
     return sorted(path.stem for path in DYNAMIC_DIR.glob("*.yaml"))
 
 
-def run_dynamic_reference(name: str) -> dict:
+def run_dynamic_reference(name: str, overlay: str | None = None) -> dict:
     """The signals of the dynamic reference run `name` ({signal: (T, width)}, 'time' (T,)):
-    TRUTH, plus SIGNALS for a run through the controller. Raises if the run fails."""
-    scenario = load_scenario(str(DYNAMIC_DIR / f"{name}.yaml"))
+    TRUTH, plus SIGNALS for a run through the controller. Raises if the run fails.
+    `overlay`: a YAML overlay on the scenario (e.g. another plant time step)."""
+    scenario = load_scenario(str(DYNAMIC_DIR / f"{name}.yaml"), overlay)
     if name not in PLANT_ALONE:
         result = simulate(scenario=scenario)
         if result.error is not None:
