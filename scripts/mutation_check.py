@@ -33,7 +33,7 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parent.parent
 # What a copy of the tree needs to run the suite (the package, the robot files, the tests and
 # the files tests read); not the virtual environment, git, caches or run outputs.
-COPY = ("cdpm_drake", "hardware", "tests", "scripts", "docs", "diagrams", "README.md",
+COPY = ("cdpm_drake", "hardware", "sweeps", "tests", "scripts", "docs", "diagrams", "README.md",
         "pyproject.toml")
 IGNORE = shutil.ignore_patterns("__pycache__", "*.pyc", ".pytest_cache", "runs", "*.egg-info")
 # One pytest run may not take longer than this (a mutant that hangs the suite is killed).
@@ -498,6 +498,21 @@ MUTANTS = [
       "        # Whole steps",
       "the dynamic emulator's plant and operator start with the emulator, not the first enable",
       ("tests/test_emulator.py",)),
+    M("dynamic_bridge_counts_taut_as_slack", "cdpm_drake/emulator.py",
+      "self.slack_ticks += step[self._slack] > 0.5",
+      "self.slack_ticks += step[self._slack] < 0.5",
+      "the dynamic emulator's summary counts the taut cables' ticks as slack",
+      ("tests/test_emulator.py",)),
+    M("sweep_slack_time_all_cables", "cdpm_drake/sweep.py",
+      'out["slack_time"] = held(np.any(np.asarray(log["slack"]), axis=1))',
+      'out["slack_time"] = held(np.all(np.asarray(log["slack"]), axis=1))',
+      "the sweep's slack_time counts only the time every cable was slack",
+      ("tests/test_sweep.py",)),
+    M("overview_never_collapses_ports", "cdpm_drake/views/diagram_graph.py",
+      "    if used is not None and len(names) > MAX_PORTS:",
+      "    if used is not None and len(names) > 10 * MAX_PORTS:",
+      "the overview draws every port of a MultibodyPlant: 2773 pt wide again",
+      ("tests/test_diagram_files.py",)),
     # --- the views: plots, Meshcat ------------------------------------------------------------
     M("plot_distance_in_metres", "cdpm_drake/views/plots.py",
       "ax.plot(t, 1000.0 * d[:, k], label=_pair_label(pairs[k]))",
@@ -543,7 +558,9 @@ def stale_reason(mutant: Mutant, root: Path = ROOT) -> str | None:
 def copy_tree(dest: Path) -> Path:
     for name in COPY:
         src = ROOT / name
-        if src.is_dir():
+        if src.is_symlink():  # e.g. sweeps -> cdpm_drake/sweeps: tests compare the two paths
+            os.symlink(os.readlink(src), dest / name)
+        elif src.is_dir():
             shutil.copytree(src, dest / name, ignore=IGNORE)
         elif src.is_file():
             shutil.copy2(src, dest / name)
