@@ -280,6 +280,13 @@ def _split_truth(rows: np.ndarray) -> dict:
     return out
 
 
+def reserve_ground_truth(diagram, context, ticks: int) -> None:
+    """Make room in the plant's ground-truth logger for `ticks` rows (no-op without one)."""
+    logger = _plant_logger(diagram)
+    if logger is not None:
+        logger.FindMutableLog(context).Reserve(int(ticks))
+
+
 def ground_truth_log(diagram, context) -> dict:
     """The dynamic plant's logged ground truth ({GROUND_TRUTH key: (T, width)}) from a
     diagram holding it as its subsystem `reels`; {} for the other plants."""
@@ -304,4 +311,4 @@ def latest_ground_truth(diagram, context) -> dict | None:
 
 __all__ = ["CableNet", "GROUND_TRUTH", "build_dynamic_plant", "cable_tensions",
            "ground_truth_log", "ground_truth_now", "latest_ground_truth", "plant_state_now",
-           "reel_step", "unstretched_lengths"]
+           "reel_step", "reserve_ground_truth", "unstretched_lengths"]
