@@ -587,6 +587,28 @@ def test_plot_out_and_html_are_where_the_files_go(tmp_path, logged):
     assert html.stat().st_size > 10_000
 
 
+# --- export ---------------------------------------------------------------------------------------
+
+
+@covers("export <log>", "export --csv")
+@pytest.mark.parametrize("as_file", [False, True])
+def test_export_csv_writes_log_csv_beside_the_log(tmp_path, logged, as_file):
+    import shutil
+
+    folder = tmp_path / "copy"
+    shutil.copytree(logged, folder)
+    assert cdpm("export", folder / "log.npz" if as_file else folder, "--csv") == 0
+    lines = (folder / "log.csv").read_text().splitlines()
+    assert lines[0].startswith("time [s],p_x [m]") and len(lines) == 1 + 21  # 0.04 s: 21 ticks
+
+
+@covers("export --out")
+def test_export_out_is_where_the_csv_goes(tmp_path, logged):
+    out = tmp_path / "elsewhere" / "table.csv"
+    assert cdpm("export", logged, "--csv", "--out", out) == 0
+    assert out.read_text().startswith("time [s],") and not (logged / "log.csv").exists()
+
+
 def test_plot_logistic_curve_spans_the_band_and_never_negative_distances(logged):
     """Fig. 8 is drawn over [max(0, d_l - w), d_u + w] with w = d_u - d_l: for d_l = 10 mm,
     d_u = 30 mm that is 0..50 mm (d_l - w would be -10 mm)."""
