@@ -359,10 +359,13 @@ def _add_loggers(builder, blocks, T):
 
 
 def reserve_log(diagram, context, ticks: int) -> None:
-    """Make room in the logger for `ticks` rows before a run (no-op without a logger): a
-    growing log is copied at each doubling (2 % of a 120 s run of exp2)."""
+    """Make room in the logger (and the dynamic plant's ground-truth logger) for `ticks` rows
+    before a run (no-op without a logger): a growing log is copied at each doubling (2 % of a
+    120 s run of exp2)."""
     if diagram.HasSubsystemNamed(LOG_SINK):
         diagram.GetSubsystemByName(LOG_SINK).FindMutableLog(context).Reserve(int(ticks))
+    from .systems.dynamic_plant import reserve_ground_truth
+    reserve_ground_truth(diagram, context, ticks)
 
 
 def logged_signals(diagram, context) -> tuple[np.ndarray, dict]:

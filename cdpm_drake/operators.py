@@ -215,6 +215,14 @@ def operator_force_on_state(kind, times, rows, params, t, state, m):
 
 
 @_jit
+def operator_force_at(kind, times, rows, params, t, x, ip, iv, out, io):
+    """`operator_force_into` on p = x[ip:ip + 3], v = x[iv:iv + 3], the force written to
+    out[io:io + 3] (the dynamic plant's step: systems/dynamic_plant.py)."""
+    operator_force_into(kind, times, rows, params, t, x[ip:ip + 3], x[iv:iv + 3],
+                        out[io:io + 3])
+
+
+@_jit
 def operator_force_into(kind, times, rows, params, t, p, v, out):
     """The force (N) of a shipped model at time t (s) on p (m), v (m/s), into out (3,), from
     its `compiled()` form: the same kernels as the models' own force_into."""

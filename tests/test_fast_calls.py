@@ -215,3 +215,54 @@ def test_the_damped_fallback_gives_the_compiled_answer(monkeypatch, module_name)
     for key in ("p", "lengths", "F_H", "F_d", "velocity"):
         np.testing.assert_allclose(fallback[key], reference[key], atol=1e-9, rtol=0,
                                    err_msg=key)
+
+
+# --- The dynamic plant (issue 21) -----------------------------------------------------------
+
+def test_every_bound_call_of_the_dynamic_plant_passes_the_types_it_was_bound_for(monkeypatch):
+    # As above, for the dynamic plant's step (cables.cable_net_step and the operator model),
+    # which runs once per 1 ms plant step: the loggers read it at each tick in the same context
+    # as the next step's updates, so 100 calls in 0.1 s (plus the start).
+    real_bind, calls = kernel_call.bind, {}
+
+    def checking_bind(kernel, *example):
+        entry, expected = real_bind(kernel, *example), kernel_call.signature_of(*example)
+        key = kernel.__name__
+
+        def call(*args):
+            assert kernel_call.signature_of(*args) == expected, key
+            calls[key] = calls.get(key, 0) + 1
+            return entry(*args)
+        return call
+
+    for module in _system_modules():
+        if getattr(module, "bind", None) is real_bind:
+            monkeypatch.setattr(module, "bind", checking_bind)
+    simulator = Simulator(build_diagram(load_scenario("exp2_interaction",
+                                                      "plant: !DynamicReels {}")))
+    simulator.Initialize()
+    simulator.AdvanceTo(0.1)
+    assert {"cable_net_step", "operator_force_at"} <= set(calls)
+    assert "simulated_reel_step_stacked" not in calls
+    assert 100 <= calls["cable_net_step"] == calls["operator_force_at"] <= 101
+
+
+def test_a_model_without_a_compiled_form_is_ticked_from_python_on_the_dynamic_plant():
+    # The same force table as a shipped ForceProfile (compiled) and as a Python model calling
+    # the table's own `force` (the branch for any model with force(t, p, v)): the plant's
+    # ground truth and the controller's log are the same, bit for bit.
+    from cdpm_drake.scenario import resolve_scenario
+    from cdpm_drake.simulation import simulate
+
+    table = operators.ForceProfile([0.0, 0.05, 0.1], [[0, 0, 0], [4.0, -3.0, 5.0], [0, 0, 0]])
+
+    class Wrapped:
+        def force(self, t, p, v):
+            return table.force(t, p, v)
+
+    base = resolve_scenario(load_scenario("exp2_interaction", "plant: !DynamicReels {}"))
+    logs = [simulate(scenario=dataclasses.replace(base, operator=model), duration=0.2).log
+            for model in (table, Wrapped())]
+    assert np.abs(logs[0]["F_H"]).max() > 0.5  # the push was measured
+    for key in ("p_true", "rpy_true", "tensions", "F_H", "p", "lengths"):
+        np.testing.assert_array_equal(logs[0][key], logs[1][key], err_msg=key)

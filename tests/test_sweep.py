@@ -232,6 +232,20 @@ def test_shipped_sweep_is_valid_and_resolves_by_name():
     assert (REPO / "sweeps" / "exp2_du_Fu.yaml").resolve() == s.path.resolve()
 
 
+def test_shipped_dynamic_sweep_runs_every_variant_on_the_dynamic_plant():
+    # Issue 21: exp2_du_Fu's grid on `!DynamicReels`; its first 10 s of the push.
+    from cdpm_drake.scenario import DynamicReels
+
+    s = sw.load_sweep("exp2_dynamic_du_Fu")
+    kinematic = sw.load_sweep("exp2_du_Fu")
+    assert s.fields == kinematic.fields
+    assert [v.values for v in s.variants] == [v.values for v in kinematic.variants]
+    for variant in s.variants:
+        assert isinstance(variant.scenario.plant, DynamicReels)
+        assert variant.scenario.duration == 10.0
+    assert s.file.metric == "min_distance_true"  # the truth, from the rotated platform
+
+
 # --- Metrics ---------------------------------------------------------------------------------
 
 

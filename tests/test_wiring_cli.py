@@ -435,6 +435,34 @@ def test_emulate_force_and_time_constant_set_the_bridge_physics():
         server.stop()
 
 
+@covers("emulate --plant")
+def test_emulate_plant_dynamic_plays_the_scenarios_dynamic_plant():
+    # --plant dynamic: the bridge is the dynamic plant of the scenario (start, robot, operator;
+    # the encoders zeroed at the start pose: they read the rigid lengths there), --force and
+    # --length-offset reach it; --plant kinematic (the default) is the first-order lag.
+    server = _server_from("--scenario", "exp2_interaction", "--plant", "dynamic", "--force",
+                          0.5, 0.0, 1.0, "--length-offset", 2, 0.003, "--port", 0)
+    try:
+        bridge = server.bridge
+        assert isinstance(bridge, E.DynamicBridge)
+        scenario = load_scenario("exp2_interaction")
+        expected = cable_lengths(scenario_robot(scenario), np.array(scenario.initial_position))
+        expected[1] += 0.003
+        np.testing.assert_allclose(bridge.lengths, expected, atol=1e-12)
+        np.testing.assert_allclose(bridge.force(), [0.5, 0.0, 1.0], atol=1e-12)
+    finally:
+        server.stop()
+    kinematic = _server_from("--scenario", "exp2_interaction", "--port", 0)
+    try:
+        assert isinstance(kinematic.bridge, ReelBridge)
+        assert kinematic.bridge.time_constant == 0.02
+    finally:
+        kinematic.stop()
+    # The dynamic plant's drives come from the robot file: a lag for them is refused.
+    assert cdpm("emulate", "--plant", "dynamic", "--time-constant", 0.01, "--port", 0,
+                "--duration", 0.01) == 2
+
+
 @covers("emulate --address", "emulate --port")
 def test_emulate_address_and_port_are_where_it_listens():
     port = _free_port()

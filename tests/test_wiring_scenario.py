@@ -36,7 +36,7 @@ from cdpm_drake.scenario import (Admittance, Interference, Limits, Logistic, Pai
                                  Scenario, ScenarioError, Sensor, SimulatedReels, WallForce,
                                  load_scenario, scenario_robot)
 from cdpm_drake.simulation import save_log, simulate
-from cdpm_drake.systems.dynamic_plant import reel_step
+from cdpm_drake.systems.dynamic_plant import ground_truth_now, plant_state_now, reel_step
 
 from conftest import case_registry, to_yaml
 
@@ -738,8 +738,7 @@ def test_cables_damping_adds_its_force_to_a_knocked_platform_and_decays_it(tmp_p
         diagram, simulator, _ = _plant_alone(s)
         mbp, mbp_context = _sub(diagram, simulator, "platform_plant")
         mbp.SetVelocities(mbp_context, v)
-        cables, cables_context = _sub(diagram, simulator, "cables")
-        T_knocked = cables.GetOutputPort("tensions").Eval(cables_context).copy()
+        T_knocked = ground_truth_now(diagram, simulator.get_context())["tensions"]
         simulator.AdvanceTo(duration)
         return s, T_knocked, mbp.GetVelocities(mbp_context)
 
@@ -752,7 +751,7 @@ def test_cables_damping_adds_its_force_to_a_knocked_platform_and_decays_it(tmp_p
     assert np.linalg.norm(v_end) < 0.5 * np.linalg.norm(v_light)
 
 
-# The reel drive's closed form (reel_step, dynamic_plant.py): inertia dw/dt = K (u - w) - b w
+# The reel drive's closed form (reel_step, cables.py): inertia dw/dt = K (u - w) - b w
 # - F_c sgn w, K = bandwidth * inertia, stepped implicitly with h. From rest under a constant
 # command u with |K u| > F_c the reel never reverses, so each step is
 # w' = (J w + h K u - h F_c sgn u) / (J + h (K + b)): w_n = w_inf (1 - r^n), w_inf = (K u - F_c
@@ -769,8 +768,7 @@ def _reel_speeds_after(scenario, command, duration):
     """The reel drives' speeds (m/s, their state) after `duration` s of a constant command."""
     diagram, simulator, _ = _plant_alone(scenario, command)
     simulator.AdvanceTo(duration)
-    drives, context = _sub(diagram, simulator, "reel_drives")
-    return context.get_discrete_state(1).value().copy()
+    return plant_state_now(diagram, simulator.get_context())["reel_speeds"]
 
 
 FRICTIONLESS = "reel_drives: {viscous_friction: 0.0, coulomb_friction: 0.0"
