@@ -66,13 +66,14 @@ class PosedInterference(KernelSystem):
 
 
 def build_kernel_block(builder, system, *, inputs, memory, outputs, memory_at, time_step,
-                       memory_outputs=()):
+                       memory_outputs=(), exported=True):
     """Add `system` (a KernelSystem) as "solve", a one-tick delay "memory" (`memory`: its size
     and initial value, None for zeros; or None for a block without memory) and a Selector
     "wiring" to `builder` (a DiagramBuilder or a FlatBlock). inputs: [(port name, size)]
     exported, stacked in this order and then the memory; outputs: [(port name, offset, size)]
     pieces of the result exported; the next memory is the result from `memory_at` on;
-    memory_outputs: [(port name, offset, size)] pieces of the memory (last tick's) exported."""
+    memory_outputs: [(port name, offset, size)] pieces of the memory (last tick's) exported.
+    Returns the Selector (the caller connects its inputs itself with exported=False)."""
     solve = builder.AddNamedSystem("solve", system)
     result_size = system.get_output_port(0).size()
     ins = list(inputs)
@@ -94,8 +95,9 @@ def build_kernel_block(builder, system, *, inputs, memory, outputs, memory_at, t
         delay = builder.AddNamedSystem("memory", unit_delay(memory[0], time_step, memory[1]))
         builder.Connect(route.GetOutputPort("memory"), delay.get_input_port())
         builder.Connect(delay.get_output_port(), route.GetInputPort("memory_previous"))
-    for name, _ in inputs:
-        builder.ExportInput(route.GetInputPort(name), name)
+    if exported:  # else the caller exports (or connects) the inputs itself
+        for name, _ in inputs:
+            builder.ExportInput(route.GetInputPort(name), name)
     for name, offset, _ in outputs:
         builder.ExportOutput(route.GetOutputPort(name), name)
         note_piece(builder, name, result, offset)
@@ -187,16 +189,25 @@ def build_tension_distribution(builder, robot, *, min_tension, trim_gain, slew_r
         solve(reels, attachments, params, x, out)
 
     start = np.concatenate([np.asarray(initial_tensions, dtype=float), np.zeros(5 + m)])
-    build_kernel_block(
+    # The hand force of the previous tick: a plant may compute its force sample in the same
+    # step as it takes the reel command (the dynamic plant does), and this block's result
+    # feeds that command, so the force is taken a tick old (2 ms, inside the sensor's
+    # filter) rather than through an algebraic loop.
+    force = builder.AddNamedSystem("force_memory", unit_delay(3, time_step))
+    route = build_kernel_block(
         builder, TensionSolve(s["tension_x"], s["tension_out"], tick),
-        inputs=[("p_WP", 3), ("R_WP", 9), ("F_H", 3), ("velocity_command", 3),
+        inputs=[("p_WP", 3), ("R_WP", 9), ("F_H_previous", 3), ("velocity_command", 3),
                 ("residual", m), ("cable_lengths", m)],
         memory=(s["tension_memory"], start),
         outputs=[("tension_command", 0, m), ("tension_estimate", m, m),
                  ("tension_target", 2 * m, m), ("t_star", 3 * m, 1),
                  ("status", 3 * m + 1, 1)],
         memory_at=3 * m + 2, time_step=time_step,
-        memory_outputs=[("tension_estimate_previous", 0, m)])
+        memory_outputs=[("tension_estimate_previous", 0, m)], exported=False)
+    builder.Connect(force.get_output_port(), route.GetInputPort("F_H_previous"))
+    builder.ExportInput(force.get_input_port(), "F_H")
+    for name in ("p_WP", "R_WP", "velocity_command", "residual", "cable_lengths"):
+        builder.ExportInput(route.GetInputPort(name), name)
 
 
 # --- orientation hold ------------------------------------------------------------------------------
