@@ -217,9 +217,6 @@ def build_diagram(scenario: Scenario | ResolvedScenario,
     return diagram
 
 
-# The internal-tension trim's gain (pose_control.tension_tick), 1/s: slow beside the length
-# loop (20 1/s), so it corrects model errors and does not fight the loop.
-TRIM_GAIN = 0.0
 # How fast the commanded tensions may change, N/s per cable (pose_control.tension_tick).
 TENSION_SLEW_RATE = 50.0
 # The full-pose length loop's integral gain, 1/s^2 (pose_control.pose_rates_tick).
@@ -256,16 +253,19 @@ def _add_pose_blocks(builder, blocks, resolved, fk, force_sensor, lengths, veloc
         return mapping
     # The estimate starts at the target of the start, level and unpushed.
     p0 = np.asarray(scenario.initial_position, dtype=float)
+    # (The estimate closes in on the robot's real pretension during the warm-up ticks.)
     start = tension_distribution(wrench_matrix(robot, p0), gravity_wrench(robot.dynamics.mass),
                                  float(controller.min_tension)).tensions
     tension = blocks["tension_distribution"] = FlatBlock(
         builder, "tension_distribution", POSE_MAIN, lambda b: build_tension_distribution(
-            b, robot, min_tension=controller.min_tension, trim_gain=TRIM_GAIN,
-            slew_rate=TENSION_SLEW_RATE, initial_tensions=start, time_step=T))
+            b, robot, min_tension=controller.min_tension,
+            max_tension=controller.max_tension, slew_rate=TENSION_SLEW_RATE,
+            initial_tensions=start, time_step=T))
     for name, port in (("p_WP", fk.GetOutputPort("p_WP")), ("R_WP", R_WP),
                        ("F_H", force_sensor.GetOutputPort("F_H")),
                        ("velocity_command", velocity_command),
-                       ("residual", fk.GetOutputPort("residual")), ("cable_lengths", lengths)):
+                       ("residual", fk.GetOutputPort("residual")), ("cable_lengths", lengths),
+                       ("tension_assumed", fk.GetOutputPort("tension_assumed"))):
         tension.connect_input(port, name)
     fk.connect_input(tension.GetOutputPort("tension_estimate_previous"), "tension_estimate")
     mapping.connect_input(tension.GetOutputPort("tension_command"), "tension_command")

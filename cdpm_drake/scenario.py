@@ -151,6 +151,10 @@ class Controller:
     # Floor of the target distribution, N: every cable at least this taut where the pose
     # allows; where the largest achievable minimum tension t* is lower, the floor is t*.
     min_tension: float = 10.0
+    # Ceiling of the target distribution, N: where raising the weakest cable to min_tension
+    # would take an internal force that pulls another cable above this, the floor is lowered
+    # instead (a cable whose share of the internal force is small can cost hundreds of N).
+    max_tension: float = 100.0
 
 
 # --- Plants ----------------------------------------------------------------------------------
@@ -805,6 +809,11 @@ def _check_controller(c: Controller, robot: Robot, plant) -> None:
             and float(c.min_tension) >= 0):
         raise ScenarioError(f"controller.min_tension must be a finite number >= 0 N, got "
                             f"{c.min_tension!r}")
+    if not (_is_number(c.max_tension) and math.isfinite(float(c.max_tension))
+            and float(c.max_tension) > float(c.min_tension)):
+        raise ScenarioError(f"controller.max_tension must be a finite number above "
+                            f"controller.min_tension = {c.min_tension!r} N, got "
+                            f"{c.max_tension!r}")
 
 
 def _or(value, default):

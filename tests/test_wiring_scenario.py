@@ -557,15 +557,19 @@ def _full_dynamic(**controller):
 
 @covers("Scenario.controller.orientation_gain")
 def test_orientation_gain_scales_the_angular_velocity_command():
-    """omega = K_R log(R_ref R^T) with R_ref the first tick's estimate: recomputed from the
-    logged orientation estimate with K_R = 3.7 1/s."""
+    """omega = K_R log(R_ref R^T) with R_ref the estimate at the end of the warm-up:
+    recomputed from the logged orientation estimate with K_R = 3.7 1/s."""
     from cdpm_drake.pose import rotation_log
     from cdpm_drake.rotation import rotation_from_rpy
 
+    from cdpm_drake.pose_control import WARMUP_TICKS
+
     log = sim(_full_dynamic(orientation_gain=3.7), 0.2)
-    R_ref = rotation_from_rpy(log["rpy"][0])
+    # The orientation held: the estimate's at the last warm-up tick; zero command before.
+    R_ref = rotation_from_rpy(log["rpy"][WARMUP_TICKS - 1])
     expected = np.array([3.7 * np.array(rotation_log(R_ref @ rotation_from_rpy(rpy).T))
                          for rpy in log["rpy"]])
+    expected[:WARMUP_TICKS] = 0.0
     np.testing.assert_allclose(log["omega"], expected, rtol=0, atol=1e-12)
     assert np.abs(log["omega"]).max() > 1e-6  # the platform did turn a little
 
@@ -599,6 +603,16 @@ def test_min_tension_is_the_floor_of_the_target():
     target = log["tension_target"][held]
     assert target.min() >= 7.5 - 1e-9
     np.testing.assert_allclose(target.min(axis=1), 7.5, atol=1e-9)
+
+
+@covers("Scenario.controller.max_tension")
+def test_max_tension_is_the_ceiling_of_the_target():
+    """With a 24 N ceiling no target tension is above it (the default 100 N ceiling lets the
+    least-norm target go above 24 N at this start, so the ceiling binds)."""
+    low = sim(_full_dynamic(tension_control=True, max_tension=24.0), 0.05)
+    high = sim(_full_dynamic(tension_control=True), 0.05)
+    assert low["tension_target"].max() <= 24.0 + 1e-9
+    assert high["tension_target"].max() > 24.5
 
 
 def _reel_speeds(log):

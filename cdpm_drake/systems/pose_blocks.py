@@ -14,7 +14,8 @@ from pydrake.systems.framework import LeafSystem
 from ..interference import result_layout
 from ..kernel_call import bind, owned
 from ..kinematics import KinematicsError
-from ..pose_control import (FK_INCONSISTENT, FK_NOT_SETTLED, drive_dead_band,
+from ..pose_control import (FK_INCONSISTENT, FK_NOT_SETTLED, START_ITERATIONS, WARMUP_TICKS,
+                            drive_dead_band,
                             interference_posed_tick,
                             orientation_tick, pose_fk_tick, pose_rates_tick, sizes,
                             tension_tick)
@@ -120,64 +121,74 @@ MAIN = "solve"
 def build_pose_forward_kinematics(builder, robot, *, initial_position, max_residual, EA,
                                   time_step):
     """The pose (p, R) from the encoders' lengths corrected for the stretch under the tension
-    estimate of the previous tick (EA <= 0: no correction). Inputs cable_lengths (m),
-    tension_estimate (m: N); outputs p_WP (3, m), R_WP (9: R_WB row-major), rpy_WP (3, rad),
-    residual (m, m). Warm-started from the previous estimate (memory: [p, R], starting at the
+    estimate of the previous tick (EA <= 0: no correction; at the first tick the fit and the
+    estimate are iterated to agreement, see pose_control.pose_fk_tick). Inputs cable_lengths
+    (m), tension_estimate (m: N); outputs p_WP (3, m), R_WP (9: R_WB row-major), rpy_WP (3,
+    rad), residual (m, m), tension_assumed (m, N: what the lengths were corrected for).
+    Warm-started from the previous estimate (memory: [p, R, started], starting at the
     scenario's start, level). Lengths no pose explains within max_residual (m) raise
     KinematicsError, as the translating forward kinematics does."""
     m = robot.num_cables
     s = sizes(m)
     reels, attachments = _constants(robot)
-    EA, max_residual = float(EA), float(max_residual)
-    example = np.concatenate([np.linalg.norm(robot.reels - robot.workspace.center
-                                             - robot.attachments, axis=1), np.zeros(m),
-                              robot.workspace.center, np.eye(3).ravel()])
-    fk = bind(pose_fk_tick, reels, attachments, EA, max_residual, example,
-              np.empty(s["fk_out"]))
+    d = robot.dynamics
+    params = owned(np.array([EA, max_residual, d.mass, *d.handle, START_ITERATIONS],
+                            dtype=float))
+    max_residual = float(max_residual)
+    example = np.zeros(s["fk_x"])
+    example[:m] = np.linalg.norm(robot.reels - robot.workspace.center - robot.attachments,
+                                 axis=1)
+    example[2 * m:2 * m + 3] = robot.workspace.center
+    example[2 * m + 3:2 * m + 12] = np.eye(3).ravel()
+    example[2 * m + 12] = 1.0
+    fk = bind(pose_fk_tick, reels, attachments, params, example, np.empty(s["fk_out"]))
 
     def tick(x, out):
-        status = fk(reels, attachments, EA, max_residual, x, out)
+        status = fk(reels, attachments, params, x, out)
         if status == FK_NOT_SETTLED:
             raise KinematicsError(f"full-pose forward kinematics of robot {robot.name!r} did "
                                   f"not settle from {x[2 * m:2 * m + 3].tolist()} m")
         if status == FK_INCONSISTENT:
-            r = out[15:15 + m]
+            r = out[16:16 + m]
             i = int(np.argmax(np.abs(r)))
             raise KinematicsError(
                 f"cable lengths are inconsistent with robot {robot.name!r}: the best-fit pose "
                 f"(p = {np.round(out[:3], 6).tolist()} m, rpy = "
-                f"{np.round(out[12:15], 5).tolist()} rad) leaves a residual of "
+                f"{np.round(out[13:16], 5).tolist()} rad) leaves a residual of "
                 f"{1000 * abs(r[i]):.3f} mm on cable {i + 1} (allowed "
                 f"{1000 * max_residual:.3f} mm)")
 
-    start = np.concatenate([np.asarray(initial_position, dtype=float), np.eye(3).ravel()])
+    start = np.concatenate([np.asarray(initial_position, dtype=float), np.eye(3).ravel(),
+                            [0.0]])
     build_kernel_block(
         builder, PoseSolve(s["fk_x"], s["fk_out"], tick),
-        inputs=[("cable_lengths", m), ("tension_estimate", m)], memory=(12, start),
-        outputs=[("p_WP", 0, 3), ("R_WP", 3, 9), ("rpy_WP", 12, 3), ("residual", 15, m)],
+        inputs=[("cable_lengths", m), ("tension_estimate", m)],
+        memory=(s["fk_memory"], start),
+        outputs=[("p_WP", 0, 3), ("R_WP", 3, 9), ("rpy_WP", 13, 3), ("residual", 16, m),
+                 ("tension_assumed", 16 + m, m)],
         memory_at=0, time_step=time_step)
 
 
 # --- tension distribution ----------------------------------------------------------------------
 
 
-def build_tension_distribution(builder, robot, *, min_tension, trim_gain, slew_rate,
+def build_tension_distribution(builder, robot, *, min_tension, max_tension, slew_rate,
                                initial_tensions, time_step):
-    """The target tensions at the estimated pose (pose_control.tension_tick) and the tension
-    estimate. Inputs p_WP, R_WP, F_H (N), velocity_command (m/s), residual (m), cable_lengths
-    (m); outputs tension_command (m, N: what the Jacobian block stretches the cables for: the
-    target plus the internal trim, at most slew_rate N/s from the last), tension_estimate (m,
-    N), tension_target (m, N: the distribution), t_star (N: the largest achievable minimum
-    tension at
-    the pose, inf where an internal force raises every tension), status (0: the floor holds,
-    1: lowered to t*, 2: no single redundant cable, nothing controlled), and
-    tension_estimate_previous (the memory's, for the forward kinematics)."""
+    """The tension estimate and the target tensions at the estimated pose
+    (pose_control.tension_tick). Inputs p_WP, R_WP, F_H (N), velocity_command (m/s),
+    residual (m), cable_lengths (m), tension_assumed (N: the forward kinematics'); outputs
+    tension_command (m, N: what the Jacobian block stretches the cables for: the target, at
+    most slew_rate N/s from the last), tension_estimate (m, N), tension_target (m, N: the
+    distribution), t_star (N: the largest achievable minimum tension at the pose, inf where an
+    internal force raises every tension), status (0: the floor holds, 1: lowered, 2: no
+    single redundant cable, nothing chosen), and tension_estimate_previous (the memory's,
+    for the forward kinematics)."""
     m = robot.num_cables
     s = sizes(m)
     d = robot.dynamics
     reels, attachments = _constants(robot)
-    params = owned(np.array([d.mass, *d.handle, d.EA, float(min_tension), float(trim_gain),
-                             float(time_step), float(slew_rate)]))
+    params = owned(np.array([d.mass, *d.handle, d.EA, float(min_tension), float(max_tension),
+                             float(time_step), float(slew_rate), float(WARMUP_TICKS)]))
     example = np.zeros(s["tension_x"])
     example[:3] = robot.workspace.center
     example[3:12] = np.eye(3).ravel()
@@ -188,16 +199,18 @@ def build_tension_distribution(builder, robot, *, min_tension, trim_gain, slew_r
     def tick(x, out):
         solve(reels, attachments, params, x, out)
 
-    start = np.concatenate([np.asarray(initial_tensions, dtype=float), np.zeros(5 + m)])
+    start = np.concatenate([np.asarray(initial_tensions, dtype=float), np.zeros(4 + m)])
     # The hand force of the previous tick: a plant may compute its force sample in the same
     # step as it takes the reel command (the dynamic plant does), and this block's result
     # feeds that command, so the force is taken a tick old (2 ms, inside the sensor's
     # filter) rather than through an algebraic loop.
     force = builder.AddNamedSystem("force_memory", unit_delay(3, time_step))
+    names = ("p_WP", "R_WP", "velocity_command", "residual", "cable_lengths",
+             "tension_assumed")
     route = build_kernel_block(
         builder, TensionSolve(s["tension_x"], s["tension_out"], tick),
         inputs=[("p_WP", 3), ("R_WP", 9), ("F_H_previous", 3), ("velocity_command", 3),
-                ("residual", m), ("cable_lengths", m)],
+                ("residual", m), ("cable_lengths", m), ("tension_assumed", m)],
         memory=(s["tension_memory"], start),
         outputs=[("tension_command", 0, m), ("tension_estimate", m, m),
                  ("tension_target", 2 * m, m), ("t_star", 3 * m, 1),
@@ -206,7 +219,7 @@ def build_tension_distribution(builder, robot, *, min_tension, trim_gain, slew_r
         memory_outputs=[("tension_estimate_previous", 0, m)], exported=False)
     builder.Connect(force.get_output_port(), route.GetInputPort("F_H_previous"))
     builder.ExportInput(force.get_input_port(), "F_H")
-    for name in ("p_WP", "R_WP", "velocity_command", "residual", "cable_lengths"):
+    for name in names:
         builder.ExportInput(route.GetInputPort(name), name)
 
 
@@ -220,10 +233,11 @@ def build_orientation_hold(builder, *, gain, time_step):
     gain = float(gain)
     example = np.zeros(s["orientation_x"])
     example[:9] = np.eye(3).ravel()
-    hold = bind(orientation_tick, gain, example, np.empty(s["orientation_out"]))
+    warmup = float(WARMUP_TICKS)
+    hold = bind(orientation_tick, gain, warmup, example, np.empty(s["orientation_out"]))
 
     def tick(x, out):
-        hold(gain, x, out)
+        hold(gain, warmup, x, out)
 
     build_kernel_block(
         builder, OrientationSolve(s["orientation_x"], s["orientation_out"], tick),
@@ -245,7 +259,7 @@ def build_pose_jacobian_mapping(builder, robot, *, length_gain, integral_gain, t
     reels, attachments = _constants(robot)
     params = owned(np.array([length_gain, integral_gain, time_step,
                              robot.dynamics.EA if tension else 0.0, 1.0 if tension else 0.0,
-                             drive_dead_band(robot.dynamics)], dtype=float))
+                             drive_dead_band(robot.dynamics), WARMUP_TICKS], dtype=float))
     example = np.zeros(s["rates_x"])
     example[:3] = robot.workspace.center
     example[3:12] = example[18:27] = np.eye(3).ravel()
