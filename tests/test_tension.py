@@ -178,9 +178,10 @@ def test_near_closure_poses_give_no_false_infeasible():
 
 
 def test_t_star_equals_highs_where_the_nullspace_has_two_or_more_dimensions():
-    # Clarabel's LP against HiGHS: a suspended 8-cable robot (2-D nullspace, finite t*), the
-    # shipped 8-cable robot, and a 7-cable robot whose cables all meet at the centre (rank 3:
-    # 4-D nullspace; a wrench with a moment is out of its range: -inf).
+    # 8 cables (2-D nullspace): the closed form over cable triples, on a suspended robot
+    # (finite t*) and the shipped cube_8cable (force closure: +inf). A 7-cable robot whose
+    # cables all meet at the centre (rank 3, 4-D nullspace): Clarabel's LP (finite t* for a
+    # force; -inf for a wrench with a moment, outside W's range).
     rng = np.random.default_rng(2)
     point7 = Robot(name="point7", reels=PAPER.reels, attachments=np.zeros((7, 3)),
                    workspace=PAPER.workspace)
