@@ -140,7 +140,7 @@ def _print_statics(r, scenario, step, out):
     rank_note = ("" if statics.unreachable is None else
                  f" < 6: no tension produces a {_describe(statics.unreachable)}")
     print(f"  wrench matrix rank at the workspace centre: {statics.rank}{rank_note}; t* there "
-          f"{statics.centre_t_star:.2f} N", file=out)
+          f"{_newtons(statics.centre_t_star)}", file=out)
     grid = step_grid(r.workspace.lower, r.workspace.upper, step)
     counts = [len(np.arange(lo, hi + 1e-9, step))
               for lo, hi in zip(r.workspace.lower, r.workspace.upper)]
@@ -153,17 +153,27 @@ def _print_statics(r, scenario, step, out):
     if scenario is None:
         return None
     p0 = np.asarray(scenario.initial_position, dtype=float)
-    print(f"  at the start {_fmt(p0, 2)} m: t* {float(holding_tension(r, p0)):.2f} N", file=out)
+    print(f"  at the start {_fmt(p0, 2)} m: t* {_newtons(float(holding_tension(r, p0)))}",
+          file=out)
     from .simulation import simulate
 
     log = simulate(scenario=_kinematic_copy(scenario)).log
     t = holding_tension(r, log["p"])
     k = int(np.argmin(t))
     print(f"  along the scenario's path (kinematic plant, {len(t)} ticks): smallest t* "
-          f"{t[k]:.2f} N at t = {log['time'][k]:.3f} s, p = {_fmt(log['p'][k])} m; "
+          f"{_newtons(t[k])} at t = {log['time'][k]:.3f} s, p = {_fmt(log['p'][k])} m; "
           f"{100 * np.mean(t >= INFO_FLOOR):.1f} % of the ticks at >= {INFO_FLOOR:g} N",
           file=out)
     return log["p"]
+
+
+def _newtons(t) -> str:
+    """t* as printed: N with two decimals, or the meaning of an infinite one."""
+    if t == np.inf:
+        return "+inf (an internal force raises every tension: any floor holds)"
+    if t == -np.inf:
+        return "-inf (no tensions balance the weight)"
+    return f"{t:.2f} N"
 
 
 def _kinematic_copy(scenario):

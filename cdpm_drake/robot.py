@@ -588,12 +588,21 @@ def statics_warnings(robot: "Robot", statics) -> list[str]:
     """What is wrong with a robot's statics, in words (empty when its box is mostly held)."""
     out = []
     n = statics.n
+    m = robot.num_cables
+    if m < 6:
+        # Too few cables for six equations: the rank and the share only restate that.
+        return [f"{robot.name}: {m} cables cannot hold the platform against all six force and "
+                f"moment components (wrench matrix rank {statics.rank} at the workspace "
+                "centre): a free platform would turn; the kinematic plant, and plant: "
+                "!DynamicReels {lock_rotation: true}, model one that only translates"]
     if statics.unreachable is not None:
+        more = 6 - statics.rank - 1
         out.append(f"{robot.name}: the wrench matrix has rank {statics.rank} < 6 at the "
                    f"workspace centre {robot.workspace.center.tolist()!r} m: no cable tensions "
-                   f"produce a {describe_wrench(statics.unreachable)} there (nor "
-                   f"{6 - statics.rank - 1} other wrench direction(s)), so the platform cannot "
-                   "resist one: the cables' lines of action leave it free to turn or slide")
+                   f"produce a {describe_wrench(statics.unreachable)} there"
+                   + (f" (nor {more} more wrench direction(s))" if more else "")
+                   + ", so the platform cannot resist one: the cables' lines of action leave "
+                   "it free to turn or slide")
     if statics.share < STATICS_WARN_SHARE:
         from .tension import point_platform_share
 

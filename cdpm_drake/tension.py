@@ -511,7 +511,8 @@ def grid_points(lower, upper, n: int) -> np.ndarray:
 def step_grid(lower, upper, step: float) -> np.ndarray:
     """The points lower + k step (m) inside the box [lower, upper] along each axis, upper
     corner included when a whole number of steps reaches it; (N, 3), x slowest. The grid
-    of the issue-18 measurements (step 0.05 m: 51 x 65 x 43 points for paper_7cable)."""
+    of the statics shares quoted in the robot files and by `cdpm info` (step 0.05 m: 51 x 65
+    x 43 points for paper_7cable)."""
     axes = [np.arange(lo, hi + 1e-9, step) for lo, hi in zip(lower, upper)]
     return np.stack(np.meshgrid(*axes, indexing="ij"), axis=-1).reshape(-1, 3)
 
@@ -586,7 +587,8 @@ def balancing_rotation(robot, p, *, mass: float, min_tension: float = 0.0,
     cables cannot hold it level hangs tilted: this says how much."""
     from .rotation import rotation_from_rpy
 
-    g = np.arange(-max_angle, max_angle + 1e-12, step)
+    k = int(round(max_angle / step))
+    g = step * np.arange(-k, k + 1)  # exact zeros: a grid from arange(-max, max, step) has -1e-16
     rpys = np.stack(np.meshgrid(g, g, g, indexing="ij"), axis=-1).reshape(-1, 3)
     rpys = rpys[np.argsort(np.linalg.norm(rpys, axis=1), kind="stable")]
     wrench = gravity_wrench(mass)

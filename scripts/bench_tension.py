@@ -1,7 +1,7 @@
 """Per-call cost of the tension distribution and of t* (the largest achievable minimum
 tension), against scipy's linprog (HiGHS) measured in the same run as the reference of the
-ratios, and against the hand-written NNLS/LDP solver this package had before issue 18 (read
-from git at OLD_COMMIT, when the checkout has it).
+ratios, and against the hand-written NNLS/LDP solver this package had before the closed forms
+(read from git at OLD_COMMIT, when the checkout has it).
 
 Cases, each on the same `--poses` random poses of paper_7cable (1-3 swapped, in its box,
 2.5 kg platform, floor 5 N) cycled for `--calls` calls, best of `--repeats`:
@@ -36,7 +36,7 @@ from cdpm_drake.tension import (distribution_kernel, gravity_wrench, holding_ten
 from cdpm_drake.text import format_table
 
 ROOT = Path(__file__).resolve().parent.parent
-OLD_COMMIT = "b28eace"  # main before issue 18: NNLS/LDP with a bisection for t*
+OLD_COMMIT = "b28eace"  # the NNLS/LDP solver, with a bisection for t*
 FLOOR = 5.0
 
 
@@ -49,7 +49,7 @@ def highs_t_star(W, w):
 
 
 def old_solver():
-    """The pre-issue-18 tension module, from git; None when the checkout lacks it."""
+    """The old tension module (NNLS/LDP), from git; None when the checkout lacks it."""
     try:
         text = subprocess.run(["git", "-C", str(ROOT), "show",
                                f"{OLD_COMMIT}:cdpm_drake/tension.py"], check=True,

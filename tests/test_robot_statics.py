@@ -147,3 +147,16 @@ def test_statics_are_computed_for_the_files_platform_mass(tmp_path):
     c = light.workspace.center
     assert robot_statics(light).centre_t_star == pytest.approx(
         highs_t_star(wrench_matrix(light, c), gravity_wrench(2.5)), abs=1e-6)
+
+
+def test_a_robot_with_fewer_than_six_cables_is_told_it_can_only_translate(caplog):
+    # Four cables, six equations: the warning says so once, not as a share of 0 %.
+    from conftest import HAND_ROBOT
+
+    caplog.clear()
+    with caplog.at_level(logging.WARNING, logger="cdpm_drake.robot"):
+        robot = load_robot(HAND_ROBOT)
+    (message,) = [r.getMessage() for r in caplog.records if "cables cannot hold" in r.getMessage()]
+    assert message.startswith(f"{robot.name}: 4 cables cannot hold the platform")
+    assert "rank 4" in message and "lock_rotation: true" in message
+    assert not [r for r in caplog.records if "workspace box" in r.getMessage()]
