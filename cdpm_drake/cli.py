@@ -13,7 +13,12 @@ from .text import format_table, prefixed_log_records
 
 
 class CliError(Exception):
-    """A bad command-line argument; printed without a traceback."""
+    """A bad command-line argument (usage, exit 2); printed without a traceback."""
+
+
+class InputError(Exception):
+    """A file or folder named on the command line that cannot be found or read (exit 1, as
+    for a scenario or robot that cannot be found); printed without a traceback."""
 
 
 def _fmt(v, digits=3) -> str:
@@ -237,12 +242,37 @@ def _swap_arg(text: str) -> tuple[int, int]:
 
 
 def _print_dynamic_summary(log, out) -> None:
+    from .rotation import rotation_angle, rotations_from_rpy
+
+    T = len(log["time"])
     slack = [f"{i + 1} ({int(n)} ticks)" for i, n in enumerate(log["slack"].sum(axis=0)) if n]
+    slack_ticks = int(np.any(log["slack"], axis=1).sum())
     error = 1000 * np.linalg.norm(log["p"] - log["p_true"], axis=1).max()
-    rotation = np.degrees(np.abs(log["rpy_true"]).max())
-    print(f"tensions {log['tensions'].min():.2f} to {log['tensions'].max():.1f} N; slack "
-          f"cables: {', '.join(slack) or 'none'}; largest rotation {rotation:.2f} deg; largest "
-          f"FK error {error:.2f} mm", file=out)
+    rotation = np.degrees(rotation_angle(rotations_from_rpy(log["rpy_true"])).max())
+    print(f"dynamic plant (true): tensions {log['tensions'].min():.2f} to "
+          f"{log['tensions'].max():.1f} N; a cable slack on {slack_ticks} of {T} ticks "
+          f"({100 * slack_ticks / T:.2f} %), cables: {', '.join(slack) or 'none'}; largest "
+          f"rotation {rotation:.2f} deg; largest FK error {error:.2f} mm", file=out)
+    if "lengths_commanded" in log:
+        drift = 1000 * np.abs(log["lengths_commanded"] - log["lengths"]).max()
+        print(f"length loop: largest |l_d - l| {drift:.2f} mm (commanded vs encoder lengths)",
+              file=out)
+
+
+def _print_clipped(log, scenario, out) -> None:
+    """The ticks whose raw hand force (F_measured) the sensor model clipped, if any."""
+    from .scenario import sensor_range_text
+    from .sensor import beyond_range
+
+    if "F_measured" not in log or not len(log["time"]):
+        return
+    s = scenario.sensor
+    clipped = beyond_range(log["F_measured"], s.axial_axis, s.axial_range, s.transverse_range)
+    if clipped.any():
+        k = int(np.argmax(clipped))
+        print(f"hand force beyond the sensor's range ({sensor_range_text(s)}), clipped: "
+              f"{int(clipped.sum())} of {len(clipped)} ticks, the first at t = "
+              f"{log['time'][k]:.3f} s ({_fmt(log['F_measured'][k], 1)} N)", file=out)
 
 
 def _load_scenario_arg(args):
@@ -262,7 +292,7 @@ def simulate_main(*, scenario, duration=None, out_dir=None, progress=True, out=N
     same, and the plots and replay asked for)."""
     from .run_folder import RUNS_DIR, RunFolder
     from .scenario import resolve_scenario
-    from .simulation import save_log, simulate, summary_rows
+    from .simulation import save_log, simulate, summary_header, summary_rows
 
     out = sys.stdout if out is None else out
     resolved = resolve_scenario(scenario)
@@ -278,14 +308,14 @@ def simulate_main(*, scenario, duration=None, out_dir=None, progress=True, out=N
         folder.discard()  # an early error (bad scenario, bad plant) leaves no folder
         raise
     log = result.log
-    path = save_log(log, out_dir, scenario)
+    path = save_log(log, out_dir, resolved)
     folder.finish()
     T = log["time"].size
     print(f"scenario {scenario.name!r}: {T} ticks, {log['time'][-1] if T else 0:.3f} s simulated "
           f"in {result.wall_time:.2f} s wall ({result.realtime_factor:.1f}x real time)", file=out)
     rows = summary_rows(log)
     if rows:
-        print(format_table(["pair", "min distance (mm)", "ticks active", "crossed"], rows), file=out)
+        print(format_table(summary_header(log), rows), file=out)
     else:
         print("no cable pair came within its d_u", file=out)
     norms = {k: np.linalg.norm(log[k], axis=1).max() if T else 0.0
@@ -293,7 +323,13 @@ def simulate_main(*, scenario, duration=None, out_dir=None, progress=True, out=N
     print("peak |F_H| {F_H:.2f} N, |F_int| {F_int:.2f} N, |F_d| {F_d:.2f} N".format(**norms),
           file=out)
     crossings = int(np.any(log["crossed"], axis=0).sum()) if T else 0
-    print(f"pairs that crossed: {crossings}", file=out)
+    if "crossed_true" in log:  # the controller's estimate beside the plant's truth
+        truly = int(np.any(log["crossed_true"], axis=0).sum()) if T else 0
+        print(f"pairs that crossed: {truly} truly (from the true pose), {crossings} by the "
+              "controller's estimate", file=out)
+    else:
+        print(f"pairs that crossed: {crossings}", file=out)
+    _print_clipped(log, scenario, out)
     if T and "tensions" in log:  # the dynamic plant's ground truth
         _print_dynamic_summary(log, out)
     print(f"log: {path}", file=out)
@@ -318,7 +354,8 @@ def simulate_main(*, scenario, duration=None, out_dir=None, progress=True, out=N
               "written", file=sys.stderr)
         return exit_code(result.error)
     if result.error is not None:
-        print(f"cdpm simulate: error: the run stopped at {stopped}: {result.error}",
+        cause = f"; {result.diagnosis}" if result.diagnosis else ""
+        print(f"cdpm simulate: error: the run stopped at {stopped}: {result.error}{cause}",
               file=sys.stderr)
         return 1
     return 0
@@ -361,6 +398,8 @@ def _cmd_simulate(args) -> int:
     if realtime is not None and not (realtime > 0 and np.isfinite(realtime)):
         raise CliError(f"--realtime must be a rate > 0 (1: real time), got {realtime!r}")
     scenario = _load_scenario_arg(args)
+    _check_duration_tick(args.duration, scenario)
+    _check_html(args.html)
     if args.meshcat:
         on_chunk = _live_meshcat(scenario)
         # Something to watch: paced at real time unless told otherwise.
@@ -386,6 +425,16 @@ def _writable_dir(path: Path, field: str) -> None:
         raise CliError(str(e)) from None
 
 
+def _check_html(path) -> None:
+    """--html FILE must be writable before a run starts, not found wanting after it."""
+    if path is None:
+        return
+    if path.is_dir():
+        raise CliError(f"--html {str(path)!r} is a folder; give a file name, e.g. "
+                       f"{str(path / 'replay.html')!r}")
+    _writable_dir(path.parent if str(path.parent) else Path("."), "--html's folder")
+
+
 def _save_replay(log, path):
     """The self-contained HTML replay. The Meshcat server it records with is private to it, so
     Drake's "listening at http://..." line would only mislead: silenced."""
@@ -405,6 +454,17 @@ def _save_replay(log, path):
 def _check_duration(duration):
     if duration is not None and not (duration > 0 and np.isfinite(duration)):
         raise CliError(f"--duration must be a number of seconds > 0, got {duration!r}")
+
+
+def _check_duration_tick(duration, resolved) -> None:
+    """--duration of at least one tick of the scenario's time_step."""
+    from .scenario import ScenarioError, check_duration
+
+    if duration is not None:
+        try:
+            check_duration(duration, resolved.time_step, "--duration")
+        except ScenarioError as e:
+            raise CliError(str(e)) from None
 
 
 def _live_meshcat(scenario):
@@ -492,6 +552,7 @@ def _cmd_run(args) -> int:
         except (PriorityError, ValueError) as e:
             raise CliError(f"--rt-priority {args.rt_priority!r}: {e}") from None
     scenario = _load_scenario_arg(args)
+    _check_duration_tick(args.duration, scenario)
     on_view = _live_meshcat(scenario) if args.meshcat else None
     return run_main(scenario=scenario, duration=args.duration, out_dir=args.out,
                     on_view=on_view, force=args.force)
@@ -500,21 +561,33 @@ def _cmd_run(args) -> int:
 # --- plot ------------------------------------------------------------------------------------
 
 
-def _cmd_plot(args) -> int:
+def _find_log(path: Path, command: str):
+    """(the log, the run folder or .npz it came from) for a command's LOG argument: a
+    log.npz, its run folder, runs/<name> (its latest run); a folder with only ticks.bin is
+    recovered first."""
     from .run_folder import resolve_latest
-    from .views.plots import LogError, load_log, plot_log
+    from .views.plots import LogError, load_log
+
+    target = resolve_latest(path)
+    if target.is_dir() and not (target / "log.npz").exists() and (target / "ticks.bin").exists():
+        print(f"cdpm {command}: {str(target)!r} has ticks.bin but no log.npz (the run was "
+              "killed before converting it): recovering first", file=sys.stderr)
+        _recover(target)
+    try:
+        return load_log(target), target
+    except LogError as e:
+        raise InputError(str(e)) from None
+
+
+def _cmd_plot(args) -> int:
+    from .views.plots import plot_log
 
     if _is_sweep_dir(args.log):
         return _cmd_plot_sweep(args)
-    target = resolve_latest(args.log)
-    if target.is_dir() and not (target / "log.npz").exists() and (target / "ticks.bin").exists():
-        print(f"cdpm plot: {str(target)!r} has ticks.bin but no log.npz (the run was killed "
-              "before converting it): recovering first", file=sys.stderr)
-        _recover(target)
-    try:
-        log = load_log(target)
-    except LogError as e:
-        raise CliError(str(e)) from None
+    log, target = _find_log(args.log, "plot")
+    if args.out is not None:
+        _writable_dir(args.out, "--out")
+    _check_html(args.html)
     out_dir = args.out if args.out is not None else (
         target if target.is_dir() else target.parent)
     for png in plot_log(log, out_dir):
@@ -522,6 +595,51 @@ def _cmd_plot(args) -> int:
     if args.html is not None:
         print(f"3D replay: {_save_replay(log, args.html)} (open it in a browser)")
     return 0
+
+
+# --- export ----------------------------------------------------------------------------------
+
+
+def _cmd_export(args) -> int:
+    from .views.log_csv import log_to_csv
+
+    if _is_sweep_dir(args.log):
+        raise InputError(f"{str(args.log)!r} is a sweep's folder: its results.csv is the "
+                         "table already (one row per run); export a run's log.npz")
+    log, target = _find_log(args.log, "export")
+    text = log_to_csv(log)
+    if args.out is not None and str(args.out) == "-":
+        sys.stdout.write(text)
+        return 0
+    path = args.out if args.out is not None else (
+        (target if target.is_dir() else target.parent) / "log.csv")
+    if path.is_dir():
+        raise CliError(f"--out {str(path)!r} is a folder; give a file name, e.g. "
+                       f"{str(path / 'log.csv')!r}")
+    _writable_dir(path.parent if str(path.parent) else Path("."), "--out's folder")
+    path.write_text(text)
+    header = text.partition("\n")[0]  # names hold no commas
+    print(f"csv: {path} ({text.count(chr(10)) - 1} rows, one per tick; "
+          f"{header.count(',') + 1} columns)")
+    return 0
+
+
+def _export_parser(sub) -> None:
+    p = sub.add_parser(
+        "export", help="write a log as CSV: one row per tick, named columns with units",
+        description="Write a log.npz as CSV for spreadsheets and other tools: one row per "
+                    "tick, one column per value, named with its unit (p_x [m], F_H_z [N], "
+                    "lengths_1 [m], pair_distances_1-3 [m], active_1-3 [0/1]), cables and "
+                    "pairs numbered from 1 (views/log_csv.py). The per-run constants (robot, "
+                    "logistic parameters, how the run ended) stay in log.npz.")
+    p.add_argument("log", type=Path,
+                   help="a log.npz, the run folder holding it (or only ticks.bin: recovered "
+                        "first), or runs/<name> (its latest run)")
+    fmt = p.add_mutually_exclusive_group(required=True)
+    fmt.add_argument("--csv", action="store_true", help="comma-separated values")
+    p.add_argument("--out", type=Path, metavar="FILE",
+                   help="output file (default: log.csv beside the log; - for stdout)")
+    p.set_defaults(func=_cmd_export)
 
 
 # --- recover ---------------------------------------------------------------------------------
@@ -534,7 +652,7 @@ def _recover(run_dir, out=None) -> None:
     try:
         path, tail = recover(run_dir)
     except RecoverError as e:
-        raise CliError(str(e)) from None
+        raise InputError(str(e)) from None
     cut = (f"the tail was cut: a partial last row of {tail['cut_bytes']} bytes left out"
            if tail["cut_bytes"] else "the tail was whole (no partial row)")
     print(f"recovered {tail['ticks']} ticks of {tail['expected']} ({tail['ending']}); {cut}; "
@@ -656,6 +774,8 @@ def _cmd_plot_sweep(args) -> int:
     from .sweep import SweepError, plot_main
     from .views.sweep_plots import plot_sweep
 
+    if args.out is not None:
+        _writable_dir(args.out, "--out")
     try:
         return plot_main(sweep_dir=args.log, plot=plot_sweep, out_dir=args.out)
     except SweepError as e:  # a bad sweep file or results: an error (1), as for scenarios
@@ -710,7 +830,8 @@ def _sweep_parser(sub) -> None:
                    help="runs per Ray task (default: chosen so a task lasts ~2 s)")
     p.add_argument("--keep-logs", action="store_true", help="also keep each run's log.npz")
     p.add_argument("--retry-errors", action="store_true",
-                   help="rerun the rows that ended in an error (a resume skips them)")
+                   help="rerun the rows that faulted or ended in an error (a resume skips "
+                        "them)")
     p.add_argument("--plot", action="store_true",
                    help="write the heatmap, metric-vs-axis and Pareto pictures")
     p.add_argument("--metric", choices=NUMERIC_METRICS, metavar="NAME",
@@ -730,8 +851,8 @@ def _sweep_parser(sub) -> None:
 EXIT_CODES = """\
 exit codes (every command):
   0    done
-  1    error: the scenario or robot cannot be loaded or is invalid, the run failed or
-       faulted, cdpm run never enabled the reels
+  1    error: a scenario, robot, sweep, log or run folder that cannot be found or is
+       invalid, a run that failed or faulted, cdpm run that never enabled the reels
   2    bad usage: an unknown option, a missing or malformed argument, an option value
        out of range (--duration, --realtime, --out, ...)
   130  interrupted by Ctrl-C (SIGINT); whatever was logged is written
@@ -779,7 +900,9 @@ def _parser() -> argparse.ArgumentParser:
 
     p = sub.add_parser("simulate", help="simulate a scenario and write its log",
                        description="Simulate a scenario's Fig. 5 diagram with Drake's Simulator "
-                                   "at 500 Hz; write DIR/log.npz and DIR/scenario.yaml.")
+                                   "at 500 Hz; write DIR/log.npz and DIR/scenario.yaml (with "
+                                   "copies of the robot file and force CSV it reads, so DIR "
+                                   "reruns alone).")
     _scenario_args(p)
     p.add_argument("--duration", type=float, help="simulated time, s (default: the scenario's)")
     p.add_argument("--out", type=Path,
@@ -857,6 +980,7 @@ def _parser() -> argparse.ArgumentParser:
     p.set_defaults(func=_cmd_diagram)
 
     _sweep_parser(sub)
+    _export_parser(sub)
 
     p = sub.add_parser("recover", help="turn a killed run's ticks.bin into log.npz",
                        description="Convert the tick stream of a `cdpm run` that was killed "
@@ -894,6 +1018,47 @@ def _scenario_args(p, default="exp2_interaction"):
                         "'{duration: 5, interference: {default: {F_u: 4.0}}}'")
 
 
+COMPILE_NOTICE = ("cdpm: compiling the per-tick math (numba): once after installing, a few "
+                  "seconds; later runs load it from the cache")
+
+
+class _compile_notice:
+    """Within the block, the first compilation of a kernel (numba's "numba:compile" event:
+    a cache miss, never a load from the cache) prints COMPILE_NOTICE once on `stream`, so the
+    seconds of a first run after installing are explained; a run that loads everything from
+    numba's cache says nothing."""
+
+    def __init__(self, stream=None):
+        self._stream = stream
+        self.said = False
+        self._installed = None
+
+    def __enter__(self):
+        try:
+            from numba.core import event
+        except ImportError:  # no numba event API: no notice, nothing else changes
+            return self
+        notice = self
+
+        class _Listener(event.Listener):
+            def on_start(self, ev):
+                if not notice.said:
+                    notice.said = True
+                    print(COMPILE_NOTICE, file=notice._stream or sys.stderr, flush=True)
+
+            def on_end(self, ev):
+                pass
+
+        self._installed = event.install_listener("numba:compile", _Listener())
+        self._installed.__enter__()
+        return self
+
+    def __exit__(self, *exc):
+        if self._installed is not None:
+            self._installed.__exit__(*exc)
+            self._installed = None
+
+
 def main(argv=None) -> int:
     from .hardware.tick_log import TickLogError
     from .interrupt import Terminated, exit_code, terminate_raises
@@ -907,15 +1072,17 @@ def main(argv=None) -> int:
         # argparse cannot hand options through a sub-command untouched; the emulator parses
         # its own.
         from .emulator import main as emulator_main
-        return emulator_main(argv[1:])
+        with _compile_notice():
+            return emulator_main(argv[1:])
     args = _parser().parse_args(argv)
-    with prefixed_log_records(), terminate_raises():
+    with prefixed_log_records(), terminate_raises(), _compile_notice():
         try:
             return int(args.func(args) or 0)
         except CliError as e:
             print(f"cdpm {args.command}: error: {e}", file=sys.stderr)
             return 2
-        except (RobotError, KinematicsError, ScenarioError, OperatorError, TickLogError) as e:
+        except (InputError, RobotError, KinematicsError, ScenarioError, OperatorError,
+                TickLogError) as e:
             print(f"cdpm {args.command}: error: {e}", file=sys.stderr)
             return 1
         except KeyboardInterrupt as e:

@@ -36,7 +36,9 @@ LOGGED = (
     ("velocity_admittance", "admittance", "velocity"),
     ("velocity", "safety_limits", "velocity_command"),
     ("reel_velocity", "jacobian_mapping", "reel_velocity_command"),
+    ("lengths_commanded", "jacobian_mapping", "commanded_lengths"),
     ("lengths", "reels", "cable_lengths"),
+    ("F_measured", "reels", "measured_force"),
     ("pair_distances", "interference_force", "pair_distances"),
     ("active", "interference_force", "active"),
     ("crossed", "interference_force", "crossed"),
@@ -137,8 +139,11 @@ def build_diagram(scenario: Scenario | ResolvedScenario,
 
     mapping = blocks["jacobian_mapping"] = FlatBlock(
         builder, "jacobian_mapping", JACOBIAN_MAPPING_MAIN,
-        lambda b: build_jacobian_mapping(b, robot))
+        lambda b: build_jacobian_mapping(b, robot,
+                                         length_gain=scenario.controller.length_gain,
+                                         time_step=T))
     mapping.connect_input(p_WP, "p_WP")
+    mapping.connect_input(plant.GetOutputPort("cable_lengths"), "cable_lengths")
     mapping.connect_input(limits.GetOutputPort("velocity_command"), "velocity_command")
     builder.Connect(mapping.GetOutputPort("reel_velocity_command"),
                     plant.GetInputPort("reel_velocity_command"))
@@ -251,10 +256,13 @@ def _add_loggers(builder, blocks, T):
 
 
 def reserve_log(diagram, context, ticks: int) -> None:
-    """Make room in the logger for `ticks` rows before a run (no-op without a logger): a
-    growing log is copied at each doubling (2 % of a 120 s run of exp2)."""
+    """Make room in the logger (and the dynamic plant's ground-truth logger) for `ticks` rows
+    before a run (no-op without a logger): a growing log is copied at each doubling (2 % of a
+    120 s run of exp2)."""
     if diagram.HasSubsystemNamed(LOG_SINK):
         diagram.GetSubsystemByName(LOG_SINK).FindMutableLog(context).Reserve(int(ticks))
+    from .systems.dynamic_plant import reserve_ground_truth
+    reserve_ground_truth(diagram, context, ticks)
 
 
 def logged_signals(diagram, context) -> tuple[np.ndarray, dict]:

@@ -1,14 +1,21 @@
 """cdpm-reel-emulator: play the reel bridge on loopback, to rehearse a run before the robot.
 
-The emulated reels follow the commanded velocities with a first-order lag; the encoders report
-what each reel paid out, the force sensor reports the operator's force at the best-fit
-platform pose, and fault-injection flags impair the link (drop, delay, duplicate, reorder,
-corrupt) or break the bridge (freeze, NaN, stop, fault bits) from `--fault-after` seconds
-after the controller first enables the reels. The protocol is hardware/PROTOCOL.md.
+Two plants behind the bridge. `--plant kinematic` (the default): the reels follow the
+commanded velocities with a first-order lag, the encoders report what each reel paid out, the
+force sensor the operator's force at the best-fit platform pose. `--plant dynamic`: the
+scenario's robot with mass, elastic cables, drive friction and the operator, the dynamic plant
+of `plant: !DynamicReels` (systems/dynamic_plant.py) stepped in real time; the encoders report
+each reel's payout, zeroed at the start pose as a homing would (they read the rigid cable
+lengths there), the force sensor the operator's force on the true platform; the closing
+summary adds the cables' tensions, their slack ticks and the platform's tilt.
+Fault-injection flags impair the link (drop, delay, duplicate, reorder, corrupt) or break the
+bridge (freeze, NaN, stop, fault bits) from `--fault-after` seconds after the controller first
+enables the reels. The protocol is hardware/PROTOCOL.md.
 
 Examples:
   cdpm-reel-emulator --robot paper_7cable --start 1.77 3.65 1.22
   cdpm-reel-emulator --scenario exp2_interaction --drop 0.01 --seed 3
+  cdpm-reel-emulator --scenario exp2_interaction --plant dynamic
   cdpm-reel-emulator --stop --fault-after 2.0
 """
 
@@ -32,6 +39,16 @@ from .hardware.priority import set_realtime_priority
 from .hardware.protocol import (FAULT_COMMAND_TIMEOUT, FAULT_OVERSPEED, MAX_FORCE, REASONS,
                        ProtocolError, SequenceTracker, Status, decode_command, encode_status,
                        next_sequence)
+
+
+def _span(layout_entry) -> tuple[int, int]:
+    """(start, stop) of an (offset, size) layout entry."""
+    at, size = layout_entry
+    return at, at + size
+
+
+# Ticks whose compute time the server keeps for its summary (8.7 min at 500 Hz).
+COMPUTE_WINDOW = 1 << 18
 
 
 @dataclasses.dataclass(frozen=True)
@@ -160,6 +177,162 @@ class ReelBridge:
         return np.clip(f, -MAX_FORCE, MAX_FORCE)
 
 
+class DynamicBridge:
+    """The bridge's physics as the dynamic plant (`plant: !DynamicReels`): the scenario's
+    robot with mass, elastic tension-only cables, reel drives with friction and the operator,
+    stepped by a Drake Simulator to the bridge's clock. Same interface as ReelBridge.
+
+    resolved: a ResolvedScenario whose plant is a DynamicReels (its start, robot, operator and
+    plant settings). The platform rests at the start until the first enabling command; the
+    plant's (and the operator's) clock starts then. The encoders read each reel's payout L0
+    plus its cable's stretch at the start (zeroed at the start pose, as a homing would: they
+    read the rigid cable lengths there), plus `length_offset` (m, per cable).
+    """
+
+    def __init__(self, resolved, length_offset=None):
+        from pydrake.systems.analysis import Simulator
+        from pydrake.systems.framework import DiagramBuilder
+
+        from .scenario import check_dynamic_reels
+        from .systems.dynamic_plant import build_dynamic_plant, plant_state_now
+
+        scenario = resolved.scenario
+        self.robot = robot = resolved.robot
+        m = robot.num_cables
+        builder = DiagramBuilder()
+        self._plant = builder.AddNamedSystem("reels", build_dynamic_plant(
+            scenario, robot, resolved.operator, check_dynamic_reels(scenario, robot).tensions,
+            log_truth=False))
+        builder.ExportInput(self._plant.GetInputPort("reel_velocity_command"), "command")
+        self._diagram = builder.Build()
+        self._simulator = Simulator(self._diagram)
+        self._context = self._simulator.get_mutable_context()
+        self._command_port = self._diagram.get_input_port(0)
+        self._force_port = self._plant.GetOutputPort("measured_force")
+        self._plant_context = self._plant.GetMyContextFromRoot(self._context)
+        self.max_reel_speed = float(scenario.plant.max_reel_speed
+                                    if scenario.plant.max_reel_speed is not None
+                                    else robot.limits.max_reel_speed)
+        self._h = float(scenario.plant.time_step)
+        self.command = np.zeros(m)
+        self._command_port.FixValue(self._context, self.command)
+        self._simulator.Initialize()
+        # Per tick, the plant's state and its ground truth are read from these directly.
+        cables = self._plant.GetSubsystemByName("cables")
+        self._state_context = self._plant.GetSubsystemByName(
+            "reel_state").GetMyContextFromRoot(self._context)
+        self._step_port = cables.GetOutputPort("step")
+        self._cables_context = cables.GetMyContextFromRoot(self._context)
+        self._L0 = slice(*_span(cables.state_layout["L0"]))
+        self._speeds = slice(*_span(cables.state_layout["reel_speeds"]))
+        self._tensions = slice(*_span(cables.layout["tensions"]))
+        self._slack = slice(*_span(cables.layout["slack"]))
+        self._rpy = slice(*_span(cables.layout["rpy_true"]))
+        p0 = np.asarray(scenario.initial_position, dtype=float)
+        L0 = plant_state_now(self._diagram, self._context)["L0"]
+        from .rotation import rotation_from_rpy
+
+        rigid = np.linalg.norm(robot.reels - (p0 + robot.attachments
+                                              @ rotation_from_rpy(scenario.plant.initial_rpy).T),
+                               axis=1)
+        self.encoder_offset = rigid - L0
+        if length_offset is not None:
+            self.encoder_offset = self.encoder_offset + np.asarray(length_offset, dtype=float)
+        self.enabled = False
+        self.faults = 0
+        self.time = 0.0                             # s stepped so far (the bridge's clock)
+        self.operator_start = None                  # `time` of the first enabling command, s
+        # What the cables went through, tick by tick (the closing summary).
+        self.ticks = 0
+        self.min_tension = math.inf
+        self.max_tension = 0.0
+        self.slack_ticks = np.zeros(m, dtype=int)
+        self.max_tilt = 0.0
+        self._observe()
+
+    @property
+    def lengths(self) -> np.ndarray:
+        """The encoders, m: each reel's payout L0, zeroed at the start pose."""
+        state = self._state_context.get_discrete_state_vector().value()
+        return state[self._L0] + self.encoder_offset
+
+    @property
+    def speed(self) -> np.ndarray:
+        """The reels' speeds, m/s of cable."""
+        return self._state_context.get_discrete_state_vector().value()[self._speeds].copy()
+
+    def set_command(self, velocity, enable: bool) -> None:
+        """As ReelBridge.set_command: follow `velocity` (m/s) if `enable` and no fault is
+        set; a command above the reel speed limit raises FAULT_OVERSPEED."""
+        velocity = np.asarray(velocity, dtype=float)
+        if enable and np.max(np.abs(velocity)) > self.max_reel_speed * (1 + 1e-9):
+            self.raise_fault(FAULT_OVERSPEED)
+        self.enabled = bool(enable) and self.faults == 0
+        self._apply(velocity if self.enabled else np.zeros_like(self.command))
+        if self.enabled and self.operator_start is None:
+            self.operator_start = self.time
+
+    def raise_fault(self, bits: int) -> None:
+        """Set fault bits; the drives are commanded to stop (they slow down with their own
+        dynamics)."""
+        self.faults |= int(bits)
+        self.enabled = False
+        self._apply(np.zeros_like(self.command))
+
+    def _apply(self, velocity) -> None:
+        if not np.array_equal(velocity, self.command):
+            self.command = velocity.copy()
+            self._command_port.FixValue(self._context, self.command)
+
+    @property
+    def plant_time(self) -> float:
+        """The plant's (and the operator's) clock, s: 0 until the first enabling command."""
+        return self._context.get_time()
+
+    def step(self, dt: float) -> None:
+        """Advance the bridge's clock by dt s; once the operator has started, the plant
+        follows to the last whole plant step at or before the same time."""
+        if dt <= 0:
+            return
+        self.time += dt
+        if self.operator_start is None:
+            return
+        # Whole steps counted in integers: the clock's sums of wall-clock intervals would
+        # otherwise land a hair either side of a step.
+        steps = math.floor((self.time - self.operator_start) / self._h + 1e-6)
+        if steps * self._h > self.plant_time:
+            self._simulator.AdvanceTo(steps * self._h)
+            self._observe()
+
+    def _observe(self) -> None:
+        # The plant's ground truth now (systems.dynamic_plant.ground_truth_now, read directly:
+        # this runs every tick).
+        step = self._step_port.Eval(self._cables_context)
+        T = step[self._tensions]
+        self.ticks += 1
+        self.min_tension = min(self.min_tension, float(T.min()))
+        self.max_tension = max(self.max_tension, float(T.max()))
+        self.slack_ticks += step[self._slack] > 0.5
+        r, p, y = (float(a) for a in step[self._rpy])
+        # The angle of R = Rz(y) Ry(p) Rx(r) from level: acos((trace R - 1) / 2).
+        trace = (math.cos(y) * math.cos(p) + math.sin(y) * math.sin(p) * math.sin(r)
+                 + math.cos(y) * math.cos(r) + math.cos(p) * math.cos(r))
+        self.max_tilt = max(self.max_tilt, math.acos(max(-1.0, min(1.0, (trace - 1) / 2))))
+
+    def force(self) -> np.ndarray:
+        """The force sample, N: the operator's force on the true platform (the plant's
+        measured_force), saturated at the link's range like a real ADC."""
+        f = self._force_port.Eval(self._plant_context)
+        return np.clip(f, -MAX_FORCE, MAX_FORCE)
+
+    def summary(self) -> str:
+        """What the cables went through: tension range, slack ticks per cable, tilt."""
+        slack = ", ".join(f"{i + 1}:{int(n)}" for i, n in enumerate(self.slack_ticks) if n)
+        return (f"dynamic plant over {self.ticks} ticks: tensions {self.min_tension:.2f}.."
+                f"{self.max_tension:.2f} N, slack ticks per cable {slack or 'none'}, largest "
+                f"tilt {math.degrees(self.max_tilt):.2f} deg")
+
+
 @dataclasses.dataclass(frozen=True)
 class ReceivedCommand:
     """A command as the emulator read it: `time` is the bridge clock when it was read, s;
@@ -246,6 +419,9 @@ class ReelBridgeServer:
         self._session_commands = 0
         self._session_rejected = {}
         self._fault_session = None   # the session in which the fault plan took effect
+        # Compute time of each tick (reading commands, stepping the plant, sending the
+        # status), s: the last COMPUTE_WINDOW ticks.
+        self.compute = collections.deque(maxlen=COMPUTE_WINDOW)
         self.counters = {"statuses_sent": 0, "statuses_dropped": 0, "commands_received": 0,
                          "commands_dropped": 0, "commands_foreign": 0, "late_ticks": 0,
                          "sessions": 0,
@@ -259,6 +435,15 @@ class ReelBridgeServer:
     @property
     def faults(self) -> FaultPlan:
         return self._faults
+
+    def compute_summary(self) -> str:
+        """Compute per tick over the last COMPUTE_WINDOW ticks: p50, p99 and max, ms."""
+        if not self.compute:
+            return "compute per tick: no ticks"
+        c = 1e3 * np.asarray(self.compute)
+        return (f"compute per tick p50 {np.percentile(c, 50):.3f} / p99 "
+                f"{np.percentile(c, 99):.3f} / max {c.max():.3f} ms over {c.size} ticks "
+                f"(period {self.period * 1e3:g} ms)")
 
     @property
     def commands_lost(self) -> int:
@@ -284,7 +469,8 @@ class ReelBridgeServer:
         last = 0.0
         deadline = self.start_wall
         while not self._stop.is_set():
-            now = time.monotonic() - self.start_wall
+            tick_start = time.monotonic()
+            now = tick_start - self.start_wall
             if duration is not None and now >= duration:
                 break
             with self._lock:
@@ -303,6 +489,7 @@ class ReelBridgeServer:
                     self.bridge.raise_fault(FAULT_COMMAND_TIMEOUT)
                 active = self._fault_active(now)
                 self._send_status(now, active)
+            self.compute.append(time.monotonic() - tick_start)
             self.tick += 1
             deadline += self.period
             pause = deadline - time.monotonic()
@@ -545,8 +732,13 @@ def _parser() -> argparse.ArgumentParser:
                    "controller's refusal to enable on lengths that do not fit the robot")
     g.add_argument("--force", nargs=3, type=float, metavar=("FX", "FY", "FZ"),
                    help="constant operator force, base frame, N (overrides the scenario's)")
-    g.add_argument("--time-constant", type=float, default=0.02,
-                   help="reel velocity lag, s (default: 0.02)")
+    g.add_argument("--plant", choices=("kinematic", "dynamic"), default="kinematic",
+                   help="kinematic: reels with a first-order lag (default); dynamic: the "
+                   "scenario's robot with mass, elastic cables, drive friction and the "
+                   "operator (plant: !DynamicReels; its settings from the scenario's plant "
+                   "when that is one)")
+    g.add_argument("--time-constant", type=float, default=None,
+                   help="reel velocity lag, s (default: 0.02; kinematic plant only)")
     n = p.add_argument_group("network")
     n.add_argument("--address", default=None,
                    help="address to listen on (default: 127.0.0.1, or the scenario's)")
@@ -624,12 +816,47 @@ def build_server(args, log=None) -> ReelBridgeServer:
                        reorder=args.reorder, corrupt=args.corrupt, freeze=args.freeze,
                        nan=args.nan, stop=args.stop, fault_bits=args.fault_bits,
                        after=args.fault_after)
-    bridge = ReelBridge(robot, lengths, force=force, time_constant=args.time_constant)
+    if args.plant == "dynamic":
+        if args.time_constant is not None:
+            raise ValueError("--time-constant sets the kinematic plant's lag; the dynamic "
+                             "plant's drives come from the robot file's reel_drives section")
+        bridge = DynamicBridge(_dynamic_scenario(args, robot, start),
+                               length_offset=lengths - cable_lengths(robot, np.asarray(
+                                   start, dtype=float)))
+    else:
+        bridge = ReelBridge(robot, lengths, force=force, time_constant=0.02
+                            if args.time_constant is None else args.time_constant)
     return ReelBridgeServer(bridge, address=(args.address or address,
                                              args.port if args.port is not None else port),
                             faults=faults, period=args.period, seed=args.seed,
                             controller=controller, command_timeout=args.command_timeout,
                             record=0, log=log)
+
+
+def _dynamic_scenario(args, robot, start):
+    """The resolved scenario of `--plant dynamic`: the scenario's (or, with --robot, a
+    scenario of that robot), at `start`, with --force as its operator, and a !DynamicReels
+    plant (the scenario's own when it has one)."""
+    import dataclasses as dc
+
+    from .operators import NoOperator, ScriptedOperator
+    from .scenario import DynamicReels, Scenario, load_scenario, resolve_scenario
+
+    if args.scenario:
+        scenario = load_scenario(args.scenario, args.scenario_text)
+    else:
+        scenario = Scenario(robot=args.robot or "paper_7cable", swaps=[],
+                            operator=NoOperator())
+    plant = scenario.plant if isinstance(scenario.plant, DynamicReels) else DynamicReels()
+    operator = scenario.operator
+    if args.force is not None:
+        operator = ScriptedOperator(times=[0.0], forces=[[float(f) for f in args.force]])
+    scenario = dc.replace(scenario, plant=plant, operator=operator,
+                          initial_position=[float(x) for x in start])
+    resolved = resolve_scenario(scenario)
+    if resolved.robot.num_cables != robot.num_cables:  # pragma: no cover - same robot
+        raise ValueError("the scenario's robot changed under --plant dynamic")
+    return resolved
 
 
 def main(argv=None) -> int:
@@ -691,6 +918,9 @@ def _main(argv) -> int:
                 f"session(s)), rejected {_count_by_reason(rejected)}, {c['statuses_sent']} "
                 f"statuses sent, commands lost {server.commands_lost}, faults "
                 f"{server.bridge.faults:#06x}")
+            say(server.compute_summary())
+            if hasattr(server.bridge, "summary"):
+                say(server.bridge.summary())
     return code
 
 

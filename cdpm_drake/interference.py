@@ -433,6 +433,60 @@ def translation_distance_bound(robot) -> np.ndarray:
     return np.sqrt((e * e).sum(axis=1))
 
 
+@_jit
+def _posed_pairs_kernel(reels, attachments, pi, pj, p, R, near, dist_out, crossed_out):
+    """Every pair's distance (N, P) and crossed flag (N, P) along a sequence of platform
+    poses p (N, 3), R (N, 3, 3): cable i from p + R b_i to a_i. The crossing-side memory
+    runs along the sequence with the controller's rule (`_side_rule`), a crossing counting
+    where the line side flips while the segments straddle and d <= near (P,) m."""
+    m, P = attachments.shape[0], pi.shape[0]
+    side = np.zeros(P, dtype=np.int64)  # unknown: the first pose adopts the line sides
+    B = np.empty((m, 3))
+    for k in range(p.shape[0]):
+        for i in range(m):
+            for r in range(3):
+                B[i, r] = p[k, r] + (R[k, r, 0] * attachments[i, 0]
+                                     + R[k, r, 1] * attachments[i, 1]
+                                     + R[k, r, 2] * attachments[i, 2])
+        for q in range(P):
+            i, j = pi[q], pj[q]
+            dist, s, t, dx, dy, dz, nx, ny, nz, D, a, c = _closest(
+                reels[i, 0] - B[i, 0], reels[i, 1] - B[i, 1], reels[i, 2] - B[i, 2],
+                reels[j, 0] - B[j, 0], reels[j, 1] - B[j, 1], reels[j, 2] - B[j, 2],
+                B[i, 0] - B[j, 0], B[i, 1] - B[j, 1], B[i, 2] - B[j, 2])
+            line = _line_side(dx, dy, dz, nx, ny, nz, D, a, c)
+            straddle = 0.0 < s < 1.0 and 0.0 < t < 1.0
+            side[q] = _side_rule(side[q], line, straddle and dist <= near[q])
+            dist_out[k, q] = dist
+            crossed_out[k, q] = side[q] * side[q] == 4
+
+
+def posed_pair_distances(robot, p, R, near=None) -> tuple[np.ndarray, np.ndarray]:
+    """The cable-cable distances of a platform that also rotates: every watched pair (in
+    `robot.pairs` order) at each pose of a sequence, cable i running from p + R b_i to a_i.
+    p (N, 3) m and R (N, 3, 3) (R_WB, base frame) in time order. Returns (distances (N, P) m,
+    crossed (N, P) bool), crossed by the controller's crossing rule (module docstring)
+    applied along the sequence from an uncrossed start, counting a side flip while the
+    segments straddle and d <= near (P,) m (default: any distance). What the dynamic plant's
+    true pose says, beside the controller's translating estimate."""
+    p = np.ascontiguousarray(np.asarray(p, dtype=float).reshape(-1, 3))
+    R = np.ascontiguousarray(np.asarray(R, dtype=float).reshape(-1, 3, 3))
+    if R.shape[0] != p.shape[0]:
+        raise ValueError(f"posed_pair_distances: {p.shape[0]} positions but {R.shape[0]} "
+                         "rotations")
+    i, j = robot.pair_index
+    P = len(i)
+    near = np.full(P, np.inf) if near is None else np.asarray(near, dtype=float).reshape(P)
+    dist = np.empty((p.shape[0], P))
+    crossed = np.zeros((p.shape[0], P), dtype=np.bool_)
+    _posed_pairs_kernel(np.ascontiguousarray(robot.reels, dtype=float),
+                        np.ascontiguousarray(robot.attachments, dtype=float),
+                        np.ascontiguousarray(i, dtype=np.int64),
+                        np.ascontiguousarray(j, dtype=np.int64), p, R,
+                        np.ascontiguousarray(near), dist, crossed)
+    return dist, crossed
+
+
 def initial_side(robot, p) -> np.ndarray:
     """The crossing-side memory at start (P,) int8 in {-1, 0, +1}: the sign of each pair's
     line signed distance at p (0 where undefined). Assumes no pair starts crossed."""

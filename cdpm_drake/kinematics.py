@@ -148,13 +148,13 @@ def forward_kinematics(robot: Robot, lengths, p_guess=None, tol: float = 1e-10,
         cable = int(np.argmax(np.abs(r[k])))
         raise KinematicsError(
             f"cable lengths are inconsistent with robot {robot.name!r}: the best-fit platform "
-            f"position {np.round(p[k], 6).tolist()} m leaves a residual of {worst[k]:.3g} m "
-            f"on cable {cable + 1} (allowed {max_residual:g} m)")
+            f"position {np.round(p[k], 6).tolist()} m leaves a residual of "
+            f"{_mm(worst[k])} on cable {cable + 1} (allowed {_mm(max_residual)})")
     if not converged.all():
         k = int(np.argmin(converged))
         raise KinematicsError(
             f"forward kinematics did not converge in {max_iterations} iterations "
-            f"(residual {worst[k]:.3g} m, last position {p[k].tolist()} m)")
+            f"(residual {_mm(worst[k])}, last position {p[k].tolist()} m)")
     return p[0] if single else p
 
 
@@ -205,6 +205,12 @@ def gauss_newton_warm(offsets, L, p_guess, tol, max_residual, max_iterations, ou
             out[0], out[1], out[2] = px, py, pz
             return True
     return False
+
+
+def _mm(metres: float) -> str:
+    """A length for a message, in mm with enough digits that a value just above a limit
+    does not print as the limit (0.0200312 m -> '20.031 mm', never '0.02 m')."""
+    return f"{1000.0 * float(metres):.4g} mm" if metres < 1e-3 else f"{1000.0 * float(metres):.3f} mm"
 
 
 def condition_number(robot: Robot, p) -> float:
@@ -258,6 +264,62 @@ def simulated_reel_step_stacked(offsets, reel, x, out):
     [time_step s, lag factor, max_reel_speed m/s]."""
     m = offsets.shape[0]
     return simulated_reel_step(offsets, reel[0], reel[1], reel[2], x[:m], x[m:], out)
+
+
+# The cable-length loop's memory after the stacked inputs [p, v, lengths] of
+# `length_loop_tick`: the commanded position p_d (3, m), the start's length offsets delta
+# (m, m) and a started flag (1).
+def length_loop_sizes(m: int) -> dict:
+    """Sizes of `length_loop_tick`'s input x and output out, and where its memory sits."""
+    return {"inputs": 6 + m, "memory": m + 4, "x": 2 * m + 10, "out": 3 * m + 4}
+
+
+@_jit
+def length_loop_tick(offsets, gain, time_step, x, out):
+    """The Jacobian block's tick (eq. 3) with the cable-length loop (beyond the paper):
+
+        l_dot = J(p_hat) v + K_l (l_d - l),   l_d = lengths(p_d) + delta.
+
+    x (2 m + 10,) = [p_hat (3, m: the forward kinematics' estimate), v (3, m/s: the velocity
+    command), l (m, m: the measured lengths), memory: p_d (3, m), delta (m, m), started (1)].
+    out (3 m + 4,) = [l_dot (m, m/s), l_d (m, m), the next memory (m + 4)].
+
+    The commanded lengths l_d are those of a rigid platform at the commanded position p_d,
+    plus the offsets delta = l - lengths(p_hat) latched at the first tick (started == 0), so
+    the loop starts with no error whatever the encoders' zero and the cables' stretch. p_d
+    advances as ideal reels would move the platform under the feedforward J v: the lengths
+    of p_d plus time_step J v, fitted back to a rigid platform (the least squares of the
+    forward kinematics). So l_d stays a set of lengths some pose has (a loop fed lengths no
+    pose has would stretch the cables against each other), and on ideal reels l == l_d to
+    round-off: the loop corrects only what the reels did not do (lag, friction, stretch).
+    gain K_l in 1/s (0: the paper's open loop), time_step in s."""
+    m = offsets.shape[0]
+    started = x[2 * m + 9] != 0.0
+    for k in range(3):
+        out[2 * m + k] = x[6 + m + k] if started else x[k]
+    pdx, pdy, pdz = out[2 * m], out[2 * m + 1], out[2 * m + 2]
+    target = out[m:2 * m]  # scratch until l_d is written over it below
+    for i in range(m):
+        # Feedforward at the estimate (eq. 3).
+        xx, yy, zz = x[0] + offsets[i, 0], x[1] + offsets[i, 1], x[2] + offsets[i, 2]
+        n = math.sqrt(xx * xx + yy * yy + zz * zz)
+        feedforward = (xx * x[3] + yy * x[4] + zz * x[5]) / n
+        xx, yy, zz = pdx + offsets[i, 0], pdy + offsets[i, 1], pdz + offsets[i, 2]
+        rigid = math.sqrt(xx * xx + yy * yy + zz * zz)
+        delta = x[9 + m + i] if started else x[6 + i] - rigid
+        out[2 * m + 3 + i] = delta
+        out[i] = feedforward + gain * (rigid + delta - x[6 + i])
+        target[i] = rigid + time_step * feedforward
+    p_next = out[2 * m:2 * m + 3]  # a view: no allocation per tick
+    # gauss_newton_warm reads its guess before it writes: the guess may be its output.
+    if not gauss_newton_warm(offsets, target, p_next, 1e-10, np.inf, 8, p_next):
+        p_next[0] = pdx + time_step * x[3]
+        p_next[1] = pdy + time_step * x[4]
+        p_next[2] = pdz + time_step * x[5]
+    for i in range(m):
+        xx, yy, zz = pdx + offsets[i, 0], pdy + offsets[i, 1], pdz + offsets[i, 2]
+        out[m + i] = math.sqrt(xx * xx + yy * yy + zz * zz) + out[2 * m + 3 + i]
+    out[3 * m + 3] = 1.0
 
 
 @_jit

@@ -44,9 +44,10 @@ class ForceProfile:
     """A piecewise-linear force table (t_k, F_k); held at the end values outside the table."""
 
     def __init__(self, times, forces, *, field: str = "operator",
-                 values: tuple[str, str] = ("forces", "[Fx, Fy, Fz] row (N)")):
+                 values: tuple[str, str] = ("forces", "[Fx, Fy, Fz] row (N)"), rows=None):
         """`values` names the rows' field and what a row is, for messages (the spring hand's
-        rows are waypoints)."""
+        rows are waypoints). `rows`: where each row comes from, for messages (a CSV's
+        "'file' line 7"); default `<field>.times[k]`."""
         name, row = values
         t = np.asarray(times, dtype=float)
         f = np.asarray(forces, dtype=float)
@@ -56,8 +57,16 @@ class ForceProfile:
         if f.shape != (t.size, 3):
             raise OperatorError(f"{field}.{name} must have one {row} per time; "
                                 f"got shape {f.shape} for {t.size} times")
-        if not (np.all(np.isfinite(t)) and np.all(np.isfinite(f))):
-            raise OperatorError(f"{field}: times and {name} must be finite numbers")
+        # Where each row is, as messages name it: "operator.path: 'f.csv' line 7", or
+        # "operator.times[3], operator.forces[3]".
+        self.rows = ([f"{field}: {r}" for r in rows] if rows is not None
+                     else [f"{field}.times[{k}], {field}.{name}[{k}]" for k in range(t.size)])
+        bad = ~(np.isfinite(t) & np.all(np.isfinite(f), axis=1))
+        if bad.any():
+            k = int(np.argmax(bad))
+            raise OperatorError(f"{self.rows[k]}: the time and the {row} must be finite "
+                                f"numbers, got t = {float(t[k])!r} s, "
+                                f"{[float(x) for x in f[k]]!r}")
         if np.any(np.diff(t) <= 0):
             k = int(np.argmax(np.diff(t) <= 0))
             raise OperatorError(f"{field}.times must increase strictly: times[{k + 1}] = "
@@ -127,19 +136,29 @@ def load_force_csv(path, *, field: str = "operator.path") -> ForceProfile:
     if header[:4] != want:
         raise OperatorError(f"{field}: force file {str(path)!r} must start with the header "
                             f"{','.join(want)}, got {','.join(rows[0])!r}")
-    data = []
+    data, lines = [], []
     for n, row in enumerate(rows[1:], start=2):
+        if not any(cell.strip() for cell in row):
+            continue  # a blank line (a trailing newline too many)
+        where = f"{field}: {str(path)!r} line {n}"
         try:
             if len(row) < 4:  # a short row would otherwise surface as a shape error
                 raise ValueError
-            data.append([float(x) for x in row[:4]])
+            values = [float(x) for x in row[:4]]
         except ValueError:
-            raise OperatorError(f"{field}: {str(path)!r} line {n}: not four numbers: "
-                                f"{row!r}") from None
+            raise OperatorError(f"{where}: not four numbers: {row!r}") from None
+        if not all(math.isfinite(x) for x in values):
+            raise OperatorError(f"{where}: t, fx, fy, fz must be finite numbers, got {row!r}")
+        if data and not values[0] > data[-1][0]:
+            raise OperatorError(f"{where}: times must increase strictly: t = {values[0]!r} s "
+                                f"follows t = {data[-1][0]!r} s on line {lines[-1]}")
+        data.append(values)
+        lines.append(n)
     if not data:
         raise OperatorError(f"{field}: force file {str(path)!r} has no data rows")
     arr = np.array(data)
-    return ForceProfile(arr[:, 0], arr[:, 1:], field=field)
+    return ForceProfile(arr[:, 0], arr[:, 1:], field=field,
+                        rows=[f"{str(path)!r} line {n}" for n in lines])
 
 
 class SpringHand:
@@ -193,6 +212,14 @@ def operator_force_on_state(kind, times, rows, params, t, state, m):
     m, v at m + 3, the force written at 2 m + 6, for m cables)."""
     operator_force_into(kind, times, rows, params, t, state[m:m + 3], state[m + 3:m + 6],
                         state[2 * m + 6:2 * m + 9])
+
+
+@_jit
+def operator_force_at(kind, times, rows, params, t, x, ip, iv, out, io):
+    """`operator_force_into` on p = x[ip:ip + 3], v = x[iv:iv + 3], the force written to
+    out[io:io + 3] (the dynamic plant's step: systems/dynamic_plant.py)."""
+    operator_force_into(kind, times, rows, params, t, x[ip:ip + 3], x[iv:iv + 3],
+                        out[io:io + 3])
 
 
 @_jit

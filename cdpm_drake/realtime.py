@@ -5,9 +5,41 @@ streamed to `DIR/ticks.bin` as the run goes (nothing but the last few unflushed 
 the process is killed); at the end it is converted to `DIR/log.npz` (docs/LOG_FORMAT.md). Any
 way the run ends (its duration, Ctrl-C, SIGTERM, a reel fault, any error) zero reel velocity
 with enable off is sent before anything else.
+
+Nothing that can take milliseconds happens inside a tick. A tick is the work Drake does from
+reading the bridge (the discrete updates at t_k) to sending the command (the publishes at
+t_k+1), back to back; the loop below advances `step` s (10 ticks) per AdvanceTo and does its
+own work between two AdvanceTo calls, which return right after a tick's command went out,
+about one period minus that tick's compute (~1.8 ms) before the next tick is due:
+
+* file I/O: the tick log's rows are copied into blocks of memory allocated before the run;
+  a writer thread writes full blocks to the file (its header too), so the tick thread never
+  calls the file system (hardware/tick_log.py);
+* printing: the live status line is formatted between steps and handed to a thread of its
+  own (`_StatusPump`), so a terminal or a pipe that blocks holds up that thread only (lines
+  are dropped meanwhile, never queued);
+* allocation that grows: no list, log or buffer grows during the run (the tick log's pool
+  is fixed and touched when it is created); a tick's temporaries are freed by reference
+  counting as it goes;
+* garbage collection: the build's garbage is collected and what survives frozen before the
+  reels are enabled (hardware.reels.start_realtime); the automatic collector is off for the
+  whole loop (a collection would run inside whichever tick allocated past its threshold);
+  the loop collects the young generations itself between steps, when the allocation count
+  says the collector would have, and the collector is back on at the end
+  (`_collector_between_steps`);
+* the live 3D view (`on_view`, `--meshcat`) is also drawn between steps; it takes
+  milliseconds, which delays the next tick (the bridge's statuses wait in the socket): a
+  rehearsal feature, not for the robot.
+
+Measured (scripts/soak_realtime.py; README, "On the robot", point 4): with this, a tick comes
+late only when the host holds the process's virtual CPU (a higher-priority sentinel thread on
+that CPU is late by the same amount every time); a bridge silenced that way is what the
+watchdog's hold and resume (hardware/reels.py, `resume_within`) rides out.
 """
 
+import contextlib
 import dataclasses
+import gc
 import signal
 import threading
 from pathlib import Path
@@ -17,7 +49,7 @@ from pydrake.systems.analysis import Simulator
 
 from .diagram import LOGGED, BuildOptions, build_diagram
 from .scenario import (DynamicReels, ResolvedScenario, Scenario, ScenarioError, SimulatedReels,
-                       resolve_scenario, scenario_to_yaml)
+                       resolve_scenario, write_run_scenario)
 from .simulation import assemble_log, mark_ending, tick_targets
 
 
@@ -43,6 +75,78 @@ class RunResult:
     enabled: bool = True
 
 
+class _StatusPump:
+    """Calls `status(line)` from a thread of its own, so that printing (to a terminal or a
+    pipe that may block) never holds up the control loop. One line waits at most: a newer
+    line replaces it (counted in `dropped`). An exception in `status` stops the pump."""
+
+    def __init__(self, status):
+        self._status = status
+        self._pending = None
+        self._closed = False
+        self._ready = threading.Condition()
+        self.dropped = 0
+        self.error = None
+        self._thread = threading.Thread(target=self._run, name="status-line", daemon=True)
+        self._thread.start()
+
+    def put(self, line: str) -> None:
+        with self._ready:
+            if self._pending is not None:
+                self.dropped += 1
+            self._pending = line
+            self._ready.notify()
+
+    def _run(self) -> None:
+        while True:
+            with self._ready:
+                while self._pending is None and not self._closed:
+                    self._ready.wait()
+                if self._pending is None:
+                    return
+                line, self._pending = self._pending, None
+            try:
+                self._status(line)
+            except Exception as e:  # a closed pipe, a broken callback: stop showing lines
+                self.error = e
+                return
+
+    def close(self, timeout: float = 1.0) -> None:
+        """Show the pending line, then stop (waiting `timeout` s at most for a blocked
+        `status`)."""
+        with self._ready:
+            self._closed = True
+            self._ready.notify()
+        self._thread.join(timeout)
+
+
+@contextlib.contextmanager
+def _collector_between_steps():
+    """Automatic garbage collection off for the block; yields `collect()`, which the loop
+    calls between steps: it collects the young generation(s) when the allocation counts
+    reach the collector's own thresholds (what an automatic collection would have done, in
+    a tick); only the objects that survived since (a tick's temporaries are freed by
+    reference counting), 0.1-0.2 ms for the few hundred the soak saw. Afterwards the frozen
+    objects (start_realtime) go back to the collector and it is on again if it was."""
+    threshold0, threshold1, _ = gc.get_threshold()
+
+    def collect():
+        count0, count1, _ = gc.get_count()
+        if count1 >= threshold1:
+            gc.collect(1)
+        elif count0 >= threshold0:
+            gc.collect(0)
+
+    was_enabled = gc.isenabled()
+    gc.disable()
+    try:
+        yield collect
+    finally:
+        gc.unfreeze()
+        if was_enabled:
+            gc.enable()
+
+
 class _StopRequest:
     """Ctrl-C and SIGTERM set a flag that the run loop checks between short steps; raising
     inside Drake's event loop instead would skip nothing but could leave a half-done tick."""
@@ -53,7 +157,8 @@ class _StopRequest:
 
     def __enter__(self):
         if threading.current_thread() is threading.main_thread():
-            for sig in (signal.SIGINT, signal.SIGTERM):
+            from .interrupt import honoured
+            for sig in filter(honoured, (signal.SIGINT, signal.SIGTERM)):  # ignored stays so
                 self._previous[sig] = signal.signal(sig, self._handle)
         return self
 
@@ -70,9 +175,10 @@ def run(*, scenario: Scenario | ResolvedScenario, out_dir, duration: float | Non
         view_period: float = 0.1) -> RunResult:
     """Run the scenario's diagram at real-time rate 1 against the reel bridge.
 
-    `status(text)` receives a one-line live status every `status_period` s of run time;
-    `on_view(diagram, context)` (a live 3D view) is called every `view_period` s.
-    The loop advances `step` s at a time, so Ctrl-C / SIGTERM stop it within that.
+    `status(text)` receives a one-line live status every `status_period` s of run time,
+    from a thread of its own (the module docstring says why); `on_view(diagram, context)` (a
+    live 3D view) is called every `view_period` s, between steps. The loop advances `step` s
+    at a time, so Ctrl-C / SIGTERM stop it within that.
     """
     from .hardware.reels import ReelFault, start_realtime
 
@@ -100,10 +206,11 @@ def run(*, scenario: Scenario | ResolvedScenario, out_dir, duration: float | Non
     context = simulator.get_context()
     # Written before the run (`cdpm recover` needs it after a kill), once nothing can fail early.
     scenario_path = out / "scenario.yaml"
-    scenario_path.write_text(scenario_to_yaml(dataclasses.replace(scenario, duration=duration)))
+    write_run_scenario(out, resolved, duration=duration)  # with its robot file and CSV
     T = scenario.time_step
     error, ending, enabled = None, "completed", False
-    with _StopRequest() as stop:
+    pump = _StatusPump(status) if status is not None else None
+    with _StopRequest() as stop, _collector_between_steps() as collect:
         try:
             start_realtime(simulator, 1.0)
             enabled = True  # initialisation enables the reels or raises
@@ -114,13 +221,15 @@ def run(*, scenario: Scenario | ResolvedScenario, out_dir, duration: float | Non
                     ending = "interrupted"
                     break
                 simulator.AdvanceTo(target)
+                # Between steps: the next tick is about a period minus its compute away.
                 t = target
-                if status is not None and t >= next_status:
-                    status(_status_line(diagram, context, reels, t))
+                if pump is not None and t >= next_status:
+                    pump.put(_status_line(diagram, context, reels, t))
                     next_status += status_period
                 if on_view is not None and t >= next_view:
                     on_view(diagram, context)
                     next_view += view_period
+                collect()
             if stop.signal is not None:
                 ending = "interrupted"  # also when it came during the last step
         except ReelFault as e:
@@ -129,6 +238,8 @@ def run(*, scenario: Scenario | ResolvedScenario, out_dir, duration: float | Non
             error, ending = e, "fault"
         finally:
             reels.shutdown()  # zero velocity first, whatever happened
+            if pump is not None:
+                pump.close()
             # Each clean-up step on its own: a failing log writer (disk full) must not skip
             # the link report, the socket's release or the conversion of what was written.
             cleanup_errors = []
@@ -244,8 +355,11 @@ def _link_report(reels, context) -> dict:
     link = reels.link
     report = {} if link is None else link.counters.as_dict()
     try:
-        report["commands_lost_at_bridge"] = int(reels.book(
-            reels.GetMyContextFromRoot(context))["commands_lost"])
+        book = reels.book(reels.GetMyContextFromRoot(context))
+        report["commands_lost_at_bridge"] = int(book["commands_lost"])
+        # The watchdog's stops that the bridge answered in time (the run went on).
+        report["watchdog_holds"] = int(book["holds"])
+        report["longest_hold"] = float(book["longest_hold"])
     except Exception:  # the context may be gone after a failed initialisation
         report.setdefault("commands_lost_at_bridge", None)
     return report
@@ -279,6 +393,11 @@ def report_lines(result: RunResult) -> list[str]:
             f"{k.get('commands_lost_at_bridge')}; statuses received {k.get('received', 0)}, "
             f"accepted {k.get('accepted', 0)}, lost {k.get('lost', 0)}, rejected "
             f"{count_by_reason(rejected)}, foreign {k.get('foreign', 0)}")
+        if k.get("watchdog_holds"):
+            lines.append(
+                f"watchdog: stopped the reels {k['watchdog_holds']} time(s) for a silent bridge "
+                f"that answered within resume_within, and resumed (longest stop "
+                f"{1e3 * k['longest_hold']:.1f} ms)")
     if result.log_path is not None:
         lines.append(f"log: {result.log_path} (stream: {result.tick_log_path})")
     else:

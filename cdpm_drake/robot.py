@@ -498,9 +498,11 @@ def load_robot(path: str | Path) -> Robot:
         valid = [f.name for f in dataclasses.fields(RobotSchema)]
         unknown = [k for k in raw if k not in valid]
         # A misspelt required field shows up as both: say both, so the typo is obvious.
+        from .text import did_you_mean
+        hints = "".join(did_you_mean(k, missing) for k in unknown)
         raise RobotError(f"{src}: missing required field(s) {missing}; a robot file needs "
                          f"{list(_REQUIRED)}"
-                         + (f" (unknown field(s) {unknown!r} given)" if unknown else ""))
+                         + (f" (unknown field(s) {unknown!r} given{hints})" if unknown else ""))
     _check_keys(raw, RobotSchema, "", src)
     if not isinstance(raw["workspace"], dict):
         raise RobotError(f"{src}: workspace must be a mapping with fields lower and upper, "
@@ -647,11 +649,18 @@ def _raw_dynamics(raw: dict) -> Dynamics:
 
 
 def _check_keys(raw: dict, schema, prefix: str, src: str) -> None:
+    from .text import did_you_mean, yaml_line
+
     valid = [f.name for f in dataclasses.fields(schema)]
     unknown = [k for k in raw if k not in valid]
     if unknown:
-        raise RobotError(f"{src}: unknown field(s) {[prefix + str(k) for k in unknown]!r}; "
-                         f"valid fields: {[prefix + k for k in valid]}")
+        # The first one's line, and the closest valid name of each.
+        line = yaml_line(prefix.split(".")[:-1] + [str(unknown[0])], filename=src)
+        hints = "".join(did_you_mean(k, valid).replace("'", f"'{prefix}", 1)
+                        for k in unknown)
+        raise RobotError(f"{src}: {f'line {line}: ' if line else ''}unknown field(s) "
+                         f"{[prefix + str(k) for k in unknown]!r}{hints} (valid fields: "
+                         f"{[prefix + k for k in valid]})")
 
 
 def robot_from_schema(schema: RobotSchema, source: str = "<code>") -> Robot:

@@ -15,6 +15,18 @@ def rotation_from_rpy(rpy) -> np.ndarray:
                      [-sp, cp * sr, cp * cr]])
 
 
+def rotations_from_rpy(rpy) -> np.ndarray:
+    """R_WB (N, 3, 3) from rows [roll, pitch, yaw] (N, 3) rad, as `rotation_from_rpy` each."""
+    a = np.asarray(rpy, dtype=float).reshape(-1, 3)
+    cr, sr = np.cos(a[:, 0]), np.sin(a[:, 0])
+    cp, sp = np.cos(a[:, 1]), np.sin(a[:, 1])
+    cy, sy = np.cos(a[:, 2]), np.sin(a[:, 2])
+    return np.stack([
+        np.stack([cy * cp, cy * sp * sr - sy * cr, cy * sp * cr + sy * sr], axis=-1),
+        np.stack([sy * cp, sy * sp * sr + cy * cr, sy * sp * cr - cy * sr], axis=-1),
+        np.stack([-sp, cp * sr, cp * cr], axis=-1)], axis=-2)
+
+
 def rotation_angle(R) -> np.ndarray:
     """The angle (rad) of the rotation R (..., 3, 3) from the identity."""
     R = np.asarray(R, dtype=float)

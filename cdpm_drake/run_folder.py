@@ -5,7 +5,9 @@ run (pointed there when the run starts, so a run killed half-way is the latest; 
 the run writes nothing). `--out DIR` chooses the folder exactly; an existing, non-empty DIR is
 refused unless `--force`, which empties it first (only when it holds a run: log.npz, ticks.bin
 or scenario.yaml, so a mistyped --out cannot wipe an unrelated folder). The folder is created
-only when the run starts and removed again if the run writes nothing. No Drake import.
+only when the run starts and removed again if the run writes nothing. What a run writes there
+(log.npz, scenario.yaml with copies of its robot file and force CSV: scenario.write_run_scenario)
+makes the folder self-contained. No Drake import.
 """
 
 import datetime

@@ -125,6 +125,19 @@ class Sensor:
     noise_std: float = 0.0
 
 
+@dataclasses.dataclass
+class Controller:
+    """Beyond the paper's Fig. 5: how the controller drives the reels."""
+
+    # Gain K_l of the cable-length loop in the Jacobian velocity mapping, 1/s: the reels get
+    # l_dot = J v + K_l (l_d - l), l_d the lengths of the commanded position, l the measured
+    # ones, so the drives' velocity error and stiction do not integrate into length drift
+    # (on a robot with 70 kN cables 1 mm of drift is ~26 N of tension). 0 is the paper's open
+    # loop; on the kinematic plant's ideal reels l == l_d and the loop changes nothing. At
+    # most 1 / time_step (the loop would overshoot within a tick).
+    length_gain: float = 20.0
+
+
 # --- Plants ----------------------------------------------------------------------------------
 
 
@@ -192,8 +205,9 @@ class Scenario:
     # Cable pairs whose platform attachment points are swapped, 1-based (the paper swaps
     # [1, 3] and [5, 7] to provoke interference).
     swaps: list[list[int]] = dataclasses.field(default_factory=list)
-    # Platform start p, base frame, m.
-    initial_position: list[float] = dataclasses.field(default_factory=lambda: [1.77, 3.65, 1.22])
+    # Platform start p, base frame, m; left out (null): the centre of the robot's workspace
+    # box, whichever robot the scenario names (resolve_scenario fills it in).
+    initial_position: typing.Optional[list[float]] = None
     # Simulated time, s.
     duration: float = 10.0
     # Control period, s (500 Hz in the paper).
@@ -202,6 +216,7 @@ class Scenario:
     interference: Interference = dataclasses.field(default_factory=Interference)
     limits: Limits = dataclasses.field(default_factory=Limits)
     wall_force: WallForce = dataclasses.field(default_factory=WallForce)
+    controller: Controller = dataclasses.field(default_factory=Controller)
     # The person at the handle (simulation and the emulator; on the robot, a real person).
     operator: OperatorConfig = dataclasses.field(default_factory=NoOperator)
     sensor: Sensor = dataclasses.field(default_factory=Sensor)
@@ -210,8 +225,9 @@ class Scenario:
     # Seed of every random number generator (sensor noise), for repeatable runs.
     random_seed: int = 0
     # The directory relative paths resolve against; the loader sets it to the scenario
-    # file's directory unless the file names one (as a resolved scenario does).
-    base_dir: str = ""
+    # file's directory. Internal: not written by scenario_to_yaml, not compared (a loaded
+    # scenario's paths are absolute already).
+    base_dir: str = dataclasses.field(default="", compare=False)
 
 
 def scenario_names() -> list[str]:
@@ -263,7 +279,36 @@ def load_resolved_scenario(name_or_path="exp2_interaction",
     if resolved.interference is not None:
         _warn_unreachable_d_u(resolved.robot, resolved.interference)
     _warn_reel_saturation(scenario, resolved.robot)
+    _warn_sensor_range(resolved)
     return resolved
+
+
+def sensor_range_text(sensor: Sensor) -> str:
+    """"axial 100 N, transverse 80 N": the sensor's range, for messages."""
+    return f"axial {sensor.axial_range:g} N, transverse {sensor.transverse_range:g} N"
+
+
+def _warn_sensor_range(resolved) -> None:
+    """Once, before a run: a hand force the operator will apply beyond the sensor's range is
+    clipped by the sensor model (as the real FSE103 saturates), so the controller never sees
+    it. A force table says where; a spring hand, its max_force."""
+    from .operators import ForceProfile, SpringHand
+    from .sensor import beyond_range
+
+    s = resolved.scenario.sensor
+    op = resolved.operator
+    if isinstance(op, ForceProfile):
+        beyond = beyond_range(op.forces, s.axial_axis, s.axial_range, s.transverse_range)
+        if beyond.any():
+            k = int(np.argmax(beyond))
+            _log.warning("%s: the hand force %s N is beyond the sensor's range (%s): the "
+                         "controller sees it clipped (%d of the %d rows are beyond it; the "
+                         "summary counts the clipped ticks)", op.rows[k], op.forces[k].tolist(),
+                         sensor_range_text(s), int(beyond.sum()), len(beyond))
+    elif isinstance(op, SpringHand) and op.F_max > min(s.axial_range, s.transverse_range):
+        _log.warning("operator.max_force %g N is above the sensor's range (%s): a larger hand "
+                     "force is clipped (the summary counts the clipped ticks)", op.F_max,
+                     sensor_range_text(s))
 
 
 def _resolve_paths(scenario: Scenario, base: Path, source: str, base_what: str, *,
@@ -303,14 +348,21 @@ def _warn_reel_saturation(scenario, robot):
     v_max = scenario.limits.max_velocity or robot.limits.max_velocity
     reel = getattr(scenario.plant, "max_reel_speed", None) or robot.limits.max_reel_speed
     if v_max > reel:
-        _log.warning("the platform speed limit %g m/s is above the reel speed limit %g m/s: "
-                     "fast motions will be slowed by the reels", v_max, reel)
+        # Each value says where it comes from: a left-out field takes the robot file's.
+        v_from = ("limits.max_velocity" if scenario.limits.max_velocity else
+                  "default: the robot file's limits.max_velocity")
+        reel_from = ("plant.max_reel_speed" if getattr(scenario.plant, "max_reel_speed", None)
+                     else "default: the robot file's limits.max_reel_speed")
+        _log.warning("the platform speed limit %g m/s (%s) is above the reel speed limit %g "
+                     "m/s (%s): fast motions will be slowed by the reels", v_max, v_from, reel,
+                     reel_from)
 
 
 def _check_yaml_text(source: str, **where) -> None:
     """Check raw YAML against the Scenario schema before yaml_load_typed, whose messages do not
     say which nested field is wrong (`The fields ['mas'] were unknown to the schema`,
-    `could not convert string to float: 'a'`) nor list the valid fields."""
+    `could not convert string to float: 'a'`) nor list the valid fields. A file's message
+    gives the line of the field."""
     from pydrake.common.yaml import yaml_load
 
     try:
@@ -322,7 +374,38 @@ def _check_yaml_text(source: str, **where) -> None:
     try:
         _check_yaml(raw, Scenario, "")
     except ScenarioError as e:
-        raise ScenarioError(f"{source}: {e}") from None
+        raise ScenarioError(f"{source}: {with_line(e, where.get('filename'))}") from None
+
+
+# Fields the loader fills in, not for users to write: accepted, never listed as choices.
+INTERNAL_FIELDS = ("base_dir",)
+
+
+def _field_error(field: str, message: str) -> ScenarioError:
+    """A ScenarioError about the YAML field at `field` (e.g. interference.pairs[0].du)."""
+    error = ScenarioError(message)
+    error.field = field
+    return error
+
+
+def field_keys(field: str) -> list:
+    """`interference.pairs[0].du` -> ["interference", "pairs", 0, "du"] (text.yaml_line's
+    key path)."""
+    import re
+
+    return [int(index) if index else name
+            for name, index in re.findall(r"([^.\[\]]+)|\[(\d+)\]", field)]
+
+
+def with_line(error: Exception, filename=None) -> str:
+    """The message of a _check_yaml error, prefixed with `line N: ` where the file `filename`
+    writes the field it names."""
+    from .text import yaml_line
+
+    field = getattr(error, "field", None)
+    line = (yaml_line(field_keys(field), filename=filename)
+            if filename is not None and field else None)
+    return f"line {line}: {error}" if line is not None else str(error)
 
 
 def _is_number(v) -> bool:
@@ -340,18 +423,22 @@ def _is_number(v) -> bool:
 def _check_yaml(value, schema, field: str) -> None:
     """Raise ScenarioError naming the field, the value and the valid choices where raw YAML
     data `value` does not fit the type `schema`."""
+    from .text import did_you_mean
+
     name = field or "the scenario"
     if dataclasses.is_dataclass(schema):
         if not isinstance(value, dict):
-            raise ScenarioError(f"{name} must be a mapping, got {value!r}")
-        valid = [f.name for f in dataclasses.fields(schema)]
+            raise _field_error(field, f"{name} must be a mapping, got {value!r}")
+        fields = [f.name for f in dataclasses.fields(schema)]
+        valid = [f for f in fields if f not in INTERNAL_FIELDS]
         for key, item in value.items():
             if key == "_tag":
                 continue
-            if key not in valid:
+            if key not in fields:
                 where = f"{field}.{key}" if field else str(key)
-                raise ScenarioError(f"unknown field {where!r}; valid fields"
-                                    f"{' of ' + field if field else ''}: {valid}")
+                raise _field_error(where, f"unknown field {where!r}{did_you_mean(key, valid)} "
+                                          f"(valid fields{' of ' + field if field else ''}: "
+                                          f"{valid})")
         types = typing.get_type_hints(schema)
         for key, item in value.items():
             if key != "_tag":
@@ -371,24 +458,26 @@ def _check_yaml(value, schema, field: str) -> None:
             try:  # an untagged entry is the first member, as yaml_load_typed reads it
                 return _check_yaml(value, args[0], field)
             except ScenarioError as e:
-                raise ScenarioError(_untagged_hint(e, value, args, tags, field)) from None
+                raise _field_error(getattr(e, "field", field),
+                                   _untagged_hint(e, value, args, tags, field)) from None
         if tag not in tags:
-            raise ScenarioError(f"{field}: unknown type {tag!r}; valid {field} types: {tags}")
+            raise _field_error(field, f"{field}: unknown type {tag!r}{did_you_mean(tag, tags)} "
+                                      f"(valid {field} types: {tags})")
         return _check_yaml(value, args[tags.index(tag)], field)
     if origin is list:
         if not isinstance(value, list):
-            raise ScenarioError(f"{name} must be a list, got {value!r}")
+            raise _field_error(field, f"{name} must be a list, got {value!r}")
         for k, item in enumerate(value):
             _check_yaml(item, args[0], f"{field}[{k}]")
         return
     if schema is float and not _is_number(value):
-        raise ScenarioError(f"{name} must be a number, got {value!r}")
+        raise _field_error(field, f"{name} must be a number, got {value!r}")
     if schema is int and not (isinstance(value, int) and not isinstance(value, bool)):
-        raise ScenarioError(f"{name} must be an integer, got {value!r}")
+        raise _field_error(field, f"{name} must be an integer, got {value!r}")
     if schema is bool and not isinstance(value, bool):
-        raise ScenarioError(f"{name} must be true or false, got {value!r}")
+        raise _field_error(field, f"{name} must be true or false, got {value!r}")
     if schema is str and not isinstance(value, str):
-        raise ScenarioError(f"{name} must be a string, got {value!r}")
+        raise _field_error(field, f"{name} must be a string, got {value!r}")
 
 
 def _untagged_hint(e: ScenarioError, value, args, tags, field: str) -> str:
@@ -489,6 +578,16 @@ def interference_params(scenario: Scenario, robot: Robot):
             if value is not None:
                 arrays[key][k] = float(value)
     F_max = float(cfg.F_max) if cfg.F_max is not None else (float(arrays["F_u"].max()) if P else 0.0)
+    # Checked here, field by field, so a message names what the user wrote (the default set,
+    # or a pair's override) rather than the first pair the default reaches.
+    default = {k: f"interference.default.{k}" for k in arrays}
+    _check_logistic_set({k: getattr(cfg.default, k) for k in arrays}, default, "")
+    for n, override in enumerate(cfg.pairs):
+        k = robot.pair_position(int(override.pair[0]), int(override.pair[1]))
+        names = {key: (f"interference.pairs[{n}].{key}" if getattr(override, key) is not None
+                       else default[key]) for key in arrays}
+        _check_logistic_set({key: arrays[key][k] for key in arrays}, names,
+                            f" (pair ({override.pair[0]},{override.pair[1]}))")
     try:
         extra = {} if cfg.gradient_floor is None else {"gradient_floor": cfg.gradient_floor}
         return InterferenceParams(F_max=F_max, pairs=tuple(robot.pairs), **arrays, **extra)
@@ -496,12 +595,36 @@ def interference_params(scenario: Scenario, robot: Robot):
         raise ScenarioError(f"interference: {e}") from None
 
 
+def _check_logistic_set(values: dict, names: dict, pair: str) -> None:
+    """ScenarioError unless d_l, d_u (m), F_u, eps (N) of `values` form a logistic (eqs.
+    26-28: 0 <= d_l < d_u, 0 < eps < F_u / 2); the message names each value by `names` (its
+    field path), with `pair` after the first."""
+    d_l, d_u, F_u, eps = (values[k] for k in ("d_l", "d_u", "F_u", "eps"))
+    for key, value in values.items():
+        if not (isinstance(value, (int, float)) and math.isfinite(value)):
+            raise ScenarioError(f"{names[key]}{pair} must be a finite number, got {value!r}")
+    if d_l < 0:
+        raise ScenarioError(f"{names['d_l']}{pair} must be >= 0 m, got {float(d_l)!r}")
+    if d_u <= d_l:
+        raise ScenarioError(f"{names['d_u']} = {float(d_u)!r} m{pair} must be above "
+                            f"{names['d_l']} = {float(d_l)!r} m")
+    if F_u <= 0:
+        raise ScenarioError(f"{names['F_u']}{pair} must be > 0 N, got {float(F_u)!r}")
+    if not 0 < eps < F_u / 2:
+        raise ScenarioError(f"{names['eps']} = {float(eps)!r} N{pair} must lie in (0, F_u/2) "
+                            f"= (0, {float(F_u) / 2!r}) N, F_u being {names['F_u']} = "
+                            f"{float(F_u)!r} N")
+
+
 @dataclasses.dataclass(frozen=True, eq=False)
 class ResolvedScenario:
     """A scenario checked and resolved once (`resolve_scenario`): what the builder, the runners
     and the views take, so that none of them goes back to the scenario's fields to derive
-    these again. The scenario itself is kept as given."""
+    these again. The scenario is kept as given but for the robot's defaults (initial_position)
+    filled in."""
 
+    # The scenario with what depends on its robot filled in: a left-out initial_position is
+    # the robot's workspace centre.
     scenario: Scenario
     # The robot with the scenario's cable swaps applied.
     robot: Robot
@@ -518,6 +641,11 @@ class ResolvedScenario:
     # How far measured lengths may disagree with the geometry, m: the simulated plant keeps
     # them consistent to round-off; real encoders and cable stretch do not.
     fk_max_residual: float
+    # The fields the scenario left out whose value came from the robot (for messages).
+    defaulted: tuple = ()
+    # The contents of the files the scenario reads, as loaded ({"robot": bytes,
+    # "operator.path": bytes}, scenario_files): what a run folder keeps a copy of.
+    files: dict = dataclasses.field(default_factory=dict)
 
     @property
     def time_step(self) -> float:
@@ -542,9 +670,14 @@ def _resolve(scenario: Scenario, source: str) -> ResolvedScenario:
     robot = scenario_robot(scenario)
     _positive(scenario.duration, "duration")
     _positive(scenario.time_step, "time_step")
+    check_duration(scenario.duration, scenario.time_step, "duration")
     _positive(scenario.admittance.mass, "admittance.mass")
     _positive(scenario.admittance.damping, "admittance.damping")
     p0 = scenario.initial_position
+    defaulted = ()
+    if p0 is None:  # the robot's workspace centre, whichever robot the scenario names
+        scenario = dataclasses.replace(scenario, initial_position=default_start(robot))
+        p0, defaulted = scenario.initial_position, ("initial_position",)
     if len(p0) != 3 or not all(math.isfinite(x) for x in p0):
         raise ScenarioError(f"initial_position must be [x, y, z] in m, got {p0!r}")
     if not robot.workspace.contains(p0):
@@ -569,11 +702,17 @@ def _resolve(scenario: Scenario, source: str) -> ResolvedScenario:
                             f"{s.axial_axis!r}")
     if not (math.isfinite(s.noise_std) and s.noise_std >= 0):
         raise ScenarioError(f"sensor.noise_std must be >= 0 N, got {s.noise_std!r}")
+    gain = scenario.controller.length_gain
+    if not (_is_number(gain) and math.isfinite(float(gain)) and 0 <= float(gain)
+            and float(gain) * scenario.time_step < 1.0):
+        raise ScenarioError(
+            f"controller.length_gain must be a number >= 0 1/s and below 1 / time_step = "
+            f"{1.0 / scenario.time_step:g} 1/s (0: the paper's open loop), got {gain!r}")
     if scenario.wall_force.enabled:
         _positive(scenario.wall_force.margin, "wall_force.margin")
         _positive(scenario.wall_force.max_force, "wall_force.max_force")
     if isinstance(scenario.plant, DynamicReels):
-        check_dynamic_reels(scenario, robot)
+        check_dynamic_reels(scenario, robot, defaulted=defaulted)
     elif not isinstance(scenario.plant, SimulatedReels):
         from .hardware.config import check_hardware_reels
         try:
@@ -600,17 +739,56 @@ def _resolve(scenario: Scenario, source: str) -> ResolvedScenario:
         max_reel_speed=float(_or(getattr(plant, "max_reel_speed", None),
                                  robot.limits.max_reel_speed)),
         fk_max_residual=1e-6 if simulated else float(getattr(plant, "max_length_residual",
-                                                             0.005)))
+                                                             0.005)),
+        defaulted=defaulted,
+        # Read right after the robot and the operator were loaded from them.
+        files={field: path.read_bytes() for field, path in scenario_files(scenario).items()})
+
+
+def check_duration(duration: float, time_step: float, field: str) -> None:
+    """ScenarioError when `duration` (s) is shorter than one tick of `time_step` (s): the run
+    would be the start tick alone."""
+    # A hair of round-off (0.1 / 0.002 = 49.99...) does not make a whole tick shorter.
+    if duration < time_step * (1 - 1e-9):
+        raise ScenarioError(f"{field} {duration!r} s is shorter than one tick (time_step "
+                            f"{time_step!r} s): a run needs at least one tick, e.g. "
+                            f"{field} {time_step!r}")
 
 
 def _or(value, default):
     return default if value is None else value
 
 
-def check_dynamic_reels(scenario: Scenario, robot: Robot):
+def default_start(robot: Robot) -> list[float]:
+    """The start of a scenario that leaves initial_position out: the centre of the robot's
+    workspace box, m, to 12 significant digits (1.35, not the 1.3499999999999999 of
+    (0.3 + 2.4) / 2, in messages and in the scenario.yaml a run writes)."""
+    return [float(f"{x:.12g}") for x in robot.workspace.center]
+
+
+def start_text(scenario: Scenario, robot: Robot, defaulted=()) -> str:
+    """"initial_position [x, y, z] m" for messages, saying "default" when the scenario left
+    it out (`defaulted` names it, or it is None: the robot's workspace centre)."""
+    p0 = scenario.initial_position
+    if p0 is None or "initial_position" in defaulted:
+        centre = default_start(robot) if p0 is None else p0
+        return (f"initial_position {centre!r} m (the default: the centre of the workspace box "
+                f"of robot {robot.name!r})")
+    return f"initial_position {p0!r} m"
+
+
+def _default_note(config, field: str) -> str:
+    """" (default)" when `config`'s field has its dataclass default value."""
+    default = next(f for f in dataclasses.fields(config) if f.name == field)
+    value = (default.default_factory() if default.default_factory is not dataclasses.MISSING
+             else default.default)
+    return " (default)" if getattr(config, field) == value else ""
+
+
+def check_dynamic_reels(scenario: Scenario, robot: Robot, defaulted=()):
     """Check a !DynamicReels plant and its start; returns the start tension distribution
     (tension.Distribution). A start pose no positive tension distribution holds is refused,
-    naming the pose and the cables that would go slack."""
+    naming the pose (and whether it is the default) and the cables that would go slack."""
     from .rotation import rotation_from_rpy
     from .tension import (balancing_rotation, gravity_wrench, stable_time_step,
                           tension_distribution, wrench_matrix)
@@ -632,7 +810,9 @@ def check_dynamic_reels(scenario: Scenario, robot: Robot):
     if cfg.max_reel_speed is not None:
         _positive(cfg.max_reel_speed, "plant.max_reel_speed")
     _positive(cfg.max_length_residual, "plant.max_length_residual")
-    p0 = np.asarray(scenario.initial_position, dtype=float)
+    start = start_text(scenario, robot, defaulted)
+    p0 = np.asarray(scenario.initial_position if scenario.initial_position is not None
+                    else default_start(robot), dtype=float)
     dyn = robot.dynamics
     W, wrench = wrench_matrix(robot, p0, rotation_from_rpy(rpy)), gravity_wrench(dyn.mass)
     if cfg.lock_rotation:  # the lock takes the moments; the cables balance the force
@@ -640,14 +820,13 @@ def check_dynamic_reels(scenario: Scenario, robot: Robot):
     dist = tension_distribution(W, wrench, cfg.min_tension)
     if not dist.feasible:
         cables = [k + 1 for k in dist.slack]
-        msg = (f"initial_position {scenario.initial_position!r} m with plant.initial_rpy "
-               f"{list(rpy)!r} rad: no tension distribution of robot {robot.name!r} holds the "
-               f"platform's {dyn.mass:g} kg with every cable >= plant.min_tension = "
-               f"{cfg.min_tension:g} N; cable(s) {cables} would go slack (the best "
-               f"distribution leaves them at {dist.best_min:.2f} N)")
+        rpy_text = f"plant.initial_rpy {list(rpy)!r} rad{_default_note(cfg, 'initial_rpy')}"
+        msg = (f"{start} with {rpy_text}: no tension distribution of robot {robot.name!r} holds "
+               f"the platform's {dyn.mass:g} kg with every cable >= plant.min_tension = "
+               f"{cfg.min_tension:g} N{_default_note(cfg, 'min_tension')}; cable(s) {cables} "
+               f"would go slack (the best distribution leaves them at {dist.best_min:.2f} N)")
         if dist.residual > 1e-6:
-            msg = (f"initial_position {scenario.initial_position!r} m with plant.initial_rpy "
-                   f"{list(rpy)!r} rad: the cables of robot {robot.name!r} cannot balance the "
+            msg = (f"{start} with {rpy_text}: the cables of robot {robot.name!r} cannot balance the "
                    f"platform's weight at all (force/moment residual {dist.residual:.3g}): "
                    f"their {robot.num_cables} lines of action leave a moment unbalanced; "
                    "plant.lock_rotation: true models the platform as only translating")
@@ -665,7 +844,9 @@ def check_dynamic_reels(scenario: Scenario, robot: Robot):
             f"{robot.name!r} (cables.EA {dyn.EA:g} N, platform.mass {dyn.mass:g} kg): their "
             f"stiffest mode is stable up to {h_max:.3g} s and accurate to half of that; use "
             f"plant.time_step <= {0.5 * h_max:.2g} s (dividing time_step "
-            f"{scenario.time_step:g} s)")
+            f"{scenario.time_step:g} s)"
+            + (f"; {cfg.time_step!r} s is plant.time_step's default"
+               if _default_note(cfg, "time_step") else ""))
     return dist
 
 
@@ -684,7 +865,56 @@ def _warn_unreachable_d_u(robot, params):
 
 
 def scenario_to_yaml(scenario: Scenario) -> str:
-    """The resolved scenario as YAML (written beside every log)."""
+    """The resolved scenario as YAML (written beside every log), without the loader's
+    internal base_dir (a loaded file's paths are resolved already)."""
     from pydrake.common.yaml import yaml_dump_typed
 
-    return yaml_dump_typed(scenario)
+    text = yaml_dump_typed(dataclasses.replace(scenario, base_dir=""))
+    return text.replace("\nbase_dir: ''\n", "\n")
+
+
+# The copies of a scenario's own files in the run folders (write_run_scenario).
+RUN_ROBOT_FILE = "robot.yaml"
+RUN_FORCE_FILE = "force.csv"
+
+
+def scenario_files(scenario: Scenario) -> dict:
+    """{field: Path} of the files the scenario reads, "robot" (a robot file, not a built-in
+    robot's name) and "operator.path" (a CSV operator's), as it resolves them."""
+    from .robot import is_path_like
+
+    base = Path(scenario.base_dir) if scenario.base_dir else None
+    files = {}
+    if is_path_like(scenario.robot):
+        files["robot"] = _under(scenario.robot, base)
+    if isinstance(scenario.operator, CsvOperator) and scenario.operator.path:
+        files["operator.path"] = _under(scenario.operator.path, base)
+    return files
+
+
+def _under(ref: str, base) -> Path:
+    path = Path(ref)
+    return path if path.is_absolute() or base is None else base / path
+
+
+def write_run_scenario(out_dir, scenario, **changes) -> Path:
+    """Write DIR/scenario.yaml, the resolved scenario (with `changes`, e.g. the duration that
+    ran), and copies of the robot file and force CSV it reads, DIR/robot.yaml and
+    DIR/force.csv, which it refers to instead of the originals: the folder can be moved,
+    shared and rerun alone. The copies are of the files as the run loaded them (a
+    ResolvedScenario's `files`), so a rerun into its own folder with --force (which empties
+    it first) still has them. Returns the scenario.yaml path."""
+    resolved = resolve_scenario(scenario)
+    out = Path(out_dir)
+    recorded = dataclasses.replace(resolved.scenario, **changes)
+    names = {"robot": RUN_ROBOT_FILE, "operator.path": RUN_FORCE_FILE}
+    for field, data in resolved.files.items():
+        (out / names[field]).write_bytes(data)
+    if "robot" in resolved.files:
+        recorded = dataclasses.replace(recorded, robot=RUN_ROBOT_FILE)
+    if "operator.path" in resolved.files:
+        recorded = dataclasses.replace(recorded, operator=dataclasses.replace(
+            recorded.operator, path=RUN_FORCE_FILE))
+    path = out / "scenario.yaml"
+    path.write_text(scenario_to_yaml(recorded))
+    return path

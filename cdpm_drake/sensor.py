@@ -34,3 +34,16 @@ def clip_into(f, axis, axial_range, transverse_range, out):
         tx, ty, tz = tx * k, ty * k, tz * k
     axial = min(max(axial, -axial_range), axial_range)
     out[0], out[1], out[2] = axial * ax + tx, axial * ay + ty, axial * az + tz
+
+
+def beyond_range(forces, axis, axial_range, transverse_range) -> np.ndarray:
+    """For forces (..., 3) N: True where the sensor clips it (`clip_into` changes it): the
+    axial component along the unit `axis` beyond +-axial_range, or the transverse part beyond
+    transverse_range in norm. NaN is never beyond."""
+    f = np.asarray(forces, dtype=float)
+    a = np.asarray(axis, dtype=float)
+    a = a / np.linalg.norm(a)
+    axial = f @ a
+    transverse = np.linalg.norm(f - axial[..., None] * a, axis=-1)
+    with np.errstate(invalid="ignore"):
+        return (np.abs(axial) > axial_range) | (transverse > transverse_range)

@@ -14,7 +14,7 @@ from pydrake.systems.analysis import Simulator
 
 from .diagram import build_diagram, logged_signals, reserve_log
 from .scenario import (DynamicReels, ResolvedScenario, Scenario, ScenarioError, SimulatedReels,
-                       resolve_scenario, scenario_to_yaml)
+                       check_duration, resolve_scenario, write_run_scenario)
 
 
 @dataclasses.dataclass
@@ -24,6 +24,9 @@ class SimulationResult:
     wall_time: float
     # The exception that ended the run early, or None.
     error: Exception | None = None
+    # What the plant's ground truth says about a fault (`plant_fault_causes`; "" when the
+    # plant logs none or the run did not fault).
+    diagnosis: str = ""
 
     @property
     def realtime_factor(self) -> float:
@@ -51,6 +54,7 @@ def simulate(*, scenario: Scenario | ResolvedScenario, duration: float | None = 
     duration = scenario.duration if duration is None else float(duration)
     if not (duration > 0 and np.isfinite(duration)):
         raise ValueError(f"duration must be a finite number > 0 s, got {duration!r}")
+    check_duration(duration, scenario.time_step, "duration")
     diagram = build_diagram(resolved) if diagram is None else diagram
     simulator = Simulator(diagram)
     context = simulator.get_mutable_context()
@@ -84,9 +88,68 @@ def simulate(*, scenario: Scenario | ResolvedScenario, duration: float | None = 
         if bar is not None:
             bar.close()
     log = collect_log(diagram, context, resolved, robot)
+    diagnosis = ""
+    if error is not None and not isinstance(error, KeyboardInterrupt):
+        diagnosis = plant_fault_causes(log, resolved)
     mark_ending(log, "completed" if error is None else
-                "interrupted" if isinstance(error, KeyboardInterrupt) else "fault", error)
-    return SimulationResult(log=log, wall_time=wall, error=error)
+                "interrupted" if isinstance(error, KeyboardInterrupt) else "fault", error,
+                diagnosis)
+    return SimulationResult(log=log, wall_time=wall, error=error, diagnosis=diagnosis)
+
+
+# What plant_fault_causes counts as worth naming: a tilt above this, deg; an FK error above
+# this, m.
+NOTABLE_TILT = 1.0
+NOTABLE_FK_ERROR = 0.002
+
+
+def plant_fault_causes(log: dict, resolved: ResolvedScenario) -> str:
+    """Why a run on a plant that logs its ground truth (the dynamic plant) faulted, from the
+    truth at its last tick: slack cables (since when), the platform's tilt (the controller's
+    model assumes a translating platform), how far the controller's position estimate was
+    from the true one, the most stretched cable, and reel commands at the drives' speed
+    limit. "" for a plant without ground truth or an empty log."""
+    if "tensions" not in log or not len(log["time"]):
+        return ""
+    from .rotation import rotation_angle, rotations_from_rpy
+
+    t = log["time"]
+    k = len(t) - 1
+    causes = []
+    slack = np.asarray(log["slack"], dtype=bool)
+    cables = np.flatnonzero(slack[k])
+    if cables.size:
+        since = []
+        for i in cables:
+            taut = np.flatnonzero(~slack[:, i])
+            first = taut[-1] + 1 if taut.size else 0
+            since.append(f"{i + 1} since t = {t[first]:.3f} s")
+        causes.append(f"cable{'s' if cables.size > 1 else ''} "
+                      f"{', '.join(str(i + 1) for i in cables)} slack ({'; '.join(since)})")
+    tilt = float(np.degrees(rotation_angle(rotations_from_rpy(log["rpy_true"][k]))[0]))
+    if tilt > NOTABLE_TILT:
+        causes.append(f"the platform tilted {tilt:.1f} deg (the controller's model keeps it "
+                      "level)")
+    fk_error = float(np.linalg.norm(log["p"][k] - log["p_true"][k]))
+    if fk_error > NOTABLE_FK_ERROR:
+        causes.append(f"the controller's position estimate {1000 * fk_error:.1f} mm from the "
+                      "true position")
+    dyn = resolved.robot.dynamics
+    tensions = np.asarray(log["tensions"][k], dtype=float)
+    if "lengths" in log and dyn is not None and tensions.size:
+        stretch = tensions * np.asarray(log["lengths"][k]) / float(dyn.EA)
+        i = int(np.argmax(stretch))
+        causes.append(f"the most stretched cable {i + 1}: {1000 * stretch[i]:.2f} mm at "
+                      f"{tensions[i]:.1f} N")
+    if "reel_velocity" in log:
+        peak = np.max(np.abs(log["reel_velocity"]), axis=1)
+        limit = resolved.max_reel_speed
+        if peak[k] >= limit:
+            below = np.flatnonzero(peak < limit)
+            first = below[-1] + 1 if below.size else 0
+            causes.append(f"reel commands at the drives' speed limit {limit:g} m/s since "
+                          f"t = {t[first]:.3f} s (scaled down: the platform lags)")
+    return f"the dynamic plant at t = {t[k]:.3f} s: " + "; ".join(causes) if causes else ""
 
 
 def tick_targets(duration: float, time_step: float, chunk: float) -> list[float]:
@@ -98,9 +161,11 @@ def tick_targets(duration: float, time_step: float, chunk: float) -> list[float]
     return [k * time_step for k in ticks if k > 0]
 
 
-def mark_ending(log: dict, ending: str, error: BaseException | None) -> dict:
+def mark_ending(log: dict, ending: str, error: BaseException | None,
+                diagnosis: str = "") -> dict:
     """Add how the run ended (docs/LOG_FORMAT.md): `ending` "completed", "interrupted" or
-    "fault"; for a fault, `fault_time` (the last logged tick, s) and `fault_message`."""
+    "fault"; for a fault, `fault_time` (the last logged tick, s) and `fault_message` (the
+    error, then the plant's `diagnosis` when there is one)."""
     if ending not in ("completed", "interrupted", "fault"):
         raise ValueError(f"ending must be 'completed', 'interrupted' or 'fault', got {ending!r}")
     t = log["time"]
@@ -109,6 +174,8 @@ def mark_ending(log: dict, ending: str, error: BaseException | None) -> dict:
     log["fault_time"] = np.array(float(t[-1]) if fault and len(t) else np.nan)
     message = "" if not fault else (f"{type(error).__name__}: {error}" if error is not None
                                     else "unknown fault")
+    if fault and diagnosis:
+        message += f" ({diagnosis})"
     log["fault_message"] = np.array(message)
     return log
 
@@ -150,6 +217,9 @@ def assemble_log(time_column, signals: dict, scenario: Scenario | ResolvedScenar
             log[key] = np.asarray(log[key]) > 0.5
     log["pairs"] = np.array(robot.pairs, dtype=int).reshape(P, 2)
     params = resolved.interference
+    if "p_true" in log and "rpy_true" in log:
+        log.update(true_pair_distances(robot, log["p_true"], log["rpy_true"],
+                                       None if params is None else params.d_u))
     if params is not None:
         for key in ("d_l", "d_u", "F_u", "eps"):
             log[key] = np.asarray(getattr(params, key), dtype=float)
@@ -167,27 +237,70 @@ def assemble_log(time_column, signals: dict, scenario: Scenario | ResolvedScenar
     return log
 
 
-def save_log(log: dict, out_dir, scenario: Scenario) -> Path:
-    """Write DIR/log.npz and the resolved scenario DIR/scenario.yaml; returns the npz path.
-    The scenario's duration is set to what the log covers, so the file reproduces the run."""
-    if len(log["time"]):
-        scenario = dataclasses.replace(scenario, duration=float(log["time"][-1]))
+# Where no d_u applies (interference off), a true crossing counts within this distance, m:
+# a real one happens at d ~ 0, so any bound well above a tick's motion finds it.
+TRUE_CROSSING_NEAR = 0.1
+
+
+def true_pair_distances(robot, p_true, rpy_true, d_u=None) -> dict:
+    """The ground truth of a plant that logs its true pose (the dynamic plant): every watched
+    pair's distance along the run from the true, rotated platform, and where the pair was
+    truly crossed (the controller's crossing rule on the true geometry, with each pair's d_u,
+    else TRUE_CROSSING_NEAR). Computed from the log after the run, never wired to the
+    controller. {"pair_distances_true": (T, P) m, "crossed_true": (T, P) bool}."""
+    from .interference import posed_pair_distances
+    from .rotation import rotations_from_rpy
+
+    near = (np.full(robot.num_pairs, TRUE_CROSSING_NEAR) if d_u is None
+            else np.asarray(d_u, dtype=float))
+    dist, crossed = posed_pair_distances(robot, p_true, rotations_from_rpy(rpy_true), near)
+    return {"pair_distances_true": dist, "crossed_true": crossed}
+
+
+def save_log(log: dict, out_dir, scenario: Scenario | ResolvedScenario) -> Path:
+    """Write DIR/log.npz and the resolved scenario DIR/scenario.yaml, with copies of the
+    robot file and force CSV it reads (scenario.write_run_scenario: the folder reruns alone);
+    returns the npz path. The scenario's duration is set to what the log covers, so the file
+    reproduces the run."""
+    changes = {"duration": float(log["time"][-1])} if len(log["time"]) else {}
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     path = out / "log.npz"
     np.savez_compressed(path, **log)
-    (out / "scenario.yaml").write_text(scenario_to_yaml(scenario))
+    write_run_scenario(out, scenario, **changes)
     return path
 
 
 def summary_rows(log: dict):
-    """Per watched pair that was ever active: (pair, min distance in mm to 0.01 mm as text,
-    ticks active, crossed)."""
+    """Per watched pair that was ever active (or, with a true pose logged, truly within its
+    d_u or crossed): (pair, min distance in mm to 0.01 mm as text, ticks active, crossed),
+    and with a true pose also the true minimum and whether the pair truly crossed, after the
+    controller's (`summary_header` names the columns)."""
     rows = []
+    truth = "pair_distances_true" in log
+    T = len(log["time"])
     for k, (i, j) in enumerate(log["pairs"]):
         active = log["active"][:, k]
         crossed = log["crossed"][:, k]
-        if active.any() or crossed.any():
+        show = active.any() or crossed.any()
+        if truth and T:
+            d_true = log["pair_distances_true"][:, k]
+            d_u = float(log["d_u"][k]) if np.isfinite(log["d_u"][k]) else -np.inf
+            show = show or bool(d_true.min() <= d_u) or bool(log["crossed_true"][:, k].any())
+        if show and T:
             d_min = 1000 * float(log["pair_distances"][:, k].min())
-            rows.append((f"({i},{j})", f"{d_min:.2f}", int(active.sum()), int(crossed.any())))
+            row = (f"({i},{j})", f"{d_min:.2f}", int(active.sum()), int(crossed.any()))
+            if truth:
+                row += (f"{1000 * float(d_true.min()):.2f}",
+                        int(log["crossed_true"][:, k].any()))
+            rows.append(row)
     return rows
+
+
+def summary_header(log: dict) -> list[str]:
+    """The column names of `summary_rows(log)`."""
+    head = ["pair", "min distance (mm)", "ticks active", "crossed"]
+    if "pair_distances_true" in log:
+        head = ["pair", "min distance, controller (mm)", "ticks active", "crossed",
+                "min distance, true (mm)", "truly crossed"]
+    return head

@@ -32,8 +32,8 @@ from pathlib import Path
 import numpy as np
 
 from .robot import resolve_named_yaml
-from .scenario import (Scenario, ScenarioError, check_scenario, interference_params,
-                       load_scenario, resolve_scenario_path, scenario_robot, scenario_to_yaml)
+from .scenario import (INTERNAL_FIELDS, Scenario, ScenarioError, interference_params, load_resolved_scenario, resolve_scenario,
+                       resolve_scenario_path, scenario_robot, scenario_to_yaml)
 
 SWEEPS_DIR = Path(__file__).resolve().parent / "sweeps"
 
@@ -113,7 +113,8 @@ def load_sweep_file(name_or_path) -> tuple[SweepFile, Path]:
     """The typed sweep file (a shipped sweep's name or a path) and its path."""
     from pydrake.common.yaml import yaml_dump, yaml_load, yaml_load_typed
 
-    from .scenario import _check_yaml  # the scenario's checker: same wording for both files
+    # The scenario's checker: same wording for both files.
+    from .scenario import _check_yaml, with_line
 
     path = resolve_sweep_path(name_or_path)
     try:
@@ -126,7 +127,7 @@ def load_sweep_file(name_or_path) -> tuple[SweepFile, Path]:
     try:
         _check_yaml(raw, SweepFile, "")
     except ScenarioError as e:
-        raise SweepError(f"{path}: {e}") from None
+        raise SweepError(f"{path}: {with_line(e, str(path))}") from None
     typed = copy.deepcopy(raw)
     for key in _RAW_FIELDS:
         typed.pop(key, None)
@@ -149,7 +150,9 @@ def load_sweep_file(name_or_path) -> tuple[SweepFile, Path]:
     sweep.variants = variants
     for k, (axis, raw_axis) in enumerate(zip(sweep.axes, raw.get("axes") or [])):
         axis.values = raw_axis.get("values") or []
-        _check_axis(axis, f"{path}: axes[{k}]")
+        _check_axis(axis, f"{path}: axes[{k}]",
+                    given=[key for key in ("values", "linspace", "geomspace")
+                           if raw_axis.get(key) is not None])
     if sweep.random is not None:
         _check_random(sweep.random, f"{path}: random")
     for k, s in enumerate(sweep.seeds):
@@ -165,15 +168,19 @@ def load_sweep_file(name_or_path) -> tuple[SweepFile, Path]:
     return sweep, path
 
 
-def _check_axis(axis: Axis, where: str) -> None:
+def _check_axis(axis: Axis, where: str, given=None) -> None:
+    """`given`: the keys of values, linspace, geomspace the file wrote (default: those set)."""
     if not axis.field:
         raise SweepError(f"{where}.field must name a scenario field, e.g. "
                          "interference.default.d_u")
     parse_field_path(axis.field, where=f"{where}.field")
-    given = [k for k in ("values", "linspace", "geomspace") if getattr(axis, k)]
+    if given is None:
+        given = [k for k in ("values", "linspace", "geomspace") if getattr(axis, k)]
     if len(given) != 1:
         raise SweepError(f"{where} ({axis.field}) needs exactly one of values, linspace, "
                          f"geomspace; got {given or 'none'}")
+    if given == ["values"] and not axis.values:
+        raise SweepError(f"{where}.values ({axis.field}) is empty: list at least one value")
     if axis.values:
         if not isinstance(axis.values, list):
             raise SweepError(f"{where}.values must be a list, got {axis.values!r}")
@@ -285,10 +292,11 @@ def _put(node: dict, obj, segs: list[_Seg], value, path: str) -> None:
     if not dataclasses.is_dataclass(obj):
         raise SweepError(f"field {path!r}: {seg.name!r} is below a value that is not a "
                          f"mapping ({obj!r})")
-    names = [f.name for f in dataclasses.fields(obj)]
+    names = [f.name for f in dataclasses.fields(obj) if f.name not in INTERNAL_FIELDS]
     if seg.name not in names:
-        raise SweepError(f"field {path!r}: unknown field {seg.name!r}; valid fields there: "
-                         f"{names}")
+        from .text import did_you_mean
+        raise SweepError(f"field {path!r}: unknown field {seg.name!r}"
+                         f"{did_you_mean(seg.name, names)} (valid fields there: {names})")
     schema = typing.get_type_hints(type(obj))[seg.name]
     child = getattr(obj, seg.name)
     if not seg.selectors:
@@ -374,7 +382,8 @@ def apply_overlay(scenario: Scenario, overlay: dict) -> Scenario:
 
 
 def _apply(scenario: Scenario, overlay: dict):
-    """apply_overlay, also returning check_scenario's robot (None for an empty overlay)."""
+    """apply_overlay, also returning the result's resolve_scenario (None for an empty
+    overlay)."""
     from pydrake.common.yaml import yaml_dump, yaml_load_typed
 
     from .scenario import _check_yaml, _explain
@@ -386,7 +395,7 @@ def _apply(scenario: Scenario, overlay: dict):
         result = yaml_load_typed(schema=Scenario, data=yaml_dump(overlay), defaults=scenario)
     except Exception as e:
         raise ScenarioError(_explain(e)) from None
-    return result, check_scenario(result)
+    return result, resolve_scenario(result)
 
 
 # --- Variants --------------------------------------------------------------------------------
@@ -412,7 +421,7 @@ class Variant:
     scenario_hash: str
 
     def label(self) -> str:
-        parts = [f"{k}={_cell(v)}" for k, v in self.values.items()]
+        parts = [f"{k}={_shown(v)}" for k, v in self.values.items()]
         if self.overlay is not None:
             parts.append(f"variant={_flow(self.overlay)}")
         parts.append(f"random_seed={self.random_seed}")
@@ -447,9 +456,13 @@ def load_sweep(name_or_path, *, on_warning=None) -> Sweep:
                          "relative to the sweep file)")
     try:
         resolve_scenario_path(base_path)
-        base = load_scenario(base_path)
+        resolved = load_resolved_scenario(base_path)
     except ScenarioError as e:
         raise SweepError(f"{path}: base: {e}") from None
+    base = resolved.scenario
+    if "initial_position" in resolved.defaulted:
+        # Left out: each variant starts at its own robot's centre (an axis may change robots).
+        base = dataclasses.replace(base, initial_position=None)
     try:
         base = apply_overlay(base, sweep_file.overlay)
     except ScenarioError as e:
@@ -533,7 +546,7 @@ def _resolve_variant(index, base, values, overlay, seed, path) -> Variant:
     coords = {"values": values, "overlay": overlay, "random_seed": seed}
     run = "r" + hashlib.sha1(json.dumps(coords, sort_keys=True, default=repr).encode()
                              ).hexdigest()[:10]
-    shown = ", ".join([f"{k}={_cell(v)}" for k, v in values.items()]
+    shown = ", ".join([f"{k}={_shown(v)}" for k, v in values.items()]
                       + ([f"variant={_flow(overlay)}"] if overlay is not None else [])
                       + ([f"random_seed={seed}"] if seed is not None else []))
     where = f"{path}: variant {index + 1} (run {run}: {shown or 'the base'})"
@@ -542,12 +555,17 @@ def _resolve_variant(index, base, values, overlay, seed, path) -> Variant:
         if overlay is not None:
             scenario = apply_overlay(scenario, overlay)
         assign = {}
+        if scenario.initial_position is None and any(
+                f.startswith("initial_position") for f in values):
+            # One coordinate of a left-out start edits the robot's centre.
+            scenario = resolve_scenario(scenario).scenario
         for field, value in values.items():
             _put(assign, scenario, parse_field_path(field), value, field)
         if seed is not None:
             assign["random_seed"] = seed
-        scenario, robot = _apply(scenario, assign)
-        robot = robot or check_scenario(scenario)
+        scenario, resolved = _apply(scenario, assign)
+        resolved = resolved or resolve_scenario(scenario)
+        robot = resolved.robot
         if scenario.interference.enabled and robot.num_pairs:
             _warn_unreachable_d_u(robot, interference_params(scenario, robot))
         _warn_reel_saturation(scenario, robot)
@@ -556,6 +574,7 @@ def _resolve_variant(index, base, values, overlay, seed, path) -> Variant:
     if _is_hardware(scenario.plant):
         raise SweepError(f"{where}: plant is !{type(scenario.plant).__name__}; a sweep "
                          "simulates, so it needs a simulated plant (plant: !SimulatedReels {})")
+    scenario = resolved.scenario  # as run: a left-out start is its robot's centre
     text = scenario_to_yaml(scenario)
     return Variant(index=index, run=run, values=values, overlay=overlay,
                    random_seed=scenario.random_seed, scenario=scenario, scenario_yaml=text,
@@ -594,6 +613,14 @@ def _flow(value) -> str:
         return f"{tag} {inner}" if tag else inner
     if isinstance(value, list):
         return "[" + ", ".join(_flow(v) for v in value) + "]"
+    return _shown(value)
+
+
+def _shown(value) -> str:
+    """A value in a message: as a CSV cell, but a NaN or infinite float spelled out (an
+    empty cell would read as no value at all)."""
+    if isinstance(value, float) and not math.isfinite(value):
+        return repr(value)
     return _cell(value)
 
 
@@ -623,11 +650,23 @@ METRICS = {
     "peak_speed": ("m/s", None, "largest |velocity| commanded after the limits"),
     "operator_effort": ("N s", "min", "integral of |F_H| dt (what the operator pushed)"),
     "limit_time": ("s", "min", "time during which the limits changed the admittance velocity"),
+    # The plant's ground truth (the dynamic plant, which logs its true pose); empty for the
+    # kinematic plant, whose pose is the controller's estimate.
+    "min_distance_true": ("m", "max", "smallest TRUE distance of any watched cable pair, from "
+                                      "the plant's true (rotated) pose (dynamic plant)"),
+    "min_distance_true_pair": ("-", None, "the pair where min_distance_true occurred"),
+    "crossings_true": ("-", "min", "number of pairs that truly crossed (dynamic plant)"),
+    "slack_ticks": ("-", "min", "ticks with at least one slack cable (dynamic plant)"),
+    "min_tension": ("N", "max", "smallest cable tension over the run (dynamic plant)"),
+    "max_rotation": ("deg", "min", "largest platform rotation from level (dynamic plant)"),
     "sim_s": ("s", None, "simulated time the run covered"),
     "wall_s": ("s", "min", "wall-clock time of the run (build and simulate)"),
     "rtf": ("-", "max", "real-time factor: sim_s / wall_s"),
 }
-NUMERIC_METRICS = [m for m in METRICS if m != "min_distance_pair"]
+NUMERIC_METRICS = [m for m in METRICS if not m.endswith("_pair")]
+# A row's status: "ok"; "fault": the run stopped part-way, its metrics cover the ticks it
+# logged; "error": it did not run (or its worker died), no metrics.
+FAILED = ("fault", "error")
 
 # A limit "acts" when the commanded velocity differs from the admittance's by more than this,
 # m/s: the limits pass an unlimited velocity through exactly, so this only absorbs round-off.
@@ -676,7 +715,32 @@ def run_metrics(log: dict, scenario: Scenario) -> dict:
     v = np.asarray(log["velocity"], dtype=float).reshape(T, 3)
     v_adm = np.asarray(log["velocity_admittance"], dtype=float).reshape(T, 3)
     out["limit_time"] = held(np.any(np.abs(v - v_adm) > LIMIT_TOLERANCE, axis=1))
+    out.update(_truth_metrics(log, T, pairs))
     out["sim_s"] = float(t[-1] - t[0]) if T > 1 else 0.0
+    return out
+
+
+def _truth_metrics(log: dict, T: int, pairs) -> dict:
+    """The dynamic plant's ground-truth metrics (METRICS), NaN / "" for a log without them."""
+    out = dict(min_distance_true=math.nan, min_distance_true_pair="", crossings_true=math.nan,
+               slack_ticks=math.nan, min_tension=math.nan, max_rotation=math.nan)
+    if not T:
+        return out
+    if "pair_distances_true" in log:
+        d = np.asarray(log["pair_distances_true"], dtype=float).reshape(T, -1)
+        if d.size:
+            flat = int(np.argmin(d))
+            k = flat % d.shape[1]
+            out["min_distance_true"] = float(d.reshape(-1)[flat])
+            out["min_distance_true_pair"] = f"{int(pairs[k][0])}-{int(pairs[k][1])}"
+        out["crossings_true"] = int(np.any(np.asarray(log["crossed_true"]), axis=0).sum())
+    if "tensions" in log:
+        out["slack_ticks"] = int(np.any(np.asarray(log["slack"], dtype=bool), axis=1).sum())
+        out["min_tension"] = float(np.min(log["tensions"]))
+    if "rpy_true" in log:
+        from .rotation import rotation_angle, rotations_from_rpy
+        out["max_rotation"] = float(np.degrees(
+            rotation_angle(rotations_from_rpy(log["rpy_true"])).max()))
     return out
 
 
@@ -703,7 +767,8 @@ def tasks_for(variants, keep_logs: bool = False) -> list[RunTask]:
 def execute_run(task: RunTask, before_run=None) -> dict:
     """Run one variant: load its resolved scenario from its YAML (the file written beside the
     row), simulate it, and return its row (and the compressed log bytes with keep_log).
-    Never raises for a failing run: the row says `error`."""
+    Never raises for a failing run: the row says `error` (it did not run, or its worker
+    died), or `fault` (it stopped part-way: the metrics are those of the ticks it logged)."""
     from pydrake.common.yaml import yaml_load_typed
 
     from .simulation import simulate
@@ -720,12 +785,10 @@ def execute_run(task: RunTask, before_run=None) -> dict:
         wall = time.perf_counter() - start
         log = result.log
         metrics = run_metrics(log, scenario)
+        row.update(metrics)  # a faulted run's too: what it logged up to the fault
         if result.error is not None:
-            row.update(status="error", error=f"the run stopped at t = {metrics['sim_s']:.3f} s: "
-                                             f"{type(result.error).__name__}: {result.error}",
-                       sim_s=metrics["sim_s"])
-        else:
-            row.update(metrics)
+            row.update(status="fault", error=f"the run stopped at t = {metrics['sim_s']:.3f} s: "
+                                             f"{type(result.error).__name__}: {result.error}")
         row["wall_s"] = wall
         row["rtf"] = metrics["sim_s"] / wall if wall > 0 else math.nan
     except Exception as e:
@@ -1136,7 +1199,7 @@ def _run_sweep(sweep, out_dir, *, workers, ray, ray_address, ray_chunk, ray_init
     for v in sweep.variants:
         row = previous.get(v.run)
         if row is not None and row.get("scenario_hash") == v.scenario_hash and (
-                row.get("status") == "ok" or (row.get("status") == "error"
+                row.get("status") == "ok" or (row.get("status") in FAILED
                                               and not retry_errors)):
             store.adopt(v, row)
         else:
@@ -1160,9 +1223,12 @@ def _run_sweep(sweep, out_dir, *, workers, ray, ray_address, ray_chunk, ray_init
 
     installed = {}
     import threading
+
+    from .interrupt import honoured
     if threading.current_thread() is threading.main_thread():
         for s in (signal.SIGINT, signal.SIGTERM):
-            installed[s] = signal.signal(s, on_signal)
+            if honoured(s):  # one ignored when the sweep started stays ignored
+                installed[s] = signal.signal(s, on_signal)
     bar = None
     failed = [0]
     start = time.perf_counter()
@@ -1315,12 +1381,14 @@ def sweep_main(*, sweep, out_dir=None, workers=None, ray=False, ray_address=None
                         retry_errors=retry_errors, progress=progress, before_run=before_run)
     ok = sum(r["status"] == "ok" for r in outcome.rows)
     errors = [r for r in outcome.rows if r["status"] != "ok"]
+    faults = sum(r["status"] == "fault" for r in errors)
     print(f"{outcome.ran} run(s) done now"
           + (f" on {outcome.runner}" if outcome.runner else "")
           + f", {outcome.skipped} already done (resumed), in {outcome.wall_s:.1f} s wall; "
-          f"{ok} ok, {len(errors)} error(s); results: {outcome.results}", file=out)
+          f"{ok} ok, {faults} faulted, {len(errors) - faults} error(s); results: "
+          f"{outcome.results}", file=out)
     for r in errors[:10]:
-        print(f"  error {r['run']}: {r['error']}", file=out)
+        print(f"  {r['status']} {r['run']}: {r['error']}", file=out)
     if len(errors) > 10:
         print(f"  ... and {len(errors) - 10} more (see the error column)", file=out)
     columns = columns_for(s)
@@ -1328,9 +1396,14 @@ def sweep_main(*, sweep, out_dir=None, workers=None, ray=False, ray_address=None
         print(f"best runs by {metric} ({METRICS[metric][0]}, "
               f"{'largest' if _better(metric) == 'max' else 'smallest'} first):", file=out)
         print(best_table(columns, outcome.rows, metric, top), file=out)
-    if plot is not None and ok:  # the views hang off the CLI, which passes them in
-        for png in plot(columns, outcome.rows, out_dir, metric=metric):
-            print(f"plot: {png}", file=out)
+    if plot is not None:  # the views hang off the CLI, which passes them in
+        why = nothing_to_draw(outcome.rows, metric)
+        if why:
+            print(f"cdpm sweep: error: no pictures: {why}", file=sys.stderr)
+            errors = errors or [why]
+        else:
+            for png in plot(columns, outcome.rows, out_dir, metric=metric):
+                print(f"plot: {png}", file=out)
     if outcome.ending == "interrupted":
         print(f"cdpm sweep: interrupted; {len(outcome.rows)} finished row(s) kept in "
               f"{outcome.results}; rerun the same command to resume", file=sys.stderr)
@@ -1354,9 +1427,29 @@ def plot_main(*, sweep_dir, plot, out_dir=None, metric=None, out=None) -> int:
             metric = load_sweep_file(sweep_dir / "sweep.yaml")[0].metric
         except (SweepError, ScenarioError):
             pass
+    why = nothing_to_draw(rows, metric)
+    if why:  # no empty axes: say why there is no picture
+        raise SweepError(f"{str(sweep_dir)!r}: no pictures: {why}")
     for png in plot(columns, rows, out_dir or sweep_dir, metric=metric):
         print(f"plot: {png}", file=out)
     if any(r["status"] == "ok" for r in rows):
         print(f"best runs by {metric}:", file=out)
         print(best_table(columns, rows, metric), file=out)
     return 0
+
+
+def nothing_to_draw(rows: list[dict], metric: str) -> str:
+    """Why a sweep's pictures of `metric` would have nothing to draw ("" when they would
+    not): they show the rows that finished ok with a value of the metric."""
+    if not rows:
+        return "results.csv has no rows yet"
+    ok = [r for r in rows if r.get("status") == "ok"]
+    if not ok:
+        faults = sum(r.get("status") == "fault" for r in rows)
+        return (f"none of the {len(rows)} runs finished ok ({faults} faulted, "
+                f"{len(rows) - faults} error(s): see the status and error columns of "
+                "results.csv)")
+    if not any(math.isfinite(metric_value(r, metric)) for r in ok):
+        return (f"none of the {len(ok)} ok runs has a value of {metric} (see docs/"
+                "SWEEP_FORMAT.md; e.g. crossings needs the interference block)")
+    return ""

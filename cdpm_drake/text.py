@@ -36,3 +36,39 @@ def prefixed_log_records(stream=None):
         yield
     finally:
         root.removeHandler(handler)
+
+
+def did_you_mean(word, choices) -> str:
+    """"; did you mean 'mass'?" for the choice closest to a misspelt `word` (difflib's ratio
+    of at least 0.6), or "" when none is close."""
+    import difflib
+
+    close = difflib.get_close_matches(str(word), [str(c) for c in choices], n=1, cutoff=0.6)
+    return f"; did you mean {close[0]!r}?" if close else ""
+
+
+def yaml_line(keys, *, filename=None, data=None) -> int | None:
+    """The line (from 1) where the key path `keys` (mapping keys as str, list indices as int)
+    is written in a YAML file or text, or None when it is not there or the YAML does not
+    parse. Tags (`!SpringHandOperator`) are kept as they are: only the layout is read."""
+    import yaml
+
+    try:
+        text = data if data is not None else open(filename, encoding="utf-8").read()
+        node = yaml.compose(text, Loader=yaml.SafeLoader)
+    except (OSError, yaml.YAMLError, UnicodeDecodeError):
+        return None
+    line = None
+    for key in keys:
+        if isinstance(node, yaml.MappingNode) and not isinstance(key, int):
+            found = [(k, v) for k, v in node.value if k.value == str(key)]
+            if not found:
+                return None
+            line, node = found[-1][0].start_mark.line + 1, found[-1][1]
+        elif isinstance(node, yaml.SequenceNode) and isinstance(key, int) \
+                and 0 <= key < len(node.value):
+            node = node.value[key]
+            line = node.start_mark.line + 1
+        else:
+            return None
+    return line

@@ -103,7 +103,7 @@ def without_math():
         (forward_kinematics, "gauss_newton_warm_stacked", _no_op),
         (interference_force, "interference_tick_stacked", _no_op),
         (safety_limits, "limit_velocity_stacked", _no_op),
-        (jacobian_mapping, "reel_rates_stacked", _no_op),
+        (jacobian_mapping, "length_loop_tick", _no_op),
         (simulated_reels, "simulated_reel_step_stacked", _no_op),
         (simulated_reels, "operator_force_on_state", _no_op),
         (operators.SpringHand, "force_into", _no_op),

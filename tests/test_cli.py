@@ -185,7 +185,9 @@ def test_warnings_start_with_warning(capsys, tmp_path):
                      "--out", str(tmp_path), "--scenario-text", "{limits: {max_velocity: 5}}"])
     assert code == 0
     err = capsys.readouterr().err
-    assert ("warning: the platform speed limit 5 m/s is above the reel speed limit 1 m/s"
+    # Each value says where it comes from: the reel speed is the robot file's (issue 22).
+    assert ("warning: the platform speed limit 5 m/s (limits.max_velocity) is above the reel "
+            "speed limit 1 m/s (default: the robot file's limits.max_reel_speed)"
             in err), err
 
 
@@ -198,3 +200,44 @@ def test_the_run_report_counts_rejected_packets():
                        error=None, ending="completed", log_path=None, tick_log_path=None)
     (packets,) = [x for x in report_lines(result) if x.startswith("packets:")]
     assert "rejected 3 (value 3)," in packets and "{" not in packets
+
+
+def test_a_first_compilation_is_announced_once(capsys):
+    # Issue 22, point 11: numba's compile event (a cache miss) prints one line, however many
+    # kernels compile; a function compiled already says nothing.
+    import io
+
+    import numba
+
+    @numba.njit
+    def twice(x):
+        return 2.0 * x
+
+    @numba.njit
+    def thrice(x):
+        return 3.0 * x
+
+    stream = io.StringIO()
+    with cli._compile_notice(stream) as notice:
+        assert twice(1.0) == 2.0 and thrice(1.0) == 3.0
+    assert stream.getvalue() == cli.COMPILE_NOTICE + "\n" and notice.said
+    stream = io.StringIO()
+    with cli._compile_notice(stream):
+        assert twice(2.0) == 4.0  # compiled for float already: no event
+    assert stream.getvalue() == ""
+    assert thrice(1) == 3  # an int signature compiles again, outside the block: not said
+
+
+def test_the_first_run_after_installing_says_it_compiles_and_the_next_does_not(tmp_path):
+    # An empty numba cache (NUMBA_CACHE_DIR) is a fresh install's; the second run loads it.
+    import os
+    env = dict(os.environ, NUMBA_CACHE_DIR=str(tmp_path / "numba_cache"))
+    runs = []
+    for k in range(2):
+        runs.append(subprocess.run(
+            [str(Path(sys.executable).parent / "cdpm"), "simulate", "exp1_no_interaction",
+             "--duration", "0.01", "--no-progress", "--out", str(tmp_path / f"run{k}")],
+            capture_output=True, text=True, env=env, timeout=600))
+    assert [r.returncode for r in runs] == [0, 0], runs[0].stderr + runs[1].stderr
+    assert runs[0].stderr.count(cli.COMPILE_NOTICE) == 1, runs[0].stderr
+    assert cli.COMPILE_NOTICE not in runs[1].stderr, runs[1].stderr

@@ -165,3 +165,71 @@ def test_overview_of_any_diagram_shows_exported_ports_and_collapses_subdiagrams(
     assert "in1 -> n1:i0:n;" in dot and "n1:o0:s -> out0;" in dot
     width, _ = _svg_size(render_svg(dot))
     assert 0 < width < README_WIDTH_PT
+
+
+def test_the_dynamic_plant_overview_fits_the_readme_with_the_multibody_plant_collapsed():
+    # Issue 21: the MultibodyPlant's ~25 ports made this picture 2773 pt wide. Only the ports
+    # in use are drawn (MAX_PORTS), and the plant's Selector is drawn as the connections it
+    # makes, labelled with the piece of the signal where it is one.
+    from cdpm_drake.scenario import DynamicReels
+    from cdpm_drake.views.diagram_graph import MAX_PORTS
+
+    plant = build_diagram(dataclasses.replace(load_scenario("exp2_interaction"),
+                                              plant=DynamicReels()),
+                          BuildOptions(loggers=False)).GetSubsystemByName("reels")
+    mbp = plant.GetSubsystemByName("platform_plant")
+    assert mbp.num_input_ports() + mbp.num_output_ports() > 20
+    dot = overview_graphviz(plant)
+    assert dot == (DIAGRAMS / "plant_dynamic_overview.dot").read_text()
+    width, height = _svg_size((DIAGRAMS / "plant_dynamic_overview.svg").read_text())
+    assert width <= README_WIDTH_PT and height <= 900, (width, height)  # measured 348 x 432
+    nodes = _nodes(dot)
+    ids = {m.group(2): m.group(1) for m in re.finditer(r"^  (n\d+) \[label=<.*?<B>(\w+)</B>",
+                                                        dot, flags=re.M)}
+    index = {name: ids[name] for name in ("platform_plant", "cables", "reel_state")}
+    label = nodes[index["platform_plant"]].split()
+    # Used: the force in, the state out; the rest counted, not drawn.
+    assert "applied_generalized_force" in label and "state" in label
+    assert "actuation" not in label and "geometry_query" not in label
+    unused_in = mbp.num_input_ports() - 1
+    unused_out = mbp.num_output_ports() - 1
+    assert f"+{unused_in} ports" in " ".join(label) and f"+{unused_out} ports" in " ".join(label)
+    assert unused_in + 1 > MAX_PORTS  # the collapse applied, not the plain port row
+    # No Selector node: its connections are drawn, each edge named by the piece it carries.
+    assert "wiring" not in " ".join(nodes.values()) and "Selector" not in dot
+    cables, state, mbp_node = (int(index[n][1:]) for n in ("cables", "reel_state",
+                                                             "platform_plant"))
+    edges = re.findall(r"^  n(\d+):o\d+:s -> n(\d+):i\d+:n(?: \[label=\" (\w+)\"\])?;$", dot,
+                       flags=re.M)
+    assert (str(mbp_node), str(cables), "") in edges  # the state into the cables' inputs
+    assert (str(cables), str(mbp_node), "generalized_force") in edges
+    assert (str(cables), str(state), "") in edges  # into its input named next_reels
+    assert (str(state), str(cables), "") in edges  # and back into the cables' inputs
+    assert "next_reels" in nodes[index["reel_state"]].split()
+    assert 'in0 [shape=cds, label="reel_velocity_command"]' in dot
+    assert f"in0 -> n{cables}:i0:n;" in dot and f"n{cables}:o0:s -> out1;" in dot
+
+
+def test_overview_draws_only_the_used_ports_of_a_system_with_many():
+    from pydrake.systems.framework import DiagramBuilder
+    from pydrake.systems.primitives import ConstantVectorSource, Multiplexer
+
+    from cdpm_drake.views.diagram_graph import MAX_PORTS
+
+    builder = DiagramBuilder()
+    mux = builder.AddNamedSystem("mux", Multiplexer([1] * (MAX_PORTS + 2)))
+    few = builder.AddNamedSystem("few", Multiplexer([1] * MAX_PORTS))
+    one = builder.AddNamedSystem("one", ConstantVectorSource([1.0]))
+    builder.Connect(one.get_output_port(), mux.get_input_port(3))
+    builder.Connect(one.get_output_port(), few.get_input_port(2))
+    builder.ExportInput(mux.get_input_port(5), "x5")
+    builder.ExportOutput(mux.get_output_port(), "y")
+    dot = overview_graphviz(builder.Build())
+    nodes = _nodes(dot)
+    mux_label = next(label for label in nodes.values() if " mux " in f" {label} ")
+    # Inputs 3 (connected) and 5 (exported) drawn; the other MAX_PORTS of 8 counted.
+    assert 'PORT="i3"' in dot and 'PORT="i5"' in dot
+    assert f"+{MAX_PORTS} ports" in mux_label
+    # At MAX_PORTS ports, every port is drawn, used or not.
+    few_label = next(label for label in nodes.values() if " few " in f" {label} ")
+    assert "ports" not in few_label and len(few_label.split()) >= MAX_PORTS + 2

@@ -105,6 +105,72 @@ def test_cable_tension_is_elastic_when_taut_and_zero_when_slack():
                           20.0)[0] == 0.0
 
 
+@pytest.mark.parametrize("locked", [False, True])
+def test_the_compiled_step_is_the_wrench_and_drive_laws_written_out(locked):
+    # cables.cable_net_step on a random state, against the pieces written out here with numpy:
+    # the wrench matrix of tension.py (column i: [u_i; (R b_i) x u_i]) times the tensions of
+    # cable_tensions (stretch rate -u_i . (v + w x R b_i) - reel speed) plus the hand's wrench
+    # at R h; the drives' step by reel_step on the command scaled to the speed limit; the pose.
+    from cdpm_drake import cables
+    from cdpm_drake.rotation import rpy_from_rotation
+
+    robot = load_robot(ROBOTS_DIR / "paper_7cable.yaml")
+    d = robot.dynamics
+    m = robot.num_cables
+    rng = np.random.default_rng(21 + locked)
+    q = rng.normal(size=4)
+    q /= np.linalg.norm(q)
+    w, x_, y, z = q
+    R = np.array([[1 - 2 * (y * y + z * z), 2 * (x_ * y - z * w), 2 * (x_ * z + y * w)],
+                  [2 * (x_ * y + z * w), 1 - 2 * (x_ * x_ + z * z), 2 * (y * z - x_ * w)],
+                  [2 * (x_ * z - y * w), 2 * (y * z + x_ * w), 1 - 2 * (x_ * x_ + y * y)]])
+    if locked:
+        R = rotation_from_rpy([0.05, -0.1, 0.2])
+    p = np.array([1.6, 3.3, 1.2]) + rng.normal(scale=0.01, size=3)
+    v, omega = rng.normal(scale=0.05, size=3), (np.zeros(3) if locked else
+                                                rng.normal(scale=0.2, size=3))
+    L_rigid = np.linalg.norm(robot.reels - (p + robot.attachments @ R.T), axis=1)
+    L0 = L_rigid - rng.uniform(-0.0002, 0.001, size=m)  # some cables slack
+    speeds = rng.normal(scale=0.01, size=m)
+    command = rng.normal(scale=0.5, size=m)
+    command[2] = 1.6  # above the 1 m/s limit: everything scaled by 1/1.6
+    F = np.array([3.0, -2.0, 4.5])
+    state = np.concatenate([p, v]) if locked else np.concatenate([q, p, omega, v])
+    x = np.concatenate([state, L0, speeds, command])
+    nv = 3 if locked else 6
+    layout = cables.step_layout(m, nv)
+    out = np.zeros(sum(size for _, size in layout.values()))
+    at = layout["hand_force"][0]
+    out[at:at + 3] = F
+    h = 0.001
+    params = cables.cable_net_params(d, time_step=h, max_reel_speed=1.0, locked=locked)
+    cables.cable_net_step(robot.reels, robot.attachments, d.handle, params,
+                          R.copy() if locked else np.zeros((3, 3)), x, out)
+
+    def piece(name):
+        a, n = layout[name]
+        return out[a:a + n]
+
+    Rb = robot.attachments @ R.T
+    rho = robot.reels - (p + Rb)
+    u = rho / np.linalg.norm(rho, axis=1)[:, None]
+    rate = -np.einsum("ij,ij->i", u, v + np.cross(omega, Rb)) - speeds
+    T = cable_tensions(np.linalg.norm(rho, axis=1), rate, L0, d.EA, d.damping)
+    assert 0 < np.count_nonzero(T == 0.0) < m  # the draw has slack and taut cables
+    # Round-off: lengths agree to ~1e-15 m, times EA / L0 ~ 3e4 N/m.
+    np.testing.assert_allclose(piece("tensions"), T, rtol=0, atol=1e-9)
+    np.testing.assert_array_equal(piece("slack"), (T <= 0).astype(float))
+    wrench = wrench_matrix(robot, p, R) @ T + np.concatenate([F, np.cross(R @ d.handle, F)])
+    expected = wrench[:3] if locked else np.concatenate([wrench[3:], wrench[:3]])
+    np.testing.assert_allclose(piece("generalized_force"), expected, rtol=0, atol=1e-8)
+    w_next = reel_step(speeds, command / 1.6, h, bandwidth=d.bandwidth, inertia=d.reel_inertia,
+                       viscous=d.viscous_friction, coulomb=d.coulomb_friction)
+    np.testing.assert_allclose(piece("next_reels"), np.concatenate([L0 + h * w_next, w_next]),
+                               rtol=0, atol=1e-15)
+    np.testing.assert_array_equal(piece("p_WP_true"), p)
+    np.testing.assert_allclose(piece("rpy_true"), rpy_from_rotation(R), atol=1e-12)
+
+
 # --- Statics, slack, energy ------------------------------------------------------------------
 
 
@@ -304,9 +370,11 @@ def test_stiff_ideal_translating_plant_follows_the_kinematic_plant_within_1_mm(n
 
 def test_the_default_paper_robot_turns_under_the_hand_at_its_handle():
     # exp2 starts level (held with every cable >= 5 N) and its hand pulls at the handle,
-    # 0.15 m below the centre: the pull's moment turns the free platform.
-    result = simulate(scenario=load_scenario("exp2_interaction", "plant: !DynamicReels {}"),
-                      duration=1.0)
+    # 0.15 m below the centre: the pull's moment turns the free platform (in the paper's open
+    # loop: the cable-length loop would hold the lengths, and the tilt, closer to the start's).
+    result = simulate(scenario=load_scenario(
+        "exp2_interaction", "{plant: !DynamicReels {}, controller: {length_gain: 0}}"),
+        duration=1.0)
     assert result.error is None
     rpy = result.log["rpy_true"]
     assert np.abs(rpy[0]).max() < 1e-9
@@ -462,6 +530,25 @@ def test_the_log_has_the_ground_truth_for_the_dynamic_plant_only():
         assert f"`{key}`" in doc
 
 
+def test_the_logged_desired_force_is_what_the_admittance_integrated_on_the_dynamic_plant():
+    # What the user sees must be what the controller used: the admittance's recursion
+    # v_{k+1} = A_d u_k + B_d F_d,k (make_admittance's zero-order-hold matrices, u the logged
+    # commanded velocity) holds on the logged F_d to round-off, as on the kinematic plant
+    # (tests/test_diagram.py). Issue 21: with the MultibodyPlant's sampled output ports, its
+    # step ran before the controller's update at each tick, so the controller measured the hand
+    # on the platform of one plant step later than the F_d it logged (2.4e-7 m/s off here).
+    from cdpm_drake.systems.admittance import make_admittance
+
+    scenario = load_scenario("exp2_interaction", "plant: !DynamicReels {}")
+    log = simulate(scenario=scenario, duration=1.0).log
+    zoh = make_admittance(scenario.admittance.mass, scenario.admittance.damping,
+                          scenario.time_step)
+    A, B = zoh.A()[0, 0], zoh.B()[0, 0]
+    v, u, F_d = log["velocity_admittance"], log["velocity"], log["F_d"]
+    assert np.abs(B * F_d).max() > 1e-4  # the hand does push: a step's increment is 0.1 mm/s
+    np.testing.assert_allclose(v[1:], A * u[:-1] + B * F_d[:-1], rtol=0, atol=1e-12)
+
+
 # --- Views and cdpm info ---------------------------------------------------------------------
 
 
@@ -489,8 +576,10 @@ def test_plot_log_adds_tensions_and_pose_error_for_a_dynamic_log(dynamic_log, tm
              and "slack" not in line.get_label()]
     assert len(lines) == 7
     np.testing.assert_allclose(lines[2].get_ydata(), dynamic_log["tensions"][:, 2])
-    slack_marks = [line for line in fig.axes[0].get_lines() if "slack" in line.get_label()]
+    # Slack ticks on the row of each cable, below the tensions (issue 22).
+    slack_marks = [line for line in fig.axes[1].get_lines() if "slack" in line.get_label()]
     assert [line.get_label() for line in slack_marks] == ["cable 3 slack (1 ticks)"]
+    assert list(slack_marks[0].get_ydata()) == [3]
     fig = plots.figure_pose_error(dynamic_log)
     norm = [line for line in fig.axes[0].get_lines() if line.get_label() == "|p - p_true|"][0]
     np.testing.assert_allclose(norm.get_ydata(), 1000 * np.linalg.norm(

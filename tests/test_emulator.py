@@ -18,6 +18,7 @@ from cdpm_drake.hardware.protocol import (FAULT_COMMAND_TIMEOUT, FAULT_DRIVE, FA
                                           encode_command)
 from cdpm_drake.kinematics import cable_lengths, jacobian
 from cdpm_drake.robot import load_robot
+from cdpm_drake.scenario import load_scenario
 
 
 @pytest.fixture(scope="module")
@@ -111,6 +112,104 @@ def test_bad_inputs_are_named(robot):
         FaultPlan(drop=1.5)
     with pytest.raises(ValueError, match=r"after must be a finite number >= 0 s, got -1"):
         FaultPlan(after=-1)
+
+
+# --- the dynamic plant behind the bridge (--plant dynamic, issue 21) ------------------------
+
+
+def _dynamic_resolved(overlay="{}"):
+    """exp2's scenario (cables 1 and 3 swapped, its start and hand) on the dynamic plant."""
+    from cdpm_drake.scenario import resolve_scenario
+
+    return resolve_scenario(load_scenario(
+        "exp2_interaction", f"{{plant: !DynamicReels {{}}, operator: !ScriptedOperator "
+        f"{{times: [0.0, 0.2], forces: [[0, 0, 0], [3.0, -2.0, 4.0]]}}}}"))
+
+
+def _plant_alone_run(resolved, command, duration):
+    """The same plant driven by a Simulator of its own (the reference): its state and
+    measured force after `duration` s of a constant `command`, and its logged truth."""
+    from pydrake.systems.analysis import Simulator
+    from pydrake.systems.framework import DiagramBuilder
+    from pydrake.systems.primitives import ConstantVectorSource
+
+    from cdpm_drake.diagram import make_plant
+    from cdpm_drake.systems.dynamic_plant import ground_truth_log, plant_state_now
+
+    builder = DiagramBuilder()
+    plant = builder.AddNamedSystem("reels", make_plant(resolved))
+    source = builder.AddSystem(ConstantVectorSource(np.asarray(command, dtype=float)))
+    builder.Connect(source.get_output_port(), plant.GetInputPort("reel_velocity_command"))
+    diagram = builder.Build()
+    simulator = Simulator(diagram)
+    simulator.AdvanceTo(duration)
+    context = simulator.get_context()
+    force = plant.GetOutputPort("measured_force").Eval(plant.GetMyContextFromRoot(context))
+    return plant_state_now(diagram, context), force, ground_truth_log(diagram, context)
+
+
+def test_the_dynamic_bridge_is_the_dynamic_plant_on_the_bridges_clock():
+    # Enabled at bridge time 0.3 s, then 250 ticks of 2 ms: the plant (and its operator) has
+    # run 0.5 s, exactly as the same plant under its own Simulator for 0.5 s: the encoders read
+    # its L0 plus the start stretch, the force sensor its measured force, bit for bit.
+    resolved = _dynamic_resolved()
+    bridge = E.DynamicBridge(resolved)
+    robot = resolved.robot
+    p0 = np.asarray(resolved.scenario.initial_position)
+    start = bridge.lengths.copy()
+    # Zeroed at the start pose: the rigid lengths there, which forward kinematics fits exactly.
+    np.testing.assert_allclose(start, cable_lengths(robot, p0), rtol=0, atol=1e-12)
+    command = np.array([0.01, -0.02, 0.005, 0.0, 0.015, -0.01, 0.02])
+    for _ in range(150):  # not enabled: nothing moves, whatever the clock
+        bridge.step(0.002)
+    np.testing.assert_array_equal(bridge.lengths, start)
+    bridge.set_command(command, enable=True)
+    assert bridge.operator_start == pytest.approx(0.3)
+    for _ in range(250):
+        bridge.step(0.002)
+    assert bridge.plant_time == 0.5
+    state, force, truth = _plant_alone_run(resolved, command, 0.5)
+    # The start stretch, L - L0 with L0 = L EA / (EA + T) at the start distribution T.
+    from cdpm_drake.scenario import check_dynamic_reels
+
+    L = cable_lengths(robot, p0)
+    EA = robot.dynamics.EA
+    offset = L - L * EA / (EA + check_dynamic_reels(resolved.scenario, robot).tensions)
+    np.testing.assert_allclose(bridge.lengths, state["L0"] + offset, rtol=0, atol=1e-14)
+    np.testing.assert_array_equal(bridge.speed, state["reel_speeds"])
+    np.testing.assert_array_equal(bridge.force(), force)
+    assert np.abs(state["L0"] - (start - offset)).max() > 1e-3  # the reels did move
+    assert np.linalg.norm(force) > 4.0  # and the hand pushes
+    # The summary's tension range and tilt come from the plant's own truth, tick by tick (its
+    # logger samples at 2 ms too).
+    assert bridge.min_tension == pytest.approx(truth["tensions"].min(), abs=1e-9)
+    assert bridge.max_tension == pytest.approx(truth["tensions"].max(), abs=1e-9)
+    assert bridge.slack_ticks.tolist() == truth["slack"][1:].sum(axis=0).astype(int).tolist()
+    assert "tensions" in bridge.summary() and "slack ticks per cable" in bridge.summary()
+
+
+def test_a_faulted_dynamic_bridge_stops_its_drives_with_their_own_dynamics():
+    resolved = _dynamic_resolved()
+    bridge = E.DynamicBridge(resolved)
+    bridge.set_command(np.full(7, 0.05), enable=True)
+    for _ in range(50):
+        bridge.step(0.002)
+    moving = np.abs(bridge.speed).max()
+    assert moving > 0.04  # bandwidth 100 rad/s: 0.1 s is 10 time constants
+    bridge.raise_fault(FAULT_DRIVE)
+    bridge.set_command(np.full(7, 0.05), enable=True)  # a fault refuses enabling
+    assert not bridge.enabled and bridge.faults == FAULT_DRIVE
+    bridge.step(0.002)
+    # One 2 ms tick later the drives are slowing (a first-order loop, not a jump to zero),
+    # and a few time constants later they stand still (friction holds them).
+    assert 0.0 < np.abs(bridge.speed).max() < moving
+    for _ in range(100):
+        bridge.step(0.002)
+    assert np.abs(bridge.speed).max() == 0.0
+    # Overspeed, as with the kinematic bridge.
+    fresh = E.DynamicBridge(resolved)
+    fresh.set_command(np.full(7, 1.5), enable=True)  # the robot's limit is 1 m/s
+    assert fresh.faults & FAULT_OVERSPEED and not fresh.enabled
 
 
 # --- the server on loopback ------------------------------------------------------------------

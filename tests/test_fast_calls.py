@@ -85,7 +85,7 @@ def test_every_bound_call_passes_the_types_it_was_bound_for(monkeypatch, name, o
     simulator.Initialize()
     simulator.AdvanceTo(0.1)
     expected = {"clip_into", "gauss_newton_warm_stacked", "interference_tick_stacked",
-                "limit_velocity_stacked", "reel_rates_stacked", "simulated_reel_step_stacked",
+                "limit_velocity_stacked", "length_loop_tick", "simulated_reel_step_stacked",
                 "operator_force_on_state"}
     expected |= {"wall_force_into"} if overlay else set()
     assert set(calls) == expected
@@ -167,21 +167,23 @@ def test_the_fused_diagram_has_one_selector_and_no_multiplexers():
     assert diagram.GetSubsystemByName(FUSED_WIRING).num_output_ports() >= 9
     assert "Multiplexer" not in kinds and "Demultiplexer" not in kinds
     plain = build_diagram(load_scenario("exp2_interaction"), BuildOptions(fuse_wiring=False))
-    # exp2: five blocks' wiring and the logger's become one system, and the three blocks'
-    # memories (FK warm start, crossing sides, previous command) one delay.
+    # exp2: five blocks' wiring and the logger's become one system, and the four blocks'
+    # memories (FK warm start, crossing sides, previous command, the length loop's commanded
+    # position, offsets and started flag) one delay.
     assert [type(s).__name__ for s in plain.GetSystems()].count("Selector") == 6
-    assert len(list(plain.GetSystems())) - len(list(diagram.GetSystems())) == 5 + 2
+    assert len(list(plain.GetSystems())) - len(list(diagram.GetSystems())) == 5 + 3
     names = {s.get_name() for s in diagram.GetSystems()}
     assert FUSED_DELAY in names and not names & {
         "forward_kinematics_previous", "interference_force_side_memory",
-        "safety_limits_previous"}
-    # Its start: the FK warm start at the scenario's initial position, the rest zero.
+        "safety_limits_previous", "jacobian_mapping_memory"}
+    # Its start: the FK warm start at the scenario's initial position, the rest zero (the
+    # length loop's started flag 0: its first tick latches the measured lengths).
     context = diagram.CreateDefaultContext()
     memory = diagram.GetSubsystemByName(FUSED_DELAY)
     state = memory.GetMyContextFromRoot(context).get_discrete_state_vector().get_value()
     scenario = load_scenario("exp2_interaction")
     np.testing.assert_array_equal(state[:3], scenario.initial_position)
-    assert state.size == 3 + 21 + 3 and not np.any(state[3:])
+    assert state.size == 3 + 21 + 3 + (3 + 7 + 1) and not np.any(state[3:])
 
 
 @pytest.mark.parametrize("plant", [SimulatedReels(), HardwareReels()], ids=["sim", "hw"])
@@ -214,3 +216,54 @@ def test_the_damped_fallback_gives_the_compiled_answer(monkeypatch, module_name)
     for key in ("p", "lengths", "F_H", "F_d", "velocity"):
         np.testing.assert_allclose(fallback[key], reference[key], atol=1e-9, rtol=0,
                                    err_msg=key)
+
+
+# --- The dynamic plant (issue 21) -----------------------------------------------------------
+
+def test_every_bound_call_of_the_dynamic_plant_passes_the_types_it_was_bound_for(monkeypatch):
+    # As above, for the dynamic plant's step (cables.cable_net_step and the operator model),
+    # which runs once per 1 ms plant step: the loggers read it at each tick in the same context
+    # as the next step's updates, so 100 calls in 0.1 s (plus the start).
+    real_bind, calls = kernel_call.bind, {}
+
+    def checking_bind(kernel, *example):
+        entry, expected = real_bind(kernel, *example), kernel_call.signature_of(*example)
+        key = kernel.__name__
+
+        def call(*args):
+            assert kernel_call.signature_of(*args) == expected, key
+            calls[key] = calls.get(key, 0) + 1
+            return entry(*args)
+        return call
+
+    for module in _system_modules():
+        if getattr(module, "bind", None) is real_bind:
+            monkeypatch.setattr(module, "bind", checking_bind)
+    simulator = Simulator(build_diagram(load_scenario("exp2_interaction",
+                                                      "plant: !DynamicReels {}")))
+    simulator.Initialize()
+    simulator.AdvanceTo(0.1)
+    assert {"cable_net_step", "operator_force_at"} <= set(calls)
+    assert "simulated_reel_step_stacked" not in calls
+    assert 100 <= calls["cable_net_step"] == calls["operator_force_at"] <= 101
+
+
+def test_a_model_without_a_compiled_form_is_ticked_from_python_on_the_dynamic_plant():
+    # The same force table as a shipped ForceProfile (compiled) and as a Python model calling
+    # the table's own `force` (the branch for any model with force(t, p, v)): the plant's
+    # ground truth and the controller's log are the same, bit for bit.
+    from cdpm_drake.scenario import resolve_scenario
+    from cdpm_drake.simulation import simulate
+
+    table = operators.ForceProfile([0.0, 0.05, 0.1], [[0, 0, 0], [4.0, -3.0, 5.0], [0, 0, 0]])
+
+    class Wrapped:
+        def force(self, t, p, v):
+            return table.force(t, p, v)
+
+    base = resolve_scenario(load_scenario("exp2_interaction", "plant: !DynamicReels {}"))
+    logs = [simulate(scenario=dataclasses.replace(base, operator=model), duration=0.2).log
+            for model in (table, Wrapped())]
+    assert np.abs(logs[0]["F_H"]).max() > 0.5  # the push was measured
+    for key in ("p_true", "rpy_true", "tensions", "F_H", "p", "lengths"):
+        np.testing.assert_array_equal(logs[0][key], logs[1][key], err_msg=key)

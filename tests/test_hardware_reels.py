@@ -22,6 +22,7 @@ from cdpm_drake.hardware.protocol import FAULT_DRIVE, FAULT_ESTOP
 from cdpm_drake.hardware.reels import HardwareReelsSystem, ReelFault, start_realtime
 from cdpm_drake.kinematics import cable_lengths
 from cdpm_drake.robot import load_robot
+from helpers_scripted_link import ScriptedLink, answering, install
 
 T = 0.002
 TAU = 0.01
@@ -84,6 +85,9 @@ def test_default_config_is_valid_and_loopback():
     check_hardware_reels(cfg)
     assert cfg.local_address == "127.0.0.1" and cfg.address == "127.0.0.1"
     assert cfg.watchdog_ticks == 3
+    # 15 ms: rides out the 5-15 ms holds of a virtual CPU measured on a shared VM; stays short
+    # of the 20 ms a status delayed by the emulator's `--delay 0.02` takes to answer the stop.
+    assert cfg.resume_within == 0.015
 
 
 @pytest.mark.parametrize("change,match", [
@@ -94,6 +98,9 @@ def test_default_config_is_valid_and_loopback():
     (dict(ramp_time=-0.1), r"plant.ramp_time must be a finite number >= 0 s, got -0.1"),
     (dict(startup_timeout=0.0), r"plant.startup_timeout must be a finite number > 0 s"),
     (dict(max_length_residual=float("nan")), r"plant.max_length_residual .* got nan"),
+    (dict(resume_within=-0.001), r"plant.resume_within must be a finite number >= 0 s, got "
+                                 r"-0.001"),
+    (dict(resume_within=1.5), r"plant.resume_within must be at most 1 s .* got 1.5"),
 ])
 def test_bad_config_names_the_field_and_value(change, match, robot):
     with pytest.raises(ValueError, match=match):
@@ -397,3 +404,137 @@ def test_commands_above_the_reel_speed_limit_are_scaled_not_clipped(robot, emula
     # Scaled as a whole to the limit: the direction of the motion is kept.
     np.testing.assert_allclose(last_on.velocity, u * (1.0 / 1.8), rtol=1e-12)
     assert math.isclose(np.max(np.abs(last_on.velocity)), robot.limits.max_reel_speed)
+
+
+# --- the watchdog's hold and resume, on a scripted link (no sockets, no real time) -----------
+
+U = _command()
+
+
+def _scripted(monkeypatch, robot, p0, script, **config):
+    """The reels on a ScriptedLink, with a constant command U; ramp_time 0.1 s unless given
+    (the ramp steps by T / 0.1 = 0.02 per tick)."""
+    config.setdefault("ramp_time", 0.1)
+    builder = DiagramBuilder()
+    source = builder.AddSystem(ConstantVectorSource(U))
+    reels = builder.AddNamedSystem("reels", HardwareReelsSystem(
+        robot, HardwareReels(**config), time_step=T))
+    builder.Connect(source.get_output_port(), reels.GetInputPort("reel_velocity_command"))
+    link = ScriptedLink(cable_lengths(robot, p0), script)
+    install(monkeypatch, reels, link)
+    simulator = Simulator(builder.Build())
+    simulator.Initialize()
+    return simulator, reels, link
+
+
+def _silent(ticks, then=answering):
+    """The bridge sends nothing during `ticks` (a paused bridge), `then(tick, link)` else."""
+    return lambda k, link: [] if k in ticks else then(k, link)
+
+
+# Ticks 50, 51, 52 silent: the watchdog (3 ticks, and 2 periods of wall time since the status
+# of tick 49) stops the reels in the update of tick 52, at t = 51 T (tick k updates at
+# (k - 1) T).
+TRIP_TICK, TRIP_TIME = 52, 51 * T
+
+
+def _book(simulator, reels):
+    return reels.book(reels.GetMyContextFromRoot(simulator.get_context()))
+
+
+def test_the_watchdog_stops_at_once_and_resumes_when_the_bridge_answers(monkeypatch, robot, p0):
+    # The bridge pauses for 5 ticks (50..54) and answers the stop at tick 55: 3 ticks after
+    # the stop, 6 ms of the default resume_within = 15 ms.
+    simulator, reels, link = _scripted(monkeypatch, robot, p0, _silent(range(50, 55)))
+    simulator.AdvanceTo(0.2)
+    book = _book(simulator, reels)
+    assert book["fault"] == 0 and book["holds"] == 1
+    assert book["longest_hold"] == pytest.approx(3 * T, abs=1e-9)  # ticks 52 -> 55
+    # The stop: shutdown_repeats (3) zero commands with enable off, sent by tick 52's update;
+    # the command before it (tick 51's publish) still moved the reels.
+    stop = link.commands_at(TRIP_TICK)
+    assert len(stop) == 3 and all(not on and np.all(v == 0) for _, _, on, v in stop)
+    assert link.commands_at(TRIP_TICK - 1)[-1][2]
+    # Nothing while the watchdog waits (the publishes after ticks 53 and 54 send nothing).
+    assert not link.commands_at(53) and not link.commands_at(54)
+    # Resumed with tick 55: enabled, the ramp from rest again (T / ramp_time per tick).
+    for k in range(55, 60):
+        (_, _, on, v), = link.commands_at(k)
+        np.testing.assert_allclose(v, (k - 54) * 0.02 * U, rtol=1e-12)
+        assert on
+
+
+def test_a_bridge_that_does_not_answer_the_stop_ends_the_run(monkeypatch, robot, p0):
+    # Statuses keep coming during the hold, but echo the last command before the stop (the
+    # one sent right before tick 52's update): the bridge never read the stop. After
+    # resume_within = 15 ms (8 ticks of 2 ms after the stop; 7 ticks are 14 ms) the fault
+    # latches, timed at the stop.
+    before = {}
+
+    def stale(k, link):
+        if k in (50, 51, 52):
+            before["echo"] = link.sequence
+            return []
+        return [(0, before.get("echo", link.sequence), 0)]
+
+    simulator, reels, link = _scripted(monkeypatch, robot, p0, stale)
+    with pytest.raises(ReelFault) as fault:
+        simulator.AdvanceTo(0.2)
+    message = str(fault.value)
+    assert message.startswith(f"reel fault at t = {TRIP_TIME:.3f} s: no valid status from the "
+                              "reel bridge at 127.0.0.1:47100 for 3 ticks (6 ms; "
+                              "watchdog_ticks = 3), and none answered the stop within "
+                              "resume_within = 15 ms; zero reel velocity sent.")
+    assert fault.value.time == pytest.approx(TRIP_TIME)
+    assert _book(simulator, reels)["holds"] == 0
+    assert link.tick == TRIP_TICK + 8
+    # One stop, nothing after it: the fault's own shutdown sends no second burst.
+    assert [on for _, _, on, _ in link.sent[-4:]] == [True, False, False, False]
+    assert link.sent[-1][0] == TRIP_TICK
+
+
+def test_statuses_lost_during_the_silence_end_the_run(monkeypatch, robot, p0):
+    # The bridge answers the stop at tick 54, but two statuses went missing on the way: a
+    # lossy link, not a paused bridge.
+    def lossy(k, link):
+        if k in (50, 51, 52, 53):
+            return []
+        return [(2 if k == 54 else 0, link.sequence, 0)]
+
+    simulator, reels, link = _scripted(monkeypatch, robot, p0, lossy)
+    with pytest.raises(ReelFault, match=r"for 3 ticks \(6 ms; watchdog_ticks = 3\), and the "
+                                        r"statuses that came back had skipped 2 \(lost or "
+                                        r"rejected on the way: a faulty link"):
+        simulator.AdvanceTo(0.2)
+    assert link.tick == 54 and link.sent[-1][0] == TRIP_TICK
+
+
+def test_a_fault_bit_while_the_watchdog_holds_ends_the_run(monkeypatch, robot, p0):
+    def faulty(k, link):
+        return [] if k in (50, 51, 52) else [(0, link.sequence, FAULT_DRIVE if k >= 53 else 0)]
+
+    simulator, reels, link = _scripted(monkeypatch, robot, p0, faulty)
+    with pytest.raises(ReelFault, match=r"fault bits 0x0002 \(DRIVE\)"):
+        simulator.AdvanceTo(0.2)
+    assert _book(simulator, reels)["holds"] == 0
+    assert link.sent[-1][0] == TRIP_TICK  # nothing sent after the stop
+
+
+def test_resume_within_zero_latches_at_the_stop(monkeypatch, robot, p0):
+    # As before holds existed: the same pause of 5 ticks ends the run at the stop.
+    simulator, reels, link = _scripted(monkeypatch, robot, p0, _silent(range(50, 55)),
+                                       resume_within=0.0)
+    with pytest.raises(ReelFault) as fault:
+        simulator.AdvanceTo(0.2)
+    assert ("for 3 ticks (6 ms; watchdog_ticks = 3); zero reel velocity sent."
+            in str(fault.value))
+    assert fault.value.time == pytest.approx(TRIP_TIME)
+    assert link.tick == TRIP_TICK  # the publish right after the stop ended the run
+
+
+def test_a_silence_just_short_of_the_watchdog_never_stops(monkeypatch, robot, p0):
+    # Two silent ticks (watchdog_ticks = 3): the reels never stop, the ramp never restarts.
+    simulator, reels, link = _scripted(monkeypatch, robot, p0, _silent(range(50, 52)))
+    simulator.AdvanceTo(0.2)
+    assert all(on for _, _, on, _ in link.sent[1:])
+    assert _book(simulator, reels)["holds"] == 0

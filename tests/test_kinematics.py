@@ -136,10 +136,12 @@ def test_inconsistent_lengths_raise_naming_the_residual(shipped, delta):
         forward_kinematics(shipped, L)
     msg = str(info.value)
     assert "inconsistent" in msg and repr(shipped.name) in msg
-    found = re.search(r"position \[(.*?)\] m leaves a residual of (\S+) m on cable (\d+)", msg)
+    found = re.search(r"position \[(.*?)\] m leaves a residual of (\S+) mm on cable (\d+) "
+                      r"\(allowed (\S+) mm\)", msg)
     assert found, msg
     p_fit = np.array([float(x) for x in found.group(1).split(",")])
-    residual, cable = float(found.group(2)), int(found.group(3))
+    residual, cable = float(found.group(2)) / 1000, int(found.group(3))
+    assert float(found.group(4)) / 1000 == pytest.approx(1e-6)
     # The true position leaves a residual of delta on cable 1, so the best fit does no worse;
     # and it must exceed the allowed 1e-6 m, or it should not have raised.
     assert 1e-6 < residual <= delta

@@ -94,12 +94,32 @@ def test_csv_operator_resolves_relative_paths_against_the_scenario_dir(tmp_path)
     ("t,fx,fy,fz\n0,0,0,0\n1,2,x,3\n", r"line 3: not four numbers: \['1', '2', 'x', '3'\]"),
     ("t,fx,fy,fz\n0,0,0\n", r"line 2: not four numbers"),
     ("t,fx,fy,fz\n1,0,0,0\n0,0,0,0\n", r"times must increase strictly"),
+    # Issue 22: NaN, inf and rows out of order name the file's line and the value. Lines count
+    # from 1 with the header as line 1; the blank line 3 still counts.
+    ("t,fx,fy,fz\n0,0,0,0\n\n1,nan,0,0\n", r"'.*force\.csv' line 4: t, fx, fy, fz must be "
+                                        r"finite numbers, got \['1', 'nan', '0', '0'\]"),
+    ("t,fx,fy,fz\n0,0,0,0\n1,0,-inf,0\n", r"line 3: .*finite.*'-inf'"),
+    ("t,fx,fy,fz\n0,0,0,0\ninf,0,0,0\n", r"line 3: .*finite.*'inf'"),
+    ("t,fx,fy,fz\n0,0,0,0\n2,0,0,0\n\n1.5,0,0,0\n", r"'.*force\.csv' line 5: times must "
+                                                  r"increase strictly: t = 1\.5 s follows "
+                                                  r"t = 2\.0 s on line 3"),
 ])
 def test_bad_csv_files_are_rejected_naming_the_file_and_line(tmp_path, text, match):
     path = write_csv(tmp_path, text)
     with pytest.raises(OperatorError, match=match) as info:
         load_force_csv(path)
     assert "operator.path" in str(info.value)
+
+
+def test_a_blank_line_in_a_csv_is_skipped(tmp_path):
+    path = write_csv(tmp_path, "t,fx,fy,fz\n0,0,0,0\n\n2,2,0,0\n\n")
+    np.testing.assert_array_equal(load_force_csv(path).force(1.0, P, V), [1.0, 0.0, 0.0])
+
+
+def test_a_non_finite_scripted_row_is_named_by_its_index():
+    with pytest.raises(OperatorError, match=r"operator\.times\[1\], operator\.forces\[1\]: .*"
+                                            r"finite numbers, got t = 1\.0 s, \[0\.0, nan, 0\.0\]"):
+        ForceProfile([0.0, 1.0], [[0, 0, 0], [0, float("nan"), 0]])
 
 
 def test_missing_csv_file_names_the_path(tmp_path):

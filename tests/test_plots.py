@@ -326,7 +326,7 @@ def test_a_fault_is_marked_in_every_figure(tmp_path):
         "127.0.0.1:47100 for 3 ticks (6 ms; watchdog_ticks = 3); zero reel velocity sent."))
     title = plots.figure_cables(long).get_suptitle()
     assert "zero reel velocity sent." in title
-    assert max(len(line) for line in title.split("\n")) <= 100
+    assert len(title.split("\n")) >= 4  # wrapped to the figure's width (issue 22, below)
 
 
 def test_timing_figure_shows_tick_period_compute_and_the_limits():
@@ -386,3 +386,121 @@ def test_views_benchmark_prints_its_table():
     for row in ("simulation (reference)", "figure forces", "figure cables", "HTML replay",
                 "live view: one frame"):
         assert row in done.stdout, done.stdout
+
+
+# --- issue 22: titles inside the figure, interrupted runs, slack rows, the legend's dots ---
+
+
+def _dynamic(log):
+    """`log` with a dynamic plant's ground truth (tensions, slack, p_true, rpy_true)."""
+    T = len(log["time"])
+    return dict(log, tensions=np.full((T, 7), 10.0), slack=np.zeros((T, 7), dtype=bool),
+                p_true=log["p"].copy(), rpy_true=np.zeros((T, 3)))
+
+
+def _titles(fig):
+    return [t for t in [fig._suptitle] + [a.title for a in fig.axes] if t and t.get_text()]
+
+
+@pytest.mark.parametrize("dpi", [100, 120])  # the figures' own, and plot_log's PNGs
+def test_every_title_lies_inside_the_figure_for_a_long_message(dpi):
+    from matplotlib.backends.backend_agg import FigureCanvasAgg
+
+    # A long fault message (about 330 characters, a 60-character word in it) on a run with a
+    # long scenario name: every figure, the dynamic plant's and the timing one included.
+    word = "/home/operator/robots/calibrations/2026-12-01/paper_7cable.yaml"
+    message = ("KinematicsError: cable lengths are inconsistent with robot 'paper_7cable_swap13'"
+               f" loaded from {word}: the best-fit platform position [1.562326, 3.242415, "
+               "1.21489] m leaves a residual of 0.0012 m on cable 5 (allowed 0.0012 m); zero "
+               "reel velocity was sent and the run stopped there.")
+    log = _dynamic(dict(synthetic_log(0.4, fault_time=0.3, realtime=True),
+                        fault_message=np.array(message),
+                        scenario_name=np.array("an_operator_s_very_long_scenario_name_for_"
+                                               "the_calibration_day_of_december_2026")))
+    for name, make in plots.FIGURES.items():
+        fig = make(log)
+        fig.set_dpi(dpi)
+        FigureCanvasAgg(fig).draw()
+        renderer = fig.canvas.get_renderer()
+        for text in _titles(fig):
+            box = text.get_window_extent(renderer)
+            assert box.x0 >= 0 and box.x1 <= fig.bbox.width, (name, text.get_text())
+            assert box.y0 >= 0 and box.y1 <= fig.bbox.height, (name, text.get_text())
+        title = fig.get_suptitle()
+        # Wrapped, not cut: the message's first and last words, and the long word whole or
+        # split across lines.
+        assert "fault at t = 0.300 s: KinematicsError:" in title, name
+        assert title.replace("\n", " ").endswith("the run stopped there."), name
+        assert word in title.replace("\n", ""), name
+
+
+def test_wrapping_keeps_every_word_and_fits_each_line():
+    def measure(text):  # one unit per character
+        return float(len(text))
+
+    lines = plots.wrap_to_width("a bb ccc dddd\nx " + "y" * 25, measure, 10)
+    assert lines == ["a bb ccc", "dddd", "x", "yyyyyyyyyy", "yyyyyyyyyy", "yyyyy"]
+    assert all(len(line) <= 10 for line in lines)
+
+
+def test_an_interrupted_run_is_marked_like_a_fault():
+    # Issue 22, point 13: `ending` "interrupted" (Ctrl-C, SIGTERM): the last logged tick is
+    # where the run stopped (the synthetic log's 0.5 s run ends at t = 0.5 s, tick 250).
+    log = _dynamic(dict(synthetic_log(0.5, realtime=True), ending=np.array("interrupted"),
+                        fault_time=np.array(np.nan), fault_message=np.array("")))
+    time_axes = 0
+    for name, make in plots.FIGURES.items():
+        fig = make(log)
+        assert "interrupted at t = 0.500 s (Ctrl-C or SIGTERM)" in \
+            fig.get_suptitle().replace("\n", " "), name
+        assert "fault" not in fig.get_suptitle()
+        for ax in fig.axes:
+            if ax.name == "3d":
+                continue
+            marks = [line for line in ax.get_lines() if line.get_gid() == "interrupted"]
+            if name == "logistic":
+                assert marks == []
+                continue
+            assert len(marks) == 1 and list(marks[0].get_xdata()) == [0.5, 0.5], name
+            assert marks[0].get_color() == plots.INTERRUPT_COLOR
+            time_axes += 1
+        if name == "trajectory":
+            star = [line for line in fig.axes[0].get_lines()
+                    if line.get_gid() == "interrupted"][0]
+            np.testing.assert_allclose(np.array(star.get_data_3d()).ravel(), log["p"][-1])
+    # distances 1, forces 3, cables 2, timing 2, tensions 2, pose error 2.
+    assert time_axes == 12
+
+
+def test_cables_slack_at_the_same_time_each_have_their_row():
+    # Issue 22, point 2: cables 4, 6 and 7 slack on the same ticks (10 to 19): three rows,
+    # at heights 4, 6 and 7 of an axis labelled 1..7; none hides another.
+    log = _dynamic(synthetic_log(0.1))
+    log["slack"][10:20, [3, 5, 6]] = True
+    fig = plots.figure_tensions(log)
+    rows = fig.axes[1]
+    assert [t.get_text() for t in rows.get_yticklabels()] == [str(i) for i in range(1, 8)]
+    marks = {line.get_gid(): line for line in rows.get_lines()
+             if (line.get_gid() or "").startswith("slack cable")}
+    assert sorted(marks) == ["slack cable 4", "slack cable 6", "slack cable 7"]
+    for i in (4, 6, 7):
+        np.testing.assert_array_equal(marks[f"slack cable {i}"].get_ydata(), np.full(10, i))
+        np.testing.assert_array_equal(marks[f"slack cable {i}"].get_xdata(),
+                                      log["time"][10:20])
+        assert marks[f"slack cable {i}"].get_label() == f"cable {i} slack (10 ticks)"
+    quiet = plots.figure_tensions(_dynamic(synthetic_log(0.1)))
+    assert "no cable went slack" in [t.get_text() for t in quiet.axes[1].texts]
+
+
+def test_the_legend_shows_the_within_d_u_dots_as_they_look(log):
+    # Issue 22, point 17: the dots are drawn translucent but overlap into solid orange; the
+    # legend's marker is that orange, not one pale dot.
+    from matplotlib.colors import to_rgba
+
+    fig = plots.figure_trajectory(log)
+    dots = [line for line in fig.axes[0].get_lines() if line.get_gid() == "within d_u"][0]
+    assert dots.get_alpha() == plots.EVENT_ALPHA < 1
+    legend = fig.legends[0]
+    handle = legend.legend_handles[[t.get_text() for t in legend.get_texts()].index(
+        "a pair within d_u")]
+    assert to_rgba(handle.get_color(), handle.get_alpha()) == to_rgba("tab:orange", 1.0)

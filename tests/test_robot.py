@@ -134,6 +134,22 @@ def test_unknown_limits_field(write_robot, valid_spec):
     assert_names(load_error(path), str(path), "'limits.max_speed'", "'limits.max_velocity'")
 
 
+def test_an_unknown_field_gives_its_line_and_the_closest_valid_name(write_robot, valid_spec):
+    # Issue 22, point 15. The spec writes name, reels, attachments, workspace (lines 1-4, the
+    # workspace's lower and upper on 5-6), then limits: line 7, its max_velocty on line 8.
+    valid_spec["limits"] = {"max_velocty": 1.0}
+    path = write_robot(valid_spec)
+    assert path.read_text().splitlines()[7].strip() == "max_velocty: 1.0"
+    msg = load_error(path)
+    assert f"{path}: line 8: unknown field(s) ['limits.max_velocty']; did you mean " \
+           "'limits.max_velocity'?" in msg, msg
+    # A misspelt required field: both said, with the name meant.
+    valid_spec["workspce"] = valid_spec.pop("workspace")
+    msg = load_error(write_robot(valid_spec))
+    assert "missing required field(s) ['workspace']" in msg
+    assert "unknown field(s) ['workspce'] given; did you mean 'workspace'?" in msg, msg
+
+
 @pytest.mark.parametrize("field, cable, row", [
     ("reels", 2, [4.0, 0.0]),
     ("attachments", 4, [0.0, 0.0, -0.1, 0.0]),

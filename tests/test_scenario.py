@@ -255,6 +255,26 @@ def test_unknown_field_in_a_scenario_file_names_the_file(tmp_path):
     assert "unknown field 'limits.max_speed'" in str(info.value)
 
 
+def test_an_unknown_field_in_a_file_gives_its_line_and_the_closest_name(tmp_path):
+    # Issue 22, point 15: the line of the field (from 1), "did you mean", and the loader's
+    # internal base_dir is no field to offer.
+    path = tmp_path / "bad.yaml"
+    path.write_text("name: bad\nduration: 1.0\ninterference:\n  default:\n    d_l: 0.05\n"
+                    "    du: 0.07\n")
+    msg = str(pytest.raises(ScenarioError, load_scenario, path).value)
+    assert f"{path}: line 6: unknown field 'interference.default.du'; did you mean 'd_u'? " \
+           "(valid fields of interference.default: ['d_l', 'd_u', 'F_u', 'eps'])" in msg, msg
+    path.write_text("name: bad\nbasedir: x\n")
+    msg = str(pytest.raises(ScenarioError, load_scenario, path).value)
+    assert "line 2: unknown field 'basedir' (valid fields: ['name'," in msg, msg
+    assert "base_dir" not in msg
+    # A value error in a list, in a tagged operator: the line of the entry.
+    path.write_text("name: bad\noperator: !SpringHandOperator\n  waypoints:\n"
+                    "    - [1.0, 2.0, 1.0]\n    - [1.0, x, 1.0]\n  times: [0, 1]\n")
+    msg = str(pytest.raises(ScenarioError, load_scenario, path).value)
+    assert "line 5: operator.waypoints[1][1] must be a number, got 'x'" in msg, msg
+
+
 @pytest.mark.parametrize("overlay,message", [
     # Types, checked on the raw YAML.
     ("{duration: abc}", "duration must be a number, got 'abc'"),
@@ -291,12 +311,36 @@ def test_unknown_field_in_a_scenario_file_names_the_file(tmp_path):
     ("plant: !SimulatedReels {max_reel_speed: 0.0}", "plant.max_reel_speed must be a finite "
                                                      "number > 0, got 0.0"),
     ("{interference: {default: {d_l: 0.07}}}", "d_u"),  # d_l above d_u = 0.061
+    # Issue 22, point 6: an error in the default set names the default's fields, not the
+    # first pair it reaches; a pair's override names the override and the pair.
+    ("{interference: {default: {d_l: 0.07, d_u: 0.06}}}",
+     "interference.default.d_u = 0.06 m must be above interference.default.d_l = 0.07 m"),
+    ("{interference: {default: {F_u: -1.0}}}", "interference.default.F_u must be > 0 N, "
+                                               "got -1.0"),
+    ("{interference: {default: {eps: 2.0}}}", "interference.default.eps = 2.0 N must lie in "
+                                              "(0, F_u/2) = (0, 1.0) N"),
+    ("{interference: {pairs: [{pair: [1, 3], d_u: 0.04}]}}",
+     "interference.pairs[0].d_u = 0.04 m (pair (1,3)) must be above "
+     "interference.default.d_l = 0.05 m"),
+    ("{interference: {pairs: [{pair: [1, 2]}, {pair: [3, 1], d_l: -0.01}]}}",
+     "interference.pairs[1].d_l (pair (3,1)) must be >= 0 m, got -0.01"),
+    # Issue 22, point 7: less than one tick of time_step (0.002 s) is refused, naming the tick.
+    ("{duration: 0.001}", "duration 0.001 s is shorter than one tick (time_step 0.002 s)"),
+    ("{duration: 0.01, time_step: 0.02}", "duration 0.01 s is shorter than one tick "
+                                          "(time_step 0.02 s)"),
     ("operator: !ScriptedOperator {times: [0, 0], forces: [[0, 0, 0], [1, 1, 1]]}",
      "operator.times must increase strictly"),
     ("operator: !CsvOperator {path: no_such.csv}", "no_such.csv' does not exist"),
 ])
 def test_bad_values_are_rejected_naming_field_and_value(overlay, message):
     assert message in error_of(overlay)
+
+
+def test_a_duration_of_one_tick_is_enough():
+    # Exactly one tick (and one tick less a round-off hair, 0.1 / 0.002 * 0.002) is a run.
+    from cdpm_drake.scenario import check_duration
+    load_scenario("exp1_no_interaction", overlay_text="{duration: 0.002}")
+    check_duration(0.002 * (1 - 1e-12), 0.002, "duration")
 
 
 def test_initial_position_outside_names_the_box():
@@ -310,10 +354,53 @@ def test_invalid_yaml_is_a_scenario_error():
 
 def test_default_scenario_is_valid():
     # The dataclass defaults alone describe a runnable scenario (STYLE: defaults that work).
-    from cdpm_drake.scenario import check_scenario
-    robot = check_scenario(Scenario())
-    assert robot.num_cables == 7
-    assert np.all(robot.workspace.contains(Scenario().initial_position))
+    from cdpm_drake.scenario import resolve_scenario
+    resolved = resolve_scenario(Scenario())
+    assert resolved.robot.num_cables == 7
+    assert np.all(resolved.robot.workspace.contains(resolved.scenario.initial_position))
+
+
+def test_a_left_out_start_is_the_workspace_centre_of_the_scenario_s_robot(tmp_path):
+    # Issue 22, point 10: not the paper robot's start, whichever robot the scenario names.
+    # cube_8cable's box is [0.5, 0.5, 0.5] to [3.5, 2.5, 2.5] m (its robot file): centre
+    from cdpm_drake.scenario import load_resolved_scenario
+    path = tmp_path / "cube.yaml"
+    path.write_text("name: cube\nrobot: cube_8cable\nduration: 0.1\n")
+    resolved = load_resolved_scenario(path)
+    # [2.0, 1.5, 1.5] m.
+    assert resolved.scenario.initial_position == [2.0, 1.5, 1.5]
+    assert resolved.defaulted == ("initial_position",)
+    assert Scenario().initial_position is None  # the schema's default is "left out"
+    # The paper robot's box is [0.5, 0.8, 0.3] to [3.0, 4.0, 2.4] m: centre [1.75, 2.4, 1.35].
+    resolved = load_resolved_scenario(path, "{robot: paper_7cable}")
+    # Written to 12 significant digits: 1.35, not (0.3 + 2.4) / 2 = 1.3499999999999999.
+    assert resolved.scenario.initial_position == [1.75, 2.4, 1.35]
+    # Written explicitly, it is what was written, and nothing is said to be defaulted.
+    resolved = load_resolved_scenario(path, "{initial_position: [1.9, 1.0, 1.1]}")
+    assert resolved.scenario.initial_position == [1.9, 1.0, 1.1] and not resolved.defaulted
+
+
+@pytest.mark.parametrize("name", scenario_names())
+def test_every_shipped_scenario_writes_its_start(name):
+    # A shipped scenario never relies on the default, so its paper reproduction (and the
+    # reference logs, tests/test_reference_logs.py) cannot move with it.
+    from cdpm_drake.scenario import SCENARIOS_DIR
+    from pydrake.common.yaml import yaml_load
+    assert len(yaml_load(filename=str(SCENARIOS_DIR / f"{name}.yaml"))["initial_position"]) == 3
+
+
+def test_a_message_about_a_defaulted_start_says_default(tmp_path):
+    # No tension distribution holds the paper robot's platform with every cable above 1 kN
+    # (its weight is 25 N); the start, at the workspace centre, is the default and the
+    # message says so, as for the start tilt; the floor was written, and is not a default.
+    path = tmp_path / "dyn.yaml"
+    path.write_text("name: dyn\nduration: 0.1\nplant: !DynamicReels {min_tension: 1000}\n")
+    with pytest.raises(ScenarioError) as e:
+        load_scenario(path)
+    assert ("initial_position [1.75, 2.4, 1.35] m (the default: the centre of the workspace "
+            "box of robot 'paper_7cable') with plant.initial_rpy [0.0, 0.0, 0.0] rad "
+            "(default)") in str(e.value), str(e.value)
+    assert "plant.min_tension = 1000 N;" in str(e.value)
 
 
 def test_a_negative_random_seed_is_refused_at_load():

@@ -17,6 +17,14 @@ import pytest
 BIN = Path(sys.executable).parent
 
 
+def _default_signals():
+    """In the child, before exec: SIGINT and SIGTERM at their defaults. A pytest started in
+    the background by a shell without job control has SIGINT ignored, the child would
+    inherit that, and (as Unix programs do, see interrupt.honoured) keep ignoring Ctrl-C."""
+    signal.signal(signal.SIGINT, signal.SIG_DFL)
+    signal.signal(signal.SIGTERM, signal.SIG_DFL)
+
+
 def _wait_for(proc, stream, needle: bytes, timeout: float = 60.0) -> bytes:
     """Read `stream` of `proc` until `needle` appears (or fail after `timeout` s)."""
     seen = b""
@@ -38,20 +46,26 @@ def _wait_for(proc, stream, needle: bytes, timeout: float = 60.0) -> bytes:
     return seen
 
 
+# Simulated seconds of the run a signal stops: paced at real time, it cannot end by itself
+# before the signal however fast the host is; the test waits for the signal's effect only.
+LONG_RUN = 600
+
+
 @pytest.mark.parametrize("sig, code, name", [(signal.SIGTERM, 143, "SIGTERM"),
                                              (signal.SIGINT, 130, "Ctrl-C")])
 def test_a_signal_during_cdpm_simulate_keeps_the_log_and_the_plots(tmp_path, sig, code, name):
     out_dir = tmp_path / "run"
-    # Paced at real time so that the run is surely under way when the signal comes; the
-    # progress bar (on stderr) appears once the simulator is initialised.
+    # The progress bar (on stderr) appears once the simulator is initialised, so the run is
+    # under way when the signal comes, and (paced at real time) far from its end.
     proc = subprocess.Popen([str(BIN / "cdpm"), "simulate", "exp1_no_interaction", "--duration",
-                             "30", "--realtime", "1", "--out", str(out_dir), "--plot"],
-                            cwd=tmp_path, stdout=subprocess.PIPE, stderr=subprocess.PIPE)
+                             str(LONG_RUN), "--realtime", "1", "--out", str(out_dir), "--plot"],
+                            cwd=tmp_path, stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+                            preexec_fn=_default_signals)
     try:
-        _wait_for(proc, proc.stderr, b"/30.0 s")
-        time.sleep(0.5)
+        _wait_for(proc, proc.stderr, f"/{LONG_RUN:.1f} s".encode(), timeout=300)
         proc.send_signal(sig)
-        out, err = proc.communicate(timeout=60)
+        # Generous: the log and the plots are written after the signal, on a loaded host too.
+        out, err = proc.communicate(timeout=300)
     finally:
         if proc.poll() is None:
             proc.kill()
@@ -60,10 +74,30 @@ def test_a_signal_during_cdpm_simulate_keeps_the_log_and_the_plots(tmp_path, sig
     assert "interrupted at t = " in err and name in err, err
     with np.load(out_dir / "log.npz") as log:
         t_end = float(log["time"][-1])
-        assert 0.0 < t_end < 30.0
+        assert 0.0 <= t_end < LONG_RUN
         assert str(log["ending"]) == "interrupted"
     assert f"duration: {t_end}" in (out_dir / "scenario.yaml").read_text()
     assert (out_dir / "distances.png").is_file() and (out_dir / "forces.png").is_file()
+
+
+def test_a_command_started_with_sigint_ignored_keeps_ignoring_it():
+    # The Unix convention (interrupt.honoured): the handlers of cdpm sweep and cdpm run are
+    # installed only for signals that are not ignored; SIGTERM is still theirs.
+    from cdpm_drake.interrupt import honoured, terminate_raises
+    from cdpm_drake.realtime import _StopRequest
+
+    previous = signal.signal(signal.SIGINT, signal.SIG_IGN)
+    try:
+        assert not honoured(signal.SIGINT) and honoured(signal.SIGTERM)
+        with _StopRequest(), terminate_raises():
+            assert signal.getsignal(signal.SIGINT) is signal.SIG_IGN
+            assert signal.getsignal(signal.SIGTERM) not in (signal.SIG_IGN, signal.SIG_DFL)
+        signal.signal(signal.SIGINT, signal.default_int_handler)
+        with _StopRequest():
+            assert signal.getsignal(signal.SIGINT) is not signal.default_int_handler
+        assert signal.getsignal(signal.SIGINT) is signal.default_int_handler
+    finally:
+        signal.signal(signal.SIGINT, previous)
 
 
 def test_sigterm_stops_the_emulator_with_its_summary(tmp_path):
@@ -95,19 +129,45 @@ def test_a_signal_during_cdpm_run_exits_130_or_143(tmp_path, capsys, sig, code):
     robot = scenario_robot(scenario)
     server = ReelBridgeServer(ReelBridge(robot, cable_lengths(
         robot, np.array(scenario.initial_position)), time_constant=0.0)).start()
-    timer = threading.Timer(1.0, os.kill, (os.getpid(), sig))
+    enabled = threading.Event()
+
+    def signal_once_enabled():
+        # The signal comes once the bridge has seen an enabled command, i.e. while the run is
+        # under way, however long loading and building take on this host.
+        deadline = time.monotonic() + 300
+        while not enabled.is_set() and time.monotonic() < deadline:
+            try:
+                if server.commands[-1].enable:
+                    enabled.set()
+                    os.kill(os.getpid(), sig)
+                    return
+            except IndexError:
+                pass
+            time.sleep(0.01)
+
+    timer = threading.Thread(target=signal_once_enabled, daemon=True)
+    # The run's handler is installed only for a signal that is not ignored: a pytest started
+    # with SIGINT ignored (in the background, without job control) must not skip this case.
+    previous = signal.signal(signal.SIGINT, signal.default_int_handler)
     timer.start()
     try:
-        rc = main(["run", "exp1_no_interaction", "--duration", "20", "--out",
+        rc = main(["run", "exp1_no_interaction", "--duration", "120", "--out",
                    str(tmp_path / "run"), "--scenario-text",
                    f"plant: !HardwareReels {{port: {server.address[1]}, watchdog_ticks: 25}}"])
     finally:
-        timer.cancel()
+        enabled.set()
+        timer.join()
+        # The stop command is the run's last datagram: give the bridge time to read it
+        # (waiting for the effect, not for a fixed time).
+        deadline = time.monotonic() + 60
+        while server.commands and server.commands[-1].enable and time.monotonic() < deadline:
+            time.sleep(0.01)
         server.stop()
+        signal.signal(signal.SIGINT, previous)
     out = capsys.readouterr().out
     assert rc == code, out
     assert f"run ended: interrupted by {signal.Signals(sig).name}" in out
     with np.load(tmp_path / "run" / "log.npz") as log:
-        assert str(log["ending"]) == "interrupted" and 0 < log["time"][-1] < 20
+        assert str(log["ending"]) == "interrupted" and 0 <= log["time"][-1] < 120
     last = list(server.commands)[-1]
     assert not last.enable and np.all(last.velocity == 0.0)

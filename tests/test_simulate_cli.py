@@ -90,6 +90,45 @@ def test_resolved_scenario_is_written_beside_the_log_and_loads_back(exp1_run):
     assert back == load_scenario("exp1_no_interaction", overlay_text="duration: 0.2")
 
 
+def test_a_run_folder_moves_and_reruns_bit_for_bit(capsys, tmp_path, write_robot, valid_spec):
+    # Issue 22, point 14: the robot file and the force CSV are copied into the run folder and
+    # its scenario.yaml refers to the copies, so the folder alone reruns the run exactly.
+    src = tmp_path / "src"
+    src.mkdir()
+    write_robot(valid_spec, "src/tetra.yaml")
+    (src / "push.csv").write_text("t,fx,fy,fz\n0,0,0,0\n0.1,2,1,0\n0.3,-1,2,1\n")
+    (src / "push.yaml").write_text("name: push\nrobot: tetra.yaml\ninitial_position: "
+                                   "[2.0, 1.5, 1.5]\nduration: 0.3\noperator: !CsvOperator "
+                                   "{path: push.csv}\nsensor: {noise_std: 0.5}\n")
+    first = tmp_path / "first"
+    assert simulate_cli(capsys, str(src / "push.yaml"), "--out", str(first),
+                        "--no-progress")[0] == 0
+    text = (first / "scenario.yaml").read_text()
+    assert "robot: robot.yaml" in text and "path: force.csv" in text
+    assert str(tmp_path) not in text and "base_dir" not in text  # nothing points outside
+    assert (first / "robot.yaml").read_bytes() == (src / "tetra.yaml").read_bytes()
+    assert (first / "force.csv").read_bytes() == (src / "push.csv").read_bytes()
+    # Moved, with the originals gone, and rerun from another directory.
+    moved = tmp_path / "elsewhere" / "shared"
+    moved.parent.mkdir()
+    first.rename(moved)
+    for f in src.iterdir():
+        f.unlink()
+    src.rmdir()
+    again = tmp_path / "again"
+    assert simulate_cli(capsys, str(moved / "scenario.yaml"), "--out", str(again),
+                        "--no-progress")[0] == 0
+    with np.load(moved / "log.npz") as a, np.load(again / "log.npz") as b:
+        assert sorted(a.files) == sorted(b.files)
+        for key in a.files:
+            np.testing.assert_array_equal(a[key], b[key], err_msg=key)
+    assert (again / "scenario.yaml").read_text() == text
+    # Into its own folder, with --force (which empties it first): the copies are kept.
+    assert simulate_cli(capsys, str(moved / "scenario.yaml"), "--out", str(moved), "--force",
+                        "--no-progress")[0] == 0
+    assert (moved / "robot.yaml").is_file() and (moved / "scenario.yaml").read_text() == text
+
+
 def test_summary_reports_ticks_and_the_logged_minimum_distances(exp1_run):
     _, out, out_dir = exp1_run
     assert re.search(r"scenario 'exp1_no_interaction': 101 ticks, 0\.200 s simulated", out), out
@@ -311,3 +350,27 @@ def test_latest_points_at_a_run_as_it_starts_and_back_if_it_writes_nothing(tmp_p
     lone.create()
     lone.discard()
     assert not (tmp_path / "fresh").exists()
+
+
+def test_a_hand_force_beyond_the_sensor_range_is_warned_once_and_counted(capsys, tmp_path):
+    # Issue 22, point 12. The CSV ramps the force along x from 0 N at t = 0 to 1e9 N at 1 s and
+    # back to 1 N at 2 s (held after): beyond the sensor's 80 N across its axis (z) from the
+    # first tick after 0 (2e6 N at 2 ms) to t < 2 - 79 / (1e9 - 1) s, i.e. ticks 1 to 999.
+    (tmp_path / "big.csv").write_text("t,fx,fy,fz\n0,0,0,0\n1,1e9,0,0\n2,1,0,0\n")
+    code, out, err = simulate_cli(capsys, "exp1_no_interaction", "--duration", "3",
+                                  "--no-progress", "--out", str(tmp_path / "run"),
+                                  "--scenario-text", "operator: !CsvOperator {path: "
+                                  f"{tmp_path / 'big.csv'}}}")
+    assert code == 0
+    assert err.count("beyond the sensor's range") == 1, err  # warned once, before the run
+    assert f"'{tmp_path / 'big.csv'}' line 3: the hand force [1000000000.0, 0.0, 0.0] N is " \
+           "beyond the sensor's range (axial 100 N, transverse 80 N)" in err, err
+    assert ("hand force beyond the sensor's range (axial 100 N, transverse 80 N), clipped: "
+            "999 of 1501 ticks, the first at t = 0.002 s" in out), out
+    with np.load(tmp_path / "run" / "log.npz") as log:
+        assert log["F_measured"][250, 0] == pytest.approx(5e8)  # raw, at 0.5 s: logged
+        assert np.abs(log["F_H"]).max() <= 80.0 + 1e-9  # what the controller saw: clipped
+    # Within the range: no warning, no summary line.
+    code, out, err = simulate_cli(capsys, "exp2_interaction", "--duration", "0.1",
+                                  "--no-progress", "--out", str(tmp_path / "calm"))
+    assert code == 0 and "sensor's range" not in out + err

@@ -122,6 +122,22 @@ axes:
         assert isinstance(v.scenario.sensor.filter_window, int)
 
 
+def test_a_left_out_start_is_each_variant_s_own_robot_centre(tmp_path):
+    # Issue 22, point 10: a base without initial_position starts every variant at the centre
+    # of its robot's workspace box (robot files: paper_7cable [1.75, 2.4, 1.35] m,
+    # cube_8cable [2.0, 1.5, 1.5] m), also when an axis changes the robot, and a coordinate
+    # axis edits that centre.
+    write(tmp_path, "name: free\nduration: 0.1\n", name="free.yaml")
+    s = sw.load_sweep(write(tmp_path, "name: robots\nbase: free.yaml\naxes:\n"
+                                      "  - {field: robot, values: [paper_7cable, cube_8cable]}\n"))
+    assert [v.scenario.initial_position for v in s.variants] == [[1.75, 2.4, 1.35],
+                                                                [2.0, 1.5, 1.5]]
+    assert "initial_position: [2.0, 1.5, 1.5]" in s.variants[1].scenario_yaml  # as it ran
+    s = sw.load_sweep(write(tmp_path, "name: z\nbase: free.yaml\naxes:\n"
+                                      '  - {field: "initial_position[2]", values: [1.0]}\n'))
+    assert s.variants[0].scenario.initial_position == [1.75, 2.4, 1.0]
+
+
 def test_random_samples_are_seeded_and_in_range(tmp_path):
     text = """\
 base: exp2_interaction
@@ -155,7 +171,8 @@ variants: [{admittance: {damping: 3.0}}, {limits: {max_velocity: 0.2}}]
 @pytest.mark.parametrize("text, expected", [
     (SMALL + "colour: red\n", "unknown field 'colour'"),
     (SMALL.replace("admittance.damping", "admittance.dampnig"),
-     "unknown field 'dampnig'; valid fields there: ['mass', 'damping']"),
+     "unknown field 'dampnig'; did you mean 'damping'? (valid fields there: ['mass', "
+     "'damping'])"),
     (SMALL.replace("linspace: [5.0, 7.0, 2]", "values: [5.0], linspace: [5.0, 7.0, 2]"),
      "needs exactly one of values, linspace, geomspace"),
     (SMALL.replace("[2.0, 4.0]", "[2.0, 2.0]"), "lists 2.0 twice"),
@@ -167,6 +184,9 @@ variants: [{admittance: {damping: 3.0}}, {limits: {max_velocity: 0.2}}]
     (SMALL + "seeds: [a]\n", "seeds[0] must be an integer, got 'a'"),
     (SMALL.replace("linspace: [5.0, 7.0, 2]", "linspace: [5.0, 7.0, 2.5]"),
      "must be [start, stop, count] with an integer count >= 1"),
+    # Issue 22, point 5: an empty list is a list given, and a NaN value is spelled out.
+    (SMALL.replace("linspace: [5.0, 7.0, 2]", "values: []"),
+     "axes[1].values (admittance.damping) is empty: list at least one value"),
 ])
 def test_bad_sweep_file_is_reported(tmp_path, text, expected):
     with pytest.raises(sw.SweepError) as e:
@@ -187,6 +207,15 @@ def test_rejected_value_names_the_variant_before_any_run(tmp_path, capsys):
     assert not (out / "runs").exists() and not (out / "results.csv").exists()
 
 
+def test_a_nan_axis_value_is_spelled_out_in_the_variant(tmp_path):
+    # Issue 22, point 5: not `interference.default.F_u=` (an empty CSV cell).
+    with pytest.raises(sw.SweepError) as e:
+        sw.load_sweep(write(tmp_path, SMALL.replace("[2.0, 4.0]", "[2.0, .nan]")))
+    assert "(run r" in str(e.value)
+    assert "interference.default.F_u=nan, admittance.damping=5.0)" in str(e.value)
+    assert "interference.default.F_u must be a finite number, got nan" in str(e.value)
+
+
 def test_unknown_pair_names_the_robot_pairs(tmp_path):
     with pytest.raises(sw.SweepError) as e:
         sw.load_sweep(write(tmp_path, SMALL.replace(
@@ -201,6 +230,20 @@ def test_shipped_sweep_is_valid_and_resolves_by_name():
     assert s.fields == ["interference.default.d_u", "interference.default.F_u"]
     assert len(s.variants) >= 25
     assert (REPO / "sweeps" / "exp2_du_Fu.yaml").resolve() == s.path.resolve()
+
+
+def test_shipped_dynamic_sweep_runs_every_variant_on_the_dynamic_plant():
+    # Issue 21: exp2_du_Fu's grid on `!DynamicReels`; its first 10 s of the push.
+    from cdpm_drake.scenario import DynamicReels
+
+    s = sw.load_sweep("exp2_dynamic_du_Fu")
+    kinematic = sw.load_sweep("exp2_du_Fu")
+    assert s.fields == kinematic.fields
+    assert [v.values for v in s.variants] == [v.values for v in kinematic.variants]
+    for variant in s.variants:
+        assert isinstance(variant.scenario.plant, DynamicReels)
+        assert variant.scenario.duration == 10.0
+    assert s.file.metric == "min_distance_true"  # the truth, from the rotated platform
 
 
 # --- Metrics ---------------------------------------------------------------------------------
@@ -420,7 +463,7 @@ def test_the_readme_sweep_example_loads(tmp_path):
     assert last.random_seed == 2 and last.duration == 5.0
 
 
-def test_a_run_that_stops_part_way_is_an_error_row_with_how_far_it_got(tmp_path, monkeypatch):
+def test_a_run_that_stops_part_way_is_a_fault_row_with_its_metrics(tmp_path, monkeypatch):
     """simulate() returns the log up to a failure with the exception in `error` (as when the
     forward kinematics finds no pose): the row says error, where, and why."""
     from cdpm_drake import simulation
@@ -432,13 +475,62 @@ def test_a_run_that_stops_part_way_is_an_error_row_with_how_far_it_got(tmp_path,
         result.error = RuntimeError("no platform pose fits the cable lengths")
         return result
 
+    # The same run, 0.1 s long and ending normally.
+    whole = sw.execute_run(sw.tasks_for([sw.load_sweep(write(
+        tmp_path, SMALL.replace("{duration: 0.2}", "{duration: 0.1}"))).variants[0]])[0])
+    assert whole["status"] == "ok"
     monkeypatch.setattr(simulation, "simulate", stops_at_0_1)
     v = sw.load_sweep(write(tmp_path, SMALL)).variants[0]
     row = sw.execute_run(sw.tasks_for([v])[0])
-    assert row["status"] == "error"
+    assert row["status"] == "fault"
     assert row["error"] == ("the run stopped at t = 0.100 s: RuntimeError: no platform pose "
                             "fits the cable lengths")
-    assert row["sim_s"] == pytest.approx(0.1) and "min_distance" not in row
+    # Issue 22, point 3: the metrics of the ticks it logged, as the 0.1 s run has them.
+    for metric in ("min_distance", "operator_effort", "peak_F_d", "time_below_d_l", "sim_s"):
+        assert row[metric] == whole[metric], metric
+
+
+# A sweep whose every run faults part-way: the dynamic plant's cables stretch, and the
+# controller's kinematics stop the run once the lengths disagree with a rigid platform by more
+# than max_length_residual (both values are reached within 0.5 s of experiment 2's push).
+# The paper's open loop on the dynamic plant: its lengths drift, so the forward kinematics'
+# residual grows past these limits within the second.
+ALL_FAULT = """\
+name: all_fault
+base: exp2_interaction
+overlay: {duration: 1.0, plant: !DynamicReels {}, controller: {length_gain: 0}}
+axes:
+  - {field: plant.max_length_residual, values: [1.0e-3, 1.2e-3]}
+"""
+
+
+def test_a_sweep_where_every_run_faults_draws_nothing_and_says_why(tmp_path, capsys):
+    path = write(tmp_path, ALL_FAULT)
+    out = tmp_path / "out"
+    assert main(["sweep", str(path), "--out", str(out), "--workers", "1", "--no-progress",
+                 "--plot"]) == 1
+    text, err = capsys.readouterr()
+    assert "0 ok, 2 faulted, 0 error(s)" in text
+    assert ("cdpm sweep: error: no pictures: none of the 2 runs finished ok (2 faulted, "
+            "0 error(s)") in err, err
+    assert not list(out.glob("*.png"))
+    rows = csv_rows(out / "results.csv")
+    for r in rows:  # faulted, with the metrics of the ticks logged up to the fault
+        assert r["status"] == "fault" and "the run stopped at t = " in r["error"]
+        assert 0 < float(r["sim_s"]) < 1.0 and float(r["min_distance"]) > 0.05
+    # cdpm plot of that folder: the same reason, exit 1, no empty axes.
+    assert main(["plot", str(out)]) == 1
+    assert "no pictures: none of the 2 runs finished ok" in capsys.readouterr().err
+    assert not list(out.glob("*.png"))
+
+
+def test_nothing_to_draw_says_why():
+    ok = {"status": "ok", "min_distance": "0.06", "crossings": ""}
+    assert sw.nothing_to_draw([ok], "min_distance") == ""
+    assert "none of the 1 ok runs has a value of crossings" in sw.nothing_to_draw([ok],
+                                                                                 "crossings")
+    assert "none of the 2 runs finished ok (1 faulted, 1 error(s)" in sw.nothing_to_draw(
+        [{"status": "fault"}, {"status": "error"}], "min_distance")
 
 
 def test_spaced_axes():

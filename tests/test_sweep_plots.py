@@ -63,3 +63,69 @@ def test_plot_sweep_writes_the_pictures(tmp_path):
     assert [p.name for p in paths] == ["heatmap.png", "operator_effort_vs_a.png",
                                        "operator_effort_vs_b.png", "pareto.png"]
     assert all(p.stat().st_size > 1000 for p in paths)
+
+
+# Issue 22, point 16: one unit per quantity, written on its axis, and readable labels.
+DU, FU = "interference.default.d_u", "interference.default.F_u"
+UNITS_COLUMNS = ["run", DU, FU, "random_seed", "status", "error", "min_distance",
+                 "operator_effort"]
+
+
+def unit_row(run, d_u, F_u, d, effort):
+    return {"run": run, DU: d_u, FU: F_u, "random_seed": "0", "status": "ok", "error": "",
+            "min_distance": repr(d), "operator_effort": repr(effort)}
+
+
+UNIT_ROWS = [unit_row("r1", "0.0605", "1.0", 0.0584, 10.0),
+             unit_row("r2", "0.0605", "5.0", 0.0598, 30.0),
+             unit_row("r3", "0.064", "1.0", 0.0584, 12.0),
+             unit_row("r4", "0.064", "5.0", 0.0596, 40.0)]
+
+
+@pytest.mark.parametrize("field, label, scale", [
+    (DU, "d_u, every pair (mm)", 1000.0),
+    ("interference.default.F_u", "F_u, every pair (N)", 1.0),
+    ("interference.pairs[1,3].d_l", "d_l of pair 1-3 (mm)", 1000.0),
+    ("admittance.mass", "admittance mass M (kg)", 1.0),
+    ("limits.max_velocity", "speed limit (m/s)", 1.0),
+    ("sensor.filter_window", "sensor filter window (samples)", 1.0),
+    ("initial_position[2]", "start z (mm)", 1000.0),
+    ("random_seed", "random seed", 1.0),
+    ("some.new_field", "some.new_field", 1.0),  # unknown: its path, no unit invented
+])
+def test_field_axes_have_readable_labels_and_units(field, label, scale):
+    assert sp.field_axis(field) == (label, scale)
+
+
+def test_the_heatmap_shows_distances_in_one_unit_on_labelled_axes():
+    fig = sp.figure_heatmap(UNITS_COLUMNS, UNIT_ROWS, "min_distance")
+    ax, bar = fig.axes
+    assert ax.get_xlabel() == "d_u, every pair (mm)" and ax.get_ylabel() == "F_u, every pair (N)"
+    # d_u values 0.0605 and 0.064 m, drawn in mm like the colour bar's distances.
+    assert [t.get_text() for t in ax.get_xticklabels()] == ["60.5", "64"]
+    assert [t.get_text() for t in ax.get_yticklabels()] == ["1", "5"]
+    assert bar.get_ylabel() == "closest approach of any pair (mm)"
+    np.testing.assert_allclose(ax.images[0].get_array(), [[58.4, 58.4], [59.8, 59.6]])
+
+
+def test_the_metric_against_a_field_and_the_pareto_front_speak_in_units():
+    fig = sp.figure_metric_vs_axis(UNITS_COLUMNS, UNIT_ROWS, "min_distance", DU)
+    ax = fig.axes[0]
+    assert ax.get_xlabel() == "d_u, every pair (mm)"
+    assert ax.get_ylabel() == "closest approach of any pair (mm)"
+    lines = {ln.get_label(): ln for ln in ax.get_lines()}
+    assert sorted(lines) == ["F_u = 1 N", "F_u = 5 N"]
+    np.testing.assert_allclose(lines["F_u = 5 N"].get_xdata(), [60.5, 64.0])  # mm
+    fig = sp.figure_pareto(UNITS_COLUMNS, UNIT_ROWS)
+    ax = fig.axes[0]
+    assert ax.get_xlabel() == "operator effort, integral of |F_H| (N s), smaller is better"
+    notes = sorted(t.get_text() for t in ax.texts)
+    # The front: r1 (10 N s, 58.4 mm) and r2 (30 N s, 59.8 mm); r3, r4 are dominated.
+    assert notes == ["d_u 60.5 mm, F_u 1 N", "d_u 60.5 mm, F_u 5 N"]
+
+
+def test_a_cell_without_an_ok_run_says_how_its_runs_ended():
+    rows = UNIT_ROWS[:3] + [dict(UNIT_ROWS[3], status="fault", error="stopped",
+                                 min_distance="0.05")]
+    fig = sp.figure_heatmap(UNITS_COLUMNS, rows, "min_distance")
+    assert "fault" in [t.get_text() for t in fig.axes[0].texts]

@@ -435,6 +435,34 @@ def test_emulate_force_and_time_constant_set_the_bridge_physics():
         server.stop()
 
 
+@covers("emulate --plant")
+def test_emulate_plant_dynamic_plays_the_scenarios_dynamic_plant():
+    # --plant dynamic: the bridge is the dynamic plant of the scenario (start, robot, operator;
+    # the encoders zeroed at the start pose: they read the rigid lengths there), --force and
+    # --length-offset reach it; --plant kinematic (the default) is the first-order lag.
+    server = _server_from("--scenario", "exp2_interaction", "--plant", "dynamic", "--force",
+                          0.5, 0.0, 1.0, "--length-offset", 2, 0.003, "--port", 0)
+    try:
+        bridge = server.bridge
+        assert isinstance(bridge, E.DynamicBridge)
+        scenario = load_scenario("exp2_interaction")
+        expected = cable_lengths(scenario_robot(scenario), np.array(scenario.initial_position))
+        expected[1] += 0.003
+        np.testing.assert_allclose(bridge.lengths, expected, atol=1e-12)
+        np.testing.assert_allclose(bridge.force(), [0.5, 0.0, 1.0], atol=1e-12)
+    finally:
+        server.stop()
+    kinematic = _server_from("--scenario", "exp2_interaction", "--port", 0)
+    try:
+        assert isinstance(kinematic.bridge, ReelBridge)
+        assert kinematic.bridge.time_constant == 0.02
+    finally:
+        kinematic.stop()
+    # The dynamic plant's drives come from the robot file: a lag for them is refused.
+    assert cdpm("emulate", "--plant", "dynamic", "--time-constant", 0.01, "--port", 0,
+                "--duration", 0.01) == 2
+
+
 @covers("emulate --address", "emulate --port")
 def test_emulate_address_and_port_are_where_it_listens():
     port = _free_port()
@@ -557,6 +585,28 @@ def test_plot_out_and_html_are_where_the_files_go(tmp_path, logged):
     assert PAPER_FIGURES <= {p.name for p in out.glob("*.png")}
     assert not list(logged.glob("*.png"))
     assert html.stat().st_size > 10_000
+
+
+# --- export ---------------------------------------------------------------------------------------
+
+
+@covers("export <log>", "export --csv")
+@pytest.mark.parametrize("as_file", [False, True])
+def test_export_csv_writes_log_csv_beside_the_log(tmp_path, logged, as_file):
+    import shutil
+
+    folder = tmp_path / "copy"
+    shutil.copytree(logged, folder)
+    assert cdpm("export", folder / "log.npz" if as_file else folder, "--csv") == 0
+    lines = (folder / "log.csv").read_text().splitlines()
+    assert lines[0].startswith("time [s],p_x [m]") and len(lines) == 1 + 21  # 0.04 s: 21 ticks
+
+
+@covers("export --out")
+def test_export_out_is_where_the_csv_goes(tmp_path, logged):
+    out = tmp_path / "elsewhere" / "table.csv"
+    assert cdpm("export", logged, "--csv", "--out", out) == 0
+    assert out.read_text().startswith("time [s],") and not (logged / "log.csv").exists()
 
 
 def test_plot_logistic_curve_spans_the_band_and_never_negative_distances(logged):

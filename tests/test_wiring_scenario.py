@@ -28,7 +28,7 @@ from cdpm_drake import scenario as scenario_module
 from cdpm_drake.hardware.config import HardwareReels
 from cdpm_drake.emulator import FaultPlan, ReelBridge, ReelBridgeServer
 from cdpm_drake.interference import InterferenceParams, interference_force
-from cdpm_drake.kinematics import KinematicsError, cable_lengths, forward_kinematics
+from cdpm_drake.kinematics import KinematicsError, cable_lengths, forward_kinematics, jacobian
 from cdpm_drake.operators import CsvOperator, NoOperator, ScriptedOperator, SpringHandOperator
 from cdpm_drake.realtime import run as realtime_run
 from cdpm_drake.robot import RobotSchema, load_robot
@@ -36,7 +36,7 @@ from cdpm_drake.scenario import (Admittance, Interference, Limits, Logistic, Pai
                                  Scenario, ScenarioError, Sensor, SimulatedReels, WallForce,
                                  load_scenario, scenario_robot)
 from cdpm_drake.simulation import save_log, simulate
-from cdpm_drake.systems.dynamic_plant import reel_step
+from cdpm_drake.systems.dynamic_plant import ground_truth_now, plant_state_now, reel_step
 
 from conftest import case_registry, to_yaml
 
@@ -503,7 +503,9 @@ def test_reel_time_constant_lags_the_motion():
     """With tau = 0.05 s each tick's actual reel speed moves 1 - exp(-T/tau) = 3.9 % of the way
     to the command; the platform velocity (the cables are consistent and J barely changes over
     millimetres) follows the commanded velocity through that same first-order filter."""
-    log = sim(push([1.0, 0, 0], plant=SimulatedReels(time_constant=0.05)), 0.3)
+    # The paper's open loop: the cable-length loop would make up the lag it measures.
+    log = sim(push([1.0, 0, 0], plant=SimulatedReels(time_constant=0.05),
+                   controller=scenario_module.Controller(length_gain=0.0)), 0.3)
     lag = 1.0 - np.exp(-T / 0.05)
     command = log["velocity"][:, 0]
     actual = np.diff(log["p"][:, 0]) / T
@@ -513,6 +515,23 @@ def test_reel_time_constant_lags_the_motion():
         predicted.append(y)
     np.testing.assert_allclose(actual, predicted, atol=2e-5)
     assert np.abs(actual - command[:-1]).max() > 0.004  # the lag is visible (100 x the tolerance)
+
+
+@covers("Scenario.controller.length_gain")
+def test_length_gain_sets_the_cable_length_loop():
+    """Every tick's reel command is J(p) v + K_l (l_d - l) with the scenario's K_l = 13.7 1/s
+    (distinct from the default 20): recomputed from the logged p, velocity, commanded and
+    measured lengths with kinematics.jacobian. Lagging drives (tau = 0.05 s) make l_d - l
+    non-zero, so the gain shows."""
+    s = push([1.0, 0, 0], plant=SimulatedReels(time_constant=0.05),
+             controller=scenario_module.Controller(length_gain=13.7))
+    log = sim(s, 0.3)
+    robot = scenario_robot(s)
+    error = log["lengths_commanded"] - log["lengths"]
+    expected = (np.einsum("kij,kj->ki", jacobian(robot, log["p"]), log["velocity"])
+                + 13.7 * error)
+    np.testing.assert_allclose(log["reel_velocity"], expected, rtol=0, atol=1e-12)
+    assert np.abs(error).max() > 1e-4  # 1e8 x the tolerance: the loop acts
 
 
 def _reel_speeds(log):
@@ -652,8 +671,7 @@ def test_cables_damping_adds_its_force_to_a_knocked_platform_and_decays_it(tmp_p
         diagram, simulator, _ = _plant_alone(s)
         mbp, mbp_context = _sub(diagram, simulator, "platform_plant")
         mbp.SetVelocities(mbp_context, v)
-        cables, cables_context = _sub(diagram, simulator, "cables")
-        T_knocked = cables.GetOutputPort("tensions").Eval(cables_context).copy()
+        T_knocked = ground_truth_now(diagram, simulator.get_context())["tensions"]
         simulator.AdvanceTo(duration)
         return s, T_knocked, mbp.GetVelocities(mbp_context)
 
@@ -666,7 +684,7 @@ def test_cables_damping_adds_its_force_to_a_knocked_platform_and_decays_it(tmp_p
     assert np.linalg.norm(v_end) < 0.5 * np.linalg.norm(v_light)
 
 
-# The reel drive's closed form (reel_step, dynamic_plant.py): inertia dw/dt = K (u - w) - b w
+# The reel drive's closed form (reel_step, cables.py): inertia dw/dt = K (u - w) - b w
 # - F_c sgn w, K = bandwidth * inertia, stepped implicitly with h. From rest under a constant
 # command u with |K u| > F_c the reel never reverses, so each step is
 # w' = (J w + h K u - h F_c sgn u) / (J + h (K + b)): w_n = w_inf (1 - r^n), w_inf = (K u - F_c
@@ -683,8 +701,7 @@ def _reel_speeds_after(scenario, command, duration):
     """The reel drives' speeds (m/s, their state) after `duration` s of a constant command."""
     diagram, simulator, _ = _plant_alone(scenario, command)
     simulator.AdvanceTo(duration)
-    drives, context = _sub(diagram, simulator, "reel_drives")
-    return context.get_discrete_state(1).value().copy()
+    return plant_state_now(diagram, simulator.get_context())["reel_speeds"]
 
 
 FRICTIONLESS = "reel_drives: {viscous_friction: 0.0, coulomb_friction: 0.0"
@@ -780,10 +797,10 @@ def test_dynamic_plant_max_length_residual_bounds_the_forward_kinematics_misfit(
     s = _dynamic()
     L, _, T0 = _start_geometry(s)
     L0 = L * 70000.0 / (70000.0 + T0)
-    with pytest.raises(KinematicsError, match=r"residual of 0\.0007 m on cable 4"):
+    with pytest.raises(KinematicsError, match=r"residual of 0\.70\d mm on cable 4"):
         forward_kinematics(scenario_robot(s), L0, max_residual=0.00065)
     forward_kinematics(scenario_robot(s), L0, max_residual=0.00075)
-    with pytest.raises(KinematicsError, match=r"allowed 0\.00065 m"):
+    with pytest.raises(KinematicsError, match=r"allowed 0\.650 mm"):
         sim(_dynamic(max_length_residual=0.00065), 0.004)
     sim(_dynamic(max_length_residual=0.00075), 0.004)
 
@@ -1126,6 +1143,38 @@ def test_hardware_shutdown_repeats_sets_the_final_zero_commands(tmp_path):
     trailing = commands[last_enabled + 1:]
     assert all(not c.enable and not np.any(c.velocity) for c in trailing)
     assert len(trailing) >= 5 and len(trailing) % 5 == 0, len(trailing)
+
+
+@covers("Scenario.plant!HardwareReels.resume_within")
+def test_hardware_resume_within_bounds_the_wait_for_the_bridge_after_a_stop(monkeypatch):
+    """The scenario's diagram on a scripted link (tests/helpers_scripted_link.py: one period
+    of clock per tick, no sockets): the bridge is silent from tick 50, the watchdog (3 ticks)
+    stops the reels in tick 52's update, and the bridge answers the stop `gap` ticks later.
+    resume_within = 6.5 ms (not the default 15 ms) takes an answer 3 ticks (6 ms) later and
+    the run goes on; 4 ticks (8 ms) later the fault has latched."""
+    from pydrake.systems.analysis import Simulator
+
+    from cdpm_drake.diagram import build_diagram
+    from cdpm_drake.hardware.reels import ReelFault
+    from helpers_scripted_link import ScriptedLink, answering, install
+
+    lengths = cable_lengths(load_robot("paper_7cable"), np.array(P0))
+    for gap, resumes in ((3, True), (4, False)):
+        diagram = build_diagram(_hw(47100, watchdog_ticks=3, resume_within=0.0065))
+        reels = diagram.GetSubsystemByName("reels")
+        link = ScriptedLink(lengths, lambda k, link, gap=gap: (
+            [] if 50 <= k < 52 + gap else answering(k, link)))
+        install(monkeypatch, reels, link)
+        simulator = Simulator(diagram)
+        simulator.Initialize()
+        if resumes:
+            simulator.AdvanceTo(0.2)
+            book = reels.book(reels.GetMyContextFromRoot(simulator.get_context()))
+            assert book["holds"] == 1 and book["fault"] == 0
+        else:
+            with pytest.raises(ReelFault, match=r"none answered the stop within "
+                                                r"resume_within = 6.5 ms"):
+                simulator.AdvanceTo(0.2)
 
 
 # --- bad values are refused by field name, for every checked field -------------------------------

@@ -5,6 +5,7 @@
   config.py         `HardwareReels`, the scenario's `!HardwareReels` plant entry
   reels.py          HardwareReelsSystem, the Drake plant talking to the bridge (imports Drake)
   tick_log.py       the streaming per-tick log; tick_log_sink.py its Drake wrapper
+  priority.py       SCHED_FIFO for the control loop and the emulator (`--rt-priority`)
 
 Only reels.py and tick_log_sink.py import Drake; the rest runs in the emulator process and
 in plain tests. The emulator (`cdpm_drake/emulator.py`, cdpm-reel-emulator) is a rehearsal

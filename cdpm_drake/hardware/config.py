@@ -11,6 +11,8 @@ from .link import resolve_ipv4
 
 # The bridge's UDP port when nothing else is configured (unassigned by IANA).
 DEFAULT_BRIDGE_PORT = 47100
+# Longest wait for a stopped bridge to answer before the fault latches, s.
+MAX_RESUME_WITHIN = 1.0
 
 
 @dataclasses.dataclass
@@ -26,8 +28,16 @@ class HardwareReels:
     # UDP port the controller binds to; 0 picks a free one (the bridge answers the sender
     # of the latest valid command).
     local_port: int = 0
-    # Control ticks without a valid status after which the watchdog latches a fault.
+    # Control ticks without a valid status after which the watchdog stops the reels (zero
+    # velocity, enable off, at once).
     watchdog_ticks: int = 3
+    # After the watchdog stopped the reels, how long the bridge has to answer, s (wall
+    # clock): a valid status that echoes the stop, with no status lost since the silence
+    # began, re-enables the reels (ramping from rest, as at start-up) and the run goes on;
+    # otherwise the fault latches and the run ends. It rides out a bridge that was paused
+    # rather than broken, e.g. a host that holds a virtual CPU for ~10 ms (see
+    # scripts/soak_realtime.py). 0: latch at once.
+    resume_within: float = 0.015
     # Longest wait for the bridge's first status at startup, s (wall clock).
     startup_timeout: float = 2.0
     # Time for the commanded reel velocity to ramp from 0 to full after enabling, s.
@@ -51,6 +61,11 @@ def check_hardware_reels(config: HardwareReels, field: str = "plant") -> None:
     _int_in(config.watchdog_ticks, 1, 1000, f"{field}.watchdog_ticks", "control ticks")
     _int_in(config.shutdown_repeats, 1, 100, f"{field}.shutdown_repeats", "datagrams")
     _number(config.startup_timeout, f"{field}.startup_timeout", "s", positive=True)
+    _number(config.resume_within, f"{field}.resume_within", "s", positive=False)
+    if config.resume_within > MAX_RESUME_WITHIN:
+        raise ValueError(f"{field}.resume_within must be at most {MAX_RESUME_WITHIN:g} s (a "
+                         f"bridge silent longer is broken, not paused), got "
+                         f"{config.resume_within!r}")
     _number(config.ramp_time, f"{field}.ramp_time", "s", positive=False)
     _number(config.max_length_residual, f"{field}.max_length_residual", "m", positive=True)
 

@@ -15,11 +15,20 @@ control rate (period `time_step`):
   would count a sample twice). (Drake handles a step's publishes before the next step's
   updates, so the command sent at t_k uses the lengths read at t_{k-1}.)
 
-A fault (no valid status for `watchdog_ticks` ticks, a bridge fault bit, a non-finite command)
-sends zero velocity with enable off at once, latches in the state, and the next publish raises
-ReelFault, which ends Simulator.AdvanceTo. (pydrake 1.51 crashes the process when a Python
-LeafSystem's event returns EventStatus.Failed(self, ...); a raised exception propagates out of
-AdvanceTo unchanged.)
+A fault (a bridge fault bit, a non-finite command) sends zero velocity with enable off at
+once, latches in the state, and the next publish raises ReelFault, which ends
+Simulator.AdvanceTo. (pydrake 1.51 crashes the process when a Python LeafSystem's event returns
+EventStatus.Failed(self, ...); a raised exception propagates out of AdvanceTo unchanged.)
+
+The watchdog (no valid status for `watchdog_ticks` ticks and (watchdog_ticks - 1) periods of
+wall time) also sends zero velocity with enable off at once, then holds: it sends nothing more
+and waits up to `resume_within` s (wall clock) for the bridge to answer. A valid status that
+echoes the stop, with no status lost since the silence began, proves the link whole again: the
+reels are re-enabled, ramping from rest, and the run goes on. Anything else (the time runs out,
+a status lost, a fault bit) latches the fault as above. Why: a bridge that is paused, not
+broken, e.g. an emulator on a virtual machine whose host holds a virtual CPU for 5-15 ms
+(measured on the shared VM this was developed on: scripts/soak_realtime.py), would otherwise
+end a person's interaction; the reels stop within the same `watchdog_ticks` either way.
 
 The socket is a resource, not state: it is held as an attribute because it cannot be copied
 into or restored from a Context. Everything that changes what the system outputs or sends
@@ -36,7 +45,7 @@ from pydrake.systems.framework import LeafSystem
 from ..kinematics import KinematicsError, cable_lengths, forward_kinematics
 from .config import HardwareReels, check_hardware_reels
 from .link import ReelLink
-from .protocol import fault_names
+from .protocol import fault_names, next_sequence, sequence_delta
 
 # Book-keeping state vector (float64; 32-bit sequence numbers are exact in a double).
 STATUS_SEQ = 0        # sequence of the last accepted status
@@ -51,9 +60,19 @@ FAULT_BITS = 8        # the bridge's fault bits when FAULT == FAULT_BRIDGE
 FAULT_TIME = 9        # context time at which the fault latched, s
 STATUS_TIME = 10      # the last status's `time` field (echoed in commands), s
 COMMANDS_LOST = 11    # the bridge's count of commands it never received
-BOOK_SIZE = 12
+HOLD = 12             # 1 while the watchdog holds the reels stopped and waits for the bridge
+HOLD_WALL = 13        # time.monotonic() when the hold began, s
+HOLD_TIME = 14        # context time when the hold began (zero velocity sent), s
+HOLD_SEQUENCE = 15    # sequence of the hold's first stop command: the bridge must echo it
+HOLD_LOST = 16        # the link's count of lost statuses when the hold began
+HOLD_MISSED = 17      # silent ticks when the watchdog stopped the reels
+HOLDS = 18            # holds that ended with the bridge answering (the run went on)
+LONGEST_HOLD = 19     # the longest of those, s (wall clock)
+BOOK_SIZE = 20
 
-FAULT_NONE, FAULT_WATCHDOG, FAULT_BRIDGE = 0, 1, 2
+# Why the run stops: a silent bridge (no answer within resume_within), a bridge fault bit, a
+# bridge that answered the watchdog's stop after losing statuses on the way.
+FAULT_NONE, FAULT_WATCHDOG, FAULT_BRIDGE, FAULT_WATCHDOG_LOSS = 0, 1, 2, 3
 
 
 class ReelFault(RuntimeError):
@@ -154,7 +173,8 @@ class HardwareReelsSystem(LeafSystem):
         b = context.get_discrete_state(self._book).get_value()
         names = ("status_sequence", "have_status", "command_echo", "missed_ticks", "enabled",
                  "ramp", "last_status_wall", "fault", "fault_bits", "fault_time",
-                 "status_time", "commands_lost")
+                 "status_time", "commands_lost", "hold", "hold_wall", "hold_time",
+                 "hold_sequence", "hold_lost", "hold_missed", "holds", "longest_hold")
         return {k: float(b[i]) for i, k in enumerate(names)}
 
     # --- events ------------------------------------------------------------------------------
@@ -229,11 +249,16 @@ class HardwareReelsSystem(LeafSystem):
                 book[FAULT], book[FAULT_BITS] = FAULT_BRIDGE, status.faults
         else:
             book[MISSED] += 1.0
-            if (book[MISSED] >= self._config.watchdog_ticks
+        if book[FAULT] == FAULT_NONE:
+            if book[HOLD]:
+                self._judge_hold(book, status, now, link)
+            elif (status is None and book[MISSED] >= self._config.watchdog_ticks
                     and now - book[LAST_STATUS_WALL] >= self._silence):
-                book[FAULT] = FAULT_WATCHDOG
+                self._start_hold(book, context.get_time(), now, link)
         if book[FAULT] != FAULT_NONE:
-            book[FAULT_TIME] = context.get_time()
+            # A fault that ends a hold happened when the reels were stopped.
+            book[FAULT_TIME] = book[HOLD_TIME] if book[HOLD] else context.get_time()
+            book[HOLD] = 0.0
             book[ENABLED] = 0.0
             book[RAMP] = 0.0
             # Stop now rather than at the next publish, one tick later.
@@ -242,12 +267,44 @@ class HardwareReelsSystem(LeafSystem):
             book[RAMP] = min(1.0, book[RAMP] + self._ramp_step)
         state.get_mutable_vector(self._book).SetFromVector(book)
 
+    def _start_hold(self, book, t, now, link) -> None:
+        """The watchdog: stop the reels now (zero velocity, enable off), then hold for the
+        bridge's answer, or latch at once when resume_within is 0."""
+        book[HOLD_MISSED] = book[MISSED]
+        if self._config.resume_within <= 0:
+            book[FAULT] = FAULT_WATCHDOG
+            return
+        book[HOLD], book[HOLD_WALL], book[HOLD_TIME] = 1.0, now, t
+        book[HOLD_SEQUENCE] = next_sequence(link.last_sent_sequence)
+        book[HOLD_LOST] = link.counters.lost
+        book[ENABLED] = 0.0
+        book[RAMP] = 0.0
+        self.shutdown()  # the stop commands: sequences HOLD_SEQUENCE onwards
+
+    def _judge_hold(self, book, status, now, link) -> None:
+        """While holding: resume when a status answers the stop in time with nothing lost on
+        the way; latch when the time is up or statuses were lost."""
+        if now - book[HOLD_WALL] > self._config.resume_within:
+            book[FAULT] = FAULT_WATCHDOG
+        elif link.counters.lost != book[HOLD_LOST]:
+            # Statuses went missing, not just late: a lossy link, not a paused bridge.
+            book[FAULT] = FAULT_WATCHDOG_LOSS
+        elif (status is not None and status.echo_sequence is not None
+              and sequence_delta(status.echo_sequence, int(book[HOLD_SEQUENCE])) >= 0):
+            # The bridge read the stop and answered: the round trip is whole again.
+            book[HOLD] = 0.0
+            book[ENABLED] = 1.0  # the ramp starts again from 0
+            book[HOLDS] += 1.0
+            book[LONGEST_HOLD] = max(book[LONGEST_HOLD], now - book[HOLD_WALL])
+
     def _publish_command(self, context):
         book = context.get_discrete_state(self._book).get_value()
         link = self._open_link()
         if book[FAULT] != FAULT_NONE:
             self.shutdown()
             raise ReelFault(self._fault_message(book), float(book[FAULT_TIME]))
+        if book[HOLD]:
+            return  # the stop went out; nothing more until the bridge answers it
         u = self._command.Eval(context)
         bad = ~np.isfinite(u)
         if bad.any():
@@ -288,9 +345,16 @@ class HardwareReelsSystem(LeafSystem):
             why = (f"the reel bridge reports fault bits {bits:#06x} "
                    f"({', '.join(fault_names(bits))})")
         else:
-            n = int(book[MISSED])
+            n = int(book[HOLD_MISSED])
             why = (f"no valid status from the reel bridge at {c.address}:{c.port} for {n} ticks "
                    f"({n * self._T * 1e3:.0f} ms; watchdog_ticks = {c.watchdog_ticks})")
+            if book[FAULT] == FAULT_WATCHDOG_LOSS:
+                lost = self._link.counters.lost - int(book[HOLD_LOST]) if self._link else 0
+                why += (f", and the statuses that came back had skipped {lost} (lost or "
+                        f"rejected on the way: a faulty link, not a paused bridge)")
+            elif c.resume_within > 0:
+                why += (f", and none answered the stop within resume_within = "
+                        f"{c.resume_within * 1e3:g} ms")
         return (f"reel fault at t = {t:.3f} s: {why}; zero reel velocity sent. "
                 f"{self._link_summary()}")
 
@@ -300,10 +364,13 @@ def start_realtime(simulator, rate: float = 1.0) -> None:
 
     Initialize() blocks while the reels wait for the bridge; Drake starts its real-time clock
     before that, so without ResetStatistics() the first ticks would race to catch up. The
-    objects alive by then (modules, the diagram) live for the whole run: gc.freeze() keeps
-    full garbage collections short (one scanning them all takes ~20 ms with pydrake loaded, more
-    than the watchdog allows)."""
+    build's garbage is collected before the reels are enabled (a full collection takes
+    20-60 ms with pydrake loaded, more than the watchdog allows; the bridge's own command
+    timeout starts with the first enabling command). The objects alive by then (modules, the
+    diagram) live for the whole run: gc.freeze() takes them out of every later collection.
+    (realtime.run also keeps the collector out of the ticks: see its docstring.)"""
     simulator.set_target_realtime_rate(rate)
+    gc.collect()
     simulator.Initialize()
     gc.freeze()
     simulator.ResetStatistics()

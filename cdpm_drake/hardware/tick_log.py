@@ -6,6 +6,12 @@ page cache, and survives the process being killed, at most `flush_rows` ticks af
 appended. Each row holds `tick` (int64), `time` (the loop's clock, s), `wall`
 (time.monotonic() at append, s) and the caller's named signals.
 
+Only the writer thread writes to the file (the header too): the thread that appends, the
+real-time loop, never waits for the disk, unless the writer falls a whole pool behind
+(`blocks` x `flush_rows` rows, 12.8 s at 500 Hz by default; counted in `stalls`). The pool is
+one array allocated and written to (so its pages are mapped) when the writer is created: an
+append touches no new memory. The writer writes straight from the pool's memory (no copy).
+
 File layout: b"CDPMTICK", uint32 little-endian header length, a JSON header (format version,
 numpy dtype of a row, caller metadata) padded with spaces to a multiple of 8 bytes, then the
 rows back to back. `read_tick_log` reads every whole row, also from a truncated file.
@@ -61,12 +67,13 @@ class TickLogWriter:
 
     signals: {name: size} or {name: (size, dtype)} (default dtype float64). flush_rows: rows
     per block handed to the writer (the most a SIGKILL can lose). blocks: blocks in the pool;
-    if the writer falls that far behind, append waits for it (counted in `stalls`) rather than
-    dropping rows. metadata: JSON-serialisable dict stored in the header. fsync: also fsync
-    each block (survives power loss, costs disk latency in the writer thread only).
+    if the writer falls that far behind (a disk stalled for blocks x flush_rows ticks),
+    append waits for it (counted in `stalls`) rather than dropping rows. metadata:
+    JSON-serialisable dict stored in the header. fsync: also fsync each block (survives power
+    loss, costs disk latency in the writer thread only).
     """
 
-    def __init__(self, path, signals, *, flush_rows: int = 50, blocks: int = 16,
+    def __init__(self, path, signals, *, flush_rows: int = 50, blocks: int = 128,
                  metadata: dict | None = None, fsync: bool = False):
         if not (isinstance(flush_rows, int) and flush_rows >= 1):
             raise TickLogError(f"flush_rows must be an integer >= 1, got {flush_rows!r}")
@@ -82,13 +89,18 @@ class TickLogWriter:
         self.path = str(path)
         self._fsync = fsync
         self._fd = os.open(self.path, os.O_WRONLY | os.O_CREAT | os.O_TRUNC, 0o644)
-        self._write_all(MAGIC + _LEN.pack(len(header)) + header)
         self._flush_rows = flush_rows
-        self._pool = [np.zeros(flush_rows, dtype=self.dtype) for _ in range(blocks)]
+        # One array for the whole pool, written once so that every page is mapped now, not
+        # at a tick's first write into it; the blocks are views into it.
+        memory = np.empty(blocks * flush_rows, dtype=self.dtype)
+        memory.view(np.uint8).fill(0)
+        self._pool = [memory[k * flush_rows:(k + 1) * flush_rows] for k in range(blocks)]
+        self._bytes = [block.view(np.uint8) for block in self._pool]
         self._free = queue.SimpleQueue()
         for k in range(1, blocks):
             self._free.put(k)
         self._full = queue.SimpleQueue()
+        self._full.put(MAGIC + _LEN.pack(len(header)) + header)  # the writer's first write
         self._current = 0
         self._n = 0
         self.rows = 0            # rows appended
@@ -163,13 +175,20 @@ class TickLogWriter:
             view = view[n:]
 
     def _writer(self) -> None:
+        itemsize = self.dtype.itemsize
         while True:
             item = self._full.get()
             if item is None:
                 return
+            if isinstance(item, bytes):  # the header
+                try:
+                    self._write_all(item)
+                except OSError as e:
+                    self._error = TickLogError(f"writing {self.path!r} failed: {e}")
+                continue
             k, n = item
             try:
-                self._write_all(self._pool[k][:n].tobytes())
+                self._write_all(self._bytes[k][:n * itemsize])
                 if self._fsync:
                     os.fsync(self._fd)
             except OSError as e:

@@ -80,8 +80,20 @@ def _short_type(system) -> str:
     return re.sub(r"_\[.*\]$", "", name)
 
 
-def _port_row(names, prefix: str) -> str:
-    cells = "".join(f'<TD PORT="{prefix}{k}">{_html(n)}</TD>' for k, n in enumerate(names))
+# A system with more ports than this (a MultibodyPlant has ~25) shows only the ones wired or
+# exported, and says how many it leaves out.
+MAX_PORTS = 6
+
+
+def _port_row(names, prefix: str, used=None) -> str:
+    """A row of port cells `prefix<k>`; with more than MAX_PORTS names, only the indices in
+    `used` and a last cell `+n ports`."""
+    shown = list(enumerate(names))
+    if used is not None and len(names) > MAX_PORTS:
+        shown = [(k, n) for k, n in shown if k in used]
+    cells = "".join(f'<TD PORT="{prefix}{k}">{_html(n)}</TD>' for k, n in shown)
+    if len(shown) < len(names):
+        cells += f'<TD><I>+{len(names) - len(shown)} ports</I></TD>'
     return ('<TR><TD BORDER="0" CELLPADDING="0"><TABLE BORDER="0" CELLBORDER="1" '
             f'CELLSPACING="0" CELLPADDING="2"><TR>{cells}</TR></TABLE></TD></TR>')
 
@@ -92,7 +104,11 @@ def overview_graphviz(diagram, title: str | None = None) -> str:
     simulated plant collapsed into one node, and so is a block whose systems were added flat,
     see `diagram.flat_blocks`), its input ports on top and output ports below, one edge per
     connection between nodes, numbered inputs (u0, u1 of an Adder) labelled with the signal
-    they receive. Laid out top to bottom so that it fits a page's width."""
+    they receive; a system with more than MAX_PORTS ports (a MultibodyPlant) shows only the
+    ones in use. A diagram's fused wiring (`diagram.fused_wiring`: one Selector that routes
+    pieces of signals) is drawn as the connections it makes (with `label_edges`, an edge
+    carrying a piece of one signal is labelled with the piece's name). Laid out top to
+    bottom so that it fits a page's width."""
     systems = list(diagram.GetSystems())
     by_name = {s.get_name(): k for k, s in enumerate(systems)}
     flat = getattr(diagram, "flat_blocks", {})
@@ -145,7 +161,7 @@ def overview_graphviz(diagram, title: str | None = None) -> str:
                    for (dst, dst_k), (src, src_k) in diagram.connection_map().items()]
     # Through the fused wiring: each of its outputs is an edge from every source it reads.
     wired = {d[1]: s for s, d in connections if d[0] == wiring_k}
-    direct = []
+    direct, direct_from_wiring, labels = [], {}, {}
     for s, d in connections:
         if d[0] == wiring_k:
             continue
@@ -155,10 +171,16 @@ def overview_graphviz(diagram, title: str | None = None) -> str:
         if s in out_at:  # a block's output, where the block exported it
             direct.append((s, in_at.get(d, [])))
             continue
-        for i in fused["reads"][s[1]]:
+        reads = fused["reads"][s[1]]
+        for i in reads:
             # The input of d's block that this wiring input is, else d's own input.
             targets = [t for t in in_at.get((wiring_k, i), []) if t[0] == node_of.get(d[0])]
-            direct.append((wired[i], targets or in_at.get(d, [])))
+            direct.append((wired.get(i), targets or in_at.get(d, [])))
+            if fused.get("label_edges") and len(reads) == 1:
+                # A piece of one signal: the edge says which (the wiring output's name).
+                for t in targets or in_at.get(d, []):
+                    labels[t] = systems[wiring_k].get_output_port(s[1]).get_name()
+        direct_from_wiring.setdefault(s[1], []).append((None, in_at.get(d, [])))
     for s, targets in direct:
         for t in targets:
             if s in out_at and out_at[s][0] != t[0]:  # not inside one flat block
@@ -170,10 +192,38 @@ def overview_graphviz(diagram, title: str | None = None) -> str:
             if name is None:
                 k = next(k for k in node_of if node_of[k] == j)
                 name = systems[k].get_input_port(i).get_name()
-            if _NUMBERED_INPUT.match(name) and (j, i) in source_of:
+            if _NUMBERED_INPUT.match(name) and (j, i) in labels:
+                name = labels[(j, i)]
+            elif _NUMBERED_INPUT.match(name) and (j, i) in source_of:
                 s, sk = source_of[(j, i)]
                 name = nodes[s][3][sk]
             node[2][i] = name
+
+    # The diagram's own (exported) ports, when it has any: (port name, [node inputs]) and
+    # (port name, node output); through the fused wiring, to what its outputs feed or from
+    # what they read.
+    exported_in, exported_out = [], []
+    for p in range(diagram.num_input_ports()):
+        targets = []
+        for system, port in diagram.GetInputPortLocators(diagram.get_input_port(p).get_index()):
+            k = index[id(system)]
+            if k == wiring_k:
+                for out_k, reads in fused["reads"].items():
+                    if int(port) in reads:
+                        targets += [t for s_, ts in direct_from_wiring.get(out_k, [])
+                                    for t in ts]
+            else:
+                targets += in_at[(k, int(port))]
+        exported_in.append((diagram.get_input_port(p).get_name(), targets))
+    for p in range(diagram.num_output_ports()):
+        system, port = diagram.get_output_port_locator(diagram.get_output_port(p).get_index())
+        k = index[id(system)]
+        sources = ([out_at[wired[i]] for i in fused["reads"][int(port)] if wired.get(i) in out_at]
+                   if k == wiring_k else [out_at[(k, int(port))]])
+        exported_out.append((diagram.get_output_port(p).get_name(), sources))
+    used_in = {(j, i) for _, _, j, i in connections} | {t for _, ts in exported_in for t in ts}
+    used_out = {(j, i) for j, i, _, _ in connections} | {s_ for _, ss in exported_out
+                                                         for s_ in ss}
 
     lines = [f'digraph "{_html(title or diagram.get_name())}" {{',
              '  graph [rankdir=TB, nodesep=0.25, ranksep=0.35, fontname="Helvetica", '
@@ -183,28 +233,27 @@ def overview_graphviz(diagram, title: str | None = None) -> str:
     for j, (name, kind, inputs, outputs, shaded) in enumerate(nodes):
         rows = []
         if inputs:
-            rows.append(_port_row(inputs, "i"))
+            rows.append(_port_row(inputs, "i", {i for n, i in used_in if n == j}))
         fill = ' BGCOLOR="#e8eef8"' if shaded else ""
         rows.append(f'<TR><TD{fill}><B>{_html(name)}</B><BR/>'
                     f'<FONT POINT-SIZE="8" COLOR="#555555">{_html(kind)}</FONT></TD></TR>')
         if outputs:
-            rows.append(_port_row(outputs, "o"))
+            rows.append(_port_row(outputs, "o", {i for n, i in used_out if n == j}))
         lines.append(f'  n{j} [label=<<TABLE BORDER="0" CELLBORDER="1" CELLSPACING="0" '
                      f'CELLPADDING="3">{"".join(rows)}</TABLE>>];')
-    # The diagram's own (exported) ports, when it has any.
-    for p in range(diagram.num_input_ports()):
-        lines.append(f'  in{p} [shape=cds, label="{_html(diagram.get_input_port(p).get_name())}"];')
-        for system, port in diagram.GetInputPortLocators(diagram.get_input_port(p).get_index()):
-            for j, i in in_at[(index[id(system)], int(port))]:
-                lines.append(f'  in{p} -> n{j}:i{i}:n;')
-    for p in range(diagram.num_output_ports()):
-        system, port = diagram.get_output_port_locator(diagram.get_output_port(p).get_index())
-        j, i = out_at[(index[id(system)], int(port))]
-        lines.append(f'  out{p} [shape=cds, label="'
-                     f'{_html(diagram.get_output_port(p).get_name())}"];')
-        lines.append(f'  n{j}:o{i}:s -> out{p};')
+    for p, (name, targets) in enumerate(exported_in):
+        lines.append(f'  in{p} [shape=cds, label="{_html(name)}"];')
+        for j, i in targets:
+            lines.append(f'  in{p} -> n{j}:i{i}:n;')
+    for p, (name, sources) in enumerate(exported_out):
+        lines.append(f'  out{p} [shape=cds, label="{_html(name)}"];')
+        for j, i in sources:
+            lines.append(f'  n{j}:o{i}:s -> out{p};')
     for s, sk, d, dk in connections:
-        lines.append(f"  n{s}:o{sk}:s -> n{d}:i{dk}:n;")
+        label = labels.get((d, dk))
+        label = "" if label is None or label == nodes[d][2][dk] else (
+            f' [label=" {_html(label)}"]')
+        lines.append(f"  n{s}:o{sk}:s -> n{d}:i{dk}:n{label};")
     lines.append("}")
     return "\n".join(lines) + "\n"
 

@@ -547,13 +547,10 @@ def live_view_callback(view: CdpmMeshcatView):
             data = diagram.GetSubsystemByName(name).FindLog(context).data()
             return data[:, -1] if data.shape[1] else np.zeros(width)
         if key in ("p_true", "rpy_true", "slack"):  # the dynamic plant's, logged inside it
-            plant = (diagram.GetSubsystemByName("reels")
-                     if diagram.HasSubsystemNamed("reels") else None)
-            if plant is not None and hasattr(plant, "HasSubsystemNamed") and (
-                    plant.HasSubsystemNamed(name)):
-                data = plant.GetSubsystemByName(name).FindLog(context).data()
-                return data[:, -1] if data.shape[1] else None
-            return None
+            from ..systems.dynamic_plant import latest_ground_truth
+
+            truth = latest_ground_truth(diagram, context)
+            return None if truth is None else truth[key]
         system_name, port_name = sources[key]
         if diagram.HasSubsystemNamed(system_name):
             port = block_output_port(diagram, system_name, port_name)

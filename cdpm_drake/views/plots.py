@@ -13,13 +13,13 @@ Figures that need keys only some logs have (`timing`: the tick clock of `cdpm ru
 when a log lacks them.
 """
 
-import textwrap
 import warnings
 from collections.abc import Mapping
 from pathlib import Path
 
 import numpy as np
 from matplotlib.figure import Figure
+from matplotlib.lines import Line2D
 
 from ..interference import logistic_intensity
 
@@ -39,7 +39,8 @@ _NEEDS = {
 OPTIONAL = ("timing", "tensions", "pose_error")
 # Keys with one row per tick.
 _PER_TICK = ("time", "p", "F_H", "F_int", "F_d", "pair_distances", "active", "crossed",
-             "lengths", "reel_velocity", "wall", "tensions", "slack", "p_true", "rpy_true")
+             "lengths", "reel_velocity", "wall", "tensions", "slack", "p_true", "rpy_true",
+             "lengths_commanded", "pair_distances_true", "crossed_true")
 LOG_KEYS = ("time", "p", "F_H", "F_int", "F_wall", "F_d", "velocity_admittance", "velocity",
             "reel_velocity", "lengths", "pair_distances", "active", "crossed", "pairs", "d_l",
             "d_u", "F_u", "eps", "F_max", "reels", "attachments", "workspace_lower",
@@ -62,6 +63,14 @@ FORCE_STYLES = {"F_H": dict(linestyle="-", linewidth=3.4, zorder=2.0),
                 "F_int": dict(linestyle="--", linewidth=2.1, zorder=2.2),
                 "F_d": dict(linestyle="-", linewidth=1.0, zorder=2.3)}
 FAULT_COLOR = "crimson"
+# Transparency of the dots where a pair was within d_u: one dot per tick, many on top of each
+# other, so the path shows through where they are sparse.
+EVENT_ALPHA = 0.35
+# An interrupted run (Ctrl-C, SIGTERM) is marked as a fault is, in a neutral dark grey: it is
+# where the log ends, not an error (and orange is the trajectory's "within d_u").
+INTERRUPT_COLOR = "0.2"
+# Most lines of a fault message in a title; the rest is cut with "...".
+TITLE_FAULT_LINES = 6
 
 
 class LogError(ValueError):
@@ -136,34 +145,115 @@ def run_fault(log: Mapping) -> tuple[float, str] | None:
     return when, message or "fault"
 
 
-def _fault_label(fault, width: int = 100, lines: int = 3) -> str:
-    """"fault at t = ... s: message", wrapped to `width` characters, at most `lines` lines."""
-    when, message = fault
-    at = f" at t = {when:.3f} s" if np.isfinite(when) else ""
-    wrapped = textwrap.wrap(f"fault{at}: {message}", width)
-    if len(wrapped) > lines:
-        wrapped = wrapped[:lines]
-        wrapped[-1] = wrapped[-1][:width - 3] + "..."
-    return "\n".join(wrapped)
+def run_interrupted(log: Mapping) -> float | None:
+    """The time (s) of the last logged tick when the log's run was interrupted (Ctrl-C,
+    SIGTERM: `ending` "interrupted"), else None."""
+    if "ending" not in log or str(log["ending"]) != "interrupted":
+        return None
+    t = np.asarray(log["time"], dtype=float).reshape(-1)
+    return float(t[-1]) if t.size else float("nan")
+
+
+def run_stop(log: Mapping) -> tuple[str, float, str, str] | None:
+    """How a run that did not complete is marked: (gid "fault" or "interrupted", time s (NaN
+    when unknown), the title's line, colour), or None for a completed run."""
+    fault = run_fault(log)
+    if fault is not None:
+        when, message = fault
+        at = f" at t = {when:.3f} s" if np.isfinite(when) else ""
+        return "fault", when, f"fault{at}: {message}", FAULT_COLOR
+    when = run_interrupted(log)
+    if when is not None:
+        at = f" at t = {when:.3f} s" if np.isfinite(when) else ""
+        return ("interrupted", when, f"interrupted{at} (Ctrl-C or SIGTERM): the log ends "
+                "there", INTERRUPT_COLOR)
+    return None
 
 
 def _mark_fault_time(ax, log: Mapping) -> None:
-    """A vertical line at the fault on a time axis, labelled at its top."""
-    fault = run_fault(log)
-    if fault is None or not np.isfinite(fault[0]):
+    """A vertical line at the fault (or where an interrupted run stopped) on a time axis,
+    labelled at its top."""
+    stop = run_stop(log)
+    if stop is None or not np.isfinite(stop[1]):
         return
-    line = ax.axvline(fault[0], color=FAULT_COLOR, linestyle="-", linewidth=1.4, zorder=5)
-    line.set_gid("fault")
+    gid, when, _, color = stop
+    line = ax.axvline(when, color=color, linestyle="-", linewidth=1.4, zorder=5)
+    line.set_gid(gid)
     # Left of the line: a run ends at its fault, so the right is usually empty axis margin.
-    ax.text(fault[0], 0.97, "fault ", color=FAULT_COLOR, fontsize="small", ha="right",
-            va="top", transform=ax.get_xaxis_transform(), gid="fault label")
+    ax.text(when, 0.97, f"{gid} ", color=color, fontsize="small", ha="right",
+            va="top", transform=ax.get_xaxis_transform(), gid=f"{gid} label", zorder=6,
+            bbox=dict(facecolor="white", edgecolor="none", alpha=0.8, pad=0.5))
 
 
 def _suptitle(fig: Figure, log: Mapping, text: str) -> None:
-    """The figure's title, with the fault's time and message as its last line when the run
-    ended on one (every figure, with a time axis or not)."""
-    fault = run_fault(log)
-    fig.suptitle(text + (f"\n{_fault_label(fault)}" if fault is not None else ""))
+    """The figure's title, with the fault's (or the interruption's) time and message as its
+    last lines when the run did not complete (every figure, with a time axis or not). Every
+    line is wrapped to the figure's width, measured in its font: a centred title wider than
+    the figure loses both its ends."""
+    stop = run_stop(log)
+    # A fault's message can be long: the title a size smaller then, so that it takes less
+    # of the figure's height.
+    title = fig.suptitle(text, fontsize="large" if stop is None else "medium")
+    width = 0.96 * fig.bbox.width  # a little margin on each side
+    measure = _text_width(fig, title.get_fontproperties())
+    lines = wrap_to_width(text, measure, width)
+    if stop is not None:
+        extra = wrap_to_width(stop[2], measure, width)
+        if len(extra) > TITLE_FAULT_LINES:
+            extra = extra[:TITLE_FAULT_LINES]
+            extra[-1] = _cut_to_width(extra[-1], "...", measure, width)
+        lines += extra
+    title.set_text("\n".join(lines))
+
+
+def _text_width(fig: Figure, font):
+    """A function: text -> its width in display pixels in `font` on `fig` (Agg renderer, at
+    the figure's dpi; savefig at another dpi scales text and figure alike)."""
+    from matplotlib.backends.backend_agg import RendererAgg
+
+    renderer = RendererAgg(fig.bbox.width, fig.bbox.height, fig.dpi)
+
+    def width(text: str) -> float:
+        return renderer.get_text_width_height_descent(text, font, ismath=False)[0]
+
+    return width
+
+
+def wrap_to_width(text: str, measure, width: float) -> list[str]:
+    """The lines of `text` (its own newlines kept), each wrapped at spaces so that
+    measure(line) <= width; a word too long for a line alone is split across lines."""
+    out = []
+    for paragraph in text.split("\n"):
+        line = ""
+        for word in paragraph.split(" "):
+            candidate = f"{line} {word}" if line else word
+            if measure(candidate) <= width:
+                line = candidate
+                continue
+            if line:
+                out.append(line)
+            while measure(word) > width and len(word) > 1:
+                k = max(1, _longest_fitting(word, measure, width))
+                out.append(word[:k])
+                word = word[k:]
+            line = word
+        out.append(line)
+    return out
+
+
+def _longest_fitting(word: str, measure, width: float) -> int:
+    lo, hi = 0, len(word)  # measure(word[:lo]) fits; word[:hi] does not
+    while hi - lo > 1:
+        mid = (lo + hi) // 2
+        lo, hi = (mid, hi) if measure(word[:mid]) <= width else (lo, mid)
+    return lo
+
+
+def _cut_to_width(line: str, tail: str, measure, width: float) -> str:
+    """`line` shortened until line + tail fits, then with tail."""
+    while line and measure(line + tail) > width:
+        line = line[:-1]
+    return line.rstrip() + tail
 
 
 # --- Fig. 10: distances -------------------------------------------------------------------------
@@ -178,13 +268,30 @@ def figure_distances(log: Mapping) -> Figure:
     pairs = np.asarray(log["pairs"]).reshape(-1, 2)
     fig = Figure(figsize=(8, 4.5), layout="constrained")
     ax = fig.add_subplot()
-    shown = np.flatnonzero(np.asarray(log["active"]).reshape(len(t), -1).any(axis=0))
+    near = np.asarray(log["active"]).reshape(len(t), -1).any(axis=0)
+    truth = None
+    if "pair_distances_true" in log:
+        # The plant's ground truth (the dynamic plant's true, rotated pose) beside the
+        # controller's estimate: a pair truly within its d_u is shown even if the estimate
+        # never was.
+        truth = np.asarray(log["pair_distances_true"], dtype=float).reshape(len(t), -1)
+        d_u = np.asarray(log["d_u"], dtype=float).reshape(-1)
+        near = near | (truth <= np.where(np.isfinite(d_u), d_u, -np.inf)).any(axis=0)
+    shown = np.flatnonzero(near)
     heading = "Distance between the cables of each active pair"
     if shown.size == 0 and d.shape[1] and len(t):
-        shown = np.array([int(np.argmin(d.min(axis=0)))])
+        shown = np.array([int(np.argmin((d if truth is None else truth).min(axis=0)))])
         heading = "No pair came within d_u; the closest pair"
-    for k in shown:
-        ax.plot(t, 1000.0 * d[:, k], label=_pair_label(pairs[k]))
+    for n, k in enumerate(shown):
+        color = f"C{n % 10}"
+        label = _pair_label(pairs[k])
+        if truth is None:
+            ax.plot(t, 1000.0 * d[:, k], color=color, label=label)
+            continue
+        ax.plot(t, 1000.0 * truth[:, k], color=color, linewidth=2.2,
+                label=f"{label} true (plant's pose)")
+        ax.plot(t, 1000.0 * d[:, k], color=color, linewidth=1.2, linestyle="--",
+                label=f"{label} controller's estimate")
     for key, style in (("d_l", "--"), ("d_u", ":")):
         values = np.asarray(log[key], dtype=float).reshape(-1)[shown] if shown.size else []
         for v in np.unique(np.asarray(values)[np.isfinite(values)]):
@@ -295,9 +402,9 @@ def figure_trajectory(log: Mapping) -> Figure:
     active = np.asarray(log["active"], dtype=bool).reshape(len(t), -1)
     crossed = np.asarray(log["crossed"], dtype=bool).reshape(len(t), -1)
     events, cross = active.any(axis=1), crossed.any(axis=1)
-    fault = run_fault(log)
-    k_fault = (int(np.clip(np.searchsorted(t, fault[0]), 0, len(t) - 1))
-               if fault is not None and np.isfinite(fault[0]) and len(t) else None)
+    stop = run_stop(log)  # a fault, or where an interrupted run stopped
+    k_fault = (int(np.clip(np.searchsorted(t, stop[1]), 0, len(t) - 1))
+               if stop is not None and np.isfinite(stop[1]) and len(t) else None)
 
     fig = Figure(figsize=(13, 6.8), layout="constrained")
     zoom = fig.add_subplot(1, 2, 1, projection="3d")
@@ -312,9 +419,14 @@ def figure_trajectory(log: Mapping) -> Figure:
     zoom.computed_zorder = False
     if events.any():
         dots, = zoom.plot(*p[events].T, linestyle="none", marker="o", markersize=6,
-                          color="tab:orange", alpha=0.35, markeredgewidth=0, zorder=1,
+                          color="tab:orange", alpha=EVENT_ALPHA, markeredgewidth=0, zorder=1,
                           label="a pair within d_u")
-        keep(dots.get_label(), dots)
+        dots.set_gid("within d_u")
+        # The dots overlap along the path and read as solid orange: the legend shows the
+        # colour they are seen in, not one translucent dot.
+        proxy = Line2D([], [], linestyle="none", marker="o", markersize=6, color="tab:orange",
+                       markeredgewidth=0, label=dots.get_label())
+        keep(proxy.get_label(), proxy)
     path, = zoom.plot(*p.T, color="tab:blue", linewidth=1.8, zorder=3, label="platform path p")
     keep(path.get_label(), path)
     if cross.any():
@@ -330,10 +442,11 @@ def figure_trajectory(log: Mapping) -> Figure:
         keep("start", start)
         keep("end", end)
     if k_fault is not None:
+        gid, color = stop[0], stop[3]
         for ax in (zoom, robot):
             at, = ax.plot(*p[k_fault], linestyle="none", marker="*", markersize=13,
-                          color=FAULT_COLOR, zorder=6, label=f"fault (t = {t[k_fault]:.3f} s)")
-            at.set_gid("fault")
+                          color=color, zorder=6, label=f"{gid} (t = {t[k_fault]:.3f} s)")
+            at.set_gid(gid)
         keep(at.get_label(), at)
     limits = motion_limits(p)
     zoom.set(xlim=limits[0], ylim=limits[1], zlim=limits[2])
@@ -554,25 +667,36 @@ def figure_timing(log: Mapping) -> Figure:
 
 
 def figure_tensions(log: Mapping) -> Figure:
-    """Each cable's tension (N) vs time (s), with the ticks where it was slack marked (a dynamic
-    plant's log)."""
+    """Each cable's tension (N) vs time (s) above, and below one row per cable (1..m) with a
+    mark at every tick where it was slack, so that cables slack at the same time never hide
+    each other (a dynamic plant's log)."""
     _check(log, "tensions")
     t = np.asarray(log["time"], dtype=float)
     tensions = np.asarray(log["tensions"], dtype=float).reshape(len(t), -1)
     slack = np.asarray(log["slack"]).reshape(len(t), -1) > 0.5
-    fig = Figure(figsize=(9, 4.5), layout="constrained")
-    ax = fig.add_subplot()
-    for i in range(1, tensions.shape[1] + 1):
+    m = tensions.shape[1]
+    fig = Figure(figsize=(9, 5.5 + 0.12 * m), layout="constrained")
+    ax, rows = fig.subplots(2, 1, sharex=True,
+                            gridspec_kw={"height_ratios": [3.0, 0.6 + 0.12 * m]})
+    for i in range(1, m + 1):
         style = cable_style(i)
         ax.plot(t, tensions[:, i - 1], linewidth=1.0, label=f"cable {i}", **style)
-        if slack[:, i - 1].any():
-            ax.plot(t[slack[:, i - 1]], np.zeros(int(slack[:, i - 1].sum())), "|",
-                    color=style["color"], markersize=8,
-                    label=f"cable {i} slack ({int(slack[:, i - 1].sum())} ticks)")
-    ax.set_xlabel("time (s)")
+        n = int(slack[:, i - 1].sum())
+        if n:
+            ticks, = rows.plot(t[slack[:, i - 1]], np.full(n, i), "|", color=style["color"],
+                               markersize=7, label=f"cable {i} slack ({n} ticks)")
+            ticks.set_gid(f"slack cable {i}")
     ax.set_ylabel("tension (N)")
-    ax.grid(True, alpha=0.3)
-    _mark_fault_time(ax, log)
+    rows.set_yticks(range(1, m + 1), [str(i) for i in range(1, m + 1)])
+    rows.set_ylim(m + 0.5, 0.5)  # cable 1 on top, as in the legend
+    rows.set_ylabel("slack\n(cable)")
+    rows.set_xlabel("time (s)")
+    if not slack.any():
+        rows.text(0.5, 0.5, "no cable went slack", ha="center", va="center",
+                  transform=rows.transAxes, color="0.4")
+    for a in (ax, rows):
+        a.grid(True, alpha=0.3)
+        _mark_fault_time(a, log)
     ax.legend(loc="upper left", bbox_to_anchor=(1.01, 1.0), fontsize="small")
     _suptitle(fig, log, f"{_title(log)}\nCable tensions (dynamic plant)")
     return fig

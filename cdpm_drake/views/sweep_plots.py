@@ -3,7 +3,10 @@
 A heatmap of a metric over two swept fields, the metric against each field with its spread
 over seeds, and the Pareto front of min_distance (larger is better) against operator_effort
 (smaller is better). Built without pyplot, like views/plots.py, so tests can read the plotted
-data back from the artists. Distances are shown in mm, as in the paper; cables count from 1.
+data back from the artists. One unit per quantity, written on its axis: distances (d_l, d_u,
+min_distance, a start coordinate's are m) in mm, as in the paper, forces in N, times in s;
+swept fields are labelled by what they are (`d_u, every pair (mm)`), not by their path.
+Cables count from 1.
 """
 
 import math
@@ -15,14 +18,99 @@ from matplotlib.figure import Figure
 
 from ..sweep import METRICS, metric_value, swept_fields
 
-# Metrics in m are drawn in mm (the paper's distances are in mm).
+# Quantities in m are drawn in mm (the paper's distances are in mm).
 _SCALE = {"m": (1000.0, "mm")}
+
+# What each metric is, for its axis (METRICS has the unit).
+METRIC_NAMES = {
+    "min_distance": "closest approach of any pair",
+    "time_below_d_l": "time any pair was below d_l",
+    "crossings": "pairs that crossed",
+    "peak_F_int": "peak |F_int|",
+    "peak_F_d": "peak |F_d|",
+    "peak_speed": "peak platform speed",
+    "operator_effort": "operator effort, integral of |F_H|",
+    "limit_time": "time the limits acted",
+    "sim_s": "simulated time",
+    "wall_s": "wall time",
+    "rtf": "real-time factor",
+}
+
+# A swept field's last name -> (what it is, unit in SI), by the section it is in
+# (scenario.py's comments). "" for the section: a top-level field.
+FIELDS = {
+    ("interference", "d_l"): ("d_l", "m"), ("interference", "d_u"): ("d_u", "m"),
+    ("interference", "F_u"): ("F_u", "N"), ("interference", "eps"): ("eps", "N"),
+    ("interference", "F_max"): ("F_max, the clip of |F_int|", "N"),
+    ("interference", "gradient_floor"): ("gradient floor", "-"),
+    ("admittance", "mass"): ("admittance mass M", "kg"),
+    ("admittance", "damping"): ("admittance damping C", "N s/m"),
+    ("limits", "max_velocity"): ("speed limit", "m/s"),
+    ("limits", "max_acceleration"): ("acceleration limit", "m/s^2"),
+    ("wall_force", "margin"): ("wall force margin", "m"),
+    ("wall_force", "max_force"): ("wall force at the face", "N"),
+    ("sensor", "filter_window"): ("sensor filter window", "samples"),
+    ("sensor", "noise_std"): ("sensor noise std", "N"),
+    ("sensor", "axial_range"): ("sensor axial range", "N"),
+    ("sensor", "transverse_range"): ("sensor transverse range", "N"),
+    ("operator", "max_force"): ("hand's largest force", "N"),
+    ("operator", "stiffness"): ("hand stiffness", "N/m"),
+    ("operator", "damping"): ("hand damping", "N s/m"),
+    ("operator", "release_time"): ("hand lets go at", "s"),
+    ("plant", "time_constant"): ("reel time constant", "s"),
+    ("plant", "max_reel_speed"): ("reel speed limit", "m/s"),
+    ("plant", "time_step"): ("plant time step", "s"),
+    ("plant", "min_tension"): ("start tension floor", "N"),
+    ("plant", "max_length_residual"): ("largest length residual", "m"),
+    ("", "duration"): ("duration", "s"),
+    ("", "time_step"): ("control period", "s"),
+    ("", "random_seed"): ("random seed", "-"),
+}
+
+
+def field_axis(field: str) -> tuple[str, float]:
+    """(label with its unit, scale from the field's SI value to the drawn one) of a swept
+    field path: `interference.default.d_u` -> ("d_u, every pair (mm)", 1000);
+    `interference.pairs[1,3].F_u` -> ("F_u of pair 1-3 (N)", 1); `initial_position[2]` ->
+    ("start z (mm)", 1000). A field not in FIELDS keeps its path, without a unit."""
+    parts = field.split(".")
+    last = parts[-1]
+    pair = re.search(r"pairs\[(\d+)\s*[,-]\s*(\d+)\]", field)
+    start = re.fullmatch(r"initial_position\[(\d)\]", field)
+    if start and int(start.group(1)) < 3:
+        what, unit = f"start {'xyz'[int(start.group(1))]}", "m"
+    elif (parts[0] if len(parts) > 1 else "", last) in FIELDS:
+        what, unit = FIELDS[(parts[0] if len(parts) > 1 else "", last)]
+        if parts[0] == "interference" and len(parts) == 3 and parts[1] == "default":
+            what += ", every pair"
+        elif pair:
+            what += f" of pair {pair.group(1)}-{pair.group(2)}"
+    else:
+        return field, 1.0
+    scale, shown = _SCALE.get(unit, (1.0, unit))
+    return (f"{what} ({shown})" if shown != "-" else what), scale
+
+
+def _short(field: str) -> str:
+    """A field's label without its unit or "every pair", for legends and annotations."""
+    return field_axis(field)[0].split(" (")[0].replace(", every pair", "")
+
+
+def _value_text(field: str, cell: str) -> str:
+    """A swept value as shown, in the axis's unit: d_u 0.0605 -> "60.5 mm"."""
+    label, scale = field_axis(field)
+    number = _number(cell)
+    unit = label.rsplit("(", 1)[1].rstrip(")") if label.endswith(")") else ""
+    if number is None:
+        return cell
+    return f"{scale * number:.4g}" + (f" {unit}" if unit else "")
 
 
 def _scaled(metric: str):
     unit = METRICS[metric][0]
     scale, shown = _SCALE.get(unit, (1.0, unit))
-    return scale, f"{metric} ({shown})" if shown != "-" else metric
+    what = METRIC_NAMES.get(metric, metric)
+    return scale, f"{what} ({shown})" if shown != "-" else what
 
 
 def _number(cell):
@@ -69,14 +157,16 @@ def figure_heatmap(columns, rows, metric="min_distance", x=None, y=None) -> Figu
             raise ValueError(f"a heatmap needs two swept fields; this sweep has {fields}")
         x, y = fields[0], fields[1]
     scale, label = _scaled(metric)
+    (x_label, x_scale), (y_label, y_scale) = field_axis(x), field_axis(y)
     fig = Figure(figsize=(7.0, 5.5), layout="constrained")
     ax = fig.add_subplot()
     xs, ys, grid, count = heatmap_grid(rows, metric, x, y)
     dense = len(xs) <= 30 and len(ys) <= 30
     if dense:
         image = ax.imshow(scale * grid, origin="lower", aspect="auto", cmap="viridis")
-        ax.set_xticks(range(len(xs)), xs, rotation=45 if len(xs) > 8 else 0)
-        ax.set_yticks(range(len(ys)), ys)
+        ax.set_xticks(range(len(xs)), [_tick(c, x_scale) for c in xs],
+                      rotation=45 if len(xs) > 8 else 0)
+        ax.set_yticks(range(len(ys)), [_tick(c, y_scale) for c in ys])
         finite = grid[np.isfinite(grid)]
         mid = scale * float(np.mean([finite.min(), finite.max()])) if finite.size else 0.0
         for i in range(len(ys)):
@@ -85,22 +175,32 @@ def figure_heatmap(columns, rows, metric="min_distance", x=None, y=None) -> Figu
                     v = scale * grid[i, j]
                     ax.text(j, i, f"{v:.4g}", ha="center", va="center", fontsize=8,
                             color="black" if v > mid else "white")
-                else:
-                    ax.text(j, i, "error", ha="center", va="center", fontsize=8,
-                            color="tab:red")
+                else:  # no run of the cell finished ok: say how they ended
+                    statuses = {r.get("status") for r in rows
+                                if r[x] == xs[j] and r[y] == ys[i]}
+                    ax.text(j, i, "fault" if "fault" in statuses else
+                            "error" if "error" in statuses else "-", ha="center",
+                            va="center", fontsize=8, color="tab:red")
         spread = " (mean over seeds)" if count.max() > 1 else ""
     else:  # random samples: every run is a point
         ok = _ok(rows, metric)
-        image = ax.scatter([_number(r[x]) for r in ok], [_number(r[y]) for r in ok],
+        image = ax.scatter([x_scale * _number(r[x]) for r in ok],
+                           [y_scale * _number(r[y]) for r in ok],
                            c=[scale * metric_value(r, metric) for r in ok], cmap="viridis",
                            s=30)
         spread = ""
     fig.colorbar(image, ax=ax, label=label)
-    ax.set_xlabel(x)
-    ax.set_ylabel(y)
+    ax.set_xlabel(x_label)
+    ax.set_ylabel(y_label)
     better = {"max": "larger is better", "min": "smaller is better"}.get(METRICS[metric][1], "")
     ax.set_title(f"{label}{spread}" + (f", {better}" if better else ""))
     return fig
+
+
+def _tick(cell: str, scale: float) -> str:
+    """A field value as a tick label in the axis's unit (0.0605 m -> 60.5 for mm)."""
+    number = _number(cell)
+    return cell if number is None else f"{scale * number:.4g}"
 
 
 def figure_metric_vs_axis(columns, rows, metric, field) -> Figure:
@@ -110,6 +210,7 @@ def figure_metric_vs_axis(columns, rows, metric, field) -> Figure:
     others = [f for f in fields if f != field]
     group = others[0] if len(others) == 1 and len(_levels(rows, others[0])[0]) <= 8 else None
     scale, label = _scaled(metric)
+    x_label, x_scale = field_axis(field)
     fig = Figure(figsize=(7.5, 4.5), layout="constrained")
     ax = fig.add_subplot()
     xs, numeric = _levels(rows, field)
@@ -121,21 +222,22 @@ def figure_metric_vs_axis(columns, rows, metric, field) -> Figure:
         for k, xv in enumerate(xs):
             vals = [scale * metric_value(r, metric) for r in sel if r[field] == xv]
             if vals:
-                px.append(_number(xv) if numeric else k)
+                px.append(x_scale * _number(xv) if numeric else k)
                 mean.append(float(np.mean(vals)))
                 lo.append(float(np.min(vals)))
                 hi.append(float(np.max(vals)))
         if not px:
             continue
-        line, = ax.plot(px, mean, marker="o", label=f"{group} = {g}" if group else "mean")
+        line, = ax.plot(px, mean, marker="o",
+                        label=f"{_short(group)} = {_value_text(group, g)}" if group else "mean")
         if any(h > low for h, low in zip(hi, lo)):
             ax.fill_between(px, lo, hi, alpha=0.2, color=line.get_color(), linewidth=0)
     if not numeric:
         ax.set_xticks(range(len(xs)), xs)
-    ax.set_xlabel(field)
+    ax.set_xlabel(x_label)
     ax.set_ylabel(label)
     seeds = len({r["random_seed"] for r in rows})
-    ax.set_title(f"{label} against {field}"
+    ax.set_title(f"{label.split(' (')[0]} against {_short(field)}"
                  + (f" (band: min to max over {seeds} seeds)" if seeds > 1 else ""))
     if group:
         ax.legend(loc="center left", bbox_to_anchor=(1.01, 0.5), fontsize=8)
@@ -172,7 +274,7 @@ def figure_pareto(columns, rows) -> Figure:
     fy = [sy * metric_value(r, y) for r in front]
     ax.plot(fx, fy, color="tab:red", marker="o", label="Pareto front")
     for k, (r, px, py) in enumerate(zip(front, fx, fy)):
-        text = ", ".join(f"{_short_field(f)}={r[f]}" for f in fields) or r["run"]
+        text = ", ".join(f"{_short(f)} {_value_text(f, r[f])}" for f in fields) or r["run"]
         # Alternate above and below: neighbours on the front often sit close together.
         ax.annotate(text, (px, py), textcoords="offset points", fontsize=7,
                     xytext=(6, 6) if k % 2 == 0 else (6, -12))
@@ -182,10 +284,6 @@ def figure_pareto(columns, rows) -> Figure:
     ax.legend(loc="lower right")
     ax.grid(True, alpha=0.3)
     return fig
-
-
-def _short_field(field: str) -> str:
-    return field.rsplit(".", 1)[-1]
 
 
 def _file_part(field: str) -> str:

@@ -1,0 +1,102 @@
+"""A log as CSV (`cdpm export LOG --csv`): one row per tick, one named column per value.
+
+Every per-tick key of docs/LOG_FORMAT.md that the log holds becomes columns named
+`<key>_<component> [<unit>]`: the x, y, z of a vector (`p_x [m]`, `F_H_z [N]`), cables
+numbered from 1 (`lengths_1 [m]`, `tensions_7 [N]`), cable pairs as `i-j` from 1
+(`pair_distances_1-3 [m]`, `active_1-3 [0/1]`), roll, pitch and yaw of `rpy_true`. Flags are
+0 or 1, NaN an empty cell, floats in the shortest form that reads back exactly. The per-run
+constants (robot geometry, logistic parameters, how the run ended) stay in log.npz. No Drake.
+"""
+
+import csv
+import io
+import math
+from collections.abc import Mapping
+from pathlib import Path
+
+import numpy as np
+
+# Per-tick keys in docs/LOG_FORMAT.md's order: (unit, what the columns are).
+# "xyz": three components; "cables": one per cable; "pairs": one per watched pair.
+COLUMNS = {
+    "time": ("s", None),
+    "tick": ("-", None),
+    "p": ("m", "xyz"),
+    "F_H": ("N", "xyz"),
+    "F_measured": ("N", "xyz"),
+    "F_int": ("N", "xyz"),
+    "F_wall": ("N", "xyz"),
+    "F_d": ("N", "xyz"),
+    "velocity_admittance": ("m/s", "xyz"),
+    "velocity": ("m/s", "xyz"),
+    "reel_velocity": ("m/s", "cables"),
+    "lengths": ("m", "cables"),
+    "pair_distances": ("m", "pairs"),
+    "active": ("0/1", "pairs"),
+    "crossed": ("0/1", "pairs"),
+    "wall": ("s", None),
+    "compute": ("s", None),
+    "tensions": ("N", "cables"),
+    "slack": ("0/1", "cables"),
+    "p_true": ("m", "xyz"),
+    "rpy_true": ("rad", "rpy"),
+}
+_PARTS = {"xyz": ("x", "y", "z"), "rpy": ("roll", "pitch", "yaw")}
+
+
+def csv_columns(log: Mapping) -> list[tuple[str, np.ndarray]]:
+    """(header, values (T,)) of every column, in COLUMNS order; keys not in COLUMNS with one
+    row per tick follow, numbered from 1 without a unit."""
+    T = len(np.asarray(log["time"]).reshape(-1))
+    pairs = np.asarray(log.get("pairs", np.zeros((0, 2))), dtype=int).reshape(-1, 2)
+    columns = []
+    keys = [k for k in COLUMNS if k in log] + sorted(
+        k for k in log if k not in COLUMNS and np.ndim(log[k]) in (1, 2)
+        and np.shape(log[k])[0] == T and np.asarray(log[k]).dtype.kind in "biuf")
+    for key in keys:
+        values = np.asarray(log[key])
+        if values.ndim == 0 or values.shape[0] != T:
+            continue  # not one row per tick (a malformed log): left out, not misaligned
+        unit, kind = COLUMNS.get(key, ("", None))
+        suffix = f" [{unit}]" if unit else ""
+        if values.ndim == 1:
+            columns.append((f"{key}{suffix}", values))
+            continue
+        width = values.shape[1]
+        if kind in _PARTS and width == len(_PARTS[kind]):
+            names = _PARTS[kind]
+        elif kind == "pairs" and width == len(pairs):
+            names = [f"{i}-{j}" for i, j in pairs]
+        else:
+            names = [str(c + 1) for c in range(width)]  # cables (and anything else) from 1
+        columns += [(f"{key}_{name}{suffix}", values[:, c]) for c, name in enumerate(names)]
+    return columns
+
+
+def _cell(value) -> str:
+    """A Python bool, int or float as a cell: 1/0, the integer, the shortest exact float
+    ("" for NaN)."""
+    if isinstance(value, bool):
+        return "1" if value else "0"
+    if isinstance(value, int):
+        return str(value)
+    return "" if math.isnan(value) else repr(value)
+
+
+def log_to_csv(log: Mapping) -> str:
+    """The CSV text: a header row, then one row per tick."""
+    columns = csv_columns(log)
+    buffer = io.StringIO()
+    writer = csv.writer(buffer, lineterminator="\n")
+    writer.writerow([name for name, _ in columns])
+    data = [values.tolist() for _, values in columns]  # Python scalars: fast to format
+    for row in zip(*data):
+        writer.writerow([_cell(v) for v in row])
+    return buffer.getvalue()
+
+
+def write_log_csv(log: Mapping, path) -> Path:
+    """Write log_to_csv(log) to `path`; returns it."""
+    path = Path(path)
+    path.write_text(log_to_csv(log))
+    return path
