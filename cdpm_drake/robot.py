@@ -556,6 +556,9 @@ STATICS_WARN_SHARE = 0.5
 # A point platform held on this much more of the box than the real one: the moment balance
 # (the attachment points) is what fails.
 _MOMENT_BLAME = 0.25
+# Points per axis of the point platform's grid (Clarabel per point, ~0.5 ms: only computed
+# for a robot that gets the warning).
+_POINT_GRID = 5
 _STATICS: dict = {}
 _AXES = ("force along x", "force along y", "force along z", "moment about x",
          "moment about y", "moment about z")
@@ -608,12 +611,13 @@ def statics_warnings(robot: "Robot", statics) -> list[str]:
     if statics.share < STATICS_WARN_SHARE:
         from .tension import point_platform_share
 
-        point = point_platform_share(robot, statics.floor, mass=statics.mass)
+        point = point_platform_share(robot, statics.floor, n=_POINT_GRID, mass=statics.mass)
+        where = f"{100 * point:.0f} % of it ({_POINT_GRID}x{_POINT_GRID}x{_POINT_GRID} grid)"
         cause = ("the moment balance fails: a point platform (forces only) would be held on "
-                 f"{100 * point:.0f} % of it, so the attachment points are the likely cause"
+                 f"{where}, so the attachment points are the likely cause"
                  if point - statics.share >= _MOMENT_BLAME else
-                 f"a point platform (forces only) would be held on {100 * point:.0f} % of it "
-                 "too, so the reels cannot hold the platform there: the box reaches beyond "
+                 f"a point platform (forces only) would be held on {where} too, so the "
+                 "reels cannot hold the platform there: the box reaches beyond "
                  "what the reels' layout supports")
         out.append(f"{robot.name}: the cables hold the level platform ({statics.mass:g} kg at "
                    f"its centre) with every cable >= {statics.floor:g} N on only "
