@@ -636,8 +636,8 @@ MUTANTS = [
       ("tests/test_diagram_files.py",)),
     # --- the cable-length loop and the dynamic plant's truth -----------------------------------
     M("length_loop_sign", "cdpm_drake/kinematics.py",
-      "out[i] = feedforward + gain * (rigid + delta - x[6 + i])",
-      "out[i] = feedforward - gain * (rigid + delta - x[6 + i])",
+      "out[i] = feedforward + gain * error + dead_band_compensation(dead_band, error)",
+      "out[i] = feedforward - gain * error + dead_band_compensation(dead_band, error)",
       "the length loop pushes the error further instead of closing it",
       ("tests/test_length_loop.py",)),
     M("length_loop_no_latch", "cdpm_drake/kinematics.py",
