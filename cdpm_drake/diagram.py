@@ -141,7 +141,7 @@ def build_diagram(scenario: Scenario | ResolvedScenario,
         builder, "jacobian_mapping", JACOBIAN_MAPPING_MAIN,
         lambda b: build_jacobian_mapping(b, robot,
                                          length_gain=scenario.controller.length_gain,
-                                         time_step=T))
+                                         time_step=T, dead_band=resolved.dead_band))
     mapping.connect_input(p_WP, "p_WP")
     mapping.connect_input(plant.GetOutputPort("cable_lengths"), "cable_lengths")
     mapping.connect_input(limits.GetOutputPort("velocity_command"), "velocity_command")

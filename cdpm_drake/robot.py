@@ -178,6 +178,13 @@ class Dynamics:
     viscous_friction: float = ReelDrivesSchema.viscous_friction
     coulomb_friction: float = ReelDrivesSchema.coulomb_friction
 
+    @property
+    def dead_band(self) -> float:
+        """The reel speed command (m/s of cable) below which a drive at rest does not move:
+        its Coulomb friction against its velocity loop's gain, coulomb_friction / (bandwidth
+        x inertia) (the drive law of systems/dynamic_plant.py)."""
+        return float(self.coulomb_friction) / (float(self.bandwidth) * float(self.reel_inertia))
+
 
 def _validate_dynamics(d: Dynamics, src: str) -> Dynamics:
     """The checked Dynamics (arrays as float arrays); RobotError naming field and value."""

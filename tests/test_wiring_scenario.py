@@ -534,6 +534,32 @@ def test_length_gain_sets_the_cable_length_loop():
     assert np.abs(error).max() > 1e-4  # 1e8 x the tolerance: the loop acts
 
 
+@covers("Scenario.controller.friction_compensation")
+def test_friction_compensation_makes_up_the_drives_dead_band():
+    """On the dynamic plant every reel command is J(p) v + K_l e + 0.9 u_c tanh(e / 20 um),
+    u_c the robot file's drive dead band, e = l_d - l (recomputed from the log); off, the
+    tanh term is gone."""
+    from cdpm_drake.kinematics import FRICTION_ERROR, FRICTION_SHARE
+
+    def reproduce(log, robot, band):
+        e = log["lengths_commanded"] - log["lengths"]
+        return (np.einsum("kij,kj->ki", jacobian(robot, log["p"]), log["velocity"])
+                + 20.0 * e + FRICTION_SHARE * band * np.tanh(e / FRICTION_ERROR))
+
+    s = dataclasses.replace(push([2.0, 0, 0]), plant=scenario_module.DynamicReels(),
+                            initial_position=list(P_EXP2))
+    robot = scenario_robot(s)
+    on = sim(s, 0.2)
+    np.testing.assert_allclose(on["reel_velocity"], reproduce(on, robot,
+                                                             robot.dynamics.dead_band),
+                               rtol=0, atol=1e-12)
+    off = sim(dataclasses.replace(
+        s, controller=scenario_module.Controller(friction_compensation=False)), 0.2)
+    np.testing.assert_allclose(off["reel_velocity"], reproduce(off, robot, 0.0), rtol=0,
+                               atol=1e-12)
+    assert np.abs(on["reel_velocity"] - off["reel_velocity"]).max() > 1e-3  # it acts
+
+
 def _reel_speeds(log):
     return np.abs(np.diff(log["lengths"], axis=0)) / T
 
