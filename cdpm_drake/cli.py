@@ -28,17 +28,37 @@ def _fmt(v, digits=3) -> str:
 # --- info ------------------------------------------------------------------------------------
 
 
-def info(*, robot: str, out=None) -> None:
-    """Print a robot description: cables, Jacobian conditioning, workspace."""
+def info(*, robot: str = "paper_7cable", swaps=None, plot_dir=None, grid_step: float = 0.05,
+         out=None) -> list[Path]:
+    """Print a robot description: cables, Jacobian conditioning, workspace, the cable pairs'
+    distances, and its statics (wrench-matrix rank, the share of the box that holds the
+    platform, the hand forces it holds). `robot` is a robot or a scenario (a built-in name or
+    a YAML path); a scenario shows its robot as the experiment uses it: with its swaps, its
+    start and its path (simulated on the kinematic plant). `swaps` [(i, j), ...] (1-based)
+    replace a scenario's swaps or swap a robot's cables. `plot_dir`: also write the workspace
+    pictures there. Returns the pictures written."""
     out = sys.stdout if out is None else out
     from .kinematics import cable_lengths, condition_number
-    from .robot import load_robot
 
-    r = load_robot(robot)
+    r, scenario = _info_target(robot)
+    if swaps is not None:
+        if scenario is not None:
+            scenario.swaps = [list(s) for s in swaps]
+        else:
+            for i, j in swaps:
+                r = r.with_swapped_attachments(i, j)
+    if scenario is not None:
+        from .scenario import resolve_scenario
+
+        resolved = resolve_scenario(scenario)
+        r = resolved.robot
     c = r.workspace.center
     lengths = cable_lengths(r, c)
-    print(f"robot {r.name!r} ({r.source}): {r.num_cables} cables, {r.num_pairs} watched pairs",
-          file=out)
+    what = (f"scenario {scenario.name!r}: " if scenario is not None else "") + f"robot {r.name!r}"
+    print(f"{what} ({r.source}): {r.num_cables} cables, {r.num_pairs} watched pairs", file=out)
+    if scenario is not None or swaps:
+        shown = scenario.swaps if scenario is not None else swaps
+        print(f"swapped cables: {', '.join(f'{i}-{j}' for i, j in shown) or 'none'}", file=out)
     rows = [(i + 1, _fmt(r.reels[i]), _fmt(r.attachments[i]), f"{lengths[i]:.4f}")
             for i in range(r.num_cables)]
     print(format_table(["cable", "reel a_i (m)", "attachment b_i (m)", "length at centre (m)"], rows),
@@ -62,7 +82,120 @@ def info(*, robot: str, out=None) -> None:
     print(format_table(["pair", "distance (mm)", "largest (mm)"], rows), file=out)
     print("(the two are equal where the closest points are the attachment points; d_u must "
           "stay below 'largest' or that pair's force never switches off)", file=out)
+    path = _print_statics(r, scenario, grid_step, out)
     _print_wrench_feasibility(r, out)
+    if plot_dir is None:
+        return []
+    from .views.workspace_plots import plot_workspace
+
+    d_u = (resolved.interference.d_u if scenario is not None and resolved.interference
+           is not None else INFO_D_U)
+    written = plot_workspace(r, plot_dir, floor=INFO_FLOOR, d_u=d_u, path=path,
+                             name=scenario.name if scenario is not None else r.name)
+    for png in written:
+        print(f"plot: {png}", file=out)
+    return written
+
+
+# The floor (N) of the statics summary and of the pictures, and the d_u (m) the
+# interference-free picture of a robot alone uses (the paper's experiments use 61-62 mm).
+INFO_FLOOR = 5.0
+INFO_D_U = 0.062
+
+
+def _info_target(name):
+    """(robot, None) for a robot, (its robot, the Scenario) for a scenario: a built-in name of
+    either, or a YAML file (a robot file has `reels`)."""
+    from .robot import RobotError, is_path_like, load_robot, robot_names
+    from .scenario import load_scenario, scenario_names, scenario_robot
+
+    text = str(name)
+    if text in robot_names():
+        return load_robot(text), None
+    if text in scenario_names():
+        scenario = load_scenario(text)
+        return scenario_robot(scenario), scenario
+    if is_path_like(text) or Path(text).is_file():
+        path = Path(text)
+        if path.is_file():
+            from pydrake.common.yaml import yaml_load
+
+            try:
+                raw = yaml_load(filename=str(path))
+            except Exception:
+                raw = None
+            if isinstance(raw, dict) and "reels" not in raw and (
+                    "robot" in raw or "initial_position" in raw or "operator" in raw):
+                scenario = load_scenario(str(path))
+                return scenario_robot(scenario), scenario
+        return load_robot(text), None
+    raise RobotError(f"unknown robot or scenario {text!r}; built-in robots: {robot_names()}, "
+                     f"built-in scenarios: {scenario_names()} (or give a path to a .yaml file)")
+
+
+def _print_statics(r, scenario, step, out):
+    """The statics summary; returns the scenario's simulated path (None without one)."""
+    from .robot import robot_statics, statics_warnings
+    from .tension import holding_tension, step_grid
+
+    statics = robot_statics(r)
+    mass = r.dynamics.mass
+    print(f"statics of the level platform ({mass:g} kg at its centre, moments about the "
+          f"centre); t* = the largest achievable minimum cable tension (N):", file=out)
+    rank_note = ("" if statics.unreachable is None else
+                 f" < 6: no tension produces a {_describe(statics.unreachable)}")
+    print(f"  wrench matrix rank at the workspace centre: {statics.rank}{rank_note}; t* there "
+          f"{_newtons(statics.centre_t_star)}", file=out)
+    grid = step_grid(r.workspace.lower, r.workspace.upper, step)
+    counts = [len(np.arange(lo, hi + 1e-9, step))
+              for lo, hi in zip(r.workspace.lower, r.workspace.upper)]
+    share = float(np.mean(holding_tension(r, grid) >= INFO_FLOOR))
+    print(f"  held with every cable >= {INFO_FLOOR:g} N on {100 * share:.1f} % of the workspace "
+          f"box ({100 * step:g} cm grid from the lower corner: {counts[0]} x {counts[1]} x "
+          f"{counts[2]} points)", file=out)
+    for message in statics_warnings(r, statics):
+        print(f"  warning: {message}", file=out)
+    if scenario is None:
+        return None
+    p0 = np.asarray(scenario.initial_position, dtype=float)
+    print(f"  at the start {_fmt(p0, 2)} m: t* {_newtons(float(holding_tension(r, p0)))}",
+          file=out)
+    from .simulation import simulate
+
+    log = simulate(scenario=_kinematic_copy(scenario)).log
+    t = holding_tension(r, log["p"])
+    k = int(np.argmin(t))
+    print(f"  along the scenario's path (kinematic plant, {len(t)} ticks): smallest t* "
+          f"{_newtons(t[k])} at t = {log['time'][k]:.3f} s, p = {_fmt(log['p'][k])} m; "
+          f"{100 * np.mean(t >= INFO_FLOOR):.1f} % of the ticks at >= {INFO_FLOOR:g} N",
+          file=out)
+    return log["p"]
+
+
+def _newtons(t) -> str:
+    """t* as printed: N with two decimals, or the meaning of an infinite one."""
+    if t == np.inf:
+        return "+inf (an internal force raises every tension: any floor holds)"
+    if t == -np.inf:
+        return "-inf (no tensions balance the weight)"
+    return f"{t:.2f} N"
+
+
+def _kinematic_copy(scenario):
+    """The scenario with the kinematic plant (the path the controller commands)."""
+    import copy
+
+    from .scenario import SimulatedReels
+
+    kinematic = copy.copy(scenario)
+    kinematic.plant = SimulatedReels()
+    return kinematic
+
+
+def _describe(direction) -> str:
+    from .robot import describe_wrench
+
+    return describe_wrench(direction)
 
 
 # Hand forces (N) and tension floors (N) of the feasibility table, and its grid per axis.
@@ -90,8 +223,19 @@ def _print_wrench_feasibility(r, out) -> None:
 
 
 def _cmd_info(args) -> int:
-    info(robot=args.robot)
+    info(robot=args.robot, swaps=args.swaps, plot_dir=args.plot, grid_step=args.grid)
     return 0
+
+
+def _swap_arg(text: str) -> tuple[int, int]:
+    """A cable swap 'I-J' (or 'I,J'), 1-based."""
+    parts = text.replace(",", "-").split("-")
+    try:
+        i, j = (int(x) for x in parts)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"a swap is two cable numbers I-J, e.g. 1-3; got "
+                                         f"{text!r}") from None
+    return i, j
 
 
 # --- simulate --------------------------------------------------------------------------------
@@ -770,11 +914,23 @@ def _parser() -> argparse.ArgumentParser:
     parser.add_argument("--version", action="version", version=f"cdpm {__version__}")
     sub = parser.add_subparsers(dest="command", metavar="COMMAND", required=True)
 
-    p = sub.add_parser("info", help="print a robot description: cables, Jacobian, workspace",
-                       description="Print a robot description as a table.")
+    p = sub.add_parser("info", help="print a robot description: cables, Jacobian, workspace, "
+                                    "statics",
+                       description="Print a robot description as tables: cables, Jacobian, "
+                                   "workspace, cable-cable distances and statics (where the "
+                                   "cables hold the platform). Given a scenario, the robot "
+                                   "as that experiment uses it: its swaps, start and path.")
     p.add_argument("robot", nargs="?", default="paper_7cable",
-                   help="a built-in robot's name or a path to a robot YAML file "
-                        "(default: paper_7cable)")
+                   help="a built-in robot or scenario name, or a path to a robot or scenario "
+                        "YAML file (default: paper_7cable)")
+    p.add_argument("--swaps", nargs="+", type=_swap_arg, metavar="I-J",
+                   help="swap these cables' attachment points (1-based, e.g. 1-3 5-7); with "
+                        "a scenario, instead of its swaps")
+    p.add_argument("--plot", type=Path, metavar="DIR",
+                   help="also write the workspace pictures (wrench-feasible and "
+                        "interference-free workspace slices) into DIR")
+    p.add_argument("--grid", type=float, default=0.05, metavar="STEP",
+                   help="grid step (m) of the statics share (default 0.05)")
     p.set_defaults(func=_cmd_info)
 
     p = sub.add_parser("simulate", help="simulate a scenario and write its log",

@@ -174,7 +174,7 @@ def build_diagram(scenario: Scenario | ResolvedScenario,
         mapping = blocks["jacobian_mapping"] = FlatBlock(
             builder, "jacobian_mapping", JACOBIAN_MAPPING_MAIN,
             lambda b: build_jacobian_mapping(b, robot, length_gain=controller.length_gain,
-                                             time_step=T))
+                                             time_step=T, dead_band=resolved.dead_band))
         mapping.connect_input(lengths, "cable_lengths")
     mapping.connect_input(p_WP, "p_WP")
     mapping.connect_input(velocity_command, "velocity_command")
@@ -241,7 +241,8 @@ def _add_pose_blocks(builder, blocks, resolved, fk, force_sensor, lengths, veloc
     mapping = blocks["jacobian_mapping"] = FlatBlock(
         builder, "jacobian_mapping", POSE_MAIN, lambda b: build_pose_jacobian_mapping(
             b, robot, length_gain=controller.length_gain,
-            integral_gain=LENGTH_INTEGRAL_GAIN, tension=tension_control, time_step=T))
+            integral_gain=LENGTH_INTEGRAL_GAIN, tension=tension_control, time_step=T,
+            dead_band=resolved.dead_band))
     for name, port in (("R_WP", R_WP), ("omega_command", hold.GetOutputPort("omega_command")),
                        ("R_WP_held", hold.GetOutputPort("R_WP_held")),
                        ("cable_lengths", lengths)):

@@ -79,9 +79,10 @@ PARALLEL_SIN = 1e-6
 # |t - s| (the gradient norm, m/m) below which a pair has no direction to push along.
 MIN_GRADIENT = 1e-12
 # Default gradient floor (m/m, see the module docstring). The paper's robot has |t - s| =
-# 0.005..0.017 where its swapped pairs are active (d <= 62 mm): 0.002 leaves the paper's force
-# unchanged there (0.05 would scale it down to 10-35 %) and still spreads the fade over tens of
-# centimetres of platform motion around a ridge, far more than one tick's step.
+# 0.005..0.016 where its swapped pairs are active in the shipped experiments (re-measured for
+# the attachment points of issue 18): 0.002 leaves the paper's force unchanged there (0.05
+# would scale it down to 10-32 %) and still spreads the fade over tens of centimetres of
+# platform motion around a ridge, far more than one tick's step.
 DEFAULT_GRADIENT_FLOOR = 0.002
 # Smallest normal float: squared lengths at or below it are treated as zero.
 _TINY = np.finfo(float).tiny

@@ -274,11 +274,30 @@ def length_loop_sizes(m: int) -> dict:
     return {"inputs": 6 + m, "memory": m + 4, "x": 2 * m + 10, "out": 3 * m + 4}
 
 
+# The length loops make up the drives' dead band to this share (a drive whose friction the
+# robot file overstates would otherwise hunt), switched in smoothly over this length error, m.
+FRICTION_SHARE = 0.9
+FRICTION_ERROR = 2e-5
+
+
 @_jit
-def length_loop_tick(offsets, gain, time_step, x, out):
+def dead_band_compensation(dead_band, error):
+    """The reel speed (m/s) that makes up a drive's dead band (m/s) where the length error
+    (m) asks for motion: FRICTION_SHARE dead_band tanh(error / FRICTION_ERROR), zero at zero
+    error (so ideal reels, whose error is zero, see none of it)."""
+    return FRICTION_SHARE * dead_band * math.tanh(error / FRICTION_ERROR)
+
+
+@_jit
+def length_loop_tick(offsets, gain, time_step, dead_band, x, out):
     """The Jacobian block's tick (eq. 3) with the cable-length loop (beyond the paper):
 
-        l_dot = J(p_hat) v + K_l (l_d - l),   l_d = lengths(p_d) + delta.
+        l_dot = J(p_hat) v + K_l e + c(e),   e = l_d - l,   l_d = lengths(p_d) + delta,
+
+    with c the drives' dead band made up (`dead_band_compensation`; dead_band m/s, 0: off):
+    a drive whose Coulomb friction holds it still under a command slower than its dead band
+    would otherwise leave e at up to dead_band / K_l (0.25 mm, ~6 N of tension, with the
+    default drives) wherever it stops or turns.
 
     x (2 m + 10,) = [p_hat (3, m: the forward kinematics' estimate), v (3, m/s: the velocity
     command), l (m, m: the measured lengths), memory: p_d (3, m), delta (m, m), started (1)].
@@ -308,7 +327,8 @@ def length_loop_tick(offsets, gain, time_step, x, out):
         rigid = math.sqrt(xx * xx + yy * yy + zz * zz)
         delta = x[9 + m + i] if started else x[6 + i] - rigid
         out[2 * m + 3 + i] = delta
-        out[i] = feedforward + gain * (rigid + delta - x[6 + i])
+        error = rigid + delta - x[6 + i]
+        out[i] = feedforward + gain * error + dead_band_compensation(dead_band, error)
         target[i] = rigid + time_step * feedforward
     p_next = out[2 * m:2 * m + 3]  # a view: no allocation per tick
     # gauss_newton_warm reads its guess before it writes: the guess may be its output.

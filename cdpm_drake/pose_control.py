@@ -35,6 +35,7 @@ import numba
 import numpy as np
 
 from .interference import interference_tick
+from .kinematics import dead_band_compensation
 from .pose import _solve6, pose_fk, posed_cables, rotation_log, wrench_columns
 from .tension import (BELOW_FLOOR, FEASIBLE, GENERAL, GRAVITY, RANK_TOL, _lam_interval,
                       _null_vector, _particular, _pivoted_qr, max_min_1d)
@@ -340,20 +341,6 @@ def orientation_tick(gain, warmup, x, out):
 # The length loop's integral term may add at most this reel speed, m/s: enough to break the
 # drives' stiction and take up their lag, never a runaway after a long stall.
 MAX_INTEGRAL_SPEED = 0.05
-# The drives' dead band is compensated to this fraction (a drive whose friction the robot
-# file overstates would otherwise hunt), and switched in smoothly over this length error, m.
-FRICTION_SHARE = 0.9
-FRICTION_ERROR = 2e-5
-
-
-def drive_dead_band(dynamics) -> float:
-    """The reel speed command (m/s of cable) below which a drive at rest does not move:
-    its Coulomb friction over its velocity loop's gain (robot file reel_drives:
-    coulomb_friction / (bandwidth x inertia); systems/dynamic_plant.reel_step's law)."""
-    return float(dynamics.coulomb_friction) / (float(dynamics.bandwidth)
-                                               * float(dynamics.reel_inertia))
-
-
 @_jit
 def pose_rates_tick(reels, attachments, params, x, out):
     """params = [gain 1/s, integral_gain 1/s^2, step s, EA N, tension (0 or 1), dead band
@@ -361,8 +348,8 @@ def pose_rates_tick(reels, attachments, params, x, out):
     (3), delta (m), integral (m), started (1)]; out = [l_dot (m), l_d (m), next memory
     (2 m + 4)].
 
-    l_dot = J(p, R) [v; w] + gain e + integral_gain I + FRICTION_SHARE dead_band
-    tanh(e / FRICTION_ERROR), e = l_d - L0, I its integral (m s, clipped so the term stays
+    l_dot = J(p, R) [v; w] + gain e + integral_gain I + c(e) (the drives' dead band made up,
+    kinematics.dead_band_compensation), e = l_d - L0, I its integral (m s, clipped so the term stays
     within MAX_INTEGRAL_SPEED): the twist through the m x 6
     Jacobian at the estimated pose plus the cable-length loop, a PI loop here so that the
     drives' stiction and lag leave no lasting length error (with 70 kN cables 0.1 mm is ~2 N
@@ -375,7 +362,7 @@ def pose_rates_tick(reels, attachments, params, x, out):
     m = reels.shape[0]
     gain, integral_gain, step, EA = params[0], params[1], params[2], params[3]
     tension = params[4] != 0.0
-    friction = FRICTION_SHARE * params[5]
+    dead_band = params[5]
     warmup = params[6]
     p = x[0:3]
     R = x[3:12].reshape((3, 3))
@@ -413,7 +400,7 @@ def pose_rates_tick(reels, attachments, params, x, out):
         integral = min(limit, max(-limit, integral))
         out[3 * m + 3 + i] = integral
         out[i] = (twist + gain * error + integral_gain * integral
-                  + friction * math.tanh(error / FRICTION_ERROR))
+                  + dead_band_compensation(dead_band, error))
     for k in range(3):
         p_d[k] += step * v[k]
     out[4 * m + 3] = min(ticks + 1.0, warmup)

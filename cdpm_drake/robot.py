@@ -178,6 +178,13 @@ class Dynamics:
     viscous_friction: float = ReelDrivesSchema.viscous_friction
     coulomb_friction: float = ReelDrivesSchema.coulomb_friction
 
+    @property
+    def dead_band(self) -> float:
+        """The reel speed command (m/s of cable) below which a drive at rest does not move:
+        its Coulomb friction against its velocity loop's gain, coulomb_friction / (bandwidth
+        x inertia) (the drive law of systems/dynamic_plant.py)."""
+        return float(self.coulomb_friction) / (float(self.bandwidth) * float(self.reel_inertia))
+
 
 def _validate_dynamics(d: Dynamics, src: str) -> Dynamics:
     """The checked Dynamics (arrays as float arrays); RobotError naming field and value."""
@@ -532,6 +539,7 @@ def load_robot(path: str | Path) -> Robot:
     except Exception as e:  # Drake's messages name the field; add the file.
         raise RobotError(f"{src}: {e}") from None
     robot = robot_from_schema(schema, source=src)
+    _report_statics(robot)
     if robot.excluded_reasons:
         # Once per load, not per copy: said where the user can see it, since these pairs get
         # no protection from the interference force.
@@ -542,6 +550,99 @@ def load_robot(path: str | Path) -> Robot:
                      len(robot.excluded_reasons),
                      "; ".join(f"{', '.join(pairs)}: {why}" for why, pairs in by_reason.items()))
     return robot
+
+
+# Statics checked on load: the level platform (platform.mass at its centre) held with every
+# cable >= STATICS_FLOOR N on an STATICS_GRID^3 grid of the workspace box. A robot whose box is
+# held on less than STATICS_WARN_SHARE of it gets a warning naming the share and its likely
+# cause. About 5 ms for 7 or 8 cables (tension.py's compiled closed forms), once per robot
+# geometry and process.
+STATICS_FLOOR = 5.0
+STATICS_GRID = 11
+STATICS_WARN_SHARE = 0.5
+# A point platform held on this much more of the box than the real one: the moment balance
+# (the attachment points) is what fails.
+_MOMENT_BLAME = 0.25
+# Points per axis of the point platform's grid (Clarabel per point, ~0.5 ms: only computed
+# for a robot that gets the warning).
+_POINT_GRID = 5
+_STATICS: dict = {}
+_AXES = ("force along x", "force along y", "force along z", "moment about x",
+         "moment about y", "moment about z")
+
+
+def _statics_entry(robot: "Robot"):
+    """(tension.Statics, warnings) of a robot, computed once per geometry and mass."""
+    from .tension import workspace_statics
+
+    key = (robot.reels.tobytes(), robot.attachments.tobytes(), robot.workspace.lower.tobytes(),
+           robot.workspace.upper.tobytes(), robot.dynamics.mass, robot.name)
+    if key not in _STATICS:
+        statics = workspace_statics(robot, STATICS_FLOOR, STATICS_GRID)
+        _STATICS[key] = (statics, tuple(statics_warnings(robot, statics)))
+    return _STATICS[key]
+
+
+def robot_statics(robot: "Robot"):
+    """tension.Statics of the robot's level platform (cached per geometry and mass)."""
+    return _statics_entry(robot)[0]
+
+
+def describe_wrench(direction) -> str:
+    """The largest components of a unit wrench direction [force; moment], in words."""
+    d = np.asarray(direction, dtype=float)
+    order = np.argsort(-np.abs(d))
+    parts = [_AXES[k] for k in order if abs(d[k]) >= 0.3 * abs(d[order[0]])]
+    return " and ".join(parts[:2])
+
+
+def statics_warnings(robot: "Robot", statics) -> list[str]:
+    """What is wrong with a robot's statics, in words (empty when its box is mostly held)."""
+    out = []
+    n = statics.n
+    m = robot.num_cables
+    if m < 6:
+        # Too few cables for six equations: the rank and the share only restate that.
+        return [f"{robot.name}: {m} cables cannot hold the platform against all six force and "
+                f"moment components (wrench matrix rank {statics.rank} at the workspace "
+                "centre): a free platform would turn; the kinematic plant, and plant: "
+                "!DynamicReels {lock_rotation: true}, model one that only translates"]
+    if statics.unreachable is not None:
+        more = 6 - statics.rank - 1
+        out.append(f"{robot.name}: the wrench matrix has rank {statics.rank} < 6 at the "
+                   f"workspace centre {robot.workspace.center.tolist()!r} m: no cable tensions "
+                   f"produce a {describe_wrench(statics.unreachable)} there"
+                   + (f" (nor {more} more wrench direction(s))" if more else "")
+                   + ", so the platform cannot resist one: the cables' lines of action leave "
+                   "it free to turn or slide")
+    if statics.share < STATICS_WARN_SHARE:
+        from .tension import point_platform_share
+
+        point = point_platform_share(robot, statics.floor, n=_POINT_GRID, mass=statics.mass)
+        where = f"{100 * point:.0f} % of it ({_POINT_GRID}x{_POINT_GRID}x{_POINT_GRID} grid)"
+        cause = ("the moment balance fails: a point platform (forces only) would be held on "
+                 f"{where}, so the attachment points are the likely cause"
+                 if point - statics.share >= _MOMENT_BLAME else
+                 f"a point platform (forces only) would be held on {where} too, so the "
+                 "reels cannot hold the platform there: the box reaches beyond "
+                 "what the reels' layout supports")
+        out.append(f"{robot.name}: the cables hold the level platform ({statics.mass:g} kg at "
+                   f"its centre) with every cable >= {statics.floor:g} N on only "
+                   f"{100 * statics.share:.0f} % of the workspace box ({n}x{n}x{n} grid); "
+                   f"{cause}")
+    return out
+
+
+def _report_statics(robot: "Robot") -> None:
+    """Loading a robot says its statics: at INFO level always, as warnings when bad."""
+    statics, warnings = _statics_entry(robot)
+    n = statics.n
+    _log.info("%s: wrench matrix rank %d at the workspace centre; level platform (%g kg) held "
+              "with every cable >= %g N on %.1f %% of the workspace box (%dx%dx%d grid)",
+              robot.name, statics.rank, statics.mass, statics.floor, 100 * statics.share,
+              n, n, n)
+    for message in warnings:
+        _log.warning("%s", message)
 
 
 def _raw_dynamics(raw: dict) -> Dynamics:

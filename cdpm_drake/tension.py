@@ -29,9 +29,13 @@ problem is one-dimensional, t* = max over lam of min_i (T_p,i + n_i lam), and it
 (min sum mu_i T_p,i, sum mu_i = 1, sum mu_i n_i = 0, mu >= 0) has vertices with two
 non-zeros, one cable with n_i > 0 and one with n_j < 0: t* is the smallest of
 (T_p,i |n_j| + T_p,j n_i) / (n_i + |n_j|) over those pairs, exact in O(m^2) and computed with
-a pivoted Householder QR, both compiled (`distribution_kernel`, ~1 us). Larger nullspaces
-(8 cables and more, or a rank-deficient W) go to Drake's MathematicalProgram with Clarabel
-(an LP for t*, a QP for the least-norm distribution), in the same nullspace coordinates.
+a pivoted Householder QR, both compiled (`distribution_kernel`, ~1 us). For 8 cables
+(k = 2) the dual's vertices have three non-zeros: t* is exact over the cable triples
+(`max_min_2d`, compiled, a few us), which keeps workspace grids of 8-cable robots as fast as
+7-cable ones (robot validation on load, `cdpm info`, the plots). The rest, the tension
+distributions of k >= 2 and t* of k >= 3 (a rank-deficient W, more cables), go to Drake's
+MathematicalProgram with Clarabel (an LP for t*, a QP for the least-norm distribution), in
+the same nullspace coordinates.
 """
 
 from __future__ import annotations
@@ -176,11 +180,13 @@ def _particular(A, V, beta, perm, w, T_p):
 
 
 @_jit
-def _null_vector(V, beta, n):
-    """The unit vector spanning W's nullspace (m = r + 1): Q's last column."""
+def _null_vector(V, beta, n, k=0):
+    """The unit vector n = Q e_(r+k), Q's column r + k: W's nullspace is spanned by columns
+    r..m-1 of Q (m = r + 1: n spans it)."""
+    r = V.shape[0]
     for i in range(n.size):
         n[i] = 0.0
-    n[n.size - 1] = 1.0
+    n[r + k] = 1.0
     _apply_q(V, beta, n)
 
 
@@ -222,6 +228,36 @@ def _lam_interval(T_p, n, floor):
         elif n[i] < 0.0:
             hi = min(hi, (floor - T_p[i]) / n[i])
     return lo, hi
+
+
+@_jit
+def max_min_2d(T_p, N):
+    """t* = max over lam (2,) of min_i (T_p[i] + N[i] . lam) for a two-dimensional nullspace
+    (N (m, 2), 8 cables and 6 DoF), exactly: the LP dual (min sum mu_i T_p,i, sum mu_i = 1,
+    sum mu_i N[i] = 0, mu >= 0) has vertices with three non-zeros, so t* is the smallest
+    mu . T_p over the triples of cables whose 3 x 3 system [1; N^T] mu = e_1 has a solution
+    mu >= 0 (the origin inside the triangle of their N rows); +inf when none has (an internal
+    force raises every tension)."""
+    m = T_p.size
+    t = math.inf
+    for i in range(m):
+        for j in range(i + 1, m):
+            for k in range(j + 1, m):
+                # mu = e_1 solved by Cramer's rule on the columns (1, N[c, 0], N[c, 1]).
+                xi, yi = N[i, 0], N[i, 1]
+                xj, yj = N[j, 0], N[j, 1]
+                xk, yk = N[k, 0], N[k, 1]
+                det = (xj * yk - xk * yj) - (xi * yk - xk * yi) + (xi * yj - xj * yi)
+                if det == 0.0:
+                    continue
+                mi = (xj * yk - xk * yj) / det
+                mj = (xk * yi - xi * yk) / det
+                mk = (xi * yj - xj * yi) / det
+                if mi >= 0.0 and mj >= 0.0 and mk >= 0.0:
+                    v = mi * T_p[i] + mj * T_p[j] + mk * T_p[k]
+                    if v < t:
+                        t = v
+    return t
 
 
 @_jit
@@ -270,13 +306,13 @@ def distribution_kernel(W, w, floor, T):
 @_jit
 def _grid_kernel(reels, attachments, points, wrenches, out):
     """out[k, j] = t* of the level platform at points[k] under wrenches[j] (the one
-    definition: W from the translated attachments), nan where W's nullspace is not
-    one-dimensional (the caller solves those)."""
+    definition: W from the translated attachments), exact for 7 and 8 cables; nan where W is
+    rank-deficient or the nullspace has more dimensions (the caller solves those)."""
     m = reels.shape[0]
     W = np.empty((6, m))
     A, V = np.empty((m, 6)), np.empty((6, m))
     beta, perm = np.empty(6), np.empty(6, dtype=np.int64)
-    T_p, n = np.empty(m), np.empty(m)
+    T_p, n, N = np.empty(m), np.empty(m), np.empty((m, 2))
     for k in range(points.shape[0]):
         for i in range(m):
             bx, by, bz = attachments[i, 0], attachments[i, 1], attachments[i, 2]
@@ -287,14 +323,17 @@ def _grid_kernel(reels, attachments, points, wrenches, out):
             x, y, z = x / L, y / L, z / L
             W[0, i], W[1, i], W[2, i] = x, y, z
             W[3, i], W[4, i], W[5, i] = by * z - bz * y, bz * x - bx * z, bx * y - by * x
-        if m != 7 or _pivoted_qr(W, A, V, beta, perm) < RANK_TOL:
+        if (m != 7 and m != 8) or _pivoted_qr(W, A, V, beta, perm) < RANK_TOL:
             for j in range(wrenches.shape[0]):
                 out[k, j] = math.nan
             continue
-        _null_vector(V, beta, n)
+        for c in range(m - 6):
+            _null_vector(V, beta, n, c)
+            for i in range(m):
+                N[i, c] = n[i]
         for j in range(wrenches.shape[0]):
             _particular(A, V, beta, perm, wrenches[j], T_p)
-            out[k, j] = max_min_1d(T_p, n)[0]
+            out[k, j] = max_min_1d(T_p, n)[0] if m == 7 else max_min_2d(T_p, N)
 
 
 # --- any nullspace -----------------------------------------------------------------------------
@@ -380,6 +419,8 @@ def max_min_tension(W, wrench) -> float:
         return float(np.min(T_p))
     if N.shape[1] == 1:
         return float(max_min_1d(T_p, np.ascontiguousarray(N[:, 0]))[0])
+    if N.shape[1] == 2:
+        return float(max_min_2d(T_p, np.ascontiguousarray(N)))
     return _max_min_general(T_p, N)[0]
 
 
@@ -429,8 +470,9 @@ def tension_distribution(W, wrench, min_tension: float = 0.0) -> Distribution:
 
 def max_min_tensions(robot, points, wrenches) -> np.ndarray:
     """t* (N, K) N of the level platform (translated, not rotated) at each of points (N, 3) m
-    under each of wrenches (K, 6) N, N m: compiled for 7 cables (one-dimensional nullspace),
-    `max_min_tension` point by point where that does not apply."""
+    under each of wrenches (K, 6) N, N m: compiled for 7 and 8 cables (one- and
+    two-dimensional nullspaces), `max_min_tension` point by point where that does not
+    apply."""
     points = np.ascontiguousarray(np.reshape(points, (-1, 3)), dtype=float)
     wrenches = np.ascontiguousarray(np.reshape(wrenches, (-1, 6)), dtype=float)
     out = np.empty((len(points), len(wrenches)))
@@ -469,7 +511,8 @@ def grid_points(lower, upper, n: int) -> np.ndarray:
 def step_grid(lower, upper, step: float) -> np.ndarray:
     """The points lower + k step (m) inside the box [lower, upper] along each axis, upper
     corner included when a whole number of steps reaches it; (N, 3), x slowest. The grid
-    of the issue-18 measurements (step 0.05 m: 51 x 65 x 43 points for paper_7cable)."""
+    of the statics shares quoted in the robot files and by `cdpm info` (step 0.05 m: 51 x 65
+    x 43 points for paper_7cable)."""
     axes = [np.arange(lo, hi + 1e-9, step) for lo, hi in zip(lower, upper)]
     return np.stack(np.meshgrid(*axes, indexing="ij"), axis=-1).reshape(-1, 3)
 
@@ -544,7 +587,8 @@ def balancing_rotation(robot, p, *, mass: float, min_tension: float = 0.0,
     cables cannot hold it level hangs tilted: this says how much."""
     from .rotation import rotation_from_rpy
 
-    g = np.arange(-max_angle, max_angle + 1e-12, step)
+    k = int(round(max_angle / step))
+    g = step * np.arange(-k, k + 1)  # exact zeros: a grid from arange(-max, max, step) has -1e-16
     rpys = np.stack(np.meshgrid(g, g, g, indexing="ij"), axis=-1).reshape(-1, 3)
     rpys = rpys[np.argsort(np.linalg.norm(rpys, axis=1), kind="stable")]
     wrench = gravity_wrench(mass)
@@ -554,3 +598,52 @@ def balancing_rotation(robot, p, *, mass: float, min_tension: float = 0.0,
         if max_min_tension(W, wrench) >= min_tension:
             return rpy
     return None
+
+
+# --- a robot's statics in one look (validation on load, `cdpm info`) --------------------------
+
+
+@dataclasses.dataclass(frozen=True)
+class Statics:
+    """How well a robot's cables hold its level platform (`holding_tension`): the wrench
+    matrix rank at the workspace centre and, if below 6, the wrench direction (unit, [force;
+    moment] about the centre) no tension can produce; t* at the centre (N); the share of an
+    n x n x n grid of the workspace box (corners included) held with every cable >= floor (N);
+    the platform mass (kg) it was computed for."""
+
+    rank: int
+    unreachable: np.ndarray | None
+    centre_t_star: float
+    share: float
+    floor: float
+    n: int
+    mass: float
+
+
+def workspace_statics(robot, floor: float = 5.0, n: int = 11,
+                      mass: float | None = None) -> Statics:
+    """The `Statics` of a robot: a few milliseconds for 7 and 8 cables (compiled closed
+    forms), Clarabel point by point otherwise."""
+    mass = robot.dynamics.mass if mass is None else float(mass)
+    c = robot.workspace.center
+    W = wrench_matrix(robot, c)
+    U, s, _ = np.linalg.svd(W)
+    rank = int(np.sum(s > RANK_TOL * max(s[0], 1e-300)))
+    unreachable = U[:, rank].copy() if rank < W.shape[0] else None
+    t = holding_tension(robot, grid_points(robot.workspace.lower, robot.workspace.upper, n),
+                        mass)
+    return Statics(rank, unreachable, float(holding_tension(robot, c, mass)),
+                   float(np.mean(t >= floor)), float(floor), int(n), mass)
+
+
+def point_platform_share(robot, floor: float = 5.0, n: int = 5,
+                         mass: float | None = None) -> float:
+    """The share `workspace_statics` would find if the platform were a point (forces only,
+    the attachment points ignored): where it is much larger than the real share, the moment
+    balance (the attachment points) is what fails. Clarabel per point (~0.5 ms)."""
+    mass = robot.dynamics.mass if mass is None else float(mass)
+    w = gravity_wrench(mass)[:3]
+    pts = grid_points(robot.workspace.lower, robot.workspace.upper, n)
+    rho = robot.reels[None, :, :] - pts[:, None, :]  # every cable to the centre
+    U = rho / np.linalg.norm(rho, axis=-1, keepdims=True)
+    return float(np.mean([max_min_tension(u.T, w) >= floor for u in U]))

@@ -1,7 +1,7 @@
 """Per-call cost of the tension distribution and of t* (the largest achievable minimum
 tension), against scipy's linprog (HiGHS) measured in the same run as the reference of the
-ratios, and against the hand-written NNLS/LDP solver this package had before issue 18 (read
-from git at OLD_COMMIT, when the checkout has it).
+ratios, and against the hand-written NNLS/LDP solver this package had before the closed forms
+(read from git at OLD_COMMIT, when the checkout has it).
 
 Cases, each on the same `--poses` random poses of paper_7cable (1-3 swapped, in its box,
 2.5 kg platform, floor 5 N) cycled for `--calls` calls, best of `--repeats`:
@@ -10,8 +10,9 @@ Cases, each on the same `--poses` random poses of paper_7cable (1-3 swapped, in 
 - the old solver's tension_distribution (feasible poses are cheap for it, the infeasible
   ones bisect);
 - scipy's linprog (HiGHS) for t* (the reference, 1.00);
-- 8 cables (a two-dimensional nullspace): tension_distribution and max_min_tension by
-  Drake's MathematicalProgram with Clarabel, on a suspended 8-cable robot;
+- 8 cables (a two-dimensional nullspace), on a suspended 8-cable robot: tension_distribution
+  (Drake's MathematicalProgram with Clarabel: an LP and a QP), max_min_tension (the closed
+  form over cable triples) and t* by Clarabel's LP alone;
 - holding_tension on a grid (per point, the wrench matrix included).
 
 Usage: python scripts/bench_tension.py [--calls 2000] [--poses 200] [--repeats 3]
@@ -30,13 +31,13 @@ from scipy.optimize import linprog
 
 from cdpm_drake.kernel_call import bind
 from cdpm_drake.robot import Robot, load_robot
-from cdpm_drake.tension import (distribution_kernel, gravity_wrench, holding_tension,
-                                max_min_tension, step_grid, tension_distribution,
-                                wrench_matrix)
+from cdpm_drake.tension import (_max_min_general, _nullspace_form, distribution_kernel,
+                                gravity_wrench, holding_tension, max_min_tension, step_grid,
+                                tension_distribution, wrench_matrix)
 from cdpm_drake.text import format_table
 
 ROOT = Path(__file__).resolve().parent.parent
-OLD_COMMIT = "b28eace"  # main before issue 18: NNLS/LDP with a bisection for t*
+OLD_COMMIT = "b28eace"  # the NNLS/LDP solver, with a bisection for t*
 FLOOR = 5.0
 
 
@@ -49,7 +50,7 @@ def highs_t_star(W, w):
 
 
 def old_solver():
-    """The pre-issue-18 tension module, from git; None when the checkout lacks it."""
+    """The old tension module (NNLS/LDP), from git; None when the checkout lacks it."""
     try:
         text = subprocess.run(["git", "-C", str(ROOT), "show",
                                f"{OLD_COMMIT}:cdpm_drake/tension.py"], check=True,
@@ -74,6 +75,12 @@ def per_call(fn, cases, calls, repeats) -> float:
             fn(*cases[k % len(cases)])
         best = min(best, (time.perf_counter() - start) / calls)
     return best
+
+
+def clarabel_t_star(W, w):
+    """t* by the Clarabel LP that tension.py uses for nullspaces of 3+ dimensions."""
+    T_p, N, _ = _nullspace_form(W, w)
+    return _max_min_general(T_p, N)[0]
 
 
 def suspended8():
@@ -120,7 +127,9 @@ def main(argv=None) -> int:
         ("7 cables: scipy linprog HiGHS t* (reference)", lambda W: highs_t_star(W, w), Ws, few),
         ("8 cables: tension_distribution (Clarabel)", lambda W: tension_distribution(W, w, 1.0),
          Ws8, few),
-        ("8 cables: max_min_tension (Clarabel)", lambda W: max_min_tension(W, w), Ws8, few),
+        ("8 cables: max_min_tension (closed form, cable triples)",
+         lambda W: max_min_tension(W, w), Ws8, args.calls),
+        ("8 cables: t* by Clarabel's LP", lambda W: clarabel_t_star(W, w), Ws8, few),
         ("8 cables: scipy linprog HiGHS t*", lambda W: highs_t_star(W, w), Ws8, few),
     ]
     grid = step_grid(robot.workspace.lower, robot.workspace.upper, 0.1)

@@ -1,22 +1,26 @@
 """The paper's three experiments on the dynamic plant (`plant: !DynamicReels`) against the
 kinematic plant (`!SimulatedReels`), at full length.
 
-Per experiment: the largest platform rotation, the forward-kinematics position error (the
-controller's FK assumes a translating platform on inextensible cables), the smallest true
-cable-cable distance (from the true, rotated pose) against the kinematic plant's, the smallest
-and largest tension, the slack ticks per cable, and the real-time factor. Two settings:
+Per experiment and controller: how far the run got, the ticks with a slack cable, the smallest
+and largest tension, the largest platform rotation (angle from level), the forward-kinematics
+position error (|p - p_true|: the controller's estimate against the plant's truth), the
+smallest TRUE distance of the pairs that interfere (from the plant's true, rotated pose:
+`pair_distances_true`) beside the controller's estimate of it and the kinematic plant's
+minimum, and the real-time factor. Controllers:
 
-- `defaults`: the robot file's dynamics (hardware/robots/paper_7cable.yaml) and the plant's
-  defaults. Where the cables cannot hold the platform level at the start (exp1, exp3 with the
-  calibrated attachment points), it starts at the tilt the refusal suggests (plant.initial_rpy).
+- `open loop`: the paper's Fig. 5 (controller.length_gain 0);
+- `length loop`: the default, the cable-length loop in the Jacobian mapping;
+- `full pose`: controller {pose: full, tension_control: true}, where the scenario accepts it;
 - `stiff`: 100 x EA, ideal drives (bandwidth 1e4 rad/s, no friction), rotation locked: the
   kinematic plant's limit; its largest position difference must stay below 1 mm.
+
+The robot file's dynamics (cdpm_drake/robots/paper_7cable.yaml) and the plant's defaults
+(drive friction on), level starts.
 
     .venv/bin/python scripts/dynamic_plant_report.py [--duration S] [--only exp2_interaction]
 """
 
 import argparse
-import dataclasses
 import re
 import sys
 import tempfile
@@ -24,27 +28,15 @@ from pathlib import Path
 
 import numpy as np
 
-from cdpm_drake.interference import pair_distances
 from cdpm_drake.robot import ROBOTS_DIR
-from cdpm_drake.rotation import rotation_from_rpy
-from cdpm_drake.scenario import ScenarioError, load_scenario, scenario_robot
+from cdpm_drake.rotation import rotation_angle, rotations_from_rpy
+from cdpm_drake.scenario import ScenarioError, load_scenario
 from cdpm_drake.simulation import simulate
 from cdpm_drake.text import format_table
 
 EXPERIMENTS = ("exp1_no_interaction", "exp2_interaction", "exp3_two_pairs")
 STIFF = ("cables: {EA: 7.0e6, damping: 200.0}\nreel_drives: {bandwidth: 10000.0, "
          "viscous_friction: 0.0, coulomb_friction: 0.0}\n")
-
-
-def true_min_distance(robot, log, every: int = 10) -> float:
-    """Smallest cable-cable distance (m) over the run, from the true pose (every `every`
-    ticks): the platform's attachments rotated by rpy_true, at p_true."""
-    best = np.inf
-    for k in range(0, len(log["time"]), every):
-        R = rotation_from_rpy(log["rpy_true"][k])
-        rotated = dataclasses.replace(robot, attachments=robot.attachments @ R.T)
-        best = min(best, float(np.min(pair_distances(rotated, log["p_true"][k]))))
-    return best
 
 
 def dynamic_scenario(name: str, text: str):
@@ -63,19 +55,29 @@ def dynamic_scenario(name: str, text: str):
         return load_scenario(name, retried), f"level start refused; tilted {tilt} rad"
 
 
-def row(name, setting, kinematic, result, robot, note):
+def row(name, setting, kinematic, result, note=""):
     log = result.log
+    T = len(log["time"])
     err = np.linalg.norm(log["p"] - log["p_true"], axis=1)
-    follow = np.linalg.norm(log["p_true"] - kinematic["p"][:len(log["time"])], axis=1)
-    d_kin = float(np.min(kinematic["pair_distances"])) if kinematic["pair_distances"].size else np.nan
-    slack = log["slack"].sum(axis=0)
-    slack_text = ", ".join(f"{i + 1}:{int(n)}" for i, n in enumerate(slack) if n) or "none"
-    return (name, setting, f"{log['time'][-1]:.1f}", f"{np.degrees(np.abs(log['rpy_true']).max()):.2f}",
-            f"{1000 * err.max():.2f}", f"{1000 * follow.max():.2f}",
-            f"{1000 * true_min_distance(robot, log):.1f}", f"{1000 * d_kin:.1f}",
-            f"{log['tensions'].min():.2f}", f"{log['tensions'].max():.1f}", slack_text,
-            f"{result.realtime_factor:.2f}", (str(result.error)[:60] if result.error else "")
-            + note)
+    tilt = np.degrees(rotation_angle(rotations_from_rpy(log["rpy_true"])))
+    slack = int(np.any(log["slack"], axis=1).sum())
+    active = np.asarray(kinematic["active"]).any(axis=0)
+    if not active.any():  # no pair interferes: the closest one
+        active = np.zeros_like(active)
+        active[int(np.argmin(kinematic["pair_distances"].min(axis=0)))] = True
+    d_kin = 1000 * float(np.min(kinematic["pair_distances"][:, active]))
+    d_true = 1000 * float(np.min(log["pair_distances_true"][:, active]))
+    d_est = 1000 * float(np.min(log["pair_distances"][:, active]))
+    fault = (str(result.error)[:50] if result.error else "") + note
+    return (name, setting, f"{log['time'][-1]:.1f}", f"{slack} ({100 * slack / T:.2f} %)",
+            f"{log['tensions'].min():.2f}", f"{log['tensions'].max():.1f}", f"{tilt.max():.2f}",
+            f"{1000 * err.max():.2f}", f"{d_true:.2f}", f"{d_est:.2f}", f"{d_kin:.2f}",
+            f"{result.realtime_factor:.1f}", fault)
+
+
+CONTROLLERS = (("open loop", "controller: {length_gain: 0}"),
+               ("length loop", ""),
+               ("full pose", "controller: {pose: full, tension_control: true}"))
 
 
 def main(argv=None) -> int:
@@ -93,29 +95,33 @@ def main(argv=None) -> int:
     for name in args.only or EXPERIMENTS:
         kinematic_result = simulate(scenario=load_scenario(name), duration=args.duration)
         kinematic = kinematic_result.log
-        settings = [("defaults", "plant: !DynamicReels {}")]
+        settings = [(label, "{plant: !DynamicReels {}" + (", " + text if text else "") + "}")
+                    for label, text in CONTROLLERS]
         if not args.no_stiff:
             settings.append(("stiff", f"{{robot: {stiff_file}, plant: !DynamicReels "
                                       "{time_step: 0.0005, lock_rotation: true, "
                                       "min_tension: 1.0}}"))
         for setting, text in settings:
-            scenario, note = dynamic_scenario(name, text)
-            robot = scenario_robot(scenario)
+            try:
+                scenario, note = dynamic_scenario(name, text)
+            except ScenarioError as e:  # a controller this robot cannot run: say so
+                rows.append((name, setting) + ("-",) * 10 + (str(e)[:50],))
+                continue
             result = simulate(scenario=scenario, duration=args.duration)
-            rows.append(row(name, setting, kinematic, result, robot, note))
+            rows.append(row(name, setting, kinematic, result, note))
             if setting == "stiff":
                 n = len(result.log["time"])
                 worst_follow = max(worst_follow, float(np.max(np.linalg.norm(
                     result.log["p_true"] - kinematic["p"][:n], axis=1))))
             print(f"done {name} {setting}", file=sys.stderr)
-        rows.append((name, "kinematic", f"{kinematic['time'][-1]:.1f}", "0", "0", "0",
-                     f"{1000 * float(np.min(kinematic['pair_distances'])):.1f}",
-                     f"{1000 * float(np.min(kinematic['pair_distances'])):.1f}", "-", "-", "-",
-                     f"{kinematic_result.realtime_factor:.2f}", ""))
+        d_kin = 1000 * float(np.min(kinematic["pair_distances"]))
+        rows.append((name, "kinematic", f"{kinematic['time'][-1]:.1f}", "-", "-", "-", "0", "0",
+                     "-", "-", f"{d_kin:.2f}", f"{kinematic_result.realtime_factor:.1f}", ""))
     print(format_table(
-        ["experiment", "plant", "t (s)", "max rotation (deg)", "FK error (mm)",
-         "vs kinematic (mm)", "min distance true (mm)", "min distance kinematic (mm)",
-         "min T (N)", "max T (N)", "slack ticks per cable", "RTF", "note"], rows))
+        ["experiment", "controller", "t (s)", "slack ticks", "min T (N)", "max T (N)",
+         "max rotation (deg)", "FK error (mm)", "min d true (mm)", "min d estimated (mm)",
+         "min d kinematic (mm)", "RTF", "fault / note"], rows))
+    print("min d: the pairs the kinematic run brought within d_u (else the closest pair)")
     if not args.no_stiff:
         print(f"stiff limit: largest |p_true - p_kinematic| {1000 * worst_follow:.3f} mm "
               f"({'within' if worst_follow < 1e-3 else 'NOT within'} 1 mm)")

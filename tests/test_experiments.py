@@ -3,7 +3,7 @@
 These run the shipped scenarios (calibrated paper robot, cdpm_drake/robots/paper_7cable.yaml)
 and a small robot built so that two cables can be pushed through each other
 (tests/data/robots/crossing_4cable.yaml): the paper robot's swapped cables never come closer
-than 37 mm anywhere in its workspace box, so no hand can cross them there.
+than 41 mm anywhere in its workspace box (5 cm grid), so no hand can cross them there.
 """
 
 from pathlib import Path

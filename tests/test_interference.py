@@ -547,7 +547,7 @@ def test_force_is_zero_when_every_pair_is_beyond_d_u(paper):
     c = paper.workspace.center
     params = InterferenceParams.uniform(paper, 0.05, 0.061, 2.0)
     res = interference_force(paper, c, params)
-    assert np.all(res.distance > 0.061)  # the smallest, (1,2), is 226 mm (cdpm info)
+    assert np.all(res.distance > 0.061)  # the smallest, (2,7), is 95 mm (cdpm info)
     assert np.all(res.force == 0.0) and not res.active.any() and np.all(res.intensity == 0.0)
 
 

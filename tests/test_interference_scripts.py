@@ -14,9 +14,9 @@ from cdpm_drake.robot import load_robot
 SCRIPTS = Path(__file__).resolve().parent.parent / "scripts"
 
 
-def run(script, *args):
+def run(script, *args, timeout=300):
     return subprocess.run([sys.executable, str(SCRIPTS / script), *args], capture_output=True,
-                          text=True, timeout=300)
+                          text=True, timeout=timeout)
 
 
 def test_benchmark_prints_one_table_with_every_row():
@@ -37,8 +37,10 @@ def test_benchmark_prints_one_table_with_every_row():
 
 
 def test_calibration_reproduces_the_shipped_points():
-    # The script's result (rounded to 0.1 mm) is what cdpm_drake/robots/paper_7cable.yaml holds.
-    out = run("calibrate_attachments.py", "--starts", "1")
+    # The script's result (rounded to 0.1 mm) is what cdpm_drake/robots/paper_7cable.yaml
+    # holds: polished again from the file's points (its last two stages; the full search of
+    # six starts takes ~25 min), they come back unchanged and meet every requirement (exit 0).
+    out = run("calibrate_attachments.py", "--from-file", timeout=900)
     assert out.returncode == 0, out.stderr
     rows = [line.split("[")[1].split("]")[0] for line in out.stdout.splitlines()
             if line.startswith("  - [")]

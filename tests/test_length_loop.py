@@ -29,10 +29,10 @@ def fd_rates(p, v, h=1e-6):
     return (cable_lengths(ROBOT, p + h * v) - cable_lengths(ROBOT, p - h * v)) / (2 * h)
 
 
-def tick(p_hat, v, lengths, memory, gain=20.0):
+def tick(p_hat, v, lengths, memory, gain=20.0, dead_band=0.0):
     x = np.concatenate([p_hat, v, lengths, memory])
     out = np.empty(length_loop_sizes(M)["out"])
-    length_loop_tick(OFFSETS, gain, T, x, out)
+    length_loop_tick(OFFSETS, gain, T, dead_band, x, out)
     return out[:M], out[M:2 * M], out[2 * M:]
 
 
@@ -176,3 +176,32 @@ def test_lagging_drives_are_caught_up_by_the_loop():
     # A 50 ms lag at ~0.1 m/s is ~5 mm behind; the loop brings it to ~1/10 of that.
     assert open_loop > 2e-3
     assert closed_loop < 0.2 * open_loop
+
+
+def test_the_drives_dead_band_is_made_up_where_the_error_asks_for_motion():
+    """l_dot = J v + K_l e + 0.9 u_c tanh(e / 20 um): at rest with errors of 1 mm, 5 um and 0
+    the extra speed is 0.9 u_c tanh(50), 0.9 u_c tanh(0.25) and exactly 0 (ideal reels, whose
+    error is zero, see nothing of it)."""
+    measured = cable_lengths(ROBOT, P)
+    _, _, memory = tick(P, np.zeros(3), measured, np.zeros(M + 4), dead_band=0.005)
+    errors = np.array([1e-3, 5e-6, 0.0, -1e-3, 0.0, 0.0, 0.0])
+    l_d = cable_lengths(ROBOT, memory[:3]) + memory[3:3 + M]
+    command, _, _ = tick(P, np.zeros(3), l_d - errors, memory, dead_band=0.005)
+    expected = 20.0 * errors + 0.9 * 0.005 * np.tanh(errors / 2e-5)
+    # (errors come back through lengths of ~3 m: 1e-16 relative of those)
+    np.testing.assert_allclose(command, expected, rtol=0, atol=1e-12)
+    assert command[2] == 0.0
+
+
+def test_the_dead_band_is_the_robot_files_drives():
+    d = ROBOT.dynamics
+    # dynamic_plant's drive law: a reel at rest moves only when bandwidth x inertia x u
+    # exceeds the Coulomb friction.
+    assert d.dead_band == pytest.approx(d.coulomb_friction / (d.bandwidth * d.reel_inertia))
+    from cdpm_drake.scenario import load_resolved_scenario
+    dynamic = load_resolved_scenario("exp2_interaction", "plant: !DynamicReels {}")
+    assert dynamic.dead_band == pytest.approx(d.dead_band)
+    off = load_resolved_scenario("exp2_interaction", "{plant: !DynamicReels {}, controller: "
+                                 "{friction_compensation: false}}")
+    assert off.dead_band == 0.0
+    assert load_resolved_scenario("exp2_interaction").dead_band == 0.0  # kinematic plant

@@ -296,13 +296,6 @@ def test_the_length_loop_is_pi_with_the_drives_dead_band_made_up():
     assert nxt[3 + M + 3] == pytest.approx(pc.MAX_INTEGRAL_SPEED / 100.0)
 
 
-def test_the_dead_band_comes_from_the_robot_files_drives():
-    d = ROBOT.dynamics
-    # reel_step: a drive at rest moves only when K u > F_c, K = bandwidth x inertia.
-    assert pc.drive_dead_band(d) == pytest.approx(
-        d.coulomb_friction / (d.bandwidth * d.reel_inertia))
-
-
 def test_the_tension_command_slews_from_the_estimate():
     p, R = random_poses(10, 1)[0]
     L0 = pose_lengths(ROBOT, p, R)

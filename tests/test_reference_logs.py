@@ -1,7 +1,8 @@
 """Today's diagram reproduces the stored logs of the three shipped experiments (issue 11).
 
 The reference is tests/data/reference_logs/*.npz, written by scripts/make_reference_logs.py
-from the diagram before its speed-up (the commit is stored in each file). Agreement within
+(first from the diagram before its speed-up; rewritten for issue 18's recalibrated robot, the
+diagram unchanged; the commit is stored in each file). Agreement within
 1e-9 m, N, m/s on every tick of the full 30 s: the rewired diagram computes the same thing.
 The stored values are within 5e-12 of what was simulated (quantum 1e-11).
 """

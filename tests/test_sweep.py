@@ -492,7 +492,9 @@ def test_a_run_that_stops_part_way_is_a_fault_row_with_its_metrics(tmp_path, mon
 
 # A sweep whose every run faults part-way: the dynamic plant's cables stretch, and the
 # controller's kinematics stop the run once the lengths disagree with a rigid platform by more
-# than max_length_residual (both values are reached within 0.5 s of experiment 2's push).
+# than max_length_residual (both values are reached within 0.8 s of experiment 2's push; the
+# start's own misfit is 1.005 mm with the attachment points of issue 18, so the limits sit
+# above it).
 # The paper's open loop on the dynamic plant: its lengths drift, so the forward kinematics'
 # residual grows past these limits within the second.
 ALL_FAULT = """\
@@ -500,7 +502,7 @@ name: all_fault
 base: exp2_interaction
 overlay: {duration: 1.0, plant: !DynamicReels {}, controller: {length_gain: 0}}
 axes:
-  - {field: plant.max_length_residual, values: [1.0e-3, 1.2e-3]}
+  - {field: plant.max_length_residual, values: [1.1e-3, 1.2e-3]}
 """
 
 

@@ -178,9 +178,10 @@ def test_near_closure_poses_give_no_false_infeasible():
 
 
 def test_t_star_equals_highs_where_the_nullspace_has_two_or_more_dimensions():
-    # Clarabel's LP against HiGHS: a suspended 8-cable robot (2-D nullspace, finite t*), the
-    # shipped 8-cable robot, and a 7-cable robot whose cables all meet at the centre (rank 3:
-    # 4-D nullspace; a wrench with a moment is out of its range: -inf).
+    # 8 cables (2-D nullspace): the closed form over cable triples, on a suspended robot
+    # (finite t*) and the shipped cube_8cable (force closure: +inf). A 7-cable robot whose
+    # cables all meet at the centre (rank 3, 4-D nullspace): Clarabel's LP (finite t* for a
+    # force; -inf for a wrench with a moment, outside W's range).
     rng = np.random.default_rng(2)
     point7 = Robot(name="point7", reels=PAPER.reels, attachments=np.zeros((7, 3)),
                    workspace=PAPER.workspace)
@@ -401,3 +402,20 @@ def test_rotation_round_trip():
         R = rotation_from_rpy(rpy)
         np.testing.assert_allclose(R, RollPitchYaw(rpy).ToRotationMatrix().matrix(), atol=1e-15)
         np.testing.assert_allclose(rpy_from_rotation(R), rpy, atol=1e-12)
+
+
+def test_the_benchmark_prints_every_row():
+    # scripts/bench_tension.py, a smoke run: its table has every case, each with a cost.
+    import subprocess
+    import sys
+    from pathlib import Path
+
+    script = Path(__file__).resolve().parent.parent / "scripts" / "bench_tension.py"
+    out = subprocess.run([sys.executable, str(script), "--calls", "20", "--poses", "5",
+                          "--repeats", "1"], capture_output=True, text=True, timeout=600)
+    assert out.returncode == 0, out.stderr
+    rows = [line for line in out.stdout.splitlines() if line[:1] in "78h"]
+    for what in ("7 cables: compiled kernel, bound", "7 cables: scipy linprog HiGHS t*",
+                 "8 cables: t* by Clarabel's LP", "holding_tension on a 10 cm grid"):
+        row = next(r for r in rows if r.startswith(what))
+        assert float(row.split()[-2]) > 0.0

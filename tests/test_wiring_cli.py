@@ -761,6 +761,23 @@ def test_version_is_the_package_version(capsys):
 # --- info ----------------------------------------------------------------------------------------
 
 
+@covers("info --swaps", "info --grid", "info --plot")
+def test_info_statics_options_reach_the_output(capsys, tmp_path):
+    """--swaps 1-3 swaps rows 1 and 3 of the attachment column, --grid 0.5 is the grid the
+    statics line names (0.5 m steps over paper_7cable's 2.5 x 3.2 x 2.1 m box: 6 x 7 x 5
+    points), --plot writes the two pictures there (tests/test_info_statics.py checks their
+    numbers)."""
+    assert cdpm("info", "paper_7cable", "--swaps", "1-3", "--grid", "0.5", "--plot",
+                tmp_path) == 0
+    out = capsys.readouterr().out
+    b = load_robot("paper_7cable").attachments
+    row1 = next(line for line in out.splitlines() if line.startswith("1 "))
+    assert f"[{b[2, 0]:.3f}, {b[2, 1]:.3f}, {b[2, 2]:.3f}]" in row1  # cable 1 ends at b_3
+    assert "(50 cm grid from the lower corner: 6 x 7 x 5 points)" in out
+    for name in ("workspace_wrench.png", "workspace_interference.png"):
+        assert (tmp_path / name).stat().st_size > 20_000
+
+
 @covers("info <robot>")
 def test_info_describes_the_robot_given(capsys, write_robot, valid_spec):
     """`info` only prints: its effect is the table, checked against lengths computed here

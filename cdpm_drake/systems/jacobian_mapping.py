@@ -26,32 +26,33 @@ class ReelRates(LeafSystem):
         - result ([reel_velocity_command m/s, commanded_lengths m, next memory])
     """
 
-    def __init__(self, robot, *, length_gain, time_step):
+    def __init__(self, robot, *, length_gain, time_step, dead_band=0.0):
         super().__init__()
         m = robot.num_cables
         sizes = length_loop_sizes(m)
         self._offsets = owned(robot.attachments - robot.reels)
         self._inputs = self.DeclareVectorInputPort("inputs", sizes["x"])
-        gain, step = float(length_gain), float(time_step)
+        gain, step, band = float(length_gain), float(time_step), float(dead_band)
         # Compiled (or loaded) now, not in the first tick.
         example = np.zeros(sizes["x"])
         example[:3] = robot.workspace.center
-        tick = bind(length_loop_tick, self._offsets, gain, step, example,
+        tick = bind(length_loop_tick, self._offsets, gain, step, band, example,
                     np.empty(sizes["out"]))
         # The tick's callback is a closure over locals, not a method reading self: attribute
         # lookups on a pybind LeafSystem cost ~0.2 us each (scripts/count_instructions.py).
         offsets, inputs = self._offsets, self._inputs.Eval
 
         def calc_result(context, output):
-            tick(offsets, gain, step, inputs(context), output.get_mutable_value())
+            tick(offsets, gain, step, band, inputs(context), output.get_mutable_value())
 
         self.DeclareVectorOutputPort("result", sizes["out"], calc_result,
                                      prerequisites_of_calc={self._inputs.ticket()})
 
 
 class JacobianVelocityMapping(Diagram):
-    """Reel velocities l_dot = J(p) v (eq. 3) plus the cable-length loop K_l (l_d - l): m/s
-    of cable, positive pays cable out. l_d, the commanded lengths, are those of the
+    """Reel velocities l_dot = J(p) v (eq. 3) plus the cable-length loop K_l (l_d - l) and
+    the drives' dead band made up where the loop asks for motion: m/s of cable, positive pays
+    cable out. l_d, the commanded lengths, are those of the
     commanded platform position advanced by J v each tick (see
     `kinematics.length_loop_tick`); l the measured ones (encoders in simulation, the reel
     bridge's on the robot). length_gain K_l = 0 is the paper's open loop.
@@ -68,10 +69,12 @@ class JacobianVelocityMapping(Diagram):
         - commanded_lengths (m, one per cable: l_d)
     """
 
-    def __init__(self, robot, *, length_gain=DEFAULT_LENGTH_GAIN, time_step=0.002):
+    def __init__(self, robot, *, length_gain=DEFAULT_LENGTH_GAIN, time_step=0.002,
+                 dead_band=0.0):
         super().__init__()
         sub_diagram(self, lambda builder: build_jacobian_mapping(
-            builder, robot, length_gain=length_gain, time_step=time_step))
+            builder, robot, length_gain=length_gain, time_step=time_step,
+            dead_band=dead_band))
 
 
 # The system a flat build (FlatBlock) names after the block.
@@ -79,13 +82,14 @@ JACOBIAN_MAPPING_MAIN = "map"
 
 
 def build_jacobian_mapping(builder, robot, *, length_gain=DEFAULT_LENGTH_GAIN,
-                           time_step=0.002):
+                           time_step=0.002, dead_band=0.0):
     """JacobianVelocityMapping's systems and exported ports, into `builder` (a DiagramBuilder
-    or a FlatBlock)."""
+    or a FlatBlock). dead_band: the drives' (m/s, robot.Dynamics.dead_band) that the loop
+    makes up; 0: none."""
     m = robot.num_cables
     sizes = length_loop_sizes(m)
     rates = builder.AddNamedSystem("map", ReelRates(robot, length_gain=length_gain,
-                                                    time_step=time_step))
+                                                    time_step=time_step, dead_band=dead_band))
     # Starts at zero: the started flag 0 makes the first tick latch the measured lengths.
     memory = builder.AddNamedSystem("memory", unit_delay(sizes["memory"], time_step))
     # One C++ Selector stacks the inputs and the memory for `map` and splits its result.

@@ -15,7 +15,6 @@ from ..interference import result_layout
 from ..kernel_call import bind, owned
 from ..kinematics import KinematicsError
 from ..pose_control import (FK_INCONSISTENT, FK_NOT_SETTLED, START_ITERATIONS, WARMUP_TICKS,
-                            drive_dead_band,
                             interference_posed_tick,
                             orientation_tick, pose_fk_tick, pose_rates_tick, sizes,
                             tension_tick)
@@ -250,7 +249,7 @@ def build_orientation_hold(builder, *, gain, time_step):
 
 
 def build_pose_jacobian_mapping(builder, robot, *, length_gain, integral_gain, tension,
-                                time_step):
+                                time_step, dead_band=0.0):
     """l_dot = J(p, R) [v; w] + K_l (l_d - l) (pose_control.pose_rates_tick). Inputs p_WP,
     R_WP, velocity_command, omega_command, R_WP_held, cable_lengths and, with `tension`,
     tension_command; outputs reel_velocity_command, commanded_lengths."""
@@ -259,7 +258,7 @@ def build_pose_jacobian_mapping(builder, robot, *, length_gain, integral_gain, t
     reels, attachments = _constants(robot)
     params = owned(np.array([length_gain, integral_gain, time_step,
                              robot.dynamics.EA if tension else 0.0, 1.0 if tension else 0.0,
-                             drive_dead_band(robot.dynamics), WARMUP_TICKS], dtype=float))
+                             dead_band, WARMUP_TICKS], dtype=float))
     example = np.zeros(s["rates_x"])
     example[:3] = robot.workspace.center
     example[3:12] = example[18:27] = np.eye(3).ravel()
