@@ -520,7 +520,7 @@ def test_reel_time_constant_lags_the_motion():
 @covers("Scenario.controller.length_gain")
 def test_length_gain_sets_the_cable_length_loop():
     """Every tick's reel command is J(p) v + K_l (l_d - l) with the scenario's K_l = 13.7 1/s
-    (distinct from the default 20): recomputed from the logged p, velocity, commanded and
+    (distinct from the default 40): recomputed from the logged p, velocity, commanded and
     measured lengths with kinematics.jacobian. Lagging drives (tau = 0.05 s) make l_d - l
     non-zero, so the gain shows."""
     s = push([1.0, 0, 0], plant=SimulatedReels(time_constant=0.05),
@@ -628,7 +628,7 @@ def test_friction_compensation_makes_up_the_drives_dead_band():
     def reproduce(log, robot, band):
         e = log["lengths_commanded"] - log["lengths"]
         return (np.einsum("kij,kj->ki", jacobian(robot, log["p"]), log["velocity"])
-                + 20.0 * e + FRICTION_SHARE * band * np.tanh(e / FRICTION_ERROR))
+                + 40.0 * e + FRICTION_SHARE * band * np.tanh(e / FRICTION_ERROR))
 
     s = dataclasses.replace(push([2.0, 0, 0]), plant=scenario_module.DynamicReels(),
                             initial_position=list(P_EXP2))
