@@ -241,6 +241,27 @@ def _swap_arg(text: str) -> tuple[int, int]:
 # --- simulate --------------------------------------------------------------------------------
 
 
+def tension_control_summary(log) -> str:
+    """One line on the tension control of a log (controller.tension_control): on how many
+    ticks the floor held, was lowered to what the pose allows (t*), and on how many no
+    distribution held at all (t* < 0: outside the wrench-feasible workspace)."""
+    status = np.asarray(log["tension_status"]).reshape(-1)
+    t_star = np.asarray(log["t_star"], dtype=float).reshape(-1)
+    T = status.size
+    held = int(np.sum(status == 0))
+    lowered = status == 1
+    none = int(np.sum(lowered & (t_star < 0)))
+    text = (f"tension control: the floor held on {held} of {T} ticks, lowered to the pose's "
+            f"largest minimum tension t* on {int(lowered.sum())}")
+    if lowered.any():
+        text += f" (smallest t* {t_star[lowered].min():.2f} N)"
+    if none:
+        text += (f"; NO tension distribution held on {none} ticks (t* < 0: outside the "
+                 "wrench-feasible workspace, a cable must go slack)")
+    estimate = np.asarray(log["tension_estimate"], dtype=float)
+    return text + (f"; estimated tensions {estimate.min():.2f} to {estimate.max():.1f} N")
+
+
 def _print_dynamic_summary(log, out) -> None:
     from .rotation import rotation_angle, rotations_from_rpy
 
@@ -330,6 +351,8 @@ def simulate_main(*, scenario, duration=None, out_dir=None, progress=True, out=N
     else:
         print(f"pairs that crossed: {crossings}", file=out)
     _print_clipped(log, scenario, out)
+    if T and "tension_status" in log:  # controller.tension_control
+        print(tension_control_summary(log), file=out)
     if T and "tensions" in log:  # the dynamic plant's ground truth
         _print_dynamic_summary(log, out)
     print(f"log: {path}", file=out)
@@ -751,6 +774,18 @@ def diagram_main(*, scenario, out_dir, depth=1, svg=True, out=None) -> int:
         diagrams["plant_dynamic"] = diagrams["controller_dynamic"].GetSubsystemByName("reels")
     except ScenarioError as e:  # a start the cables cannot hold level: say so, draw the rest
         print(f"skipped controller_dynamic: {e}", file=out)
+    # The full-pose controller with its tension control (controller.pose: full), on the
+    # dynamic plant: the pose forward kinematics, the tension distribution, the orientation
+    # hold.
+    from .scenario import check_scenario
+    full = dataclasses.replace(
+        scenario, plant=dynamic, controller=dataclasses.replace(
+            scenario.controller, pose="full", tension_control=True))
+    try:
+        check_scenario(full)
+        diagrams["controller_full_pose"] = build_diagram(full, options)
+    except ScenarioError as e:
+        print(f"skipped controller_full_pose: {e}", file=out)
     for path in write_diagrams(diagrams, out_dir, svg=svg, max_depth=depth):
         print(f"wrote {path}", file=out)
     return 0

@@ -24,6 +24,9 @@ from .systems.forward_kinematics import FORWARD_KINEMATICS_MAIN, build_forward_k
 from .systems.interference_force import INTERFERENCE_FORCE_MAIN, build_interference_force
 from .systems.jacobian_mapping import JACOBIAN_MAPPING_MAIN, build_jacobian_mapping
 from .systems.safety_limits import SAFETY_LIMITS_MAIN, build_safety_limits
+from .systems.pose_blocks import (MAIN as POSE_MAIN, build_orientation_hold,
+                                  build_pose_forward_kinematics, build_pose_jacobian_mapping,
+                                  build_posed_interference_force, build_tension_distribution)
 
 # Logged signals: (logger name suffix, system name, output port name). Every signal of the
 # paper's Figs. 10, 11, 13, 14 and 16, and what the limits and reels did with them.
@@ -37,6 +40,14 @@ LOGGED = (
     ("velocity", "safety_limits", "velocity_command"),
     ("reel_velocity", "jacobian_mapping", "reel_velocity_command"),
     ("lengths_commanded", "jacobian_mapping", "commanded_lengths"),
+    # controller.pose: full, and its tension control (each only where the block has it).
+    ("rpy", "forward_kinematics", "rpy_WP"),
+    ("omega", "orientation_hold", "omega_command"),
+    ("tension_command", "tension_distribution", "tension_command"),
+    ("tension_estimate", "tension_distribution", "tension_estimate"),
+    ("tension_target", "tension_distribution", "tension_target"),
+    ("t_star", "tension_distribution", "t_star"),
+    ("tension_status", "tension_distribution", "status"),
     ("lengths", "reels", "cable_lengths"),
     ("F_measured", "reels", "measured_force"),
     ("pair_distances", "interference_force", "pair_distances"),
@@ -93,21 +104,39 @@ def build_diagram(scenario: Scenario | ResolvedScenario,
             time_step=T))
     force_sensor.connect_input(plant.GetOutputPort("measured_force"), "measured_force")
 
-    fk = blocks["forward_kinematics"] = FlatBlock(
-        builder, "forward_kinematics", FORWARD_KINEMATICS_MAIN,
-        lambda b: build_forward_kinematics(b, robot, initial_position=p0,
-                                           max_residual=resolved.fk_max_residual,
-                                           time_step=T))
-    fk.connect_input(plant.GetOutputPort("cable_lengths"), "cable_lengths")
+    controller = scenario.controller
+    full = controller.pose == "full"
+    tension_control = full and controller.tension_control
+    lengths = plant.GetOutputPort("cable_lengths")
+    if full:
+        fk = blocks["forward_kinematics"] = FlatBlock(
+            builder, "forward_kinematics", POSE_MAIN, lambda b: build_pose_forward_kinematics(
+                b, robot, initial_position=p0, max_residual=resolved.fk_max_residual,
+                EA=robot.dynamics.EA if tension_control else 0.0, time_step=T))
+        R_WP = fk.GetOutputPort("R_WP")
+    else:
+        fk = blocks["forward_kinematics"] = FlatBlock(
+            builder, "forward_kinematics", FORWARD_KINEMATICS_MAIN,
+            lambda b: build_forward_kinematics(b, robot, initial_position=p0,
+                                               max_residual=resolved.fk_max_residual,
+                                               time_step=T))
+    fk.connect_input(lengths, "cable_lengths")
     p_WP = fk.GetOutputPort("p_WP")
 
     # eq. 22: F_d = F_H + F_int (+ F_wall, beyond the paper).
     forces = [force_sensor.GetOutputPort("F_H")]
     if resolved.interference is not None and options.interference:
-        interference = blocks["interference_force"] = FlatBlock(
-            builder, "interference_force", INTERFERENCE_FORCE_MAIN,
-            lambda b: build_interference_force(b, robot, resolved.interference,
-                                               time_step=T))
+        if full:
+            interference = blocks["interference_force"] = FlatBlock(
+                builder, "interference_force", POSE_MAIN,
+                lambda b: build_posed_interference_force(b, robot, resolved.interference,
+                                                         time_step=T))
+            interference.connect_input(R_WP, "R_WP")
+        else:
+            interference = blocks["interference_force"] = FlatBlock(
+                builder, "interference_force", INTERFERENCE_FORCE_MAIN,
+                lambda b: build_interference_force(b, robot, resolved.interference,
+                                                   time_step=T))
         interference.connect_input(p_WP, "p_WP")
         forces.append(interference.GetOutputPort("F_int"))
     wall = scenario.wall_force
@@ -137,14 +166,18 @@ def build_diagram(scenario: Scenario | ResolvedScenario,
     # Anti-windup: the admittance integrates from the velocity actually commanded.
     admittance.connect_input(limits.GetOutputPort("velocity_command"), "velocity_command")
 
-    mapping = blocks["jacobian_mapping"] = FlatBlock(
-        builder, "jacobian_mapping", JACOBIAN_MAPPING_MAIN,
-        lambda b: build_jacobian_mapping(b, robot,
-                                         length_gain=scenario.controller.length_gain,
-                                         time_step=T, dead_band=resolved.dead_band))
+    velocity_command = limits.GetOutputPort("velocity_command")
+    if full:
+        mapping = _add_pose_blocks(builder, blocks, resolved, fk, force_sensor, lengths,
+                                   velocity_command, T)
+    else:
+        mapping = blocks["jacobian_mapping"] = FlatBlock(
+            builder, "jacobian_mapping", JACOBIAN_MAPPING_MAIN,
+            lambda b: build_jacobian_mapping(b, robot, length_gain=controller.length_gain,
+                                             time_step=T, dead_band=resolved.dead_band))
+        mapping.connect_input(lengths, "cable_lengths")
     mapping.connect_input(p_WP, "p_WP")
-    mapping.connect_input(plant.GetOutputPort("cable_lengths"), "cable_lengths")
-    mapping.connect_input(limits.GetOutputPort("velocity_command"), "velocity_command")
+    mapping.connect_input(velocity_command, "velocity_command")
     builder.Connect(mapping.GetOutputPort("reel_velocity_command"),
                     plant.GetInputPort("reel_velocity_command"))
 
@@ -184,6 +217,62 @@ def build_diagram(scenario: Scenario | ResolvedScenario,
     return diagram
 
 
+# How fast the commanded tensions may change, N/s per cable (pose_control.tension_tick).
+TENSION_SLEW_RATE = 50.0
+# The full-pose length loop's integral gain, 1/s^2 (pose_control.pose_rates_tick).
+LENGTH_INTEGRAL_GAIN = 100.0
+
+
+def _add_pose_blocks(builder, blocks, resolved, fk, force_sensor, lengths, velocity_command,
+                     T):
+    """controller.pose: full: the orientation hold, the tension distribution (with
+    tension_control) and the Jacobian mapping of the pose; returns the mapping (its p_WP and
+    velocity_command inputs still to connect)."""
+    from .tension import gravity_wrench, tension_distribution, wrench_matrix
+
+    scenario, robot = resolved.scenario, resolved.robot
+    controller = scenario.controller
+    R_WP = fk.GetOutputPort("R_WP")
+    hold = blocks["orientation_hold"] = FlatBlock(
+        builder, "orientation_hold", POSE_MAIN, lambda b: build_orientation_hold(
+            b, gain=controller.orientation_gain, time_step=T))
+    hold.connect_input(R_WP, "R_WP")
+    tension_control = controller.tension_control
+    mapping = blocks["jacobian_mapping"] = FlatBlock(
+        builder, "jacobian_mapping", POSE_MAIN, lambda b: build_pose_jacobian_mapping(
+            b, robot, length_gain=controller.length_gain,
+            integral_gain=LENGTH_INTEGRAL_GAIN, tension=tension_control, time_step=T,
+            dead_band=resolved.dead_band))
+    for name, port in (("R_WP", R_WP), ("omega_command", hold.GetOutputPort("omega_command")),
+                       ("R_WP_held", hold.GetOutputPort("R_WP_held")),
+                       ("cable_lengths", lengths)):
+        mapping.connect_input(port, name)
+    if not tension_control:
+        # The blocks ignore the tensions then (EA off): the lengths fill their slots.
+        fk.connect_input(lengths, "tension_estimate")
+        mapping.connect_input(lengths, "tension_slot")
+        return mapping
+    # The estimate starts at the target of the start, level and unpushed.
+    p0 = np.asarray(scenario.initial_position, dtype=float)
+    # (The estimate closes in on the robot's real pretension during the warm-up ticks.)
+    start = tension_distribution(wrench_matrix(robot, p0), gravity_wrench(robot.dynamics.mass),
+                                 float(controller.min_tension)).tensions
+    tension = blocks["tension_distribution"] = FlatBlock(
+        builder, "tension_distribution", POSE_MAIN, lambda b: build_tension_distribution(
+            b, robot, min_tension=controller.min_tension,
+            max_tension=controller.max_tension, slew_rate=TENSION_SLEW_RATE,
+            initial_tensions=start, time_step=T))
+    for name, port in (("p_WP", fk.GetOutputPort("p_WP")), ("R_WP", R_WP),
+                       ("F_H", force_sensor.GetOutputPort("F_H")),
+                       ("velocity_command", velocity_command),
+                       ("residual", fk.GetOutputPort("residual")), ("cable_lengths", lengths),
+                       ("tension_assumed", fk.GetOutputPort("tension_assumed"))):
+        tension.connect_input(port, name)
+    fk.connect_input(tension.GetOutputPort("tension_estimate_previous"), "tension_estimate")
+    mapping.connect_input(tension.GetOutputPort("tension_command"), "tension_command")
+    return mapping
+
+
 def block_output_port(diagram, block: str, port_name: str):
     """The output port `port_name` of the Fig. 5 block `block` of a diagram build_diagram
     made, whether the block is one system, a sub-diagram or flat (FlatBlock)."""
@@ -192,6 +281,21 @@ def block_output_port(diagram, block: str, port_name: str):
         system_name, index = flat["outputs"][port_name]
         return diagram.GetSubsystemByName(system_name).get_output_port(index)
     return diagram.GetSubsystemByName(block).GetOutputPort(port_name)
+
+
+def logged_ports(diagram):
+    """(key, block, port name) of every LOGGED signal the diagram has (its block, and the port:
+    the full-pose blocks have ports the paper's do not), in LOGGED order."""
+    for key, block, port_name in LOGGED:
+        if diagram.HasSubsystemNamed(block) and _block_has_output(diagram, block, port_name):
+            yield key, block, port_name
+
+
+def _block_has_output(diagram, block: str, port_name: str) -> bool:
+    flat = getattr(diagram, "flat_blocks", {}).get(block)
+    if flat is not None:
+        return port_name in flat["outputs"]
+    return diagram.GetSubsystemByName(block).HasOutputPort(port_name)
 
 
 def make_plant(scenario: Scenario | ResolvedScenario, robot=None):
@@ -273,20 +377,26 @@ def logged_signals(diagram, context) -> tuple[np.ndarray, dict]:
     log = diagram.GetSubsystemByName(LOG_SINK).FindLog(context)
     rows = log.data().T
     signals, k = {}, 0
-    for key, system_name, port_name in LOGGED:
-        if diagram.HasSubsystemNamed(system_name):
-            width = block_output_port(diagram, system_name, port_name).size()
-            signals[key] = rows[:, k:k + width].copy()
-            k += width
+    for key, system_name, port_name in logged_ports(diagram):
+        width = block_output_port(diagram, system_name, port_name).size()
+        signals[key] = rows[:, k:k + width].copy()
+        k += width
     return log.sample_times().copy(), signals
 
 
 def _logged_ports(blocks):
     """(key, block, port name, port) of every LOGGED signal whose block the diagram has."""
     for key, system_name, port_name in LOGGED:
-        if system_name in blocks:
+        if system_name in blocks and _has_output(blocks[system_name], port_name):
             block = blocks[system_name]
             yield key, block, port_name, block.GetOutputPort(port_name)
+
+
+def _has_output(block, port_name: str) -> bool:
+    """A block (FlatBlock or system) has an output port of that name."""
+    if isinstance(block, FlatBlock):
+        return port_name in block.outputs
+    return block.HasOutputPort(port_name)
 
 
 def _add_tick_log(builder, blocks, T, path, robot, scenario):

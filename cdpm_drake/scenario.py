@@ -134,8 +134,11 @@ class Controller:
     # ones, so the drives' velocity error and stiction do not integrate into length drift
     # (on a robot with 70 kN cables 1 mm of drift is ~26 N of tension). 0 is the paper's open
     # loop; on the kinematic plant's ideal reels l == l_d and the loop changes nothing. At
-    # most 1 / time_step (the loop would overshoot within a tick).
-    length_gain: float = 20.0
+    # most 1 / time_step (the loop would overshoot within a tick). 40 1/s: on the dynamic
+    # plant's exp2, the full pose's largest tilt 0.40 deg at 20, 0.31 at 30, 0.26 at 40; the
+    # translating controller's 0.51, 0.50, 0.49 (a quarter of the drives' 100 rad/s loop:
+    # well damped with their lag).
+    length_gain: float = 40.0
     # Make up the reel drives' dead band in the length loop: a drive holds still under a
     # command slower than coulomb_friction / (bandwidth x inertia) (robot file reel_drives),
     # so the loop adds 90 % of that speed, smoothly, where its length error asks for motion.
@@ -143,6 +146,25 @@ class Controller:
     # 0.51 deg. Not on the kinematic plant (its reels have no friction), nor with
     # length_gain 0.
     friction_compensation: bool = True
+    # What the forward kinematics estimates: "translation" (the paper's Fig. 5: a level
+    # platform, position only) or "full" (position and orientation from m >= 6 lengths; the
+    # interference distances, the Jacobian and the commanded lengths then use the attachment
+    # points p + R b_i, and an angular-velocity command holds the start's orientation).
+    pose: str = "translation"
+    # Gain of the orientation hold (pose: full), 1/s: w = K_R log(R_held R^T).
+    orientation_gain: float = 10.0
+    # Tension control (needs pose: full): every tick a target tension distribution at the
+    # estimated pose for the platform's weight (robot file: platform.mass), the measured hand
+    # force at the handle and the commanded acceleration, and commanded lengths = rigid lengths
+    # - the target's stretch (robot file: cables.EA), tracked by the length loop.
+    tension_control: bool = False
+    # Floor of the target distribution, N: every cable at least this taut where the pose
+    # allows; where the largest achievable minimum tension t* is lower, the floor is t*.
+    min_tension: float = 10.0
+    # Ceiling of the target distribution, N: where raising the weakest cable to min_tension
+    # would take an internal force that pulls another cable above this, the floor is lowered
+    # instead (a cable whose share of the internal force is small can cost hundreds of N).
+    max_tension: float = 100.0
 
 
 # --- Plants ----------------------------------------------------------------------------------
@@ -719,6 +741,7 @@ def _resolve(scenario: Scenario, source: str) -> ResolvedScenario:
         raise ScenarioError(
             f"controller.length_gain must be a number >= 0 1/s and below 1 / time_step = "
             f"{1.0 / scenario.time_step:g} 1/s (0: the paper's open loop), got {gain!r}")
+    _check_controller(scenario.controller, robot, scenario.plant)
     if scenario.wall_force.enabled:
         _positive(scenario.wall_force.margin, "wall_force.margin")
         _positive(scenario.wall_force.max_force, "wall_force.max_force")
@@ -768,6 +791,47 @@ def check_duration(duration: float, time_step: float, field: str) -> None:
         raise ScenarioError(f"{field} {duration!r} s is shorter than one tick (time_step "
                             f"{time_step!r} s): a run needs at least one tick, e.g. "
                             f"{field} {time_step!r}")
+
+
+POSES = ("translation", "full")
+
+
+def _check_controller(c: Controller, robot: Robot, plant) -> None:
+    if c.pose not in POSES:
+        raise ScenarioError(f"controller.pose must be one of {list(POSES)}, got {c.pose!r}")
+    m = robot.num_cables
+    if c.pose == "full" and m < 6:
+        raise ScenarioError(
+            f"controller.pose 'full' needs at least 6 cables to estimate position and "
+            f"orientation; robot {robot.name!r} has {m} (use pose: translation)")
+    if c.pose == "full":
+        _positive(c.orientation_gain, "controller.orientation_gain")
+    if not c.tension_control:
+        return
+    if c.pose != "full":
+        raise ScenarioError(
+            "controller.tension_control: true needs controller.pose: full (the stretch it "
+            "commands fits only a fitted orientation, and the redundant cable's length "
+            f"measures the internal tension only in a full pose); got pose {c.pose!r}")
+    if isinstance(plant, SimulatedReels):
+        raise ScenarioError(
+            "controller.tension_control: true needs a plant whose cables stretch "
+            "(plant: !DynamicReels {} or !HardwareReels {...}): the kinematic !SimulatedReels "
+            "has inextensible cables, whose lengths no stretch can be commanded on")
+    if m > 7:
+        raise ScenarioError(
+            f"controller.tension_control works for robots with 6 or 7 cables (at most one "
+            f"redundant cable: its target is computed in closed form every tick); robot "
+            f"{robot.name!r} has {m}")
+    if not (_is_number(c.min_tension) and math.isfinite(float(c.min_tension))
+            and float(c.min_tension) >= 0):
+        raise ScenarioError(f"controller.min_tension must be a finite number >= 0 N, got "
+                            f"{c.min_tension!r}")
+    if not (_is_number(c.max_tension) and math.isfinite(float(c.max_tension))
+            and float(c.max_tension) > float(c.min_tension)):
+        raise ScenarioError(f"controller.max_tension must be a finite number above "
+                            f"controller.min_tension = {c.min_tension!r} N, got "
+                            f"{c.max_tension!r}")
 
 
 def _or(value, default):

@@ -13,7 +13,8 @@ import numpy as np
 import pytest
 from pydrake.systems.analysis import Simulator
 
-from cdpm_drake.diagram import LOGGED, PLANT_PORTS, BuildOptions, block_output_port, build_diagram
+from cdpm_drake.diagram import (PLANT_PORTS, BuildOptions, block_output_port, build_diagram,
+                                logged_ports)
 from cdpm_drake.kinematics import forward_kinematics
 from cdpm_drake.scenario import load_scenario, scenario_robot
 from cdpm_drake.simulation import collect_log, simulate
@@ -53,7 +54,7 @@ def test_system_names_follow_fig_5():
     # input stacked by the fused wiring (see tests/test_fast_calls.py).
     assert {"log", "wiring"} <= names
     width = sum(block_output_port(diagram, system, port).size()
-                for _, system, port in LOGGED if system in names)
+                for _, system, port in logged_ports(diagram))
     assert diagram.GetSubsystemByName("log").get_input_port().size() == width
 
 

@@ -21,7 +21,8 @@ def test_committed_dot_files_are_up_to_date(tmp_path):
     assert main(["diagram", "--out", str(tmp_path), "--no-svg"]) == 0
     for name in ("controller_simulated", "controller_hardware", "controller_simulated_overview",
                  "controller_hardware_overview", "controller_dynamic", "plant_dynamic",
-                 "controller_dynamic_overview", "plant_dynamic_overview"):
+                 "controller_dynamic_overview", "plant_dynamic_overview",
+                 "controller_full_pose", "controller_full_pose_overview"):
         fresh = (tmp_path / f"{name}.dot").read_text()
         committed = (DIAGRAMS / f"{name}.dot").read_text()
         assert fresh == committed, (f"diagrams/{name}.dot is out of date: run `cdpm diagram` "

@@ -21,7 +21,8 @@ from pydrake.systems.analysis import Simulator
 
 import cdpm_drake.systems
 from cdpm_drake import kernel_call, operators
-from cdpm_drake.diagram import LOGGED, BuildOptions, block_output_port, build_diagram, logged_signals
+from cdpm_drake.diagram import (BuildOptions, block_output_port, build_diagram,
+                                logged_ports, logged_signals)
 from cdpm_drake.hardware.config import HardwareReels
 from cdpm_drake.kinematics import reel_rates
 from cdpm_drake.scenario import SimulatedReels, load_scenario
@@ -149,9 +150,7 @@ def test_fused_wiring_changes_no_value(name, overlay):
         np.testing.assert_array_equal(fused_log[key], plain_log[key], err_msg=key)
     # Every block port the views read (block_output_port) gives the same value in both, and
     # the last logged row (the log reads some of them elsewhere: from the block's result).
-    for key, system, port in LOGGED:
-        if not fused.HasSubsystemNamed(system):
-            continue
+    for key, system, port in logged_ports(fused):
         a = block_output_port(fused, system, port)
         b = block_output_port(plain, system, port)
         value = a.Eval(a.get_system().GetMyContextFromRoot(fused_context))

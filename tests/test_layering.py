@@ -11,7 +11,7 @@ PACKAGE = Path(__file__).resolve().parent.parent / "cdpm_drake"
 DRIVER_MAY_IMPORT = {"kinematics", "robot", "rotation", "tension", "interference", "limits",
                      "kernel_call", "text", "hardware", "systems"}
 MATH = ("kinematics", "interference", "limits", "tension", "rotation", "robot", "sensor",
-        "operators", "kernel_call", "cables")
+        "operators", "kernel_call", "cables", "pose", "pose_control")
 
 
 def _package_imports(path: Path) -> set[str]:

@@ -520,7 +520,7 @@ def test_reel_time_constant_lags_the_motion():
 @covers("Scenario.controller.length_gain")
 def test_length_gain_sets_the_cable_length_loop():
     """Every tick's reel command is J(p) v + K_l (l_d - l) with the scenario's K_l = 13.7 1/s
-    (distinct from the default 20): recomputed from the logged p, velocity, commanded and
+    (distinct from the default 40): recomputed from the logged p, velocity, commanded and
     measured lengths with kinematics.jacobian. Lagging drives (tau = 0.05 s) make l_d - l
     non-zero, so the gain shows."""
     s = push([1.0, 0, 0], plant=SimulatedReels(time_constant=0.05),
@@ -534,6 +534,90 @@ def test_length_gain_sets_the_cable_length_loop():
     assert np.abs(error).max() > 1e-4  # 1e8 x the tolerance: the loop acts
 
 
+@covers("Scenario.controller.pose")
+def test_pose_full_estimates_the_orientation_and_holds_it():
+    """pose: full adds the orientation to the estimate (logged rpy) and the orientation hold;
+    on the kinematic plant (a level platform) the estimate is level and the position the
+    translating estimate's."""
+    log = sim(push([1.0, 0, 0], controller=scenario_module.Controller(pose="full")), 0.1)
+    reference = sim(push([1.0, 0, 0]), 0.1)
+    assert np.abs(log["rpy"]).max() < 1e-9 and np.abs(log["omega"]).max() < 1e-8
+    # The full pose's PI loop and dead-band compensation act on round-off-level length errors
+    # (1e-12 m), which moves the platform by nanometres, no more.
+    np.testing.assert_allclose(log["p"], reference["p"], rtol=0, atol=1e-7)
+    assert "rpy" not in reference and "omega" not in reference
+
+
+def _full_dynamic(**controller):
+    c = scenario_module.Controller(pose="full", **controller)
+    # P0, where the cables hold the platform with a few tens of newtons.
+    return dataclasses.replace(_dynamic(), initial_position=list(P0), controller=c,
+                               operator=ScriptedOperator(times=[0.0], forces=[[2.0, -1.0, 1.0]]))
+
+
+@covers("Scenario.controller.orientation_gain")
+def test_orientation_gain_scales_the_angular_velocity_command():
+    """omega = K_R log(R_ref R^T) with R_ref the estimate at the end of the warm-up:
+    recomputed from the logged orientation estimate with K_R = 3.7 1/s."""
+    from cdpm_drake.pose import rotation_log
+    from cdpm_drake.rotation import rotation_from_rpy
+
+    from cdpm_drake.pose_control import WARMUP_TICKS
+
+    log = sim(_full_dynamic(orientation_gain=3.7), 0.2)
+    # The orientation held: the estimate's at the last warm-up tick; zero command before.
+    R_ref = rotation_from_rpy(log["rpy"][WARMUP_TICKS - 1])
+    expected = np.array([3.7 * np.array(rotation_log(R_ref @ rotation_from_rpy(rpy).T))
+                         for rpy in log["rpy"]])
+    expected[:WARMUP_TICKS] = 0.0
+    np.testing.assert_allclose(log["omega"], expected, rtol=0, atol=1e-12)
+    assert np.abs(log["omega"]).max() > 1e-6  # the platform did turn a little
+
+
+@covers("Scenario.controller.tension_control")
+def test_tension_control_commands_the_unstretched_lengths():
+    """At the first tick the commanded pose is the estimate (p, R of the log), so the
+    commanded lengths are its rigid lengths unstretched by the commanded tensions,
+    L EA / (EA + T) with the robot file's EA."""
+    from cdpm_drake.pose import pose_lengths
+    from cdpm_drake.rotation import rotation_from_rpy
+
+    s = _full_dynamic(tension_control=True)
+    log = sim(s, 0.02)
+    robot = scenario_robot(s)
+    EA = robot.dynamics.EA
+    L = pose_lengths(robot, log["p"][0], rotation_from_rpy(log["rpy"][0]))
+    np.testing.assert_allclose(log["lengths_commanded"][0],
+                               L * EA / (EA + log["tension_command"][0]), rtol=0, atol=1e-9)
+    plain = sim(_full_dynamic(), 0.02)
+    assert "tension_command" not in plain
+
+
+@covers("Scenario.controller.min_tension")
+def test_min_tension_is_the_floor_of_the_target():
+    """Where the pose allows (status 0) every target tension is at least 7.5 N and the
+    least-norm distribution puts some cable on that floor."""
+    log = sim(_full_dynamic(tension_control=True, min_tension=7.5), 0.1)
+    held = log["tension_status"][:, 0] == 0
+    assert held.any()
+    target = log["tension_target"][held]
+    assert target.min() >= 7.5 - 1e-9
+    np.testing.assert_allclose(target.min(axis=1), 7.5, atol=1e-9)
+
+
+@covers("Scenario.controller.max_tension")
+def test_max_tension_is_the_ceiling_of_the_target():
+    """At this start the least-norm target with the 10 N floor reaches ~23.7 N (default
+    100 N ceiling), while no distribution of this weight has every cable below 22.98 N (the
+    smallest largest tension over the nullspace line): a 23.3 N ceiling binds, is kept, and
+    still lets the floor hold."""
+    low = sim(_full_dynamic(tension_control=True, max_tension=23.3), 0.05)
+    high = sim(_full_dynamic(tension_control=True), 0.05)
+    assert low["tension_target"].max() <= 23.3 + 1e-9
+    assert low["tension_target"].min() >= 10.0 - 1e-9
+    assert high["tension_target"].max() > 23.5
+
+
 @covers("Scenario.controller.friction_compensation")
 def test_friction_compensation_makes_up_the_drives_dead_band():
     """On the dynamic plant every reel command is J(p) v + K_l e + 0.9 u_c tanh(e / 20 um),
@@ -544,7 +628,7 @@ def test_friction_compensation_makes_up_the_drives_dead_band():
     def reproduce(log, robot, band):
         e = log["lengths_commanded"] - log["lengths"]
         return (np.einsum("kij,kj->ki", jacobian(robot, log["p"]), log["velocity"])
-                + 20.0 * e + FRICTION_SHARE * band * np.tanh(e / FRICTION_ERROR))
+                + 40.0 * e + FRICTION_SHARE * band * np.tanh(e / FRICTION_ERROR))
 
     s = dataclasses.replace(push([2.0, 0, 0]), plant=scenario_module.DynamicReels(),
                             initial_position=list(P_EXP2))

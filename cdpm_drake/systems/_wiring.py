@@ -54,6 +54,9 @@ class FlatBlock:
         # fuse_wiring removes must not be touched again, only their names remapped.
         self._input_at: dict[str, list] = {}
         self._output_at: dict[str, tuple] = {}
+        # What the parent connected to each input: (system name, output index) of the source,
+        # for drawing an input whose wiring fuse_wiring merged into another's.
+        self._source_at: dict[str, tuple] = {}
         build(self)
 
     # The builder calls a block's build function makes.
@@ -84,6 +87,7 @@ class FlatBlock:
     def connect_input(self, source, name):
         for port in self.inputs[name]:
             self._builder.Connect(source, port)
+        self._source_at[name] = _where(source)
 
     def layout(self, moved=None, fused=()) -> dict:
         """{"systems": names, "inputs": {port: [(system name, input index)]}, "outputs":
@@ -99,7 +103,10 @@ class FlatBlock:
                 "inputs": {name: [moved.get((*at, "in"), at) for at in ats]
                            for name, ats in self._input_at.items()},
                 "outputs": {name: moved.get((*at, "out"), at)
-                            for name, at in self._output_at.items()}}
+                            for name, at in self._output_at.items()},
+                # Where each connected input's source is now (through the fusion).
+                "sources": {name: moved.get((*at, "out"), at)
+                            for name, at in self._source_at.items()}}
 
 
 def _where(port):

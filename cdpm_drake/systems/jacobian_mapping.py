@@ -8,7 +8,7 @@ from ..kinematics import length_loop_sizes, length_loop_tick
 from ._wiring import note_piece, sub_diagram, unit_delay, wiring
 
 # The cable-length loop's gain when a caller gives none, 1/s (scenario.Controller).
-DEFAULT_LENGTH_GAIN = 20.0
+DEFAULT_LENGTH_GAIN = 40.0
 
 
 class ReelRates(LeafSystem):

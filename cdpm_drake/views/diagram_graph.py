@@ -121,6 +121,7 @@ def overview_graphviz(diagram, title: str | None = None) -> str:
     # Nodes: [name, kind, inputs, outputs, shaded]; where each system's ports land on them
     # (in_at: a list, as one input of the fused wiring can be several blocks' inputs).
     nodes, node_of, in_at, out_at = [], {}, {}, {}
+    merged = []  # (source (system, output), target (node, input)) of fused-away inputs
     for k, system in enumerate(systems):
         block = in_block.get(k)
         if k in (wiring_k, memory_k):
@@ -148,9 +149,15 @@ def overview_graphviz(diagram, title: str | None = None) -> str:
                      for name in info.get("parts", info["systems"])]
             nodes.append([block, _inside(parts), list(info["inputs"]),
                           list(info["outputs"]), True])
-            for i, ports in enumerate(info["inputs"].values()):
+            for i, (port_name, ports) in enumerate(info["inputs"].items()):
                 for name, p in ports:
-                    in_at.setdefault((by_name[name], p), []).append((j, i))
+                    if name in by_name:
+                        in_at.setdefault((by_name[name], p), []).append((j, i))
+                    elif port_name in info.get("sources", {}):
+                        # Its wiring fed straight from another block's: fused into that one,
+                        # so the edge comes from where the source is now.
+                        source, sp = info["sources"][port_name]
+                        merged.append(((by_name[source], sp), (j, i)))
             for i, (name, p) in enumerate(info["outputs"].values()):
                 out_at[(by_name[name], p)] = (j, i)
             for name in info["systems"]:
@@ -181,6 +188,7 @@ def overview_graphviz(diagram, title: str | None = None) -> str:
                 for t in targets or in_at.get(d, []):
                     labels[t] = systems[wiring_k].get_output_port(s[1]).get_name()
         direct_from_wiring.setdefault(s[1], []).append((None, in_at.get(d, [])))
+    direct += [(source, [target]) for source, target in merged]
     for s, targets in direct:
         for t in targets:
             if s in out_at and out_at[s][0] != t[0]:  # not inside one flat block

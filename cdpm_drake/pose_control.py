@@ -1,0 +1,433 @@
+"""The full-pose controller's per-tick math (controller.pose: full, tension_control): compiled
+kernels, one per block, each on one stacked input vector as the blocks' C++ wiring delivers it.
+numpy and numba, no Drake. Beyond the paper, whose platform only translates.
+
+Base frame A, SI units. A pose is (p, R): p the platform centre (m), R = R_WB stored row-major
+as 9 floats. Tensions in N, lengths in m.
+
+- `pose_fk_tick` (forward_kinematics): the pose whose rigid lengths best fit the encoders'
+  lengths L0 corrected for the cables' modelled stretch under the last tension estimate,
+  l_i = L0_i (1 + T_i / EA); and the fit's residual. At the first tick it iterates the fit
+  and the estimate below to agreement (the pretension it starts from is unknown).
+- `tension_tick` (tension_distribution): the tension ESTIMATE and the target. With one more
+  cable than degrees of freedom the fit's residual along the wrench matrix's nullspace n is
+  the one thing a pose cannot explain, the internal tension. From r = lengths(pose) - l and
+  l = L0 + D T_assumed (D = diag(L0 / EA)), n . D T = n . D T_assumed + n . r; the true
+  T = T_p + lam n balances the same wrench (T_p the minimum-norm one), so
+  lam = (n . D (T_assumed - T_p) + n . r) / (n . D n). The estimate is what the next tick's
+  fit corrects the lengths by, so the pose stays fitted to the cables as they really are
+  stretched. The target: a distribution at the estimated pose for the platform's weight, the
+  measured hand force at the handle and the commanded acceleration, every cable between a
+  floor (`min_tension`, lowered where the pose or the ceiling allow no more) and a ceiling
+  (`max_tension`).
+- `orientation_tick` (orientation_hold): an angular-velocity command back to the orientation
+  held (the estimate's after the warm-up), w = K_R log(R_ref R^T).
+- `pose_rates_tick` (jacobian_mapping): l_dot = J(p, R) [v; w] + K_l (l_d - L0), with l_d the
+  unstretched lengths of the commanded pose (p_d, R_ref) under the commanded tensions
+  (tension control) or its rigid lengths plus the offsets latched at the warm-up's end.
+- `interference_posed_tick` (interference_force): the paper's interference tick on the cables
+  of the estimated pose, attachment points at p + R b_i.
+"""
+
+import math
+
+import numba
+import numpy as np
+
+from .interference import interference_tick
+from .kinematics import dead_band_compensation
+from .pose import _solve6, pose_fk, posed_cables, rotation_log, wrench_columns
+from .tension import (BELOW_FLOOR, FEASIBLE, GENERAL, GRAVITY, RANK_TOL, _lam_interval,
+                      _null_vector, _particular, _pivoted_qr, max_min_1d)
+
+_jit = numba.njit(cache=True, error_model="numpy")
+
+# Ticks the full-pose blocks wait, following the estimate, before they hold the orientation,
+# integrate the commanded position and slew the tensions: the estimate of the pose and the
+# tensions starts from a guess (the start's target distribution, which can be hundreds of
+# newtons off the pretension the robot really has) and closes ~60 % of its error a tick.
+WARMUP_TICKS = 25
+# At most this many fit-and-estimate iterations at the first tick (pose_fk_tick); 0.4^40 of
+# the first guess's error is left at worst.
+START_ITERATIONS = 40
+
+# pose_fk_tick's status.
+FK_OK, FK_NOT_SETTLED, FK_INCONSISTENT = 0, 1, 2
+
+
+def sizes(m: int) -> dict:
+    """Input (x) and output (out) sizes of the kernels for m cables, and their memories."""
+    return {
+        "fk_x": 2 * m + 13, "fk_out": 2 * m + 16, "fk_memory": 13,
+        "tension_x": 5 * m + 22, "tension_out": 5 * m + 6, "tension_memory": 2 * m + 4,
+        "orientation_x": 19, "orientation_out": 22, "orientation_memory": 10,
+        "rates_x": 4 * m + 31, "rates_out": 4 * m + 4, "rates_memory": 2 * m + 4,
+    }
+
+
+@_jit
+def _rpy(R, out):
+    """roll, pitch, yaw (rad) of R = Rz(yaw) Ry(pitch) Rx(roll) into out (3,)."""
+    out[0] = math.atan2(R[2, 1], R[2, 2])
+    out[1] = -math.asin(min(1.0, max(-1.0, R[2, 0])))
+    out[2] = math.atan2(R[1, 0], R[0, 0])
+
+
+@_jit
+def _fit(reels, attachments, L0, T, EA, p_guess, R_guess, p, R, residual):
+    """The pose fitted to L0 (1 + T / EA) (L0 alone for EA <= 0); False if it did not
+    settle."""
+    m = reels.shape[0]
+    lengths = np.empty(m)
+    for i in range(m):
+        lengths[i] = L0[i] * (1.0 + T[i] / EA) if EA > 0.0 else L0[i]
+    if pose_fk(reels, attachments, lengths, p_guess, R_guess, 1e-10, 8, p, R, residual):
+        return True
+    # Lengths far from any pose (slack or overstretched cables) slow Gauss-Newton down to a
+    # linear rate: more steps, and a looser step at which it counts as settled.
+    return pose_fk(reels, attachments, lengths, p_guess, R_guess, 1e-8, 50, p, R, residual)
+
+
+@_jit
+def _wrench(R, params, F, a, w):
+    """The wrench (6,) the cables balance: the platform's weight (params[0] kg), the hand
+    force F (N) at the handle (params[1:4], platform frame) and the inertia of an
+    acceleration a (m/s^2, d'Alembert), about the centre."""
+    mass = params[0]
+    hx = R[0, 0] * params[1] + R[0, 1] * params[2] + R[0, 2] * params[3]
+    hy = R[1, 0] * params[1] + R[1, 1] * params[2] + R[1, 2] * params[3]
+    hz = R[2, 0] * params[1] + R[2, 1] * params[2] + R[2, 2] * params[3]
+    for k in range(3):
+        w[k] = F[k] - mass * a[k]
+    w[2] -= mass * GRAVITY
+    w[3] = hy * F[2] - hz * F[1]
+    w[4] = hz * F[0] - hx * F[2]
+    w[5] = hx * F[1] - hy * F[0]
+
+
+@_jit
+def _estimate(reels, attachments, p, R, w, L0, r, T_assumed, EA, W, T_p, n, T_est):
+    """The tensions of a platform in equilibrium under w at the pose (p, R) fitted to the
+    lengths L0 (1 + T_assumed / EA) with residual r: T = T_p + lam n, the minimum-norm T_p of
+    the wrench plus the internal force the redundant cable's residual measures (module
+    docstring). Writes W (6, m), T_p, n (zero when there is not one redundant cable: then
+    T_est = T_p) and T_est; returns True when n exists (m == 7, W of full rank)."""
+    m = reels.shape[0]
+    u, Rb, L = np.empty((m, 3)), np.empty((m, 3)), np.empty(m)
+    posed_cables(reels, attachments, p, R, u, Rb, L)
+    wrench_columns(u, Rb, W)
+    A, V = np.empty((m, 6)), np.empty((6, m))
+    beta, perm = np.empty(6), np.empty(6, dtype=np.int64)
+    if m == 7 and _pivoted_qr(W, A, V, beta, perm) >= RANK_TOL:
+        _particular(A, V, beta, perm, w, T_p)
+        _null_vector(V, beta, n)
+        num = den = 0.0
+        for i in range(m):
+            d = L0[i] / EA
+            num += n[i] * (d * (T_assumed[i] - T_p[i]) + r[i])
+            den += n[i] * n[i] * d
+        lam = num / den
+        for i in range(m):
+            T_est[i] = T_p[i] + lam * n[i]
+        return True
+    # No single redundant cable: the minimum-norm distribution by the normal equations.
+    G = np.empty((6, 6))
+    for a in range(6):
+        for b in range(6):
+            total = 0.0
+            for i in range(m):
+                total += W[a, i] * W[b, i]
+            G[a, b] = total
+    minus_w, y = np.empty(6), np.zeros(6)
+    for a in range(6):
+        minus_w[a] = -w[a]
+    if not (m >= 6 and _solve6(G, minus_w, y)):
+        for a in range(6):
+            y[a] = 0.0
+    for i in range(m):
+        total = 0.0
+        for a in range(6):
+            total += W[a, i] * y[a]
+        T_p[i] = total
+        T_est[i] = total
+        n[i] = 0.0
+    return False
+
+
+@_jit
+def pose_fk_tick(reels, attachments, params, x, out):
+    """params = [EA N, max_residual m, mass kg, handle (3, m, platform frame), start
+    iterations]. x = [L0 (m), T_previous (m), memory: p (3), R (9), started (1)]; out = [p
+    (3), R (9), started (1), rpy (3), residual (m), T_used (m)]: the pose fitted to the
+    lengths corrected by the stretch under T_used (EA <= 0: no correction).
+
+    T_used is the previous tick's tension estimate; at the first tick, whose estimate is only
+    a guess (hundreds of newtons off where the pretension is unknown), the fit and the
+    estimate of a platform at rest (weight only) are iterated to agreement first: the
+    estimate closes ~60 % of its error an iteration. Returns FK_OK, FK_NOT_SETTLED, or
+    FK_INCONSISTENT when the best fit leaves a residual above max_residual (m) on some cable
+    (out then holds that fit)."""
+    m = reels.shape[0]
+    EA, max_residual = params[0], params[1]
+    L0 = x[0:m]
+    p = out[0:3]
+    R = out[3:12].reshape((3, 3))
+    residual = out[16:16 + m]
+    T = out[16 + m:16 + 2 * m]
+    for i in range(m):
+        T[i] = x[m + i]
+    p_guess = x[2 * m:2 * m + 3]
+    R_guess = x[2 * m + 3:2 * m + 12].reshape((3, 3))
+    if x[2 * m + 12] == 0.0 and EA > 0.0:
+        W, T_p, n, T_next = np.empty((6, m)), np.empty(m), np.empty(m), np.empty(m)
+        w, zero = np.empty(6), np.zeros(3)
+        for _ in range(int(params[6])):
+            # A guess far off leaves lengths no pose fits well, where Gauss-Newton crawls:
+            # its last step is good enough to improve the estimate; only the final fit must
+            # settle.
+            _fit(reels, attachments, L0, T, EA, p_guess, R_guess, p, R, residual)
+            _wrench(R, params[2:6], zero, zero, w)
+            _estimate(reels, attachments, p, R, w, L0, residual, T, EA, W, T_p, n, T_next)
+            change = 0.0
+            for i in range(m):
+                change = max(change, abs(T_next[i] - T[i]))
+                T[i] = T_next[i]
+            p_guess, R_guess = p, R
+            if change < 1e-9:
+                break
+    if not _fit(reels, attachments, L0, T, EA, p_guess, R_guess, p, R, residual):
+        return FK_NOT_SETTLED
+    out[12] = 1.0
+    _rpy(R, out[13:16])
+    for i in range(m):
+        if not abs(residual[i]) <= max_residual:
+            return FK_INCONSISTENT
+    return FK_OK
+
+
+@_jit
+def distribution_1d_bounded(T_p, n, floor, ceiling, T):
+    """The tension distribution of a one-dimensional nullspace T = T_p + n lam with every
+    T_i in [floor, ceiling] (N), into T: the least-norm one when the pose allows the floor
+    under the ceiling (status FEASIBLE), else the one that keeps the smallest tension largest
+    without any going above the ceiling, the floor lowered to that (BELOW_FLOOR). A ceiling
+    no lam meets (the wrench alone asks more of a cable) is dropped. Returns (status, t*,
+    the floor used): t* the pose's largest achievable minimum tension, unbounded above
+    (tension.max_min_1d), +inf where an internal force raises every tension.
+
+    Why a ceiling: where t* is +inf, or large, raising the weakest cable to the floor may take
+    an internal force of hundreds of newtons through the others (a cable whose nullspace
+    component is small); the ceiling trades that floor for sane tensions."""
+    m = T_p.size
+    t_star, lam_star = max_min_1d(T_p, n)
+    a, b = -math.inf, math.inf  # the lam that keep every cable at or below the ceiling
+    for i in range(m):
+        if n[i] > 0.0:
+            b = min(b, (ceiling - T_p[i]) / n[i])
+        elif n[i] < 0.0:
+            a = max(a, (ceiling - T_p[i]) / n[i])
+        elif T_p[i] > ceiling:
+            a, b = math.inf, -math.inf
+    if a > b:
+        a, b = -math.inf, math.inf
+    # The best lam within [a, b]: m(lam) = min_i T_i(lam) is concave, so its maximiser over
+    # the interval is the unconstrained one clipped (a direction when t* is +inf).
+    if t_star == math.inf:
+        lam_best = b if b < math.inf else (a if a > -math.inf else 0.0)
+        # With every n_i of one sign, raising lam raises them all: the sign says which way.
+        s = 0.0
+        for i in range(m):
+            s += n[i]
+        if s < 0.0:
+            lam_best = a if a > -math.inf else (b if b < math.inf else 0.0)
+    else:
+        lam_best = min(max(lam_star, a), b)
+    best = math.inf
+    for i in range(m):
+        best = min(best, T_p[i] + n[i] * lam_best)
+    used = floor
+    status = FEASIBLE
+    if best < floor:
+        used, status = best, BELOW_FLOOR
+    lo, hi = _lam_interval(T_p, n, used)
+    lo, hi = max(lo, a), min(hi, b)
+    lam = lam_best if lo > hi else min(max(0.0, lo), hi)  # |T|^2 = |T_p|^2 + lam^2
+    for i in range(m):
+        T[i] = T_p[i] + n[i] * lam
+    return status, t_star, used
+
+
+@_jit
+def tension_tick(reels, attachments, params, x, out):
+    """params = [mass kg, handle (3, m, platform frame), EA N, floor N, ceiling N, time step
+    s, slew rate N/s, warm-up ticks]. x = [p (3), R (9), F_H (3), v (3), residual (m), L0
+    (m), T_assumed (m: the tensions the forward kinematics corrected the lengths for),
+    memory: T_estimate (m), v_previous (3), ticks (1), T_command_previous (m)]. out =
+    [T_command (m), T_estimate (m), T_target (m), t* (1), status (1), next memory (2 m + 4)]:
+    T_target the distribution at the pose (`distribution_1d_bounded`), T_command what the
+    lengths are stretched for: the target, moved towards at most `slew rate` N/s per cable
+    from the estimate at the end of the warm-up (the plant's tensions when the controller
+    takes over are whatever they are, and a jump to the target would shake the platform).
+    status: FEASIBLE, BELOW_FLOOR (the floor lowered to what the pose and the ceiling allow)
+    or GENERAL (not one redundant cable: the minimum-norm distribution, nothing chosen)."""
+    m = reels.shape[0]
+    EA, floor, ceiling = params[4], params[5], params[6]
+    step, max_change, warmup = params[7], params[8] * params[7], params[9]
+    p = x[0:3]
+    R = x[3:12].reshape((3, 3))
+    F = x[12:15]
+    v = x[15:18]
+    r = x[18:18 + m]
+    L0 = x[18 + m:18 + 2 * m]
+    T_assumed = x[18 + 2 * m:18 + 3 * m]
+    mem = 18 + 3 * m
+    v_prev = x[mem + m:mem + m + 3]
+    ticks = x[mem + m + 3]
+    T_before = x[mem + m + 4:mem + 2 * m + 4]
+    started = ticks >= warmup
+    a = np.empty(3)
+    for k in range(3):
+        a[k] = (v[k] - v_prev[k]) / step if ticks > 0.0 else 0.0
+    w = np.empty(6)
+    _wrench(R, params, F, a, w)
+    T_cmd = out[0:m]
+    T_est = out[m:2 * m]
+    T_target = out[2 * m:3 * m]
+    W, T_p, n = np.empty((6, m)), np.empty(m), np.empty(m)
+    if _estimate(reels, attachments, p, R, w, L0, r, T_assumed, EA, W, T_p, n, T_est):
+        status, t_star, _ = distribution_1d_bounded(T_p, n, floor, ceiling, T_target)
+    else:
+        status, t_star = GENERAL, math.inf
+        for i in range(m):
+            T_target[i] = T_p[i]
+            t_star = min(t_star, T_p[i])
+    for i in range(m):
+        before = T_before[i] if started else T_est[i]  # during the warm-up: the estimate
+        T_cmd[i] = min(before + max_change, max(before - max_change, T_target[i]))
+    out[3 * m] = t_star
+    out[3 * m + 1] = status
+    nxt = 3 * m + 2
+    for i in range(m):
+        out[nxt + i] = T_est[i]
+        out[nxt + m + 4 + i] = T_cmd[i]
+    for k in range(3):
+        out[nxt + m + k] = v[k]
+    out[nxt + m + 3] = min(ticks + 1.0, warmup)
+    return status
+
+
+@_jit
+def orientation_tick(gain, warmup, x, out):
+    """x = [R (9), memory: R_ref (9), ticks (1)]; out = [w (3) rad/s, R_ref (9), next memory
+    (10)]. The orientation held is the estimate's after `warmup` ticks (until then it follows
+    the estimate, w = 0: the estimate settles first); then w = gain log(R_ref R^T) turns the
+    platform back to it at `gain` 1/s."""
+    R = x[0:9].reshape((3, 3))
+    started = x[18] >= warmup
+    ref = out[3:12].reshape((3, 3))
+    for k in range(9):
+        out[3 + k] = x[9 + k] if started else x[k]
+    E = np.empty((3, 3))
+    for a in range(3):
+        for b in range(3):
+            E[a, b] = ref[a, 0] * R[b, 0] + ref[a, 1] * R[b, 1] + ref[a, 2] * R[b, 2]
+    ex, ey, ez = rotation_log(E)
+    out[0], out[1], out[2] = gain * ex, gain * ey, gain * ez
+    for k in range(9):
+        out[12 + k] = out[3 + k]
+    out[21] = min(x[18] + 1.0, warmup)
+
+
+# The length loop's integral term may add at most this reel speed, m/s: enough to break the
+# drives' stiction and take up their lag, never a runaway after a long stall.
+MAX_INTEGRAL_SPEED = 0.05
+@_jit
+def pose_rates_tick(reels, attachments, params, x, out):
+    """params = [gain 1/s, integral_gain 1/s^2, step s, EA N, tension (0 or 1), dead band
+    m/s, warm-up ticks]. x = [p (3), R (9), v (3), w (3), R_ref (9), L0 (m), T_command (m), memory: p_d
+    (3), delta (m), integral (m), started (1)]; out = [l_dot (m), l_d (m), next memory
+    (2 m + 4)].
+
+    l_dot = J(p, R) [v; w] + gain e + integral_gain I + c(e) (the drives' dead band made up,
+    kinematics.dead_band_compensation), e = l_d - L0, I its integral (m s, clipped so the term stays
+    within MAX_INTEGRAL_SPEED): the twist through the m x 6
+    Jacobian at the estimated pose plus the cable-length loop, a PI loop here so that the
+    drives' stiction and lag leave no lasting length error (with 70 kN cables 0.1 mm is ~2 N
+    of tension), and the drives' dead band (their Coulomb friction holds a reel commanded
+    slower than dead_band) made up where the error asks for motion. l_d: the lengths of the
+    commanded pose (p_d, R_ref) unstretched by the
+    commanded tensions (`tension`: L EA / (EA + T)), else its rigid lengths plus the offsets
+    delta latched at the first tick (the loop then starts with no error). p_d starts at the
+    first tick's estimate and integrates v."""
+    m = reels.shape[0]
+    gain, integral_gain, step, EA = params[0], params[1], params[2], params[3]
+    tension = params[4] != 0.0
+    dead_band = params[5]
+    warmup = params[6]
+    p = x[0:3]
+    R = x[3:12].reshape((3, 3))
+    v = x[12:15]
+    w = x[15:18]
+    R_ref = x[18:27].reshape((3, 3))
+    L0 = x[27:27 + m]
+    T = x[27 + m:27 + 2 * m]
+    mem = 27 + 2 * m
+    ticks = x[mem + 2 * m + 3]
+    started = ticks >= warmup
+    limit = MAX_INTEGRAL_SPEED / integral_gain if integral_gain > 0.0 else 0.0
+    u, Rb, L = np.empty((m, 3)), np.empty((m, 3)), np.empty(m)
+    posed_cables(reels, attachments, p, R, u, Rb, L)
+    p_d = out[2 * m:2 * m + 3]
+    for k in range(3):
+        p_d[k] = x[mem + k] if started else p[k]
+    ud, Rbd, Ld = np.empty((m, 3)), np.empty((m, 3)), np.empty(m)
+    posed_cables(reels, attachments, p_d, R_ref, ud, Rbd, Ld)
+    for i in range(m):
+        if tension:
+            target = Ld[i] * EA / (EA + T[i])
+            delta = 0.0
+        else:
+            delta = x[mem + 3 + i] if started else L0[i] - Ld[i]
+            target = Ld[i] + delta
+        out[2 * m + 3 + i] = delta
+        out[m + i] = target
+        twist = -(u[i, 0] * v[0] + u[i, 1] * v[1] + u[i, 2] * v[2]
+                  + (Rb[i, 1] * u[i, 2] - Rb[i, 2] * u[i, 1]) * w[0]
+                  + (Rb[i, 2] * u[i, 0] - Rb[i, 0] * u[i, 2]) * w[1]
+                  + (Rb[i, 0] * u[i, 1] - Rb[i, 1] * u[i, 0]) * w[2])
+        error = target - L0[i]
+        integral = x[mem + 3 + m + i] + step * error if started else 0.0
+        integral = min(limit, max(-limit, integral))
+        out[3 * m + 3 + i] = integral
+        out[i] = (twist + gain * error + integral_gain * integral
+                  + dead_band_compensation(dead_band, error))
+    for k in range(3):
+        p_d[k] += step * v[k]
+    out[4 * m + 3] = min(ticks + 1.0, warmup)
+
+
+@_jit
+def posed_geometry(reels, attachments, pi, pj, R, geo):
+    """The interference kernel's per-pair constants (interference.pair_geometry's layout:
+    U = a_i - R b_i, V = a_j - R b_j, W = R (b_i - b_j), (U - V) x W) for orientation R."""
+    for q in range(pi.shape[0]):
+        i, j = pi[q], pj[q]
+        for r in range(3):
+            Ri = R[r, 0] * attachments[i, 0] + R[r, 1] * attachments[i, 1] + R[r, 2] * attachments[i, 2]
+            Rj = R[r, 0] * attachments[j, 0] + R[r, 1] * attachments[j, 1] + R[r, 2] * attachments[j, 2]
+            geo[q, r] = reels[i, r] - Ri
+            geo[q, 3 + r] = reels[j, r] - Rj
+            geo[q, 6 + r] = Ri - Rj
+        ux, uy, uz = geo[q, 0] - geo[q, 3], geo[q, 1] - geo[q, 4], geo[q, 2] - geo[q, 5]
+        wx, wy, wz = geo[q, 6], geo[q, 7], geo[q, 8]
+        geo[q, 9] = uy * wz - uz * wy
+        geo[q, 10] = uz * wx - ux * wz
+        geo[q, 11] = ux * wy - uy * wx
+
+
+@_jit
+def interference_posed_tick(reels, attachments, pi, pj, par, floor, F_max, x, geo, out):
+    """`interference.interference_tick` with the platform at (p, R): x = [p (3), R (9),
+    previous side memory (P)]; geo (P, 12) scratch."""
+    posed_geometry(reels, attachments, pi, pj, x[3:12].reshape((3, 3)), geo)
+    interference_tick(geo, par, floor, F_max, x[0:3], x[12:], True, out)
