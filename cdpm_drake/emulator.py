@@ -674,10 +674,19 @@ class ReelBridgeServer:
         return self
 
     def stop(self) -> None:
-        """Stop serving and release the socket."""
+        """Stop serving and release the socket. Commands that arrived since the last tick
+        (a controller's shutdown burst, sent just before stop() is called) are read into
+        `commands` and the counters first, not lost with the socket."""
         self._stop.set()
         if self._thread is not None:
             self._thread.join(timeout=5.0)
+        if self._sock.fileno() < 0:
+            return  # stopped before
+        if self._thread is None or not self._thread.is_alive():
+            with self._lock:
+                now = (time.monotonic() - self.start_wall if self.start_wall is not None
+                       else 0.0)
+                self._drain(now)
         self._sock.close()
 
     def __enter__(self):

@@ -297,6 +297,25 @@ def test_commands_move_the_reels_and_are_recorded(serve, robot, p0):
     assert [c.sequence for c in server.commands] == list(range(1, 26))
 
 
+def test_stop_reads_the_commands_that_arrived_since_the_last_tick(serve):
+    """A controller's shutdown burst goes out just before the test (or the user) stops the
+    bridge: stop() reads what is waiting instead of closing the socket on it. The commands
+    are sent after the serving thread's last tick, so only stop() can read them."""
+    server, ctl = serve()
+    ctl.send(np.zeros(7), enable=False)
+    deadline = time.monotonic() + 2.0
+    while not server.commands and time.monotonic() < deadline:
+        time.sleep(0.002)
+    server._stop.set()  # the serving thread's last tick ...
+    server._thread.join(5.0)
+    for _ in range(3):  # ... is over before these arrive
+        ctl.send(np.zeros(7), enable=False)
+    time.sleep(0.01)  # loopback delivery
+    server.stop()
+    assert [c.sequence for c in server.commands] == [1, 2, 3, 4]
+    assert server.counters["commands_received"] == 4
+
+
 def _run_until_fault(serve, plan):
     """Enable, stream commands until the fault takes effect, drop the statuses sent before
     it (the server marks the onset before sending that tick's status), then collect ~30 ms
