@@ -280,6 +280,24 @@ FRICTION_SHARE = 0.9
 FRICTION_ERROR = 2e-5
 
 
+# The most the length loops add to a reel's command, m/s of cable. A command is held until
+# the next one arrives: a stall (the controller late, the bridge holding the last command)
+# that holds K_l e for longer than 2 / K_l (50 ms at 40 1/s) returns more than the error, and
+# repeated stalls ring up (measured: three 0.1-0.2 s controller stalls on the emulated bridge
+# took the reels to 0.38 m/s and the lengths 1.6 mm apart from any pose). The corrections are
+# scaled together (`correction_scale`), not clipped one by one: scaled, they keep the
+# direction of the length error (a motion of the platform, to first order); clipped one by
+# one, cables with large errors would lag the others and pull against them.
+MAX_CORRECTION = 0.05
+
+
+@_jit
+def correction_scale(largest):
+    """The factor (<= 1) on every cable's correction when the largest is `largest` m/s, so
+    that none exceeds MAX_CORRECTION."""
+    return 1.0 if largest <= MAX_CORRECTION else MAX_CORRECTION / largest
+
+
 @_jit
 def dead_band_compensation(dead_band, error):
     """The reel speed (m/s) that makes up a drive's dead band (m/s) where the length error
@@ -292,9 +310,10 @@ def dead_band_compensation(dead_band, error):
 def length_loop_tick(offsets, gain, time_step, dead_band, x, out):
     """The Jacobian block's tick (eq. 3) with the cable-length loop (beyond the paper):
 
-        l_dot = J(p_hat) v + K_l e + c(e),   e = l_d - l,   l_d = lengths(p_d) + delta,
+        l_dot = J(p_hat) v + s (K_l e + c(e)),   e = l_d - l,   l_d = lengths(p_d) + delta,
 
-    with c the drives' dead band made up (`dead_band_compensation`; dead_band m/s, 0: off):
+    with c the drives' dead band made up (`dead_band_compensation`; dead_band m/s, 0: off)
+    and s the scale that keeps every correction within MAX_CORRECTION (`correction_scale`):
     a drive whose Coulomb friction holds it still under a command slower than its dead band
     would otherwise leave e at up to dead_band / K_l (0.25 mm, ~6 N of tension, with the
     default drives) wherever it stops or turns.
@@ -318,6 +337,8 @@ def length_loop_tick(offsets, gain, time_step, dead_band, x, out):
         out[2 * m + k] = x[6 + m + k] if started else x[k]
     pdx, pdy, pdz = out[2 * m], out[2 * m + 1], out[2 * m + 2]
     target = out[m:2 * m]  # scratch until l_d is written over it below
+    feedforwards = np.empty(m)
+    largest = 0.0
     for i in range(m):
         # Feedforward at the estimate (eq. 3).
         xx, yy, zz = x[0] + offsets[i, 0], x[1] + offsets[i, 1], x[2] + offsets[i, 2]
@@ -328,8 +349,13 @@ def length_loop_tick(offsets, gain, time_step, dead_band, x, out):
         delta = x[9 + m + i] if started else x[6 + i] - rigid
         out[2 * m + 3 + i] = delta
         error = rigid + delta - x[6 + i]
-        out[i] = feedforward + gain * error + dead_band_compensation(dead_band, error)
+        out[i] = gain * error + dead_band_compensation(dead_band, error)
+        largest = max(largest, abs(out[i]))
+        feedforwards[i] = feedforward
         target[i] = rigid + time_step * feedforward
+    scale = correction_scale(largest)
+    for i in range(m):
+        out[i] = feedforwards[i] + scale * out[i]
     p_next = out[2 * m:2 * m + 3]  # a view: no allocation per tick
     # gauss_newton_warm reads its guess before it writes: the guess may be its output.
     if not gauss_newton_warm(offsets, target, p_next, 1e-10, np.inf, 8, p_next):

@@ -35,7 +35,7 @@ import numba
 import numpy as np
 
 from .interference import interference_tick
-from .kinematics import dead_band_compensation
+from .kinematics import correction_scale, dead_band_compensation
 from .pose import _solve6, pose_fk, posed_cables, rotation_log, wrench_columns
 from .tension import (BELOW_FLOOR, FEASIBLE, GENERAL, GRAVITY, RANK_TOL, _lam_interval,
                       _null_vector, _particular, _pivoted_qr, max_min_1d)
@@ -348,8 +348,9 @@ def pose_rates_tick(reels, attachments, params, x, out):
     (3), delta (m), integral (m), started (1)]; out = [l_dot (m), l_d (m), next memory
     (2 m + 4)].
 
-    l_dot = J(p, R) [v; w] + gain e + integral_gain I + c(e) (the drives' dead band made up,
-    kinematics.dead_band_compensation), e = l_d - L0, I its integral (m s, clipped so the term stays
+    l_dot = J(p, R) [v; w] + s (gain e + integral_gain I + c(e)) (the drives' dead band
+    made up, kinematics.dead_band_compensation; s the scale that keeps every correction
+    within kinematics.MAX_CORRECTION, kinematics.correction_scale), e = l_d - L0, I its integral (m s, clipped so the term stays
     within MAX_INTEGRAL_SPEED): the twist through the m x 6
     Jacobian at the estimated pose plus the cable-length loop, a PI loop here so that the
     drives' stiction and lag leave no lasting length error (with 70 kN cables 0.1 mm is ~2 N
@@ -382,6 +383,8 @@ def pose_rates_tick(reels, attachments, params, x, out):
         p_d[k] = x[mem + k] if started else p[k]
     ud, Rbd, Ld = np.empty((m, 3)), np.empty((m, 3)), np.empty(m)
     posed_cables(reels, attachments, p_d, R_ref, ud, Rbd, Ld)
+    twists = np.empty(m)
+    largest = 0.0
     for i in range(m):
         if tension:
             target = Ld[i] * EA / (EA + T[i])
@@ -399,8 +402,13 @@ def pose_rates_tick(reels, attachments, params, x, out):
         integral = x[mem + 3 + m + i] + step * error if started else 0.0
         integral = min(limit, max(-limit, integral))
         out[3 * m + 3 + i] = integral
-        out[i] = (twist + gain * error + integral_gain * integral
+        out[i] = (gain * error + integral_gain * integral
                   + dead_band_compensation(dead_band, error))
+        largest = max(largest, abs(out[i]))
+        twists[i] = twist
+    scale = correction_scale(largest)
+    for i in range(m):
+        out[i] = twists[i] + scale * out[i]
     for k in range(3):
         p_d[k] += step * v[k]
     out[4 * m + 3] = min(ticks + 1.0, warmup)

@@ -115,15 +115,16 @@ def test_the_commanded_position_integrates_the_velocity():
 @pytest.mark.parametrize("gain", [5.0, 20.0, 125.0])
 def test_a_length_disturbance_decays_geometrically_at_the_gain(gain):
     """At rest on ideal reels (l_{k+1} = l_k + T l_dot_k) a slip e_0 of the measured lengths
-    decays as e_k = (1 - K_l T)^k e_0: the loop's closed form."""
+    decays as e_k = (1 - K_l T)^k e_0: the loop's closed form. The slip is 0.1 mm so that
+    K_l e_0 (12.5 mm/s at 125 1/s) stays below MAX_CORRECTION, where the loop is linear."""
     memory = np.zeros(M + 4)
     lengths = cable_lengths(ROBOT, P)
     zero = np.zeros(3)
     command, _, memory = tick(P, zero, lengths, memory, gain)
     lengths = lengths + T * command
     slip = np.zeros(M)
-    slip[4] = 0.001
-    lengths = lengths - slip  # cable 5 slips by 1 mm: the encoders read it
+    slip[4] = 0.0001
+    lengths = lengths - slip  # cable 5 slips by 0.1 mm: the encoders read it
     errors = []
     for _ in range(50):
         command, commanded, memory = tick(P, zero, lengths, memory, gain)
@@ -205,3 +206,25 @@ def test_the_dead_band_is_the_robot_files_drives():
                                  "{friction_compensation: false}}")
     assert off.dead_band == 0.0
     assert load_resolved_scenario("exp2_interaction").dead_band == 0.0  # kinematic plant
+
+
+def test_the_corrections_are_scaled_together_after_a_stall():
+    """A stall leaves 15 mm of error on one cable and -0.5 mm on another: K_l e would be
+    0.6 m/s and -0.02 m/s; both are scaled by MAX_CORRECTION / 0.6 m/s, so the largest is
+    MAX_CORRECTION and the two keep their ratio (the direction of the length error). With no
+    velocity command the feedforward is zero and the command is the correction alone."""
+    from cdpm_drake.kinematics import MAX_CORRECTION
+
+    measured = cable_lengths(ROBOT, P)
+    _, _, memory = tick(P, np.zeros(3), measured, np.zeros(M + 4))
+    l_d = cable_lengths(ROBOT, memory[:3]) + memory[3:3 + M]
+    errors = np.zeros(M)
+    errors[1], errors[4] = 0.015, -0.0005
+    command, _, _ = tick(P, np.zeros(3), l_d - errors, memory, gain=40.0)
+    scale = MAX_CORRECTION / (40.0 * 0.015)
+    assert scale < 0.1  # the scale is what held it
+    np.testing.assert_allclose(command, 40.0 * errors * scale, rtol=1e-9, atol=1e-12)
+    # Below the bound nothing is scaled: 1 mm gives K_l e = 0.04 m/s.
+    errors[1] = 0.001
+    command, _, _ = tick(P, np.zeros(3), l_d - errors, memory, gain=40.0)
+    np.testing.assert_allclose(command, 40.0 * errors, rtol=1e-9, atol=1e-12)
