@@ -304,6 +304,22 @@ def distribution_kernel(W, w, floor, T):
 
 
 @_jit
+def level_wrench_matrix(reels, attachments, p, W):
+    """W (6, m): column i = [u_i; b_i x u_i], the wrench (N, N m about the platform's centre)
+    of a unit tension in cable i of the level platform at p (m); u_i points from the
+    attachment to the reel."""
+    for i in range(reels.shape[0]):
+        bx, by, bz = attachments[i, 0], attachments[i, 1], attachments[i, 2]
+        x = reels[i, 0] - p[0] - bx
+        y = reels[i, 1] - p[1] - by
+        z = reels[i, 2] - p[2] - bz
+        L = math.sqrt(x * x + y * y + z * z)
+        x, y, z = x / L, y / L, z / L
+        W[0, i], W[1, i], W[2, i] = x, y, z
+        W[3, i], W[4, i], W[5, i] = by * z - bz * y, bz * x - bx * z, bx * y - by * x
+
+
+@_jit
 def _grid_kernel(reels, attachments, points, wrenches, out):
     """out[k, j] = t* of the level platform at points[k] under wrenches[j] (the one
     definition: W from the translated attachments), exact for 7 and 8 cables; nan where W is
@@ -314,15 +330,7 @@ def _grid_kernel(reels, attachments, points, wrenches, out):
     beta, perm = np.empty(6), np.empty(6, dtype=np.int64)
     T_p, n, N = np.empty(m), np.empty(m), np.empty((m, 2))
     for k in range(points.shape[0]):
-        for i in range(m):
-            bx, by, bz = attachments[i, 0], attachments[i, 1], attachments[i, 2]
-            x = reels[i, 0] - points[k, 0] - bx
-            y = reels[i, 1] - points[k, 1] - by
-            z = reels[i, 2] - points[k, 2] - bz
-            L = math.sqrt(x * x + y * y + z * z)
-            x, y, z = x / L, y / L, z / L
-            W[0, i], W[1, i], W[2, i] = x, y, z
-            W[3, i], W[4, i], W[5, i] = by * z - bz * y, bz * x - bx * z, bx * y - by * x
+        level_wrench_matrix(reels, attachments, points[k], W)
         if (m != 7 and m != 8) or _pivoted_qr(W, A, V, beta, perm) < RANK_TOL:
             for j in range(wrenches.shape[0]):
                 out[k, j] = math.nan

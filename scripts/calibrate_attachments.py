@@ -64,7 +64,8 @@ from scipy.optimize import least_squares, minimize
 from cdpm_drake.interference import _pairs_kernel, pair_distances, translation_distance_bound
 from cdpm_drake.robot import ROBOTS_DIR, load_robot
 from cdpm_drake.tension import (RANK_TOL, _null_vector, _particular, _pivoted_qr,
-                                gravity_wrench, holding_tension, max_min_tensions, step_grid)
+                                gravity_wrench, holding_tension, level_wrench_matrix,
+                                max_min_tensions, step_grid)
 
 # (swaps, p in m, {pair: reported distance in m}); swaps are 1-based cable pairs.
 EXPERIMENTS = (
@@ -150,15 +151,7 @@ def _ceiling_kernel(reels, attachments, points, w, ceiling, out):
     beta, perm = np.empty(6), np.empty(6, dtype=np.int64)
     a, n = np.empty(m), np.empty(m)
     for k in range(points.shape[0]):
-        for i in range(m):
-            bx, by, bz = attachments[i, 0], attachments[i, 1], attachments[i, 2]
-            x = reels[i, 0] - points[k, 0] - bx
-            y = reels[i, 1] - points[k, 1] - by
-            z = reels[i, 2] - points[k, 2] - bz
-            L = math.sqrt(x * x + y * y + z * z)
-            x, y, z = x / L, y / L, z / L
-            W[0, i], W[1, i], W[2, i] = x, y, z
-            W[3, i], W[4, i], W[5, i] = by * z - bz * y, bz * x - bx * z, bx * y - by * x
+        level_wrench_matrix(reels, attachments, points[k], W)
         if _pivoted_qr(W, A, V, beta, perm) < RANK_TOL:
             out[k] = -ceiling
             continue

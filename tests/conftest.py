@@ -76,3 +76,22 @@ def case_registry(cases: dict):
         return mark
 
     return covers
+
+
+def highs_t_star(W, w):
+    """The independent statics reference: t* = max t s.t. W T + w = 0, T_i >= t (all free),
+    by scipy's linprog (HiGHS). +inf where t is unbounded (an internal force exists), -inf
+    where no T balances w at all."""
+    import numpy as np
+    from scipy.optimize import linprog
+
+    m = W.shape[1]
+    res = linprog(np.r_[np.zeros(m), -1.0], A_ub=np.hstack([-np.eye(m), np.ones((m, 1))]),
+                  b_ub=np.zeros(m), A_eq=np.hstack([W, np.zeros((W.shape[0], 1))]), b_eq=-w,
+                  bounds=[(None, None)] * (m + 1), method="highs")
+    if res.status == 3:
+        return np.inf
+    if res.status == 2:
+        return -np.inf
+    assert res.status == 0, res.message
+    return -res.fun

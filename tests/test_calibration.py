@@ -11,7 +11,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from scipy.optimize import linprog
+from conftest import highs_t_star
 
 from cdpm_drake.interference import pair_distances, translation_distance_bound
 from cdpm_drake.robot import load_robot
@@ -91,16 +91,6 @@ def test_every_shipped_scenario_lets_its_swapped_pairs_separate(name):
 
 # --- statics (issue 18) ----------------------------------------------------------------------
 
-
-def highs_t_star(W, w):
-    m = W.shape[1]
-    res = linprog(np.r_[np.zeros(m), -1.0], A_ub=np.hstack([-np.eye(m), np.ones((m, 1))]),
-                  b_ub=np.zeros(m), A_eq=np.hstack([W, np.zeros((W.shape[0], 1))]), b_eq=-w,
-                  bounds=[(None, None)] * (m + 1), method="highs")
-    if res.status == 3:
-        return np.inf
-    assert res.status == 0, res.message
-    return -res.fun
 
 
 WEIGHT = gravity_wrench(2.5)  # the robot file's platform mass

@@ -9,7 +9,7 @@ import re
 
 import numpy as np
 import pytest
-from scipy.optimize import linprog
+from conftest import highs_t_star
 
 from cdpm_drake import cli
 from cdpm_drake.interference import pair_distances
@@ -18,13 +18,6 @@ from cdpm_drake.scenario import load_scenario, scenario_robot
 from cdpm_drake.tension import gravity_wrench, holding_tension, step_grid, wrench_matrix
 from cdpm_drake.views import workspace_plots as wp
 
-
-def highs_t_star(W, w):
-    m = W.shape[1]
-    res = linprog(np.r_[np.zeros(m), -1.0], A_ub=np.hstack([-np.eye(m), np.ones((m, 1))]),
-                  b_ub=np.zeros(m), A_eq=np.hstack([W, np.zeros((W.shape[0], 1))]), b_eq=-w,
-                  bounds=[(None, None)] * (m + 1), method="highs")
-    return np.inf if res.status == 3 else -res.fun
 
 
 def newtons(text):

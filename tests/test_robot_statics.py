@@ -10,26 +10,13 @@ import logging
 
 import numpy as np
 import pytest
-from scipy.optimize import linprog
 
 from cdpm_drake.interference import pair_distances
 from cdpm_drake.robot import STATICS_FLOOR, STATICS_GRID, load_robot, robot_statics
 from cdpm_drake.tension import gravity_wrench, grid_points, step_grid, wrench_matrix
 
-from conftest import to_yaml
+from conftest import highs_t_star, to_yaml
 
-
-def highs_t_star(W, w):
-    m = W.shape[1]
-    res = linprog(np.r_[np.zeros(m), -1.0], A_ub=np.hstack([-np.eye(m), np.ones((m, 1))]),
-                  b_ub=np.zeros(m), A_eq=np.hstack([W, np.zeros((W.shape[0], 1))]), b_eq=-w,
-                  bounds=[(None, None)] * (m + 1), method="highs")
-    if res.status == 3:
-        return np.inf
-    if res.status == 2:
-        return -np.inf
-    assert res.status == 0, res.message
-    return -res.fun
 
 
 def lp_share(robot, points, floor=5.0):

@@ -11,6 +11,8 @@ import numpy as np
 import pytest
 from scipy.optimize import linprog
 
+from conftest import highs_t_star
+
 from cdpm_drake.kernel_call import bind
 from cdpm_drake.robot import Robot, load_robot
 from cdpm_drake.rotation import rotation_from_rpy, rpy_from_rotation
@@ -47,19 +49,6 @@ def _swapped(robot, swaps):
         robot = robot.with_swapped_attachments(*s)
     return robot
 
-
-def _highs_t_star(W, w):
-    """t* by scipy's linprog (HiGHS): max t s.t. W T = -w, T_i - t >= 0, all free."""
-    m = W.shape[1]
-    res = linprog(np.r_[np.zeros(m), -1.0], A_ub=np.hstack([-np.eye(m), np.ones((m, 1))]),
-                  b_ub=np.zeros(m), A_eq=np.hstack([W, np.zeros((W.shape[0], 1))]), b_eq=-w,
-                  bounds=[(None, None)] * (m + 1), method="highs")
-    if res.status == 3:
-        return np.inf
-    if res.status == 2:
-        return -np.inf
-    assert res.status == 0, res.message
-    return -res.fun
 
 
 def _highs_feasible(W, w, floor):
@@ -121,7 +110,7 @@ def test_t_star_equals_highs_on_2000_random_poses_of_the_paper_robot():
     for W, w in _random_cases(2000, seed=1):
         status, _ = distribution_kernel(W, w, 0.0, np.empty(7))
         assert status != GENERAL  # the compiled closed form answered, not the fallback
-        t, ref = max_min_tension(W, w), _highs_t_star(W, w)
+        t, ref = max_min_tension(W, w), highs_t_star(W, w)
         if np.isfinite(ref):
             assert t == pytest.approx(ref, abs=1e-6)
             finite += 1
@@ -171,7 +160,7 @@ def test_near_closure_poses_give_no_false_infeasible():
                 if abs(margin) < 1e-6:
                     continue
                 checked += 1
-                ref = _highs_t_star(W, w)
+                ref = highs_t_star(W, w)
                 assert t == ref or t == pytest.approx(ref, abs=1e-6), (t, ref, margin)
                 assert (t >= 5.0) == _highs_feasible(W, w, 5.0), (t, margin)
     assert checked > 200
@@ -192,7 +181,7 @@ def test_t_star_equals_highs_where_the_nullspace_has_two_or_more_dimensions():
         handle = [0.0, 0.0, -0.1] if k % 6 == 5 else [0.0, 0.0, 0.0]
         w = gravity_wrench(2.5, rng.normal(scale=3.0, size=3), handle)
         assert distribution_kernel(W, w, 0.0, np.empty(W.shape[1]))[0] == GENERAL
-        t, ref = max_min_tension(W, w), _highs_t_star(W, w)
+        t, ref = max_min_tension(W, w), highs_t_star(W, w)
         if np.isfinite(ref):
             assert t == pytest.approx(ref, abs=1e-6)
             finite += 1
@@ -210,7 +199,7 @@ def test_the_compiled_kernel_bound_once_gives_the_dispatchers_answer():
     status, t = kernel(W, w, 5.0, T2)
     assert (status, t) == distribution_kernel(W, w, 5.0, T1)
     np.testing.assert_array_equal(T1, T2)
-    assert status == FEASIBLE and t == pytest.approx(_highs_t_star(W, w), abs=1e-9)
+    assert status == FEASIBLE and t == pytest.approx(highs_t_star(W, w), abs=1e-9)
 
 
 # --- the distribution ------------------------------------------------------------------------
@@ -236,7 +225,7 @@ def test_a_feasible_distribution_is_the_least_norm_one_with_the_floor(robot, swa
     W = wrench_matrix(_swapped(robot, swaps), p)
     w = gravity_wrench(2.5)
     d = tension_distribution(W, w, floor)
-    assert d.feasible and d.t_star == pytest.approx(_highs_t_star(W, w), abs=1e-6)
+    assert d.feasible and d.t_star == pytest.approx(highs_t_star(W, w), abs=1e-6)
     assert d.t_star >= floor
     _assert_least_norm(W, w, floor, d.tensions)
     assert d.best_min == d.tensions.min()
