@@ -63,10 +63,9 @@ def _system_modules():
         yield importlib.import_module(f"cdpm_drake.systems.{info.name}")
 
 
-@pytest.mark.parametrize("name,overlay", CASES)
-def test_every_bound_call_passes_the_types_it_was_bound_for(monkeypatch, name, overlay):
-    # A mismatch would not compile a new version (as the dispatcher would): the entry point
-    # would read the arguments as the bound types. So check every call of every tick.
+def _check_every_bound_call(monkeypatch) -> dict:
+    """Make every block's `bind` return an entry point that asserts, call by call, the
+    argument types it was bound for; returns {kernel name: calls}, filled as the run goes."""
     real_bind, calls = kernel_call.bind, {}
 
     def checking_bind(kernel, *example):
@@ -82,6 +81,14 @@ def test_every_bound_call_passes_the_types_it_was_bound_for(monkeypatch, name, o
     for module in _system_modules():
         if getattr(module, "bind", None) is real_bind:
             monkeypatch.setattr(module, "bind", checking_bind)
+    return calls
+
+
+@pytest.mark.parametrize("name,overlay", CASES)
+def test_every_bound_call_passes_the_types_it_was_bound_for(monkeypatch, name, overlay):
+    # A mismatch would not compile a new version (as the dispatcher would): the entry point
+    # would read the arguments as the bound types. So check every call of every tick.
+    calls = _check_every_bound_call(monkeypatch)
     simulator = Simulator(build_diagram(load_scenario(name, overlay)))
     simulator.Initialize()
     simulator.AdvanceTo(0.1)
@@ -223,21 +230,7 @@ def test_every_bound_call_of_the_dynamic_plant_passes_the_types_it_was_bound_for
     # As above, for the dynamic plant's step (cables.cable_net_step and the operator model),
     # which runs once per 1 ms plant step: the loggers read it at each tick in the same context
     # as the next step's updates, so 100 calls in 0.1 s (plus the start).
-    real_bind, calls = kernel_call.bind, {}
-
-    def checking_bind(kernel, *example):
-        entry, expected = real_bind(kernel, *example), kernel_call.signature_of(*example)
-        key = kernel.__name__
-
-        def call(*args):
-            assert kernel_call.signature_of(*args) == expected, key
-            calls[key] = calls.get(key, 0) + 1
-            return entry(*args)
-        return call
-
-    for module in _system_modules():
-        if getattr(module, "bind", None) is real_bind:
-            monkeypatch.setattr(module, "bind", checking_bind)
+    calls = _check_every_bound_call(monkeypatch)
     simulator = Simulator(build_diagram(load_scenario("exp2_interaction",
                                                       "plant: !DynamicReels {}")))
     simulator.Initialize()

@@ -19,7 +19,6 @@ from cdpm_drake.tension import gravity_wrench, holding_tension, step_grid, wrenc
 from cdpm_drake.views import workspace_plots as wp
 
 
-
 def newtons(text):
     """A t* as cdpm info prints it: '12.34' (N), '+inf' or '-inf' (with words after)."""
     return {"+inf": np.inf, "-inf": -np.inf}.get(text, None) or float(text)
