@@ -16,11 +16,12 @@ __version__ = "0.1.0"
 
 def numba_cache_dir(package: Path = Path(__file__).parent) -> Path:
     """Where the package's compiled kernels are cached: a folder named by a hash of the
-    source of every module that defines numba kernels. numba invalidates a cached kernel only when the
-    file that defines it changes; a kernel that calls another file's kernel (pose_control
-    calls kinematics, interference, pose and tension) would otherwise keep running the
-    callee's old code after an edit of the callee's file. Keyed by all the kernel modules, an
-    edit of any of them starts a fresh cache; an edit elsewhere (cli.py) keeps it."""
+    source of every module that defines numba kernels. numba invalidates a cached kernel only
+    when the file that defines it changes; a kernel that calls another file's kernel
+    (pose_control calls kinematics, interference, pose and tension) would otherwise keep
+    running the callee's old code after an edit of the callee's file. Keyed by all the kernel
+    modules, an edit of any of them starts a fresh cache; an edit elsewhere (cli.py) keeps
+    it."""
     digest = hashlib.sha256()
     for path in sorted(package.glob("*.py")):
         source = path.read_bytes()
