@@ -51,6 +51,17 @@ def _run_against(server, out, duration, *, watchdog_ticks=None):
     finally:
         server.stop()
 
+ATTEMPTS = 3
+
+
+def _host_stalled(text: str) -> bool:
+    """Whether a run's error or report says a host stall ended it: the bridge stopped the reels
+    after 50 ms without a command (COMMAND_TIMEOUT), or the controller heard nothing for its
+    watchdog's limit. Both are the right response to a stall, not what these tests are about:
+    such a run is repeated, up to ATTEMPTS in all."""
+    return "COMMAND_TIMEOUT" in text or "no valid status" in text
+
+
 def test_a_run_against_the_emulator_matches_the_simulation(tmp_path):
     """Experiment 1 (the interference force alone moves the platform) for 5 s, on the emulated
     bridge and in pure simulation: positions agree within 1 mm at every tick. What differs is
@@ -98,16 +109,19 @@ def test_a_run_against_the_emulator_matches_the_simulation(tmp_path):
 
 def test_sigint_stops_the_run_with_zero_velocity_first(tmp_path):
     scenario = load_scenario("exp2_interaction")
-    server = _server(scenario)
-    timer = threading.Timer(1.0, os.kill, (os.getpid(), signal.SIGINT))
-    try:
-        timer.start()
-        result = run(scenario=_hardware("exp2_interaction", server), out_dir=tmp_path,
-                     duration=20.0)
-    finally:
-        timer.cancel()
-        server.stop()
-    assert result.ending == "interrupted"
+    for attempt in range(ATTEMPTS):
+        server = _server(scenario)
+        timer = threading.Timer(1.0, os.kill, (os.getpid(), signal.SIGINT))
+        try:
+            timer.start()
+            result = run(scenario=_hardware("exp2_interaction", server),
+                         out_dir=tmp_path / f"run{attempt}", duration=20.0)
+        finally:
+            timer.cancel()
+            server.stop()
+        if not (result.ending == "fault" and _host_stalled(str(result.error))):
+            break
+    assert result.ending == "interrupted", result.error
     # Stopped within a few steps of the signal, and the log is there up to the stop.
     assert 0.5 < result.log["time"][-1] < 2.0
     last = list(server.commands)[-1]
@@ -154,12 +168,16 @@ def _shutdown_burst(server) -> int:
 
 def test_a_completed_run_logs_compute_time_and_ends_with_one_shutdown_burst(tmp_path, capsys):
     scenario = load_scenario("exp1_no_interaction")
-    server = _server(scenario)
-    code = _run_against(server, tmp_path / "run", 0.5, watchdog_ticks=25)
-    out = capsys.readouterr().out
+    for attempt in range(ATTEMPTS):
+        server = _server(scenario)
+        run_dir = tmp_path / f"run{attempt}"
+        code = _run_against(server, run_dir, 0.5, watchdog_ticks=25)
+        out = capsys.readouterr().out
+        if code == 0 or not _host_stalled(out):
+            break
     assert code == 0, out
     assert _shutdown_burst(server) == 3
-    log = np.load(tmp_path / "run" / "log.npz")
+    log = np.load(run_dir / "log.npz")
     assert len(log["time"]) == 251 and str(log["ending"]) == "completed"
     assert np.isnan(log["fault_time"]) and str(log["fault_message"]) == ""
     assert float(log["watchdog_limit"]) == pytest.approx(25 * 0.002)  # ticks x time_step
@@ -292,9 +310,14 @@ def test_run_refuses_a_simulated_plant(tmp_path):
 
 def test_cdpm_run_cli_reports_timing_and_packets(tmp_path, capsys):
     scenario = load_scenario("exp1_no_interaction")
-    server = _server(scenario)
-    code = _run_against(server, tmp_path, 1, watchdog_ticks=25)
-    out = capsys.readouterr().out
+    for attempt in range(ATTEMPTS):
+        server = _server(scenario)
+        run_dir = tmp_path / f"run{attempt}"
+        code = _run_against(server, run_dir, 1, watchdog_ticks=25)
+        out = capsys.readouterr().out
+        if code == 0 or not _host_stalled(out):
+            break
+    tmp_path = run_dir  # the run that counts
     assert code == 0, out
     assert "run ended: completed" in out
     assert "tick period p50" in out and "packets: commands sent" in out
@@ -343,14 +366,19 @@ def test_a_second_run_against_the_same_bridge_is_a_new_session(tmp_path):
     # The next `cdpm run` counts its commands from 1 again: the bridge, at rest after the first
     # run's enable-clear shutdown, must take that as a new session, not drop it as old.
     scenario = load_scenario("exp1_no_interaction")
-    server = _server(scenario)
-    try:
-        for k in range(2):
-            result = run(scenario=_hardware("exp1_no_interaction", server),
-                         out_dir=tmp_path / f"run{k}", duration=0.5)
-            assert result.ending == "completed", (k, result.error)
-    finally:
-        server.stop()
+    for attempt in range(ATTEMPTS):
+        server = _server(scenario)
+        try:
+            for k in range(2):
+                result = run(scenario=_hardware("exp1_no_interaction", server),
+                             out_dir=tmp_path / f"attempt{attempt}" / f"run{k}", duration=0.5)
+                if result.ending != "completed":
+                    break
+        finally:
+            server.stop()
+        if not (result.ending == "fault" and _host_stalled(str(result.error))):
+            break
+    assert result.ending == "completed", (k, result.error)
     assert server.counters["sessions"] == 1
     assert server.counters["rejected"]["sequence"] == 0
 
