@@ -205,12 +205,23 @@ def pose_fk_tick(reels, attachments, params, x, out):
     return FK_OK
 
 
+# Where the pose allows less than the floor, the target keeps every cable within this much
+# (N) of the best minimum t* and takes the least-norm distribution among those. The max-min
+# distribution itself is not unique where the weakest cable's tension cannot be changed by
+# the internal force (its nullspace component near zero: cable 7 in exp2 near Fig. 12's
+# poses); picking one end of that flat maximum jumped the target by up to 15 N per tick and
+# rang the platform (dynamic plant, exp2: smallest tension 1.26 N at a target of 3.07 N;
+# with the margin the target moves at most 0.9 N per tick and the smallest is 2.03 N).
+FLOOR_MARGIN = 0.05
+
+
 @_jit
 def distribution_1d_bounded(T_p, n, floor, ceiling, T):
     """The tension distribution of a one-dimensional nullspace T = T_p + n lam with every
     T_i in [floor, ceiling] (N), into T: the least-norm one when the pose allows the floor
-    under the ceiling (status FEASIBLE), else the one that keeps the smallest tension largest
-    without any going above the ceiling, the floor lowered to that (BELOW_FLOOR). A ceiling
+    under the ceiling (status FEASIBLE), else the least-norm one that keeps the smallest
+    tension within FLOOR_MARGIN of the largest it can be without any going above the ceiling,
+    the floor lowered to that (BELOW_FLOOR). A ceiling
     no lam meets (the wrench alone asks more of a cable) is dropped. Returns (status, t*,
     the floor used): t* the pose's largest achievable minimum tension, unbounded above
     (tension.max_min_1d), +inf where an internal force raises every tension.
@@ -245,10 +256,8 @@ def distribution_1d_bounded(T_p, n, floor, ceiling, T):
     best = math.inf
     for i in range(m):
         best = min(best, T_p[i] + n[i] * lam_best)
-    used = floor
-    status = FEASIBLE
-    if best < floor:
-        used, status = best, BELOW_FLOOR
+    used = min(floor, best - FLOOR_MARGIN)  # continuous as best passes the floor
+    status = FEASIBLE if best >= floor else BELOW_FLOOR
     lo, hi = _lam_interval(T_p, n, used)
     lo, hi = max(lo, a), min(hi, b)
     lam = lam_best if lo > hi else min(max(0.0, lo), hi)  # |T|^2 = |T_p|^2 + lam^2

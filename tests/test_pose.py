@@ -10,6 +10,7 @@ import math
 
 import numpy as np
 import pytest
+from conftest import highs_t_star
 
 from cdpm_drake import pose_control as pc
 from cdpm_drake.interference import InterferenceParams, interference_tick, pair_geometry
@@ -138,17 +139,6 @@ def _tension(p, R, F, r, L0, T_assumed, v=np.zeros(3), v_prev=np.zeros(3), ticks
     return status, out[:M], out[M:2 * M], out[3 * M], out[3 * M + 2:]
 
 
-def _linprog_t_star(W, w):
-    from scipy.optimize import linprog
-
-    # max t s.t. W T = -w, T_i - t >= 0: variables [T (m), t].
-    m = W.shape[1]
-    res = linprog(np.r_[np.zeros(m), -1.0], A_ub=np.c_[-np.eye(m), np.ones(m)],
-                  b_ub=np.zeros(m), A_eq=np.c_[W, np.zeros(6)], b_eq=-w,
-                  bounds=[(None, None)] * (m + 1), method="highs")
-    return -res.fun if res.status == 0 else (math.inf if res.status == 3 else -math.inf)
-
-
 def test_the_target_balances_weight_hand_and_inertia_with_the_largest_floor_allowed():
     p = np.array([1.6, 2.2, 1.1])
     R = rotation_from_rpy([0.02, -0.01, 0.03])
@@ -163,12 +153,12 @@ def test_the_target_balances_weight_hand_and_inertia_with_the_largest_floor_allo
     w[:3] -= 2.5 * a
     W = wrench_matrix(ROBOT, p, R)
     np.testing.assert_allclose(W @ T_cmd + w, 0.0, atol=1e-9)
-    reference = _linprog_t_star(W, w)
+    reference = highs_t_star(W, w)
     if math.isfinite(reference):
         assert t_star == pytest.approx(reference, abs=1e-6)
     else:
         assert t_star == reference
-    assert T_cmd.min() >= min(10.0, t_star) - 1e-9
+    assert T_cmd.min() >= min(10.0, t_star) - pc.FLOOR_MARGIN - 1e-9
 
 
 def test_the_estimate_reads_the_internal_tension_from_the_redundant_length():
@@ -354,8 +344,9 @@ def _bounded_reference(W, w, floor, ceiling):
 
 def test_the_bounded_distribution_keeps_the_ceiling_and_the_largest_floor_under_it():
     """For random poses and hand forces: every target tension within [floor used, ceiling];
-    the floor used is min(floor, the largest minimum tension under the ceiling) (HiGHS
-    reference); without a binding ceiling the target is tension.py's least-norm one."""
+    the floor used is min(floor, the largest minimum tension under the ceiling - FLOOR_MARGIN)
+    (HiGHS reference); without a binding ceiling, where the floor holds with the margin to
+    spare, the target is tension.py's least-norm one."""
     from cdpm_drake.tension import FEASIBLE, distribution_1d
 
     rng = np.random.default_rng(11)
@@ -374,13 +365,44 @@ def test_the_bounded_distribution_keeps_the_ceiling_and_the_largest_floor_under_
             best = _bounded_reference(W, w, floor, ceiling)
             if not np.isfinite(best) or best < floor - 1e-6 and T.max() > ceiling + 1e-9:
                 continue  # no distribution under this ceiling at all: dropped, see docstring
-            assert used == pytest.approx(min(floor, best), abs=1e-6)
+            assert used == pytest.approx(min(floor, best - pc.FLOOR_MARGIN), abs=1e-6)
             assert T.min() >= used - 1e-9 and T.max() <= ceiling + 1e-9
-            if ceiling == 1e6:
+            if ceiling == 1e6 and best >= floor + pc.FLOOR_MARGIN:
                 ref = np.empty(M)
                 ref_status, _ = distribution_1d(T_p, n, floor, ref)
                 np.testing.assert_allclose(T, ref, atol=1e-9)
                 checked_free += 1
-            elif best < floor:
+            elif ceiling == 1e6:
+                # The least-norm lam with every T_i >= used, in closed form: |T|^2 =
+                # |T_p|^2 + lam^2 (n is a unit vector orthogonal to T_p, the pseudo-inverse's).
+                with np.errstate(divide="ignore"):
+                    bound = (used - T_p) / n
+                lo, hi = bound[n > 0].max(initial=-np.inf), bound[n < 0].min(initial=np.inf)
+                np.testing.assert_allclose(T, T_p + n * min(max(0.0, lo), hi), atol=1e-9)
+                checked_free += 1
+            if best < floor and ceiling != 1e6:
                 checked_binding += 1
     assert checked_binding >= 5 and checked_free >= 50  # both cases were exercised
+
+
+def test_the_target_does_not_jump_where_the_weakest_cable_cannot_be_changed():
+    """Cable 7's nullspace component is +-1e-6: its tension (3 N, the pose's t*) is the same
+    for every internal force, so the largest minimum is reached on a whole interval of lam
+    ([-2, 2] here: cables 1 and 2 reach 3 N at its ends). The exact max-min distribution
+    would be one end or the other as the component's sign flips (4 N apart on cables 1 and
+    2); the target keeps every cable within FLOOR_MARGIN of t* and takes the least-norm
+    distribution among those: lam = 0 for either sign."""
+    T_p = np.array([5.0, 5.0, 6.0, 6.0, 7.0, 7.0, 3.0])
+    targets = []
+    for eps in (1e-6, -1e-6):
+        n = np.array([1.0, -1.0, 0.5, -0.5, 0.8, -0.3, eps])
+        n /= np.linalg.norm(n)
+        T = np.empty(7)
+        status, t_star, used = pc.distribution_1d_bounded(T_p, n, 10.0, 1e6, T)
+        assert t_star == pytest.approx(3.0, abs=1e-4)
+        assert used == pytest.approx(t_star - pc.FLOOR_MARGIN)
+        assert T.min() >= t_star - pc.FLOOR_MARGIN - 1e-9
+        targets.append(T.copy())
+    np.testing.assert_allclose(targets[0], T_p, atol=1e-4)  # lam = 0: least norm
+    np.testing.assert_allclose(targets[0], targets[1], atol=1e-4)
+
