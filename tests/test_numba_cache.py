@@ -70,3 +70,13 @@ def test_a_users_folder_is_kept_and_an_inherited_one_is_recomputed(tmp_path):
     got = _folder_in_subprocess({**env, "NUMBA_CACHE_DIR": stale,
                                  "CDPM_DRAKE_NUMBA_CACHE_DIR": stale})
     assert got == str(numba_cache_dir())
+
+
+def test_a_read_only_package_caches_in_the_users_cache_folder(tmp_path, monkeypatch):
+    copy = _copy(tmp_path)
+    monkeypatch.setattr(cdpm_drake.os, "access", lambda path, mode: False)  # as for a user
+    monkeypatch.setenv("XDG_CACHE_HOME", str(tmp_path / "xdg"))
+    folder = numba_cache_dir(copy)
+    assert folder.parent == tmp_path / "xdg" / "cdpm_drake" / "numba"
+    monkeypatch.undo()
+    assert folder.name == numba_cache_dir(copy).name  # the same sources, the same key
