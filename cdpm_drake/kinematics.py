@@ -299,6 +299,18 @@ def correction_scale(largest):
 
 
 @_jit
+def add_scaled_corrections(base, out):
+    """out[i] = base[i] + s out[i] for i < base.size: out holds a length loop's corrections
+    (m/s), base the reel speeds they add to; s = correction_scale of the largest |out[i]|."""
+    largest = 0.0
+    for i in range(base.shape[0]):
+        largest = max(largest, abs(out[i]))
+    scale = correction_scale(largest)
+    for i in range(base.shape[0]):
+        out[i] = base[i] + scale * out[i]
+
+
+@_jit
 def dead_band_compensation(dead_band, error):
     """The reel speed (m/s) that makes up a drive's dead band (m/s) where the length error
     (m) asks for motion: FRICTION_SHARE dead_band tanh(error / FRICTION_ERROR), zero at zero
@@ -313,7 +325,8 @@ def length_loop_tick(offsets, gain, time_step, dead_band, x, out):
         l_dot = J(p_hat) v + s (K_l e + c(e)),   e = l_d - l,   l_d = lengths(p_d) + delta,
 
     with c the drives' dead band made up (`dead_band_compensation`; dead_band m/s, 0: off)
-    and s the scale that keeps every correction within MAX_CORRECTION (`correction_scale`):
+    and s the scale that keeps every correction within MAX_CORRECTION
+    (`add_scaled_corrections`):
     a drive whose Coulomb friction holds it still under a command slower than its dead band
     would otherwise leave e at up to dead_band / K_l (0.25 mm, ~6 N of tension, with the
     default drives) wherever it stops or turns.
@@ -338,7 +351,6 @@ def length_loop_tick(offsets, gain, time_step, dead_band, x, out):
     pdx, pdy, pdz = out[2 * m], out[2 * m + 1], out[2 * m + 2]
     target = out[m:2 * m]  # scratch until l_d is written over it below
     feedforwards = np.empty(m)
-    largest = 0.0
     for i in range(m):
         # Feedforward at the estimate (eq. 3).
         xx, yy, zz = x[0] + offsets[i, 0], x[1] + offsets[i, 1], x[2] + offsets[i, 2]
@@ -350,12 +362,9 @@ def length_loop_tick(offsets, gain, time_step, dead_band, x, out):
         out[2 * m + 3 + i] = delta
         error = rigid + delta - x[6 + i]
         out[i] = gain * error + dead_band_compensation(dead_band, error)
-        largest = max(largest, abs(out[i]))
         feedforwards[i] = feedforward
         target[i] = rigid + time_step * feedforward
-    scale = correction_scale(largest)
-    for i in range(m):
-        out[i] = feedforwards[i] + scale * out[i]
+    add_scaled_corrections(feedforwards, out)
     p_next = out[2 * m:2 * m + 3]  # a view: no allocation per tick
     # gauss_newton_warm reads its guess before it writes: the guess may be its output.
     if not gauss_newton_warm(offsets, target, p_next, 1e-10, np.inf, 8, p_next):

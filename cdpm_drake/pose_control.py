@@ -35,7 +35,7 @@ import numba
 import numpy as np
 
 from .interference import interference_tick
-from .kinematics import correction_scale, dead_band_compensation
+from .kinematics import add_scaled_corrections, dead_band_compensation
 from .pose import _solve6, pose_fk, posed_cables, rotation_log, wrench_columns
 from .tension import (BELOW_FLOOR, FEASIBLE, GENERAL, GRAVITY, RANK_TOL, _lam_interval,
                       _null_vector, _particular, _pivoted_qr, max_min_1d)
@@ -221,8 +221,8 @@ def distribution_1d_bounded(T_p, n, floor, ceiling, T):
     T_i in [floor, ceiling] (N), into T: the least-norm one when the pose allows the floor
     under the ceiling (status FEASIBLE), else the least-norm one that keeps the smallest
     tension within FLOOR_MARGIN of the largest it can be without any going above the ceiling,
-    the floor lowered to that (BELOW_FLOOR). A ceiling
-    no lam meets (the wrench alone asks more of a cable) is dropped. Returns (status, t*,
+    the floor lowered to that (BELOW_FLOOR). A ceiling no lam meets (the wrench alone asks
+    more of a cable) is dropped. Returns (status, t*,
     the floor used): t* the pose's largest achievable minimum tension, unbounded above
     (tension.max_min_1d), +inf where an internal force raises every tension.
 
@@ -357,18 +357,17 @@ def pose_rates_tick(reels, attachments, params, x, out):
     (3), delta (m), integral (m), started (1)]; out = [l_dot (m), l_d (m), next memory
     (2 m + 4)].
 
-    l_dot = J(p, R) [v; w] + s (gain e + integral_gain I + c(e)) (the drives' dead band
-    made up, kinematics.dead_band_compensation; s the scale that keeps every correction
-    within kinematics.MAX_CORRECTION, kinematics.correction_scale), e = l_d - L0, I its integral (m s, clipped so the term stays
-    within MAX_INTEGRAL_SPEED): the twist through the m x 6
+    l_dot = J(p, R) [v; w] + s (gain e + integral_gain I + c(e)) (the drives' dead band made up,
+    kinematics.dead_band_compensation; s the scale that keeps every correction within
+    kinematics.MAX_CORRECTION, kinematics.add_scaled_corrections), e = l_d - L0, I its integral
+    (m s, clipped so the term stays within MAX_INTEGRAL_SPEED): the twist through the m x 6
     Jacobian at the estimated pose plus the cable-length loop, a PI loop here so that the
-    drives' stiction and lag leave no lasting length error (with 70 kN cables 0.1 mm is ~2 N
-    of tension), and the drives' dead band (their Coulomb friction holds a reel commanded
-    slower than dead_band) made up where the error asks for motion. l_d: the lengths of the
-    commanded pose (p_d, R_ref) unstretched by the
-    commanded tensions (`tension`: L EA / (EA + T)), else its rigid lengths plus the offsets
-    delta latched at the first tick (the loop then starts with no error). p_d starts at the
-    first tick's estimate and integrates v."""
+    drives' stiction and lag leave no lasting length error (with 70 kN cables 0.1 mm is ~2 N of
+    tension), and the drives' dead band (their Coulomb friction holds a reel commanded slower
+    than dead_band) made up where the error asks for motion. l_d: the lengths of the commanded
+    pose (p_d, R_ref) unstretched by the commanded tensions (`tension`: L EA / (EA + T)), else
+    its rigid lengths plus the offsets delta latched at the first tick (the loop then starts
+    with no error). p_d starts at the first tick's estimate and integrates v."""
     m = reels.shape[0]
     gain, integral_gain, step, EA = params[0], params[1], params[2], params[3]
     tension = params[4] != 0.0
@@ -393,7 +392,6 @@ def pose_rates_tick(reels, attachments, params, x, out):
     ud, Rbd, Ld = np.empty((m, 3)), np.empty((m, 3)), np.empty(m)
     posed_cables(reels, attachments, p_d, R_ref, ud, Rbd, Ld)
     twists = np.empty(m)
-    largest = 0.0
     for i in range(m):
         if tension:
             target = Ld[i] * EA / (EA + T[i])
@@ -413,11 +411,8 @@ def pose_rates_tick(reels, attachments, params, x, out):
         out[3 * m + 3 + i] = integral
         out[i] = (gain * error + integral_gain * integral
                   + dead_band_compensation(dead_band, error))
-        largest = max(largest, abs(out[i]))
         twists[i] = twist
-    scale = correction_scale(largest)
-    for i in range(m):
-        out[i] = twists[i] + scale * out[i]
+    add_scaled_corrections(twists, out)
     for k in range(3):
         p_d[k] += step * v[k]
     out[4 * m + 3] = min(ticks + 1.0, warmup)
