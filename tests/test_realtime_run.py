@@ -62,6 +62,20 @@ def _host_stalled(text: str) -> bool:
     return "COMMAND_TIMEOUT" in text or "no valid status" in text
 
 
+def _cli_run_unstalled(tmp_path, duration, capsys):
+    """`_run_against` a fresh bridge into tmp_path/run<attempt> (watchdog 25 ticks), repeated
+    while a host stall ends the run; returns (server, run folder, exit code, stdout)."""
+    scenario = load_scenario("exp1_no_interaction")
+    for attempt in range(ATTEMPTS):
+        server = _server(scenario)
+        run_dir = tmp_path / f"run{attempt}"
+        code = _run_against(server, run_dir, duration, watchdog_ticks=25)
+        out = capsys.readouterr().out
+        if code == 0 or not _host_stalled(out):
+            break
+    return server, run_dir, code, out
+
+
 def test_a_run_against_the_emulator_matches_the_simulation(tmp_path):
     """Experiment 1 (the interference force alone moves the platform) for 5 s, on the emulated
     bridge and in pure simulation: positions agree within 1 mm at every tick. What differs is
@@ -167,14 +181,7 @@ def _shutdown_burst(server) -> int:
 
 
 def test_a_completed_run_logs_compute_time_and_ends_with_one_shutdown_burst(tmp_path, capsys):
-    scenario = load_scenario("exp1_no_interaction")
-    for attempt in range(ATTEMPTS):
-        server = _server(scenario)
-        run_dir = tmp_path / f"run{attempt}"
-        code = _run_against(server, run_dir, 0.5, watchdog_ticks=25)
-        out = capsys.readouterr().out
-        if code == 0 or not _host_stalled(out):
-            break
+    server, run_dir, code, out = _cli_run_unstalled(tmp_path, 0.5, capsys)
     assert code == 0, out
     assert _shutdown_burst(server) == 3
     log = np.load(run_dir / "log.npz")
@@ -309,15 +316,7 @@ def test_run_refuses_a_simulated_plant(tmp_path):
 
 
 def test_cdpm_run_cli_reports_timing_and_packets(tmp_path, capsys):
-    scenario = load_scenario("exp1_no_interaction")
-    for attempt in range(ATTEMPTS):
-        server = _server(scenario)
-        run_dir = tmp_path / f"run{attempt}"
-        code = _run_against(server, run_dir, 1, watchdog_ticks=25)
-        out = capsys.readouterr().out
-        if code == 0 or not _host_stalled(out):
-            break
-    tmp_path = run_dir  # the run that counts
+    _, tmp_path, code, out = _cli_run_unstalled(tmp_path, 1, capsys)  # the run that counts
     assert code == 0, out
     assert "run ended: completed" in out
     assert "tick period p50" in out and "packets: commands sent" in out
