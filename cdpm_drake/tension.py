@@ -46,6 +46,8 @@ import math
 import numba
 import numpy as np
 
+from .qp import solve_qp
+
 GRAVITY = 9.81  # m/s^2, along -z of the base frame
 
 # W (r x m) counts as rank-deficient when the last pivot of its pivoted QR (or its smallest
@@ -655,3 +657,66 @@ def point_platform_share(robot, floor: float = 5.0, n: int = 5,
     rho = robot.reels[None, :, :] - pts[:, None, :]  # every cable to the centre
     U = rho / np.linalg.norm(rho, axis=-1, keepdims=True)
     return float(np.mean([max_min_tension(u.T, w) >= floor for u in U]))
+
+
+# --- the max-min of any number of lines, compiled (the safety filter's kinetostatic margin,
+# the tension target of nullspaces of any dimension) ----------------------------------------
+
+# max_min_lines for k >= 2 solves the LP max t s.t. a_j + C_j . lam >= t as the QP
+# min 1/2 (LINES_WEIGHT |lam|^2 + (t - M)^2) with M far above any bounded optimum: it returns
+# t within ~LINES_WEIGHT |lam| |dlam/dt| / (M - t) of the LP's (1e-6 N for tensions of
+# hundreds of N, tests/test_kinetostatics.py against HiGHS) and a maximiser lam of small norm.
+LINES_WEIGHT = 1e-6
+
+
+@_jit
+def max_min_lines(a, C, lam):
+    """max over lam (k,) of min_j (a[j] + C[j] . lam) for K lines (a (K,), C (K, k)); +inf
+    when unbounded (a direction raises every line), and a maximiser written into lam (zero
+    where unbounded). k = 0: min(a); k = 1: exact (`max_min_1d`); k >= 2: the LP as a QP
+    (LINES_WEIGHT), solved by qp.solve_qp."""
+    K, k = C.shape
+    if K == 0:
+        for c in range(k):
+            lam[c] = 0.0
+        return math.inf
+    top = a[0]
+    for j in range(K):
+        top = max(top, a[j])
+    if k == 0:
+        t = a[0]
+        for j in range(K):
+            t = min(t, a[j])
+        return t
+    if k == 1:
+        t, l = max_min_1d(a, C[:, 0])
+        lam[0] = l if math.isfinite(l) else 0.0
+        return t
+    # A bounded optimum is a convex combination of the a[j] (LP duality), so <= top.
+    M = top + 1e4 * (1.0 + abs(top))
+    w = np.full(k + 1, LINES_WEIGHT)
+    w[k] = 1.0
+    z0 = np.zeros(k + 1)
+    z0[k] = M
+    Cq = np.empty((K, k + 1))
+    d = np.empty(K)
+    for j in range(K):
+        for c in range(k):
+            Cq[j, c] = C[j, c]
+        Cq[j, k] = -1.0
+        d[j] = -a[j]
+    z, u = np.empty(k + 1), np.empty(K)
+    solve_qp(w, z0, Cq, d, K, z, u, 100 + 4 * K)
+    t = math.inf
+    for j in range(K):
+        s = a[j]
+        for c in range(k):
+            s += C[j, c] * z[c]
+        t = min(t, s)
+    if t > top + 1e-6 * (1.0 + abs(top)):
+        for c in range(k):
+            lam[c] = 0.0
+        return math.inf
+    for c in range(k):
+        lam[c] = z[c]
+    return t
