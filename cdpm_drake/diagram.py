@@ -9,7 +9,7 @@ import dataclasses
 
 import numpy as np
 from pydrake.systems.framework import Diagram, DiagramBuilder
-from pydrake.systems.primitives import Adder, VectorLogSink
+from pydrake.systems.primitives import Adder, ConstantVectorSource, VectorLogSink
 
 from .scenario import (DynamicReels as DynamicReelsConfig, ResolvedScenario, Scenario,
                        SimulatedReels as SimulatedReelsConfig, check_dynamic_reels,
@@ -24,6 +24,8 @@ from .systems.forward_kinematics import FORWARD_KINEMATICS_MAIN, build_forward_k
 from .systems.interference_force import INTERFERENCE_FORCE_MAIN, build_interference_force
 from .systems.jacobian_mapping import JACOBIAN_MAPPING_MAIN, build_jacobian_mapping
 from .systems.safety_limits import SAFETY_LIMITS_MAIN, build_safety_limits
+from .systems.safety_blocks import (MAIN as SAFETY_MAIN, build_kinetostatic_force,
+                                    build_model_monitor, build_safety_filter)
 from .systems.pose_blocks import (MAIN as POSE_MAIN, build_orientation_hold,
                                   build_pose_forward_kinematics, build_pose_jacobian_mapping,
                                   build_posed_interference_force, build_tension_distribution)
@@ -38,11 +40,25 @@ LOGGED = (
     ("F_d", "F_d_adder", "sum"),
     ("velocity_admittance", "admittance", "velocity"),
     ("velocity", "safety_limits", "velocity_command"),
+    # With the safety filter, what the reels follow is its command (a key logged by several
+    # blocks is the last one's the diagram has: `logged_ports`) and the limits' is kept beside.
+    ("velocity", "safety_filter", "velocity_command"),
+    ("velocity_limited", "safety_filter", "velocity_desired"),
+    ("filter_status", "safety_filter", "status"),
+    ("filter_binding", "safety_filter", "binding"),
+    ("pair_margin", "safety_filter", "pair_margin"),
+    ("F_kin", "kinetostatic_force", "F_kin"),
+    ("kappa", "kinetostatic_force", "kappa"),
+    ("t_c", "kinetostatic_force", "t_c"),
+    ("t_star_hand", "kinetostatic_force", "t_star"),
+    ("model_status", "model_monitor", "status"),
+    ("model_residual", "model_monitor", "residual"),
     ("reel_velocity", "jacobian_mapping", "reel_velocity_command"),
     ("lengths_commanded", "jacobian_mapping", "commanded_lengths"),
     # controller.pose: full, and its tension control (each only where the block has it).
     ("rpy", "forward_kinematics", "rpy_WP"),
     ("omega", "orientation_hold", "omega_command"),
+    ("omega", "safety_filter", "omega_command"),
     ("tension_command", "tension_distribution", "tension_command"),
     ("tension_estimate", "tension_distribution", "tension_estimate"),
     ("tension_target", "tension_distribution", "tension_target"),
@@ -139,6 +155,30 @@ def build_diagram(scenario: Scenario | ResolvedScenario,
                                                    time_step=T))
         interference.connect_input(p_WP, "p_WP")
         forces.append(interference.GetOutputPort("F_int"))
+    hold = None
+    if full:
+        hold = blocks["orientation_hold"] = FlatBlock(
+            builder, "orientation_hold", POSE_MAIN, lambda b: build_orientation_hold(
+                b, gain=controller.orientation_gain, time_step=T))
+        hold.connect_input(R_WP, "R_WP")
+    # Beyond the paper: the kinetostatic limit, for the safety filter's barrier, its felt cue
+    # and the model monitor's check of the hand force.
+    safety = scenario.safety_filter
+    filter_on = safety.enabled
+    kinetostatic_on = filter_on and safety.kinetostatic
+    monitor_on = scenario.model_monitor.enabled
+    kinetostatic = None
+    if kinetostatic_on or monitor_on:
+        kinetostatic = blocks["kinetostatic_force"] = FlatBlock(
+            builder, "kinetostatic_force", SAFETY_MAIN, lambda b: build_kinetostatic_force(
+                b, robot, params=_kinetostatic_params(resolved, cue=kinetostatic_on),
+                full_pose=full, time_step=T))
+        kinetostatic.connect_input(p_WP, "p_WP")
+        kinetostatic.connect_input(force_sensor.GetOutputPort("F_H"), "F_H")
+        if full:  # at the commanded orientation (safety_filter.py says why)
+            kinetostatic.connect_input(hold.GetOutputPort("R_WP_held"), "R_WP")
+        if kinetostatic_on and safety.kinetostatic_force.enabled:
+            forces.append(kinetostatic.GetOutputPort("F_kin"))
     wall = scenario.wall_force
     if wall.enabled:
         wall_system = blocks["wall_force"] = builder.AddNamedSystem(
@@ -163,13 +203,19 @@ def build_diagram(scenario: Scenario | ResolvedScenario,
             virtual_wall=scenario.limits.virtual_wall, time_step=T))
     limits.connect_input(admittance.GetOutputPort("velocity"), "velocity_desired")
     limits.connect_input(p_WP, "p_WP")
-    # Anti-windup: the admittance integrates from the velocity actually commanded.
-    admittance.connect_input(limits.GetOutputPort("velocity_command"), "velocity_command")
 
     velocity_command = limits.GetOutputPort("velocity_command")
+    omega_command = hold.GetOutputPort("omega_command") if full else None
+    if filter_on:
+        velocity_command, omega_command = _add_safety_filter(
+            builder, blocks, resolved, velocity_command, omega_command, p_WP,
+            hold.GetOutputPort("R_WP_held") if full else None,
+            kinetostatic if kinetostatic_on else None, T)
+    # Anti-windup: the admittance integrates from the velocity actually commanded.
+    admittance.connect_input(velocity_command, "velocity_command")
     if full:
         mapping = _add_pose_blocks(builder, blocks, resolved, fk, force_sensor, lengths,
-                                   velocity_command, T)
+                                   velocity_command, omega_command, hold, T)
     else:
         mapping = blocks["jacobian_mapping"] = FlatBlock(
             builder, "jacobian_mapping", JACOBIAN_MAPPING_MAIN,
@@ -180,6 +226,14 @@ def build_diagram(scenario: Scenario | ResolvedScenario,
     mapping.connect_input(velocity_command, "velocity_command")
     builder.Connect(mapping.GetOutputPort("reel_velocity_command"),
                     plant.GetInputPort("reel_velocity_command"))
+    if kinetostatic is not None and not kinetostatic_on:
+        # Built for the model monitor alone: no look ahead, no command to look along.
+        none = builder.AddNamedSystem("kinetostatic_force_no_command",
+                                      ConstantVectorSource(np.zeros(3)))
+        kinetostatic.connect_input(none.get_output_port(), "velocity_previous")
+    if monitor_on:
+        _add_model_monitor(builder, blocks, resolved, lengths, p_WP, R_WP if full else None,
+                           kinetostatic, force_sensor.GetOutputPort("F_H"), T)
 
     wirings = {}
     if options.loggers:
@@ -223,27 +277,118 @@ TENSION_SLEW_RATE = 50.0
 LENGTH_INTEGRAL_GAIN = 100.0
 
 
+def _kinetostatic_params(resolved, *, cue: bool):
+    """The kinetostatic block's parameters (kinetostatics.kinetostatic_params) for the
+    scenario: the controller's tension floor and ceiling, the robot's wrench rows, the cue's
+    logistic (on only with `cue`)."""
+    from .kinetostatics import kinetostatic_params, wrench_rows
+
+    scenario, robot = resolved.scenario, resolved.robot
+    c, f = scenario.controller, scenario.safety_filter.kinetostatic_force
+    return kinetostatic_params(
+        robot, floor=float(c.tension_floor), ceiling=float(c.max_tension),
+        rows=wrench_rows(robot), barrier=cue, t_l=f.t_l, t_u=f.t_u, F_u=f.F_u, eps=f.eps,
+        force=cue and f.enabled, a_brake=_filter_braking(resolved),
+        time_step=resolved.time_step)
+
+
+def _filter_braking(resolved) -> float:
+    """The deceleration the safety filter's barriers brake with, m/s^2: per axis as the
+    virtual wall does (limits._wall_caps), a / sqrt(3), which keeps the braking within the
+    acceleration limit where three barriers meet."""
+    return resolved.max_acceleration / np.sqrt(3.0)
+
+
+def _add_safety_filter(builder, blocks, resolved, velocity_desired, omega_desired, p_WP, R_WP,
+                       kinetostatic, T):
+    """The safety filter between the limits and the Jacobian mapping, its barriers at the
+    commanded pose (p_WP and, for the full pose, the held orientation R_WP); returns its
+    velocity and angular velocity commands (None without a full pose)."""
+    from .safety_filter import filter_params
+
+    scenario, robot = resolved.scenario, resolved.robot
+    f = scenario.safety_filter
+    full = R_WP is not None
+    params = filter_params(
+        time_step=T, gamma=f.gamma, a_brake=_filter_braking(resolved),
+        max_velocity=resolved.max_velocity,
+        max_acceleration=resolved.max_acceleration, angular_weight=f.angular_weight,
+        return_speed=f.return_speed, full_pose=full, kinetostatic=kinetostatic is not None)
+    block = blocks["safety_filter"] = FlatBlock(
+        builder, "safety_filter", SAFETY_MAIN, lambda b: build_safety_filter(
+            b, robot, d_min=resolved.d_min, params=params, full_pose=full, time_step=T))
+    block.connect_input(velocity_desired, "velocity_desired")
+    block.connect_input(p_WP, "p_WP")
+    if robot.num_pairs:
+        if "interference_force" in blocks:
+            block.connect_input(blocks["interference_force"].GetOutputPort("crossed"),
+                                "crossed")
+        else:  # no interference block: no pair is known to be crossed
+            none = builder.AddNamedSystem("safety_filter_no_crossing",
+                                          ConstantVectorSource(np.zeros(robot.num_pairs)))
+            block.connect_input(none.get_output_port(), "crossed")
+    if kinetostatic is not None:
+        for name in ("kappa", "kappa_gradient", "kappa_ray"):
+            block.connect_input(kinetostatic.GetOutputPort(name), name)
+        kinetostatic.connect_input(block.GetOutputPort("velocity_previous"),
+                                   "velocity_previous")
+    else:  # the barrier is off (the filter's parameter says so): zeros fill its inputs
+        for name, size in (("kappa", 1), ("kappa_gradient", 3), ("kappa_ray", 1)):
+            none = builder.AddNamedSystem(f"safety_filter_no_{name}",
+                                          ConstantVectorSource(np.zeros(size)))
+            block.connect_input(none.get_output_port(), name)
+    if full:
+        block.connect_input(omega_desired, "omega_desired")
+        block.connect_input(R_WP, "R_WP")
+        return block.GetOutputPort("velocity_command"), block.GetOutputPort("omega_command")
+    return block.GetOutputPort("velocity_command"), None
+
+
+def _add_model_monitor(builder, blocks, resolved, lengths, p_WP, R_WP, kinetostatic, F_H, T):
+    """The model monitor (model_monitor.py) on the measurements and the estimates."""
+    from .model_monitor import monitor_params
+
+    scenario, robot = resolved.scenario, resolved.robot
+    mon, c = scenario.model_monitor, scenario.controller
+    estimate = "tension_distribution" in blocks
+    params = monitor_params(
+        EA=robot.dynamics.EA if estimate else 0.0, slack_tension=mon.slack_tension,
+        slack_length=mon.slack_length, fit_tolerance=mon.fit_tolerance,
+        unholdable=mon.unholdable, ticks=mon.ticks, estimate=estimate,
+        full_pose=R_WP is not None)
+    block = blocks["model_monitor"] = FlatBlock(
+        builder, "model_monitor", SAFETY_MAIN, lambda b: build_model_monitor(
+            b, robot, params=params, full_pose=R_WP is not None, estimate=estimate,
+            time_step=T))
+    block.connect_input(lengths, "cable_lengths")
+    block.connect_input(p_WP, "p_WP")
+    block.connect_input(kinetostatic.GetOutputPort("t_star"), "t_star")
+    block.connect_input(F_H, "F_H")
+    if R_WP is not None:
+        block.connect_input(R_WP, "R_WP")
+    if estimate:
+        block.connect_input(blocks["tension_distribution"].GetOutputPort("tension_estimate"),
+                            "tension_estimate")
+
+
 def _add_pose_blocks(builder, blocks, resolved, fk, force_sensor, lengths, velocity_command,
-                     T):
-    """controller.pose: full: the orientation hold, the tension distribution (with
-    tension_control) and the Jacobian mapping of the pose; returns the mapping (its p_WP and
-    velocity_command inputs still to connect)."""
+                     omega_command, hold, T):
+    """controller.pose: full: the tension distribution (with tension_control) and the
+    Jacobian mapping of the pose, fed the orientation hold's reference and the (filtered)
+    angular velocity command; returns the mapping (its p_WP and velocity_command inputs still
+    to connect)."""
     from .tension import gravity_wrench, tension_distribution, wrench_matrix
 
     scenario, robot = resolved.scenario, resolved.robot
     controller = scenario.controller
     R_WP = fk.GetOutputPort("R_WP")
-    hold = blocks["orientation_hold"] = FlatBlock(
-        builder, "orientation_hold", POSE_MAIN, lambda b: build_orientation_hold(
-            b, gain=controller.orientation_gain, time_step=T))
-    hold.connect_input(R_WP, "R_WP")
     tension_control = controller.tension_control
     mapping = blocks["jacobian_mapping"] = FlatBlock(
         builder, "jacobian_mapping", POSE_MAIN, lambda b: build_pose_jacobian_mapping(
             b, robot, length_gain=controller.length_gain,
             integral_gain=LENGTH_INTEGRAL_GAIN, tension=tension_control, time_step=T,
             dead_band=resolved.dead_band))
-    for name, port in (("R_WP", R_WP), ("omega_command", hold.GetOutputPort("omega_command")),
+    for name, port in (("R_WP", R_WP), ("omega_command", omega_command),
                        ("R_WP_held", hold.GetOutputPort("R_WP_held")),
                        ("cable_lengths", lengths)):
         mapping.connect_input(port, name)
@@ -285,10 +430,33 @@ def block_output_port(diagram, block: str, port_name: str):
 
 def logged_ports(diagram):
     """(key, block, port name) of every LOGGED signal the diagram has (its block, and the port:
-    the full-pose blocks have ports the paper's do not), in LOGGED order."""
+    the full-pose blocks have ports the paper's do not), in LOGGED order; a key several blocks
+    log is the last one's the diagram has (`_available`)."""
+    yield from _available(lambda block, port_name: diagram.HasSubsystemNamed(block)
+                          and _block_has_output(diagram, block, port_name))
+
+
+def _available(has):
+    """(key, block, port name) of LOGGED where has(block, port name), one per key: the last
+    such entry of a key (the safety filter's velocity over the limits'), at the place of the
+    key's first entry."""
+    chosen, order = {}, []
     for key, block, port_name in LOGGED:
-        if diagram.HasSubsystemNamed(block) and _block_has_output(diagram, block, port_name):
-            yield key, block, port_name
+        if key not in order:
+            order.append(key)
+        if has(block, port_name):
+            chosen[key] = (block, port_name)
+    for key in order:
+        if key in chosen:
+            yield (key, *chosen[key])
+
+
+def logged_source(diagram, key: str):
+    """The output port that logs `key` in a diagram build_diagram made, or None."""
+    for k, block, port_name in logged_ports(diagram):
+        if k == key:
+            return block_output_port(diagram, block, port_name)
+    return None
 
 
 def _block_has_output(diagram, block: str, port_name: str) -> bool:
@@ -385,11 +553,12 @@ def logged_signals(diagram, context) -> tuple[np.ndarray, dict]:
 
 
 def _logged_ports(blocks):
-    """(key, block, port name, port) of every LOGGED signal whose block the diagram has."""
-    for key, system_name, port_name in LOGGED:
-        if system_name in blocks and _has_output(blocks[system_name], port_name):
-            block = blocks[system_name]
-            yield key, block, port_name, block.GetOutputPort(port_name)
+    """(key, block, port name, port) of every LOGGED signal whose block the diagram has (one
+    per key, as `logged_ports`)."""
+    for key, system_name, port_name in _available(
+            lambda name, port_name: name in blocks and _has_output(blocks[name], port_name)):
+        block = blocks[system_name]
+        yield key, block, port_name, block.GetOutputPort(port_name)
 
 
 def _has_output(block, port_name: str) -> bool:

@@ -52,6 +52,14 @@ class Logistic:
     F_u: float = 2.0
     # Allowed variation eps, N.
     eps: float = 0.1
+    # Beyond the paper: the hard floor of the distance that the safety filter keeps
+    # (safety_filter), m; left out: d_l, the paper's "minimum permissible distance". The
+    # paper's force is soft: a hand pushing harder than F_u still takes the pair below d_l;
+    # the filter lets the estimated distance go no lower than d_min. At d_l the 2 mm the
+    # promise allows (true distance >= d_l - 2 mm) are all left to what the controller cannot
+    # see: the estimate's error and the platform's ringing (on the dynamic plant with the full
+    # pose the true distance swings up to ~0.8 mm about the estimate under an 8 N push).
+    d_min: typing.Optional[float] = None
 
 
 @dataclasses.dataclass
@@ -65,6 +73,7 @@ class PairLogistic:
     d_u: typing.Optional[float] = None
     F_u: typing.Optional[float] = None
     eps: typing.Optional[float] = None
+    d_min: typing.Optional[float] = None
 
 
 @dataclasses.dataclass
@@ -165,6 +174,89 @@ class Controller:
     # would take an internal force that pulls another cable above this, the floor is lowered
     # instead (a cable whose share of the internal force is small can cost hundreds of N).
     max_tension: float = 100.0
+    # The hard floor of every cable's tension, N: the tension target is never below it (where
+    # the pose cannot hold it under max_tension, the ceiling gives way), and the safety
+    # filter keeps the platform where a distribution between tension_floor and max_tension
+    # holds its weight and the measured hand force (the kinetostatic limit). 3 N: the true
+    # tensions ring ~1 N around their target at the platform's lightly damped mode (README),
+    # so a cable at the floor stays taut.
+    tension_floor: float = 3.0
+
+
+# --- The promise made hard (beyond the paper) ---------------------------------------------
+
+
+@dataclasses.dataclass
+class KinetostaticForce:
+    """The felt cue of the kinetostatic limit, beside F_int: a logistic force (the paper's
+    eqs. 26-28 in tensions) along the gradient of the kinetostatic margin, added to F_d. Its
+    argument t_c is the largest minimum cable tension the pose allows under
+    controller.max_tension with the platform's weight and the measured hand force (t*
+    where the ceiling does not bind); the safety filter stops the platform where t_c reaches
+    controller.tension_floor."""
+
+    # Off keeps the barrier (the safety filter) without the cue.
+    enabled: bool = True
+    # t_c at which the cue is F_u - eps, N (and stronger below).
+    t_l: float = 4.0
+    # t_c at which it is eps, N; none above (as the paper's force is none above d_u).
+    t_u: float = 7.0
+    # Largest intensity, N; the allowed variation eps, N (eq. 28).
+    F_u: float = 3.0
+    eps: float = 0.1
+
+
+@dataclasses.dataclass
+class SafetyFilter:
+    """Beyond the paper: a block between the limits and the Jacobian mapping that commands,
+    every tick, the twist closest to the admittance's (weighted least squares) that keeps
+    every watched cable pair at or above its d_min, the platform in its workspace box, and its
+    weight and the measured hand force holdable with every cable between
+    controller.tension_floor and controller.max_tension; within the speed and acceleration
+    limits (discrete-time control barrier functions, safety_filter.py). Off: the paper's
+    Fig. 5 exactly."""
+
+    enabled: bool = True
+    # Per tick, a barrier may lose at most this fraction of its margin (h(x + T u) >=
+    # (1 - gamma) h(x)); also capped by braking at the acceleration limit. In (0, 1].
+    gamma: float = 0.2
+    # Where a margin is already lost (a start inside d_min, a hand force that changed), the
+    # platform is brought back at most this fast, m/s.
+    return_speed: float = 0.02
+    # Weight of the angular velocity's deviation against the velocity's, m^2 (the full pose).
+    # A rotation never buys a margin (safety_filter.py), so where the orientation hold's
+    # command would cost one the filter should slow the rotation rather than jerk the
+    # velocity: a pair's distance moves ~0.1 m per rad of tilt and ~0.01 m per m of
+    # translation near the paper's boundary, and at 1 m^2 the filter takes 99 % of such a
+    # correction from the rotation.
+    angular_weight: float = 1.0
+    # The kinetostatic barrier (and its block): off leaves the pairs and the box.
+    kinetostatic: bool = True
+    kinetostatic_force: KinetostaticForce = dataclasses.field(
+        default_factory=KinetostaticForce)
+
+
+@dataclasses.dataclass
+class ModelMonitor:
+    """Beyond the paper: from the measurements alone, a slack cable, lengths that no longer
+    fit the estimated pose, or a hand force the cables cannot hold, lasting `ticks` ticks,
+    stop the run with zero reel velocity and a fault naming the cable and the reason
+    (model_monitor.py), in simulation and on the robot alike."""
+
+    enabled: bool = True
+    # A cable whose tension estimate (full pose with tension control) is below -this is
+    # slack, N.
+    slack_tension: float = 2.0
+    # Without a tension estimate: a cable longer than the estimated pose explains by more
+    # than this is slack, m.
+    slack_length: float = 0.003
+    # A cable length this far from the estimated pose (after the modelled stretch), m.
+    fit_tolerance: float = 0.01
+    # t* with the measured hand force below -this, N: no tension distribution holds it.
+    unholdable: float = 1.0
+    # How long a condition must last to be a fault, ticks (5 x 2 ms: within 20 ms of its
+    # start, with the tick the estimate needs).
+    ticks: int = 5
 
 
 # --- Plants ----------------------------------------------------------------------------------
@@ -246,6 +338,8 @@ class Scenario:
     limits: Limits = dataclasses.field(default_factory=Limits)
     wall_force: WallForce = dataclasses.field(default_factory=WallForce)
     controller: Controller = dataclasses.field(default_factory=Controller)
+    safety_filter: SafetyFilter = dataclasses.field(default_factory=SafetyFilter)
+    model_monitor: ModelMonitor = dataclasses.field(default_factory=ModelMonitor)
     # The person at the handle (simulation and the emulator; on the robot, a real person).
     operator: OperatorConfig = dataclasses.field(default_factory=NoOperator)
     sensor: Sensor = dataclasses.field(default_factory=Sensor)
@@ -592,16 +686,7 @@ def interference_params(scenario: Scenario, robot: Robot):
     cfg = scenario.interference
     arrays = {k: np.full(P, float(getattr(cfg.default, k))) for k in ("d_l", "d_u", "F_u", "eps")}
     for n, override in enumerate(cfg.pairs):
-        if len(override.pair) != 2:
-            raise ScenarioError(f"interference.pairs[{n}].pair must be two cable numbers "
-                                f"[i, j], got {override.pair!r}")
-        i, j = override.pair
-        try:
-            k = robot.pair_position(int(i), int(j))
-        except RobotError:
-            raise ScenarioError(
-                f"interference.pairs[{n}].pair = {override.pair!r} is not a cable pair of "
-                f"robot {robot.name!r}; valid pairs: {robot.pairs}") from None
+        k = _override_position(n, override, robot)
         for key in arrays:
             value = getattr(override, key)
             if value is not None:
@@ -622,6 +707,106 @@ def interference_params(scenario: Scenario, robot: Robot):
         return InterferenceParams(F_max=F_max, pairs=tuple(robot.pairs), **arrays, **extra)
     except ValueError as e:
         raise ScenarioError(f"interference: {e}") from None
+
+
+def _override_position(n: int, override: PairLogistic, robot: Robot) -> int:
+    """The position in robot.pairs of interference.pairs[n]'s pair; ScenarioError naming the
+    entry where it is not a watched pair of the robot."""
+    if len(override.pair) != 2:
+        raise ScenarioError(f"interference.pairs[{n}].pair must be two cable numbers "
+                            f"[i, j], got {override.pair!r}")
+    i, j = override.pair
+    try:
+        return robot.pair_position(int(i), int(j))
+    except (RobotError, TypeError, ValueError):
+        raise ScenarioError(
+            f"interference.pairs[{n}].pair = {override.pair!r} is not a cable pair of "
+            f"robot {robot.name!r}; valid pairs: {robot.pairs}") from None
+
+
+# d_min where the scenario leaves it out: this far under d_l, m (Logistic.d_min).
+D_MIN_BELOW_D_L = 0.0
+
+
+def pair_d_min(scenario: Scenario, robot: Robot) -> np.ndarray:
+    """Each watched pair's hard floor d_min (m, robot.pairs order): the pair's override, else
+    the default's, else its d_l - D_MIN_BELOW_D_L (at least 0). Whether or not the
+    interference force is on: the safety filter keeps the pairs apart either way.
+    ScenarioError naming the field unless 0 <= d_min <= d_l."""
+    P = robot.num_pairs
+    cfg = scenario.interference
+    d_l = np.full(P, float(cfg.default.d_l))
+    d_min = np.full(P, math.nan)
+    field = ["interference.default.d_min"] * P
+    if cfg.default.d_min is not None:
+        _finite_number(cfg.default.d_min, "interference.default.d_min")
+        d_min[:] = float(cfg.default.d_min)
+    for n, override in enumerate(cfg.pairs):
+        k = _override_position(n, override, robot)
+        if override.d_l is not None:
+            d_l[k] = float(override.d_l)
+        if override.d_min is not None:
+            _finite_number(override.d_min, f"interference.pairs[{n}].d_min")
+            d_min[k] = float(override.d_min)
+            field[k] = f"interference.pairs[{n}].d_min"
+    given = ~np.isnan(d_min)
+    for k in np.flatnonzero(given):
+        i, j = robot.pairs[k]
+        if not 0.0 <= d_min[k] <= d_l[k]:
+            raise ScenarioError(
+                f"{field[k]} = {d_min[k]!r} m (pair ({i},{j})) must lie in [0, d_l] = "
+                f"[0, {d_l[k]!r}] m: the hard floor the safety filter keeps, under the "
+                "interference force's d_l")
+    d_min[~given] = np.maximum(d_l[~given] - D_MIN_BELOW_D_L, 0.0)
+    return d_min
+
+
+def _finite_number(value, field: str) -> None:
+    if not (_is_number(value) and math.isfinite(float(value))):
+        raise ScenarioError(f"{field} must be a finite number, got {value!r}")
+
+
+def _check_safety(scenario: Scenario) -> None:
+    """The safety filter's, the kinetostatic cue's, the model monitor's and the tension
+    floor's fields; ScenarioError naming the field and the value."""
+    c = scenario.controller
+    for name in ("tension_floor", "max_tension"):
+        _finite_number(getattr(c, name), f"controller.{name}")
+    if not 0 < float(c.tension_floor) < float(c.max_tension):
+        raise ScenarioError(f"controller.tension_floor must be > 0 N and below "
+                            f"controller.max_tension = {c.max_tension!r} N, got "
+                            f"{c.tension_floor!r}")
+    f = scenario.safety_filter
+    _finite_number(f.gamma, "safety_filter.gamma")
+    if not 0 < float(f.gamma) <= 1:
+        raise ScenarioError(f"safety_filter.gamma must lie in (0, 1] (the share of a "
+                            f"barrier's margin one tick may use), got {f.gamma!r}")
+    _finite_number(f.return_speed, "safety_filter.return_speed")
+    if float(f.return_speed) < 0:
+        raise ScenarioError(f"safety_filter.return_speed must be >= 0 m/s, got "
+                            f"{f.return_speed!r}")
+    _positive(f.angular_weight, "safety_filter.angular_weight")
+    cue = f.kinetostatic_force
+    if cue.enabled:
+        for name in ("t_l", "t_u", "F_u", "eps"):
+            _finite_number(getattr(cue, name), f"safety_filter.kinetostatic_force.{name}")
+        if not cue.t_u > cue.t_l:
+            raise ScenarioError(f"safety_filter.kinetostatic_force.t_u = {cue.t_u!r} N must "
+                                f"be above t_l = {cue.t_l!r} N")
+        _positive(cue.F_u, "safety_filter.kinetostatic_force.F_u")
+        if not 0 < cue.eps < cue.F_u / 2:
+            raise ScenarioError(f"safety_filter.kinetostatic_force.eps = {cue.eps!r} N must "
+                                f"lie in (0, F_u/2) = (0, {cue.F_u / 2!r}) N")
+    mon = scenario.model_monitor
+    for name in ("slack_tension", "unholdable"):
+        _finite_number(getattr(mon, name), f"model_monitor.{name}")
+        if float(getattr(mon, name)) < 0:
+            raise ScenarioError(f"model_monitor.{name} must be >= 0 N, got "
+                                f"{getattr(mon, name)!r}")
+    for name in ("slack_length", "fit_tolerance"):
+        _positive(getattr(mon, name), f"model_monitor.{name}")
+    if not (isinstance(mon.ticks, int) and mon.ticks >= 1):
+        raise ScenarioError(f"model_monitor.ticks must be an integer >= 1, got {mon.ticks!r}")
 
 
 def _check_logistic_set(values: dict, names: dict, pair: str) -> None:
@@ -674,6 +859,8 @@ class ResolvedScenario:
     # reel_drives; 0 without controller.friction_compensation, without the loop, or on the
     # kinematic plant).
     dead_band: float = 0.0
+    # Each watched pair's hard floor d_min, m (pair_d_min), robot.pairs order.
+    d_min: typing.Any = None
     # The fields the scenario left out whose value came from the robot (for messages).
     defaulted: tuple = ()
     # The contents of the files the scenario reads, as loaded ({"robot": bytes,
@@ -763,6 +950,8 @@ def _resolve(scenario: Scenario, source: str) -> ResolvedScenario:
     params = None
     if scenario.interference.enabled and robot.num_pairs:
         params = interference_params(scenario, robot)
+    _check_safety(scenario)
+    d_min = pair_d_min(scenario, robot)
     limits = scenario.limits
     plant = scenario.plant
     simulated = isinstance(plant, SimulatedReels)
@@ -778,6 +967,7 @@ def _resolve(scenario: Scenario, source: str) -> ResolvedScenario:
         dead_band=(robot.dynamics.dead_band if scenario.controller.friction_compensation
                    and float(scenario.controller.length_gain) > 0 and not simulated
                    else 0.0),
+        d_min=d_min,
         defaulted=defaulted,
         # Read right after the robot and the operator were loaded from them.
         files={field: path.read_bytes() for field, path in scenario_files(scenario).items()})

@@ -7,6 +7,7 @@ import pytest
 from scipy.optimize import linprog
 
 from cdpm_drake.tension import max_min_lines
+from conftest import highs_t_star
 
 
 def _highs_max_min(a, C):
@@ -40,3 +41,56 @@ def test_max_min_lines_equals_the_linear_program(k):
         if k:  # the maximiser returned attains it
             assert np.min(a + C @ lam) == pytest.approx(t, rel=1e-9, abs=1e-9)
     assert k == 0 or unbounded > 0
+
+
+# --- the margin of a pose ------------------------------------------------------------------------
+
+
+def _highs_margin(W, w, floor, ceiling):
+    """kappa = max s s.t. W T + w = 0, floor + s <= T_i <= ceiling - s, by HiGHS (-inf when
+    infeasible for every s)."""
+    m = W.shape[1]
+    A_ub = np.vstack([np.hstack([-np.eye(m), np.ones((m, 1))]),
+                      np.hstack([np.eye(m), np.ones((m, 1))])])
+    b_ub = np.r_[-floor * np.ones(m), ceiling * np.ones(m)]
+    res = linprog(np.r_[np.zeros(m), -1.0], A_ub=A_ub, b_ub=b_ub,
+                  A_eq=np.hstack([W, np.zeros((W.shape[0], 1))]), b_eq=-w,
+                  bounds=[(None, None)] * (m + 1), method="highs")
+    return -res.fun if res.status == 0 else -np.inf
+
+
+def _robot(name, swaps=()):
+    from cdpm_drake.robot import load_robot, resolve_robot_path
+
+    robot = load_robot(resolve_robot_path(name))
+    for i, j in swaps:
+        robot = robot.swapped(i, j) if hasattr(robot, "swapped") else robot
+    return robot
+
+
+@pytest.mark.parametrize("name", ["paper_7cable", "cube_8cable"])
+def test_margin_equals_the_linear_program(name):
+    from cdpm_drake.kinetostatics import margin, margin_scratch
+    from cdpm_drake.rotation import rotation_from_rpy
+    from cdpm_drake.tension import gravity_wrench, wrench_matrix
+
+    robot = _robot(name)
+    scratch = margin_scratch(robot.num_cables)
+    rng = np.random.default_rng(3)
+    finite = 0
+    for _ in range(150):
+        p = rng.uniform(robot.workspace.lower, robot.workspace.upper)
+        R = rotation_from_rpy(rng.normal(size=3) * 0.1)
+        F = rng.normal(size=3) * 15.0
+        w = gravity_wrench(robot.dynamics.mass, F, R @ robot.dynamics.handle)
+        kappa, t_star = margin(robot.reels, robot.attachments, 6, p, R, w, 3.0, 100.0, scratch)
+        W = wrench_matrix(robot, p, R)
+        ref = _highs_margin(W, w, 3.0, 100.0)
+        if np.isfinite(ref):
+            finite += 1
+            assert kappa == pytest.approx(ref, abs=1e-6)
+        else:
+            assert kappa < -1e3 or kappa == -np.inf
+        # t* (no ceiling) against the statics tests' HiGHS reference.
+        assert t_star == pytest.approx(highs_t_star(W, w), abs=1e-6)
+    assert finite > 100

@@ -1,0 +1,336 @@
+"""The safety filter (beyond the paper): every tick, the twist closest to the one the
+admittance and the limits command, subject to discrete-time control barrier functions that
+keep every watched cable pair apart, the platform in its workspace box and the cables able to
+hold it with the measured hand force. numpy and numba, no Drake.
+
+The paper's interference force is soft: a hand that pushes harder than F_u drags the cables
+across each other (its section 5.4). On an admittance-controlled robot the controller decides
+every motion, so it can refuse the ones that break the promise. Base frame A, SI units. The
+unknown is the twist u = (v, w) (m/s, rad/s; the translating controller: v alone):
+
+    minimise  |v - v_d|^2 + rho |w - w_d|^2
+    subject to, for each barrier h (h >= 0 is safe),
+        grad_v h . v >= -rate(h)        (h(x + T u) >= h(x) - T rate(h), linearised)
+        |v| <= v_max,  |v - v_prev| <= a_max T   (cutting planes, exact to 1e-9)
+
+with rate(h) = min(gamma h / T, g cap(h / g)): at most the fraction gamma of the margin per
+tick (the discrete-time CBF h(x + T u) >= (1 - gamma) h(x)), and no faster than a braking at
+a_brake would stop the platform at the barrier (cap: limits._face_cap, the virtual wall's
+braking curve, on the platform distance h / g to the barrier, g = |grad_v h|), so that a
+barrier never asks for more than the acceleration limit. Where h < 0 (a margin already lost:
+a start inside d_min, a hand force that changed) the barrier asks for a slow return instead,
+grad h . u >= min(gamma |h| / T, g v_return). A barrier that jumps (an estimate that moves
+with the platform's ringing, a hand force that changes the kinetostatic margin) would ask for
+a step of the command: each row asks at most g a_brake T more than the previous command gave
+it, so that a jump is met by braking at a_brake, not by a jerk.
+
+The barriers: every watched pair's distance above its d_min (signed: a pair the interference
+block has seen cross counts negative; the gradient by the envelope theorem,
+`pair_barrier`); each face of the workspace box; the kinetostatic margin kappa >= 0
+(kinetostatics.py: a tension distribution between the floor and the ceiling holds the
+platform's weight and the measured hand force), with its gradient from the kinetostatic
+block.
+
+When no twist meets them all, the filter gives up in this order, and says which in its
+status: the returns of lost margins (each then only must not get worse, grad h . u >= 0:
+STATUS_NO_RETURN), and then it holds the platform (STATUS_HOLD), braking to zero twist at the
+acceleration limit. The acceleration limit is never given up: a step of the command is a
+jerk of the platform, which on a robot with mass slackens cables (measured: a barrier met by
+a 0.2 m/s step in one tick slackened four cables of the dynamic plant).
+
+The barriers are evaluated at the commanded pose: the estimated position and, for the full
+pose, the orientation the orientation hold keeps (R_ref), not the estimated one. The estimate
+of the orientation moves with the platform's ringing (its yaw mode rings at ~4 Hz, lightly
+damped, and a pair's distance moves ~0.1 m per rad of tilt against ~0.01 m per m of
+translation near the paper's boundary): barriers at the estimated orientation fed that ringing
+back into the velocity command and rang it up until cables went slack (dynamic plant, an 8 N
+push along the boundary: 275-326 slack ticks, against none at R_ref). At the commanded
+orientation the barriers depend on the translation alone: the full pose's twist (6 unknowns)
+keeps the orientation hold's angular velocity, which corrects towards R_ref and never moves
+it.
+"""
+
+import math
+
+import numba
+import numpy as np
+
+from .interference import _closest
+from .limits import _face_cap
+from .qp import QP_OPTIMAL, solve_qp
+
+_jit = numba.njit(cache=True, error_model="numpy")
+
+# status output of `filter_tick`.
+STATUS_PASS, STATUS_MODIFIED, STATUS_NO_RETURN, STATUS_HOLD = 0, 1, 2, 3
+STATUS_TEXT = ("passed", "modified", "lost margins held, not restored",
+               "braking to a hold (no safe twist)")
+# Which kinds of barrier bind (have a positive multiplier) at the filter's solution: bits of
+# the `binding` output.
+BIND_PAIR, BIND_BOX, BIND_KINETOSTATIC, BIND_SPEED, BIND_ACCELERATION = 1, 2, 4, 8, 16
+BIND_TEXT = ((BIND_PAIR, "cable pairs"), (BIND_BOX, "workspace box"),
+             (BIND_KINETOSTATIC, "kinetostatic limit"), (BIND_SPEED, "speed limit"),
+             (BIND_ACCELERATION, "acceleration limit"))
+
+# Parameters (a flat array, `filter_params`).
+(F_T, F_GAMMA, F_A_BRAKE, F_V_MAX, F_A_MAX, F_RHO, F_V_RETURN, F_DOF, F_KINETOSTATIC,
+ F_SIZE) = range(10)
+
+# At most this many cutting planes of the speed and acceleration balls per solve: each cuts
+# the violation of the last solution; 12 leave it below 1e-9 m/s in every case measured.
+MAX_CUTS = 12
+BALL_TOL = 1e-9
+
+
+def filter_params(*, time_step, gamma, a_brake, max_velocity, max_acceleration,
+                  angular_weight, return_speed, full_pose, kinetostatic) -> np.ndarray:
+    return np.array([time_step, gamma, a_brake, max_velocity, max_acceleration,
+                     angular_weight, return_speed, 6 if full_pose else 3,
+                     1.0 if kinetostatic else 0.0], dtype=float)
+
+
+def filter_sizes(P: int, full_pose: bool) -> dict:
+    """Input (x) and output (out) sizes of `filter_tick` for P watched pairs, and the offset
+    of its memory in x."""
+    x = 11 + P + (12 if full_pose else 0)
+    return {"x": x + 6, "out": 20, "memory": 6, "memory_at": x}
+
+
+@_jit
+def pair_barrier(reels, attachments, i, j, p, R, grad):
+    """The distance (m) between cables i and j of the pose (p, R) and its gradient with
+    respect to the twist (v, w) into grad (6,): by the envelope theorem only the attachment
+    points move, dB = v + w x R b, and d d = (1 - s) n . dB_i - (1 - t) n . dB_j with n the
+    unit vector between the closest points (interference.py's module docstring; (t - s) n for
+    the translation). Zero gradient where the cables touch (d == 0)."""
+    Bi = np.empty(3)
+    Bj = np.empty(3)
+    for r in range(3):
+        Rbi = R[r, 0] * attachments[i, 0] + R[r, 1] * attachments[i, 1] + R[r, 2] * attachments[i, 2]
+        Rbj = R[r, 0] * attachments[j, 0] + R[r, 1] * attachments[j, 1] + R[r, 2] * attachments[j, 2]
+        grad[r] = Rbi  # R b_i, R b_j kept in grad's slots until the end
+        grad[3 + r] = Rbj
+        Bi[r] = p[r] + Rbi
+        Bj[r] = p[r] + Rbj
+    dist, s, t, dx, dy, dz, _, _, _, _, _, _ = _closest(
+        reels[i, 0] - Bi[0], reels[i, 1] - Bi[1], reels[i, 2] - Bi[2],
+        reels[j, 0] - Bj[0], reels[j, 1] - Bj[1], reels[j, 2] - Bj[2],
+        Bi[0] - Bj[0], Bi[1] - Bj[1], Bi[2] - Bj[2])
+    if dist == 0.0:
+        for k in range(6):
+            grad[k] = 0.0
+        return dist
+    nx, ny, nz = dx / dist, dy / dist, dz / dist
+    ai, aj = 1.0 - s, 1.0 - t
+    rix, riy, riz = grad[0], grad[1], grad[2]
+    rjx, rjy, rjz = grad[3], grad[4], grad[5]
+    k = ai - aj
+    grad[0], grad[1], grad[2] = k * nx, k * ny, k * nz
+    # w . (R b_i x (1 - s) n) - w . (R b_j x (1 - t) n)
+    grad[3] = ai * (riy * nz - riz * ny) - aj * (rjy * nz - rjz * ny)
+    grad[4] = ai * (riz * nx - rix * nz) - aj * (rjz * nx - rjx * nz)
+    grad[5] = ai * (rix * ny - riy * nx) - aj * (rjx * ny - rjy * nx)
+    return dist
+
+
+@_jit
+def barrier_rate(h, g, params):
+    """rate(h) (units of h per s; module docstring): the largest decrease of a barrier at
+    margin h >= 0 with |grad_v h| = g, or minus the return asked where h < 0."""
+    T, gamma = params[F_T], params[F_GAMMA]
+    if h < 0.0:
+        back = gamma * (-h) / T
+        if g > 0.0:
+            back = min(back, g * params[F_V_RETURN])
+        return -back
+    rate = gamma * h / T
+    if g > 0.0:
+        rate = min(rate, g * _face_cap(h / g, params[F_A_BRAKE], T))
+    return rate
+
+
+@_jit
+def _add_row(C, d, kind, count, grad, n, rhs, k):
+    for c in range(n):
+        C[count, c] = grad[c]
+    d[count] = rhs
+    kind[count] = k
+    return count + 1
+
+
+@_jit
+def _add_barrier(C, d, kind, lost, count, grad, n, rhs, is_lost, k, prev, ramp):
+    """A barrier's row on the translation, grad_v . v >= rhs, asking at most `ramp` more
+    than the previous command gave it (module docstring)."""
+    lost[count] = is_lost
+    trans = 0.0
+    for c in range(3):
+        trans += grad[c] * prev[c]
+    for c in range(3, 6):
+        grad[c] = 0.0
+    return _add_row(C, d, kind, count, grad, n, min(rhs, trans + ramp), k)
+
+
+@_jit
+def filter_tick(reels, attachments, pi, pj, d_min, bounds, params, x, out):
+    """One tick of the safety filter. pi, pj (P,): the watched pairs (0-based cables); d_min
+    (P,) m; bounds (2, 3): the workspace box's lower and upper corners, m.
+    x = [v_d (3), p (3), crossed (P), kappa (1), grad kappa (3), look ahead (1), (the full
+    pose only:) w_d (3), R (9), memory: v_prev (3), w_prev (3)] (m/s, m, 0/1, N, N/m, m,
+    rad/s, -); the translating controller's platform is level (R = I);
+    out = [v (3), w (3), status (1), binding (1), smallest pair margin h (1, m; +inf with
+    no pair), kappa used (1, N; nan when the barrier is off or undefined), barriers (1: how
+    many could bind this tick and went into the QP), next memory (6: the twist), v_d (3: the
+    velocity asked for, passed through for the log)]. Returns the status."""
+    P = pi.shape[0]
+    n = int(params[F_DOF])
+    T = params[F_T]
+    v_max, a_max = params[F_V_MAX], params[F_A_MAX]
+    p = x[3:6]
+    crossed = x[6:6 + P]
+    kappa = x[6 + P]
+    gk = x[7 + P:10 + P]
+    ray = x[10 + P]
+    R = np.eye(3)
+    target = np.empty(n)
+    w = np.ones(n)
+    for c in range(3):
+        target[c] = x[c]
+    if n == 6:
+        for c in range(3):
+            target[3 + c] = x[11 + P + c]
+            w[3 + c] = params[F_RHO]
+        for a in range(3):
+            for b in range(3):
+                R[a, b] = x[14 + P + 3 * a + b]
+    prev = x[x.shape[0] - 6:]
+    rows = P + 6 + 2 + 2 * MAX_CUTS
+    C = np.zeros((rows, n))
+    d = np.empty(rows)
+    kind = np.empty(rows, dtype=np.int64)
+    lost = np.zeros(rows, dtype=np.bool_)  # a barrier whose margin is already lost (h < 0)
+    grad = np.empty(6)
+    count = 0
+    # A barrier may ask its rate to change by at most a_brake T a tick (per unit of its
+    # translation gradient): always feasible within the acceleration limit.
+    ramp = params[F_A_BRAKE] * T
+    smallest = math.inf
+    # Only barriers that could bind this tick: the most a velocity within the speed limit can
+    # take off a margin is g v_max.
+    v_bound = v_max
+    for q in range(P):
+        dist = pair_barrier(reels, attachments, pi[q], pj[q], p, R, grad)
+        sign = 1.0
+        if crossed[q] > 0.5:
+            sign = -1.0
+        h = sign * dist - d_min[q]
+        smallest = min(smallest, h)
+        gv = math.sqrt(grad[0] * grad[0] + grad[1] * grad[1] + grad[2] * grad[2])
+        rate = barrier_rate(h, gv, params)
+        if rate >= gv * v_bound:
+            continue
+        for c in range(6):
+            grad[c] *= sign
+        count = _add_barrier(C, d, kind, lost, count, grad, n, -rate, h < 0.0, BIND_PAIR,
+                             prev, gv * ramp)
+    for axis in range(3):
+        for side in range(2):
+            h = p[axis] - bounds[0, axis] if side == 0 else bounds[1, axis] - p[axis]
+            rate = barrier_rate(h, 1.0, params)
+            if rate >= v_bound:
+                continue
+            for c in range(6):
+                grad[c] = 0.0
+            grad[axis] = 1.0 if side == 0 else -1.0
+            count = _add_barrier(C, d, kind, lost, count, grad, n, -rate, h < 0.0, BIND_BOX,
+                                 prev, ramp)
+    kappa_used = math.nan
+    if params[F_KINETOSTATIC] != 0.0 and math.isfinite(kappa):
+        gv = math.sqrt(gk[0] * gk[0] + gk[1] * gk[1] + gk[2] * gk[2])
+        kappa_used = kappa
+        for c in range(3):
+            grad[c] = gk[c]
+        count = _add_barrier(C, d, kind, lost, count, grad, n, -barrier_rate(kappa, gv, params),
+                             kappa < 0.0, BIND_KINETOSTATIC, prev, gv * ramp)
+        speed = math.sqrt(prev[0] * prev[0] + prev[1] * prev[1] + prev[2] * prev[2])
+        if ray < math.inf and speed > 0.0:
+            # The look ahead (kinetostatics.kinetostatic_tick): the margin is lost `ray` m
+            # along the last command; the speed along it brakes to stop there (the braking
+            # curve), at most a_brake T a tick.
+            along = 0.0
+            for c in range(3):
+                grad[c] = -prev[c] / speed
+                along += prev[c] / speed * prev[c]
+            cap = _face_cap(ray, params[F_A_BRAKE], T)
+            count = _add_barrier(C, d, kind, lost, count, grad, n, -max(cap, along - ramp),
+                                 False, BIND_KINETOSTATIC, prev, 1e300)
+    base = count
+    z = np.empty(n)
+    u = np.empty(rows)
+    status = STATUS_HOLD
+    for stage in range(2):
+        # Stage 0: everything; 1: lost margins only kept, not restored.
+        if stage == 1:
+            relaxed = False
+            for r in range(base):
+                if lost[r] and d[r] > 0.0:
+                    d[r] = 0.0
+                    relaxed = True
+            if not relaxed:
+                break
+        count = base
+        ok = False
+        for _ in range(MAX_CUTS + 1):
+            qp_status, _ = solve_qp(w, target, C, d, count, z, u, 200)
+            if qp_status != QP_OPTIMAL:
+                break
+            speed = math.sqrt(z[0] * z[0] + z[1] * z[1] + z[2] * z[2])
+            ex, ey, ez = z[0] - prev[0], z[1] - prev[1], z[2] - prev[2]
+            step = math.sqrt(ex * ex + ey * ey + ez * ez)
+            over_speed = speed > v_max * (1.0 + BALL_TOL)
+            over_step = step > a_max * T * (1.0 + BALL_TOL) + BALL_TOL
+            if not (over_speed or over_step):
+                ok = True
+                break
+            if count + 2 > rows:
+                break
+            for c in range(6):
+                grad[c] = 0.0
+            if over_speed:  # -(z / |z|) . v >= -v_max
+                grad[0], grad[1], grad[2] = -z[0] / speed, -z[1] / speed, -z[2] / speed
+                count = _add_row(C, d, kind, count, grad, n, -v_max, BIND_SPEED)
+            if over_step:  # -(e / |e|) . (v - v_prev) >= -a_max T
+                grad[0], grad[1], grad[2] = -ex / step, -ey / step, -ez / step
+                count = _add_row(C, d, kind, count, grad, n,
+                                 -a_max * T + grad[0] * prev[0] + grad[1] * prev[1]
+                                 + grad[2] * prev[2], BIND_ACCELERATION)
+        if ok:
+            status = (STATUS_PASS, STATUS_NO_RETURN)[stage]
+            break
+    binding = 0
+    if status == STATUS_HOLD:
+        # Brake to a hold at the acceleration limit: a step to zero from speed would jerk
+        # the platform (on a robot with mass, hard enough to slacken cables).
+        speed = math.sqrt(prev[0] * prev[0] + prev[1] * prev[1] + prev[2] * prev[2])
+        k = max(0.0, 1.0 - a_max * T / speed) if speed > 0.0 else 0.0
+        for c in range(n):
+            z[c] = prev[c] * k if c < 3 else 0.0
+    else:
+        for r in range(count):
+            if u[r] > 0.0:
+                binding |= kind[r]
+        if status == STATUS_PASS:
+            for c in range(n):
+                if z[c] != target[c]:
+                    status = STATUS_MODIFIED
+    for c in range(6):
+        out[c] = z[c] if c < n else 0.0
+        out[11 + c] = out[c]
+    out[6] = status
+    out[7] = binding
+    out[8] = smallest
+    out[9] = kappa_used
+    out[10] = base
+    for c in range(3):
+        out[17 + c] = x[c]
+    return status
