@@ -312,8 +312,9 @@ def _add_safety_filter(builder, blocks, resolved, velocity_desired, omega_desire
     params = filter_params(
         time_step=T, gamma=f.gamma, a_brake=_filter_braking(resolved),
         max_velocity=resolved.max_velocity,
-        max_acceleration=resolved.max_acceleration, angular_weight=f.angular_weight,
-        return_speed=f.return_speed, full_pose=full, kinetostatic=kinetostatic is not None)
+        max_acceleration=resolved.max_acceleration,
+        return_speed=f.return_speed, full_pose=full, kinetostatic=kinetostatic is not None,
+        box=scenario.limits.virtual_wall)
     block = blocks["safety_filter"] = FlatBlock(
         builder, "safety_filter", SAFETY_MAIN, lambda b: build_safety_filter(
             b, robot, d_min=resolved.d_min, params=params, full_pose=full, time_step=T))

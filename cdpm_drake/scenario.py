@@ -197,10 +197,14 @@ class KinetostaticForce:
 
     # Off keeps the barrier (the safety filter) without the cue.
     enabled: bool = True
-    # t_c at which the cue is F_u - eps, N (and stronger below).
-    t_l: float = 4.0
-    # t_c at which it is eps, N; none above (as the paper's force is none above d_u).
-    t_u: float = 7.0
+    # t_c at which the cue is F_u - eps, N (and stronger below): half a newton above the
+    # default tension_floor, where the filter stops the platform.
+    t_l: float = 3.5
+    # t_c at which it is eps, N; none above (as the paper's force is none above d_u). 5 N:
+    # paper_7cable's ceiling keeps t_c at 5.4 N at experiment 1's start and 3.2 N along
+    # experiment 2's path (its hand included), so the cue is felt where the limit is near
+    # (Fig. 12 (a)) and nowhere in experiment 1, which the paper ran without a hand.
+    t_u: float = 5.0
     # Largest intensity, N; the allowed variation eps, N (eq. 28).
     F_u: float = 3.0
     eps: float = 0.1
@@ -223,13 +227,6 @@ class SafetyFilter:
     # Where a margin is already lost (a start inside d_min, a hand force that changed), the
     # platform is brought back at most this fast, m/s.
     return_speed: float = 0.02
-    # Weight of the angular velocity's deviation against the velocity's, m^2 (the full pose).
-    # A rotation never buys a margin (safety_filter.py), so where the orientation hold's
-    # command would cost one the filter should slow the rotation rather than jerk the
-    # velocity: a pair's distance moves ~0.1 m per rad of tilt and ~0.01 m per m of
-    # translation near the paper's boundary, and at 1 m^2 the filter takes 99 % of such a
-    # correction from the rotation.
-    angular_weight: float = 1.0
     # The kinetostatic barrier (and its block): off leaves the pairs and the box.
     kinetostatic: bool = True
     kinetostatic_force: KinetostaticForce = dataclasses.field(
@@ -785,7 +782,6 @@ def _check_safety(scenario: Scenario) -> None:
     if float(f.return_speed) < 0:
         raise ScenarioError(f"safety_filter.return_speed must be >= 0 m/s, got "
                             f"{f.return_speed!r}")
-    _positive(f.angular_weight, "safety_filter.angular_weight")
     cue = f.kinetostatic_force
     if cue.enabled:
         for name in ("t_l", "t_u", "F_u", "eps"):

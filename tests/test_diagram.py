@@ -24,7 +24,12 @@ M = C = 6.25  # the paper's virtual mass (kg) and damping (N s/m)
 A = np.exp(-T * C / M)  # ZOH of 1/(M s + C): v_{k+1} = A v_k + B F_k
 B = (1.0 - A) / C
 
-NO_INTERFERENCE = "interference: {enabled: false}, "
+# These tests pin the paper's Fig. 5 blocks (admittance, limits, F_d): without issue 26's
+# safety filter (which would modify the limited command, and add its kinetostatic cue to F_d)
+# and model monitor (which stops runs where the cables could not hold the platform: starts
+# near the box's corners).
+FIG_5 = "safety_filter: {enabled: false}, model_monitor: {enabled: false}, "
+NO_INTERFERENCE = "interference: {enabled: false}, " + FIG_5
 HIGH_LIMITS = "limits: {max_velocity: 10, max_acceleration: 1000}, "
 
 
@@ -135,7 +140,7 @@ def test_sliding_average_feeds_the_admittance_a_ramp():
 
 def test_logged_desired_force_is_what_the_admittance_integrates_with_noise():
     scenario = load_scenario("exp1_no_interaction", overlay_text=(
-        "{interference: {enabled: false}, sensor: {noise_std: 2.0, filter_window: 5}, "
+        "{interference: {enabled: false}, sensor: {noise_std: 2.0, filter_window: 5}, " + FIG_5 +
         "operator: !ScriptedOperator {times: [0, 1], forces: [[0, 0, 0], [3, 1, -2]]}}"))
     log = run(scenario, 0.2)
     v, F = log["velocity_admittance"], log["F_d"]
@@ -147,7 +152,8 @@ def test_desired_force_is_the_sum_of_hand_interference_and_wall_forces():
     three non-zero: a 1 N push, 5 cm from the lower x face (box 0.5..3.0 m, wall force 1 N
     there), cables 1 and 3 (swapped) about 60 mm apart, inside d_u = 61 mm."""
     scenario = load_scenario("exp1_no_interaction", overlay_text=(
-        "{wall_force: {enabled: true, margin: 0.1}, initial_position: [0.55, 1.85, 2.2], "
+        "{wall_force: {enabled: true, margin: 0.1}, initial_position: [0.55, 1.85, 2.2], " + FIG_5
+        +
         "operator: !ScriptedOperator {times: [0], forces: [[0.0, 1.0, 0.0]]}}"))
     log = run(scenario, 0.1)
     for key in ("F_H", "F_int", "F_wall"):

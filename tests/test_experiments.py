@@ -94,12 +94,16 @@ def test_exp2_hand_keeps_cables_apart_without_crossing():
 # --- Crossing: a robot whose cables 1 and 2 can be pushed through each other -----------------
 
 
-def _push(force_y, release=4.0, duration=12.0):
+# The paper's Fig. 5 alone: without issue 26's safety filter, which stops the push at d_min.
+FIG_5 = "safety_filter: {enabled: false}, model_monitor: {enabled: false}, "
+
+
+def _push(force_y, release=4.0, duration=12.0, extra=FIG_5):
     """From y = 0.5 m (d12 = 33 mm) a constant hand force along -y, towards the plane y = 0
     where cables 1 and 2 meet, released at `release` s. d_l = 20 mm, d_u = 30 mm, F_u = 2 N."""
     overlay = (
         f"{{robot: {CROSSING_ROBOT}, swaps: [], initial_position: [0.0, 0.5, 0.5], "
-        f"duration: {duration}, "
+        f"duration: {duration}, {extra}"
         "interference: {default: {d_l: 0.02, d_u: 0.03, F_u: 2.0, eps: 0.1}}, "
         f"operator: !ScriptedOperator {{times: [0, {release}, {release + 0.002}], "
         f"forces: [[0, {-force_y}, 0], [0, {-force_y}, 0], [0, 0, 0]]}}}}")
@@ -130,3 +134,19 @@ def test_a_strong_push_crosses_the_cables_and_the_force_pushes_back():
     # Released at 4 s, the force alone brings the platform back and the crossing clears.
     assert not crossed[-1]
     assert log["p"][-1, 1] > 0.0
+
+
+def test_the_safety_filter_stops_a_strong_push_at_d_min_and_lets_it_back():
+    # The same 5 N push with the safety filter (the default, issue 26): the pair's distance
+    # never goes below its d_min (= d_l, 20 mm: the default) by more than the linearisation
+    # of one tick, nothing crosses, and the filter is what held it (its status says so).
+    _, robot, log = _push(5.0, extra="")
+    k = robot.pair_position(1, 2)
+    d = log["pair_distances"][:, k]
+    assert d.min() > 0.02 - 1e-6, d.min()
+    assert d.min() < 0.0201  # it was pushed right to the floor
+    assert not np.any(log["crossed"])
+    held = (log["filter_binding"][:, 0].astype(int) & 1) > 0  # a pair's barrier binds
+    assert held.any() and np.all(d[held] < 0.03)  # only near the pair
+    # Released at 4 s, the interference force moves it back out of the band.
+    assert d[-1] > 0.03

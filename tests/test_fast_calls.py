@@ -94,7 +94,9 @@ def test_every_bound_call_passes_the_types_it_was_bound_for(monkeypatch, name, o
     simulator.AdvanceTo(0.1)
     expected = {"clip_into", "gauss_newton_warm_stacked", "interference_tick_stacked",
                 "limit_velocity_stacked", "length_loop_tick", "simulated_reel_step_stacked",
-                "operator_force_on_state"}
+                "operator_force_on_state",
+                # issue 26: the kinetostatic limit, the safety filter, the model monitor
+                "kinetostatic_tick", "filter_tick", "monitor_tick"}
     expected |= {"wall_force_into"} if overlay else set()
     assert set(calls) == expected
     assert min(calls.values()) >= 50  # every tick went through the checks
@@ -173,11 +175,12 @@ def test_the_fused_diagram_has_one_selector_and_no_multiplexers():
     assert diagram.GetSubsystemByName(FUSED_WIRING).num_output_ports() >= 9
     assert "Multiplexer" not in kinds and "Demultiplexer" not in kinds
     plain = build_diagram(load_scenario("exp2_interaction"), BuildOptions(fuse_wiring=False))
-    # exp2: five blocks' wiring and the logger's become one system, and the four blocks'
-    # memories (FK warm start, crossing sides, previous command, the length loop's commanded
-    # position, offsets and started flag) one delay.
-    assert [type(s).__name__ for s in plain.GetSystems()].count("Selector") == 6
-    assert len(list(plain.GetSystems())) - len(list(diagram.GetSystems())) == 5 + 3
+    # exp2: eight blocks' wiring and the logger's become one system, and seven memories (FK
+    # warm start, crossing sides, the limits' previous command, the length loop's commanded
+    # position, offsets and started flag; issue 26: the kinetostatic block's hand force of
+    # the last tick, the filter's last twist, the monitor's counters) one delay.
+    assert [type(s).__name__ for s in plain.GetSystems()].count("Selector") == 9
+    assert len(list(plain.GetSystems())) - len(list(diagram.GetSystems())) == 8 + 6
     names = {s.get_name() for s in diagram.GetSystems()}
     assert FUSED_DELAY in names and not names & {
         "forward_kinematics_previous", "interference_force_side_memory",
@@ -189,7 +192,7 @@ def test_the_fused_diagram_has_one_selector_and_no_multiplexers():
     state = memory.GetMyContextFromRoot(context).get_discrete_state_vector().get_value()
     scenario = load_scenario("exp2_interaction")
     np.testing.assert_array_equal(state[:3], scenario.initial_position)
-    assert state.size == 3 + 21 + 3 + (3 + 7 + 1) and not np.any(state[3:])
+    assert state.size == 3 + 21 + 3 + (3 + 7 + 1) + 3 + 6 + 3 and not np.any(state[3:])
 
 
 @pytest.mark.parametrize("plant", [SimulatedReels(), HardwareReels()], ids=["sim", "hw"])

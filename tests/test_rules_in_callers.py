@@ -21,8 +21,8 @@ from cdpm_drake.interference import (InterferenceParams, interference_force, log
                                      segment_distance)
 from cdpm_drake.operators import ScriptedOperator
 from cdpm_drake.robot import Robot, Workspace
-from cdpm_drake.scenario import (Admittance, Interference, Logistic, Scenario, Sensor,
-                                 scenario_robot)
+from cdpm_drake.scenario import (Admittance, Interference, Logistic, ModelMonitor, SafetyFilter,
+                                 Scenario, Sensor, scenario_robot)
 from cdpm_drake.simulation import simulate
 
 from conftest import DATA_DIR, to_yaml
@@ -136,7 +136,9 @@ def test_a_real_crossing_is_flagged_pushed_back_at_F_u_and_clipped_by_F_max():
         sensor=Sensor(filter_window=1),
         interference=Interference(default=Logistic(d_l=0.01, d_u=0.025, F_u=0.6, eps=0.1),
                                   F_max=0.45),
-        operator=ScriptedOperator(times=[0.0], forces=[[0.0, -4.0, 0.0]]))
+        operator=ScriptedOperator(times=[0.0], forces=[[0.0, -4.0, 0.0]]),
+        # The paper's Fig. 5: issue 26's safety filter would stop the push before the crossing.
+        safety_filter=SafetyFilter(enabled=False), model_monitor=ModelMonitor(enabled=False))
     result = simulate(scenario=scenario)
     assert result.error is None, result.error
     log = result.log

@@ -263,7 +263,7 @@ def test_an_unknown_field_in_a_file_gives_its_line_and_the_closest_name(tmp_path
                     "    du: 0.07\n")
     msg = str(pytest.raises(ScenarioError, load_scenario, path).value)
     assert f"{path}: line 6: unknown field 'interference.default.du'; did you mean 'd_u'? " \
-           "(valid fields of interference.default: ['d_l', 'd_u', 'F_u', 'eps'])" in msg, msg
+           "(valid fields of interference.default: ['d_l', 'd_u', 'F_u', 'eps', 'd_min'])" in msg, msg
     path.write_text("name: bad\nbasedir: x\n")
     msg = str(pytest.raises(ScenarioError, load_scenario, path).value)
     assert "line 2: unknown field 'basedir' (valid fields: ['name'," in msg, msg

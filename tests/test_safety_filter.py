@@ -1,0 +1,223 @@
+"""The safety filter's math (cdpm_drake.safety_filter) against independent references: the
+pair barrier's distance against the segment distance (itself checked against FCL and Drake),
+its gradient against central finite differences, the filter's command against closed forms
+(a face of the box, the speed and acceleration limits) and against Clarabel solving the same
+weighted projection."""
+
+import math
+
+import numpy as np
+import pytest
+
+from cdpm_drake.interference import segment_distance
+from cdpm_drake.limits import _face_cap
+from cdpm_drake.pose import rotation_exp
+from cdpm_drake.safety_filter import (BIND_ACCELERATION, BIND_BOX, BIND_KINETOSTATIC,
+                                      BIND_PAIR, STATUS_HOLD, STATUS_MODIFIED, STATUS_NO_RETURN,
+                                      STATUS_PASS, CURVE_SHARE,
+                                      filter_params, filter_sizes, filter_tick, pair_barrier)
+
+T = 0.002
+V_MAX, A_MAX = 0.5, 2.0
+A_BRAKE = A_MAX / math.sqrt(3.0)
+GAMMA = 0.2
+
+
+def _robot():
+    from cdpm_drake.robot import load_robot, resolve_robot_path
+
+    return load_robot(resolve_robot_path("paper_7cable"))
+
+
+def _rotation(phi):
+    R = np.empty((3, 3))
+    rotation_exp(*phi, R)
+    return R
+
+
+def test_pair_barrier_distance_and_gradient_match_independent_references():
+    robot = _robot()
+    rng = np.random.default_rng(7)
+    i_all, j_all = robot.pair_index
+    for _ in range(120):
+        q = int(rng.integers(len(i_all)))
+        i, j = int(i_all[q]), int(j_all[q])
+        p = rng.uniform(robot.workspace.lower, robot.workspace.upper)
+        R = _rotation(rng.normal(size=3) * 0.2)
+        grad = np.empty(6)
+        d = pair_barrier(robot.reels, robot.attachments, i, j, p, R, grad)
+        B = p + robot.attachments @ R.T
+        ref = segment_distance(B[i], robot.reels[i], B[j], robot.reels[j]).distance
+        assert d == pytest.approx(ref, abs=1e-12)
+        # Central differences in position and in rotation about the base axes (exp([h e]x) R).
+        h = 1e-6
+        fd = np.empty(6)
+        g = np.empty(6)
+        for k in range(6):
+            e = np.zeros(3)
+            e[k % 3] = h
+            if k < 3:
+                plus = pair_barrier(robot.reels, robot.attachments, i, j, p + e, R, g)
+                minus = pair_barrier(robot.reels, robot.attachments, i, j, p - e, R, g)
+            else:
+                plus = pair_barrier(robot.reels, robot.attachments, i, j, p, _rotation(e) @ R, g)
+                minus = pair_barrier(robot.reels, robot.attachments, i, j, p, _rotation(-e) @ R,
+                                     g)
+            fd[k] = (plus - minus) / (2 * h)
+        np.testing.assert_allclose(grad, fd, atol=2e-6)
+
+
+def _filter(robot, *, v_d, p, v_prev=(0.0, 0.0, 0.0), kappa=100.0, grad_kappa=(0, 0, 0),
+            ray=math.inf, d_min=None, crossed=None, kinetostatic=True, full=False,
+            w_d=(0.0, 0.0, 0.0)):
+    """One filter tick on paper_7cable (level); returns (v, status, binding, out)."""
+    i, j = robot.pair_index
+    pi, pj = np.asarray(i, dtype=np.int64), np.asarray(j, dtype=np.int64)
+    P = pi.size
+    dmin = np.full(P, 0.05) if d_min is None else np.asarray(d_min, dtype=float)
+    bounds = np.array([robot.workspace.lower, robot.workspace.upper])
+    params = filter_params(time_step=T, gamma=GAMMA, a_brake=A_BRAKE, max_velocity=V_MAX,
+                           max_acceleration=A_MAX, return_speed=0.02,
+                           full_pose=full, kinetostatic=kinetostatic)
+    s = filter_sizes(P, full)
+    x = np.zeros(s["x"])
+    x[0:3], x[3:6] = v_d, p
+    x[6:6 + P] = 0.0 if crossed is None else crossed
+    x[6 + P] = kappa
+    x[7 + P:10 + P] = grad_kappa
+    x[10 + P] = ray
+    if full:
+        x[11 + P:14 + P] = w_d
+        x[14 + P:23 + P] = np.eye(3).ravel()
+    x[-6:-3] = v_prev
+    out = np.empty(s["out"])
+    status = filter_tick(robot.reels, robot.attachments, pi, pj, dmin, bounds, params, x, out)
+    return out[:3].copy(), int(status), int(out[7]), out
+
+
+def test_a_command_far_from_every_barrier_passes_unchanged():
+    robot = _robot()
+    v_d = np.array([0.1, -0.05, 0.02])
+    v, status, binding, out = _filter(robot, v_d=v_d, p=robot.workspace.center, v_prev=v_d)
+    assert status == STATUS_PASS and binding == 0
+    np.testing.assert_array_equal(v, v_d)
+    np.testing.assert_array_equal(out[17:20], v_d)  # the velocity asked for, for the log
+    np.testing.assert_array_equal(out[11:14], v)  # the next memory is the command
+
+
+@pytest.mark.parametrize("gap", [0.002, 0.01, 0.05, 0.2])
+def test_a_face_of_the_box_caps_the_speed_towards_it_by_the_braking_curve(gap):
+    # Moving at 0.3 m/s along +x with the upper x face `gap` m away: the barrier h = gap
+    # (g = 1) allows rate(h) = min(gamma h / T, cap(h)) (the module's definition; cap is the
+    # virtual wall's braking curve, limits._face_cap, at CURVE_SHARE of a_brake); the
+    # previous command (at v_d) lets the ramp ask a decrease of a_brake T at most, but never
+    # a step through the face (h / T): v_x = min(v_d, max(rate, v_d - a_brake T), h / T).
+    robot = _robot()
+    p = robot.workspace.center.copy()
+    p[0] = robot.workspace.upper[0] - gap
+    v_d = np.array([0.3, 0.0, 0.0])
+    rate = min(GAMMA * gap / T, _face_cap(gap, CURVE_SHARE * A_BRAKE, T))
+    expected = min(0.3, max(rate, 0.3 - A_BRAKE * T), gap / T)
+    v, status, binding, _ = _filter(robot, v_d=v_d, p=p, v_prev=v_d)
+    assert v[0] == pytest.approx(expected, rel=1e-12, abs=1e-15)
+    assert v[1] == v[2] == 0.0
+    if expected < 0.3:
+        assert status == STATUS_MODIFIED and binding & BIND_BOX
+
+
+def test_the_acceleration_and_speed_limits_hold_exactly():
+    robot = _robot()
+    rng = np.random.default_rng(1)
+    for _ in range(200):
+        v_prev = rng.normal(size=3) * 0.2
+        v_prev *= min(1.0, V_MAX / np.linalg.norm(v_prev))  # a command it gave: within limits
+        v_d = rng.normal(size=3) * 0.6
+        v, status, _, _ = _filter(robot, v_d=v_d, p=robot.workspace.center, v_prev=v_prev)
+        assert np.linalg.norm(v) <= V_MAX * (1 + 1e-8)
+        assert np.linalg.norm(v - v_prev) <= A_MAX * T * (1 + 1e-8) + 1e-9
+        if status == STATUS_PASS:  # the request met both: passed as it was
+            np.testing.assert_array_equal(v, v_d)
+
+
+def test_the_kinetostatic_barrier_and_its_look_ahead():
+    robot = _robot()
+    p = robot.workspace.center
+    # kappa = 0.5 N with the margin falling 100 N/m along +x: moving +x at 0.3 m/s the
+    # barrier allows rate = min(gamma kappa / T, g cap(kappa / g)) N/s, i.e. v_x <= rate / g.
+    kappa, g = 0.5, 100.0
+    v_d = np.array([0.3, 0.0, 0.0])
+    rate = min(GAMMA * kappa / T, g * _face_cap(kappa / g, CURVE_SHARE * A_BRAKE, T))
+    v, status, binding, _ = _filter(robot, v_d=v_d, p=p, v_prev=v_d, kappa=kappa,
+                                    grad_kappa=(-g, 0.0, 0.0))
+    assert v[0] == pytest.approx(max(rate / g, 0.3 - A_BRAKE * T), rel=1e-12)
+    assert binding & BIND_KINETOSTATIC
+    # Off: the same inputs pass.
+    v, status, _, _ = _filter(robot, v_d=v_d, p=p, v_prev=v_d, kappa=kappa,
+                              grad_kappa=(-g, 0.0, 0.0), kinetostatic=False)
+    assert status == STATUS_PASS
+    # The look ahead: the margin is lost 2 cm along the last command (gradient here flat):
+    # the speed along it brakes to the braking curve of 2 cm, a_brake T a tick at most.
+    v, status, binding, _ = _filter(robot, v_d=v_d, p=p, v_prev=v_d, kappa=5.0,
+                                    grad_kappa=(0.0, 0.0, 0.0), ray=0.02)
+    assert v[0] == pytest.approx(max(_face_cap(0.02, A_BRAKE, T), 0.3 - A_BRAKE * T),
+                                 rel=1e-12)
+    assert binding & BIND_KINETOSTATIC
+
+
+def test_a_pair_barrier_is_met_and_the_command_is_the_weighted_projection():
+    """On exp2's robot near the 1-3 boundary, with random commands: the filter's command
+    meets every pair barrier row (recomputed here from the gradient and the module's rate)
+    and is the closest such command (Clarabel on the same rows, speed and acceleration
+    balls as second-order cones)."""
+    from pydrake.solvers import ClarabelSolver, MathematicalProgram, SolverOptions
+
+    from cdpm_drake.safety_filter import barrier_rate
+    from cdpm_drake.scenario import load_resolved_scenario
+
+    robot = load_resolved_scenario("exp2_interaction").robot
+    i, j = robot.pair_index
+    q = robot.pair_position(1, 3)
+    params = filter_params(time_step=T, gamma=GAMMA, a_brake=A_BRAKE, max_velocity=V_MAX,
+                           max_acceleration=A_MAX, return_speed=0.02,
+                           full_pose=False, kinetostatic=False)
+    rng = np.random.default_rng(5)
+    p0 = np.array([1.56, 3.24, 1.22])
+    checked = 0
+    for _ in range(60):
+        p = p0 + rng.normal(size=3) * 0.05
+        grad = np.empty(6)
+        d = pair_barrier(robot.reels, robot.attachments, int(i[q]), int(j[q]), p, np.eye(3),
+                         grad)
+        d_min = np.full(robot.num_pairs, 0.0)
+        d_min[q] = d - rng.uniform(-0.0005, 0.002)
+        v_prev = rng.normal(size=3) * 0.2
+        v_d = v_prev + rng.normal(size=3) * 0.003
+        v, status, binding, _ = _filter(robot, v_d=v_d, p=p, v_prev=v_prev, d_min=d_min,
+                                        kinetostatic=False)
+        if status == STATUS_HOLD:
+            continue
+        g = grad[:3]
+        h = d - d_min[q]
+        rhs = min(-barrier_rate(h, np.linalg.norm(g), params),
+                  g @ v_prev + np.linalg.norm(g) * A_BRAKE * T)
+        if status == STATUS_NO_RETURN:  # a lost margin held, not restored
+            rhs = min(rhs, 0.0)
+        assert g @ v >= rhs - 1e-9
+        prog = MathematicalProgram()
+        z = prog.NewContinuousVariables(3)
+        prog.AddQuadraticCost(np.eye(3), -v_d, z, is_convex=True)
+        prog.AddLinearConstraint(g[None, :], [rhs], [np.inf], z)
+        cone = np.vstack([np.zeros((1, 3)), np.eye(3)])  # (a, z): |z| <= a
+        prog.AddLorentzConeConstraint(cone, np.r_[V_MAX, np.zeros(3)], z)
+        prog.AddLorentzConeConstraint(cone, np.r_[A_MAX * T, -v_prev], z)
+        options = SolverOptions()
+        for name in ("tol_gap_abs", "tol_gap_rel", "tol_feas"):
+            options.SetOption(ClarabelSolver.id(), name, 1e-12)
+        result = ClarabelSolver().Solve(prog, None, options)
+        if not result.is_success():
+            continue
+        np.testing.assert_allclose(v, result.GetSolution(z), atol=1e-6)  # Clarabel: ~1e-7
+        checked += 1
+        if status != STATUS_PASS:
+            assert binding & (BIND_PAIR | BIND_ACCELERATION)
+    assert checked > 30
