@@ -247,7 +247,8 @@ def _named_cables(cable, ticks) -> str:
     named = cable[ticks]
     numbers, counts = np.unique(named[named > 0], return_counts=True)
     order = np.argsort(-counts, kind="stable")
-    return ", ".join(f"{numbers[k]} ({counts[k]} ticks)" for k in order) or "none named"
+    return ", ".join(f"{numbers[k]} ({counts[k]} tick{'s' if counts[k] != 1 else ''})"
+                     for k in order) or "none named"
 
 
 def tension_control_summary(log) -> str:
@@ -277,8 +278,10 @@ def tension_control_summary(log) -> str:
              "cable raised most")):
         ticks = status == code
         if ticks.any():
-            parts.append(f"{what} on {int(ticks.sum())} (smallest t* "
-                         f"{t_star[ticks].min():.2f} N; {role}: {_named_cables(cable, ticks)})")
+            smallest = t_star[ticks].min()
+            t_text = f"smallest t* {smallest:.2f} N; " if np.isfinite(smallest) else ""
+            parts.append(f"{what} on {int(ticks.sum())} ({t_text}{role}: "
+                         f"{_named_cables(cable, ticks)})")
     text = "tension control: " + "; ".join(parts)
     none = int(np.sum(t_star < 0))
     if none:
