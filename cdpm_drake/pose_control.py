@@ -9,17 +9,19 @@ as 9 floats. Tensions in N, lengths in m.
   lengths L0 corrected for the cables' modelled stretch under the last tension estimate,
   l_i = L0_i (1 + T_i / EA); and the fit's residual. At the first tick it iterates the fit
   and the estimate below to agreement (the pretension it starts from is unknown).
-- `tension_tick` (tension_distribution): the tension ESTIMATE and the target. With one more
-  cable than degrees of freedom the fit's residual along the wrench matrix's nullspace n is
-  the one thing a pose cannot explain, the internal tension. From r = lengths(pose) - l and
-  l = L0 + D T_assumed (D = diag(L0 / EA)), n . D T = n . D T_assumed + n . r; the true
-  T = T_p + lam n balances the same wrench (T_p the minimum-norm one), so
-  lam = (n . D (T_assumed - T_p) + n . r) / (n . D n). The estimate is what the next tick's
+- `tension_tick` (tension_distribution): the tension ESTIMATE and the target. With k = m - 6
+  more cables than degrees of freedom the fit's residual along the wrench matrix's nullspace
+  (an orthonormal basis N, m x k) is what a pose cannot explain, the internal tension. From
+  r = lengths(pose) - l and l = L0 + D T_assumed (D = diag(L0 / EA)), N^T D T = N^T D
+  T_assumed + N^T r; the true T = T_p + N lam balances the same wrench (T_p the minimum-norm
+  one), so N^T D N lam = N^T (D (T_assumed - T_p) + r) (weighted least squares; for k = 1
+  lam = (n . D (T_assumed - T_p) + n . r) / (n . D n)). The estimate is what the next tick's
   fit corrects the lengths by, so the pose stays fitted to the cables as they really are
   stretched. The target: a distribution at the estimated pose for the platform's weight, the
   measured hand force at the handle and the commanded acceleration, every cable between a
   floor (`min_tension`, lowered where the pose or the ceiling allow no more) and a ceiling
-  (`max_tension`).
+  (`max_tension`), never below a hard floor (`tension_floor`; rules (a)-(d) of
+  `distribution_1d_bounded`).
 - `orientation_tick` (orientation_hold): an angular-velocity command back to the orientation
   held (the estimate's after the warm-up), w = K_R log(R_ref R^T).
 - `pose_rates_tick` (jacobian_mapping): l_dot = J(p, R) [v; w] + K_l (l_d - L0), with l_d the

@@ -86,8 +86,8 @@ def clarabel_least_norm(W, w, lo, hi):
 
 
 def reference_target(W, w, floor, hard, ceiling):
-    """The rules of issue 26, item 3, written from their statement: (T before the raise, T,
-    t*, status)."""
+    """The target's rules (a)-(d) (pose_control.distribution_1d_bounded), written from their
+    statement with HiGHS and Clarabel: (T before the raise, T, t*, status)."""
     t_star = highs_t_star(W, w)
     best = highs_best(W, w, ceiling)
     used = min(floor, best - FM)
