@@ -241,20 +241,49 @@ def _swap_arg(text: str) -> tuple[int, int]:
 # --- simulate --------------------------------------------------------------------------------
 
 
+def _named_cables(cable, ticks) -> str:
+    """'7 (120 ticks), 6 (3 ticks)': the 1-based cables `cable` names on the `ticks` (bool
+    mask), most often named first."""
+    named = cable[ticks]
+    numbers, counts = np.unique(named[named > 0], return_counts=True)
+    order = np.argsort(-counts, kind="stable")
+    return ", ".join(f"{numbers[k]} ({counts[k]} tick{'s' if counts[k] != 1 else ''})"
+                     for k in order) or "none named"
+
+
 def tension_control_summary(log) -> str:
-    """One line on the tension control of a log (controller.tension_control): on how many
-    ticks the floor held, was lowered to what the pose allows (t*), and on how many no
-    distribution held at all (t* < 0: outside the wrench-feasible workspace)."""
+    """One line on the tension control of a log (controller.tension_control): per status
+    (pose_control.tension_tick) how many ticks and which cables: the floor held; lowered to
+    what the pose and the ceiling allow (the weakest cable); the ceiling exceeded to keep
+    the hard floor (the cable above it); the hard floor unreachable (t* < tension_floor:
+    the cables raised to it); W rank-deficient; and on how many no distribution held at all
+    (t* < 0: outside the wrench-feasible workspace)."""
+    from .pose_control import CEILING_EXCEEDED, FLOOR_UNREACHABLE
+    from .tension import BELOW_FLOOR, FEASIBLE, GENERAL
+
     status = np.asarray(log["tension_status"]).reshape(-1)
     t_star = np.asarray(log["t_star"], dtype=float).reshape(-1)
+    # Logs written before the cable was logged name none.
+    cable = np.asarray(log["tension_cable"] if "tension_cable" in log
+                       else np.zeros(status.size)).reshape(-1).astype(int)
     T = status.size
-    held = int(np.sum(status == 0))
-    lowered = status == 1
-    none = int(np.sum(lowered & (t_star < 0)))
-    text = (f"tension control: the floor held on {held} of {T} ticks, lowered to the pose's "
-            f"largest minimum tension t* on {int(lowered.sum())}")
-    if lowered.any():
-        text += f" (smallest t* {t_star[lowered].min():.2f} N)"
+    parts = [f"the floor held on {int(np.sum(status == FEASIBLE))} of {T} ticks"]
+    for code, what, role in (
+            (BELOW_FLOOR, "lowered to what the pose and the ceiling allow", "weakest cable"),
+            (CEILING_EXCEEDED, "above controller.max_tension to keep every cable at "
+             "controller.tension_floor", "cable above the ceiling"),
+            (FLOOR_UNREACHABLE, "the pose cannot hold every cable at controller.tension_floor"
+             " (t* below it), weak cables raised to it", "cable raised most"),
+            (GENERAL, "the wrench matrix rank-deficient (minimum-norm target)",
+             "cable raised most")):
+        ticks = status == code
+        if ticks.any():
+            smallest = t_star[ticks].min()
+            t_text = f"smallest t* {smallest:.2f} N; " if np.isfinite(smallest) else ""
+            parts.append(f"{what} on {int(ticks.sum())} ({t_text}{role}: "
+                         f"{_named_cables(cable, ticks)})")
+    text = "tension control: " + "; ".join(parts)
+    none = int(np.sum(t_star < 0))
     if none:
         text += (f"; NO tension distribution held on {none} ticks (t* < 0: outside the "
                  "wrench-feasible workspace, a cable must go slack)")

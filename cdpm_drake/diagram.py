@@ -64,6 +64,7 @@ LOGGED = (
     ("tension_target", "tension_distribution", "tension_target"),
     ("t_star", "tension_distribution", "t_star"),
     ("tension_status", "tension_distribution", "status"),
+    ("tension_cable", "tension_distribution", "cable"),
     ("lengths", "reels", "cable_lengths"),
     ("F_measured", "reels", "measured_force"),
     ("pair_distances", "interference_force", "pair_distances"),
@@ -406,7 +407,8 @@ def _add_pose_blocks(builder, blocks, resolved, fk, force_sensor, lengths, veloc
     tension = blocks["tension_distribution"] = FlatBlock(
         builder, "tension_distribution", POSE_MAIN, lambda b: build_tension_distribution(
             b, robot, min_tension=controller.min_tension,
-            max_tension=controller.max_tension, slew_rate=TENSION_SLEW_RATE,
+            max_tension=controller.max_tension, tension_floor=controller.tension_floor,
+            slew_rate=TENSION_SLEW_RATE,
             initial_tensions=start, time_step=T))
     for name, port in (("p_WP", fk.GetOutputPort("p_WP")), ("R_WP", R_WP),
                        ("F_H", force_sensor.GetOutputPort("F_H")),

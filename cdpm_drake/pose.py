@@ -116,10 +116,10 @@ def wrench_columns(u, Rb, W):
 
 
 @_jit
-def _solve6(A, g, x):
-    """x = A^-1 g for a symmetric positive definite A (6, 6) by Cholesky (A is overwritten
+def solve_spd(A, g, x):
+    """x = A^-1 g for a symmetric positive definite A (n, n) by Cholesky (A is overwritten
     by its factor). False when A is not positive definite to working precision."""
-    n = 6
+    n = A.shape[0]
     scale = 0.0
     for i in range(n):
         scale = max(scale, A[i, i])
@@ -185,7 +185,7 @@ def pose_fk(reels, attachments, lengths, p_guess, R_guess, tol, max_iterations, 
         for a in range(6):
             for b in range(a):
                 A[a, b] = A[b, a]
-        if not _solve6(A, g, x):
+        if not solve_spd(A, g, x):
             return False
         for r in range(3):
             p[r] += x[r]

@@ -9,17 +9,19 @@ as 9 floats. Tensions in N, lengths in m.
   lengths L0 corrected for the cables' modelled stretch under the last tension estimate,
   l_i = L0_i (1 + T_i / EA); and the fit's residual. At the first tick it iterates the fit
   and the estimate below to agreement (the pretension it starts from is unknown).
-- `tension_tick` (tension_distribution): the tension ESTIMATE and the target. With one more
-  cable than degrees of freedom the fit's residual along the wrench matrix's nullspace n is
-  the one thing a pose cannot explain, the internal tension. From r = lengths(pose) - l and
-  l = L0 + D T_assumed (D = diag(L0 / EA)), n . D T = n . D T_assumed + n . r; the true
-  T = T_p + lam n balances the same wrench (T_p the minimum-norm one), so
-  lam = (n . D (T_assumed - T_p) + n . r) / (n . D n). The estimate is what the next tick's
+- `tension_tick` (tension_distribution): the tension ESTIMATE and the target. With k = m - 6
+  more cables than degrees of freedom the fit's residual along the wrench matrix's nullspace
+  (an orthonormal basis N, m x k) is what a pose cannot explain, the internal tension. From
+  r = lengths(pose) - l and l = L0 + D T_assumed (D = diag(L0 / EA)), N^T D T = N^T D
+  T_assumed + N^T r; the true T = T_p + N lam balances the same wrench (T_p the minimum-norm
+  one), so N^T D N lam = N^T (D (T_assumed - T_p) + r) (weighted least squares; for k = 1
+  lam = (n . D (T_assumed - T_p) + n . r) / (n . D n)). The estimate is what the next tick's
   fit corrects the lengths by, so the pose stays fitted to the cables as they really are
   stretched. The target: a distribution at the estimated pose for the platform's weight, the
   measured hand force at the handle and the commanded acceleration, every cable between a
   floor (`min_tension`, lowered where the pose or the ceiling allow no more) and a ceiling
-  (`max_tension`).
+  (`max_tension`), never below a hard floor (`tension_floor`; rules (a)-(d) of
+  `distribution_1d_bounded`).
 - `orientation_tick` (orientation_hold): an angular-velocity command back to the orientation
   held (the estimate's after the warm-up), w = K_R log(R_ref R^T).
 - `pose_rates_tick` (jacobian_mapping): l_dot = J(p, R) [v; w] + K_l (l_d - L0), with l_d the
@@ -36,9 +38,11 @@ import numpy as np
 
 from .interference import interference_tick
 from .kinematics import add_scaled_corrections, dead_band_compensation
-from .pose import _solve6, pose_fk, posed_cables, rotation_log, wrench_columns
+from .pose import pose_fk, posed_cables, rotation_log, solve_spd, wrench_columns
+from .qp import QP_OPTIMAL, solve_qp
 from .tension import (BELOW_FLOOR, FEASIBLE, GENERAL, GRAVITY, RANK_TOL, _lam_interval,
-                      _null_vector, _particular, _pivoted_qr, max_min_1d)
+                      _null_vector, _particular, _pivoted_qr, max_min_1d, max_min_lines,
+                      max_min_lines_subject_to)
 
 _jit = numba.njit(cache=True, error_model="numpy")
 
@@ -59,7 +63,7 @@ def sizes(m: int) -> dict:
     """Input (x) and output (out) sizes of the kernels for m cables, and their memories."""
     return {
         "fk_x": 2 * m + 13, "fk_out": 2 * m + 16, "fk_memory": 13,
-        "tension_x": 5 * m + 22, "tension_out": 5 * m + 6, "tension_memory": 2 * m + 4,
+        "tension_x": 5 * m + 22, "tension_out": 5 * m + 7, "tension_memory": 2 * m + 4,
         "orientation_x": 19, "orientation_out": 22, "orientation_memory": 10,
         "rates_x": 4 * m + 31, "rates_out": 4 * m + 4, "rates_memory": 2 * m + 4,
     }
@@ -106,31 +110,47 @@ def _wrench(R, params, F, a, w):
 
 
 @_jit
-def _estimate(reels, attachments, p, R, w, L0, r, T_assumed, EA, W, T_p, n, T_est):
+def _estimate(reels, attachments, p, R, w, L0, r, T_assumed, EA, W, T_p, N, T_est):
     """The tensions of a platform in equilibrium under w at the pose (p, R) fitted to the
-    lengths L0 (1 + T_assumed / EA) with residual r: T = T_p + lam n, the minimum-norm T_p of
-    the wrench plus the internal force the redundant cable's residual measures (module
-    docstring). Writes W (6, m), T_p, n (zero when there is not one redundant cable: then
-    T_est = T_p) and T_est; returns True when n exists (m == 7, W of full rank)."""
+    lengths L0 (1 + T_assumed / EA) with residual r: T = T_p + N lam, the minimum-norm T_p of
+    the wrench plus the internal force the redundant cables' residual measures, lam the
+    weighted least-squares solution of N^T D N lam = N^T (D (T_assumed - T_p) + r), D =
+    diag(L0 / EA) (module docstring). Writes W (6, m), T_p, N (m, m - 6: an orthonormal basis
+    of W's nullspace, perpendicular to T_p) and T_est; returns True when W has rank 6 (else
+    T_est = T_p, the minimum-norm distribution of the normal equations, N zero)."""
     m = reels.shape[0]
+    k = N.shape[1]
     u, Rb, L = np.empty((m, 3)), np.empty((m, 3)), np.empty(m)
     posed_cables(reels, attachments, p, R, u, Rb, L)
     wrench_columns(u, Rb, W)
     A, V = np.empty((m, 6)), np.empty((6, m))
     beta, perm = np.empty(6), np.empty(6, dtype=np.int64)
-    if m == 7 and _pivoted_qr(W, A, V, beta, perm) >= RANK_TOL:
+    if m == k + 6 and _pivoted_qr(W, A, V, beta, perm) >= RANK_TOL:
         _particular(A, V, beta, perm, w, T_p)
-        _null_vector(V, beta, n)
-        num = den = 0.0
+        col = np.empty(m)
+        for c in range(k):
+            _null_vector(V, beta, col, c)
+            for i in range(m):
+                N[i, c] = col[i]
+        G, g, lam = np.zeros((k, k)), np.zeros(k), np.zeros(k)
         for i in range(m):
             d = L0[i] / EA
-            num += n[i] * (d * (T_assumed[i] - T_p[i]) + r[i])
-            den += n[i] * n[i] * d
-        lam = num / den
+            for a in range(k):
+                g[a] += N[i, a] * (d * (T_assumed[i] - T_p[i]) + r[i])
+                for b in range(k):
+                    G[a, b] += N[i, a] * N[i, b] * d
+        if k == 1:
+            lam[0] = g[0] / G[0, 0]
+        elif k > 1 and not solve_spd(G, g, lam):
+            for a in range(k):
+                lam[a] = 0.0
         for i in range(m):
-            T_est[i] = T_p[i] + lam * n[i]
+            total = T_p[i]
+            for a in range(k):
+                total += lam[a] * N[i, a]
+            T_est[i] = total
         return True
-    # No single redundant cable: the minimum-norm distribution by the normal equations.
+    # W rank-deficient: the minimum-norm distribution by the normal equations.
     G = np.empty((6, 6))
     for a in range(6):
         for b in range(6):
@@ -141,7 +161,7 @@ def _estimate(reels, attachments, p, R, w, L0, r, T_assumed, EA, W, T_p, n, T_es
     minus_w, y = np.empty(6), np.zeros(6)
     for a in range(6):
         minus_w[a] = -w[a]
-    if not (m >= 6 and _solve6(G, minus_w, y)):
+    if not (m >= 6 and solve_spd(G, minus_w, y)):
         for a in range(6):
             y[a] = 0.0
     for i in range(m):
@@ -150,7 +170,8 @@ def _estimate(reels, attachments, p, R, w, L0, r, T_assumed, EA, W, T_p, n, T_es
             total += W[a, i] * y[a]
         T_p[i] = total
         T_est[i] = total
-        n[i] = 0.0
+        for a in range(k):
+            N[i, a] = 0.0
     return False
 
 
@@ -179,7 +200,8 @@ def pose_fk_tick(reels, attachments, params, x, out):
     p_guess = x[2 * m:2 * m + 3]
     R_guess = x[2 * m + 3:2 * m + 12].reshape((3, 3))
     if x[2 * m + 12] == 0.0 and EA > 0.0:
-        W, T_p, n, T_next = np.empty((6, m)), np.empty(m), np.empty(m), np.empty(m)
+        W, T_p, T_next = np.empty((6, m)), np.empty(m), np.empty(m)
+        N = np.empty((m, max(m - 6, 0)))
         w, zero = np.empty(6), np.zeros(3)
         for _ in range(int(params[6])):
             # A guess far off leaves lengths no pose fits well, where Gauss-Newton crawls:
@@ -187,7 +209,7 @@ def pose_fk_tick(reels, attachments, params, x, out):
             # settle.
             _fit(reels, attachments, L0, T, EA, p_guess, R_guess, p, R, residual)
             _wrench(R, params[2:6], zero, zero, w)
-            _estimate(reels, attachments, p, R, w, L0, residual, T, EA, W, T_p, n, T_next)
+            _estimate(reels, attachments, p, R, w, L0, residual, T, EA, W, T_p, N, T_next)
             change = 0.0
             for i in range(m):
                 change = max(change, abs(T_next[i] - T[i]))
@@ -215,73 +237,234 @@ def pose_fk_tick(reels, attachments, params, x, out):
 FLOOR_MARGIN = 0.05
 
 
-@_jit
-def distribution_1d_bounded(T_p, n, floor, ceiling, T):
-    """The tension distribution of a one-dimensional nullspace T = T_p + n lam with every
-    T_i in [floor, ceiling] (N), into T: the least-norm one when the pose allows the floor
-    under the ceiling (status FEASIBLE), else the least-norm one that keeps the smallest
-    tension within FLOOR_MARGIN of the largest it can be without any going above the ceiling,
-    the floor lowered to that (BELOW_FLOOR). A ceiling no lam meets (the wrench alone asks
-    more of a cable) is dropped. Returns (status, t*,
-    the floor used): t* the pose's largest achievable minimum tension, unbounded above
-    (tension.max_min_1d), +inf where an internal force raises every tension.
+# tension_tick's statuses beyond tension.py's FEASIBLE (0: every cable between min_tension
+# and max_tension), BELOW_FLOOR (1: the floor lowered to what the pose and the ceiling allow,
+# never below tension_floor) and GENERAL (2: the wrench matrix is rank-deficient, the
+# minimum-norm distribution): CEILING_EXCEEDED (3: the ceiling and the hard floor conflict,
+# the floor wins: a cable above max_tension) and FLOOR_UNREACHABLE (4: no distribution keeps
+# every cable at tension_floor even without a ceiling: the max-min one, its weak cables
+# raised to tension_floor, which no longer balances the wrench exactly).
+CEILING_EXCEEDED, FLOOR_UNREACHABLE = 3, 4
 
-    Why a ceiling: where t* is +inf, or large, raising the weakest cable to the floor may take
-    an internal force of hundreds of newtons through the others (a cable whose nullspace
-    component is small); the ceiling trades that floor for sane tensions."""
-    m = T_p.size
-    t_star, lam_star = max_min_1d(T_p, n)
-    a, b = -math.inf, math.inf  # the lam that keep every cable at or below the ceiling
-    for i in range(m):
+
+@_jit
+def _ceiling_interval(T_p, n, ceiling):
+    """[a, b]: the lam with T_p[i] + n[i] lam <= ceiling for every cable (a > b: none)."""
+    a, b = -math.inf, math.inf
+    for i in range(T_p.size):
         if n[i] > 0.0:
             b = min(b, (ceiling - T_p[i]) / n[i])
         elif n[i] < 0.0:
             a = max(a, (ceiling - T_p[i]) / n[i])
         elif T_p[i] > ceiling:
             a, b = math.inf, -math.inf
-    if a > b:
-        a, b = -math.inf, math.inf
-    # The best lam within [a, b]: m(lam) = min_i T_i(lam) is concave, so its maximiser over
-    # the interval is the unconstrained one clipped (a direction when t* is +inf).
-    if t_star == math.inf:
-        lam_best = b if b < math.inf else (a if a > -math.inf else 0.0)
-        # With every n_i of one sign, raising lam raises them all: the sign says which way.
-        s = 0.0
+    return a, b
+
+
+@_jit
+def _weakest(T):
+    """The 1-based number of the cable with the smallest tension."""
+    worst = 0
+    for i in range(T.size):
+        if T[i] < T[worst]:
+            worst = i
+    return worst + 1
+
+
+@_jit
+def _raise_to(T, floor):
+    """Every T_i below floor raised to it; the 1-based cable raised most (0: none was)."""
+    most, cable = 0.0, 0
+    for i in range(T.size):
+        if floor - T[i] > most:
+            most, cable = floor - T[i], i + 1
+        T[i] = max(T[i], floor)
+    return cable
+
+
+@_jit
+def _floor_wins(T, t_star, hard_floor, ceiling):
+    """Cases (c) and (d): every cable of T raised to hard_floor; returns (status, t*,
+    hard_floor, cable): FLOOR_UNREACHABLE naming the cable raised most where t* <
+    hard_floor, else CEILING_EXCEEDED naming the cable above the ceiling (the largest), or
+    BELOW_FLOOR naming the weakest where none ended up above it."""
+    raised = _raise_to(T, hard_floor)
+    if t_star < hard_floor:
+        return FLOOR_UNREACHABLE, t_star, hard_floor, raised
+    top = 0
+    for i in range(T.size):
+        if T[i] > T[top]:
+            top = i
+    if T[top] > ceiling + 1e-9 * max(1.0, ceiling):
+        return CEILING_EXCEEDED, t_star, hard_floor, top + 1
+    return BELOW_FLOOR, t_star, hard_floor, _weakest(T)
+
+
+@_jit
+def distribution_1d_bounded(T_p, n, floor, hard_floor, ceiling, T):
+    """The target tension distribution of a one-dimensional nullspace T = T_p + n lam (n a
+    unit vector perpendicular to T_p: |T|^2 = |T_p|^2 + lam^2), in closed form, into T (N).
+    Returns (status, t*, the floor used, cable): t* the pose's largest achievable minimum
+    tension, unbounded above (tension.max_min_1d; +inf where an internal force raises every
+    tension); cable 1-based (0: none). With best, the largest minimum tension with every
+    cable <= ceiling (-inf where no lam keeps them all under it):
+      (a) best >= floor: the least-norm T with floor <= T <= ceiling (FEASIBLE, cable 0);
+      (b) best - FLOOR_MARGIN >= hard_floor: the least-norm T with best - FLOOR_MARGIN <= T
+          <= ceiling (BELOW_FLOOR, the weakest cable);
+      (c) else, t* >= hard_floor (the ceiling and the hard floor conflict; the floor wins):
+          the least-norm T with hard_floor <= T <= the smallest largest tension of those
+          with every T_i >= hard_floor, plus FLOOR_MARGIN, or the ceiling if that is higher
+          (CEILING_EXCEEDED naming the cable above the ceiling; BELOW_FLOOR naming the
+          weakest where none ends up above it);
+      (d) else (t* < hard_floor): the same with the floor t* - FLOOR_MARGIN (the least-norm
+          T within FLOOR_MARGIN of t*, its largest tension kept as in (c)), each cable then
+          raised to hard_floor (FLOOR_UNREACHABLE, naming the cable raised most).
+    Where hard_floor <= t* < hard_floor + FLOOR_MARGIN, (c) takes (d)'s floor too, and
+    raises: an exact floor just under t* is reached only far out along the nullspace where
+    the weakest cable's component is small (the flat maximum of FLOOR_MARGIN), a jump of
+    the target by 14 N a tick on exp2. The floor used: min(floor, best - FLOOR_MARGIN) in
+    (a) and (b) (continuous as best passes the floor), hard_floor in (c) and (d).
+
+    Why a ceiling: where t* is +inf, or large, raising the weakest cable to the floor may take
+    an internal force of hundreds of newtons through the others (a cable whose nullspace
+    component is small); the ceiling trades that floor for sane tensions, down to the hard
+    floor, never below: a cable commanded below it goes slack under the tension ripple."""
+    m = T_p.size
+    t_star, lam_star = max_min_1d(T_p, n)
+    a, b = _ceiling_interval(T_p, n, ceiling)
+    best, lam_best = -math.inf, 0.0
+    if a <= b:
+        # The best lam within [a, b]: m(lam) = min_i T_i(lam) is concave, so its maximiser
+        # over the interval is the unconstrained one clipped (a direction when t* is +inf).
+        if t_star == math.inf:
+            lam_best = b if b < math.inf else (a if a > -math.inf else 0.0)
+            # With every n_i of one sign, raising lam raises them all: the sign says which.
+            s = 0.0
+            for i in range(m):
+                s += n[i]
+            if s < 0.0:
+                lam_best = a if a > -math.inf else (b if b < math.inf else 0.0)
+        else:
+            lam_best = min(max(lam_star, a), b)
+        best = math.inf
         for i in range(m):
-            s += n[i]
-        if s < 0.0:
-            lam_best = a if a > -math.inf else (b if b < math.inf else 0.0)
-    else:
-        lam_best = min(max(lam_star, a), b)
-    best = math.inf
-    for i in range(m):
-        best = min(best, T_p[i] + n[i] * lam_best)
+            best = min(best, T_p[i] + n[i] * lam_best)
     used = min(floor, best - FLOOR_MARGIN)  # continuous as best passes the floor
-    status = FEASIBLE if best >= floor else BELOW_FLOOR
-    lo, hi = _lam_interval(T_p, n, used)
+    if used >= hard_floor:  # (a), (b)
+        lo, hi = _lam_interval(T_p, n, used)
+        lo, hi = max(lo, a), min(hi, b)
+        lam = lam_best if lo > hi else min(max(0.0, lo), hi)  # |T|^2 = |T_p|^2 + lam^2
+        for i in range(m):
+            T[i] = T_p[i] + n[i] * lam
+        if best >= floor:
+            return FEASIBLE, t_star, used, 0
+        return BELOW_FLOOR, t_star, used, _weakest(T)
+    # (c), (d): the floor wins over the ceiling, and the FLOOR_MARGIN below t* over the
+    # floor where t* is within it (the flat maximum: a weak cable that the internal force
+    # barely moves, which an exact floor would reach only far out along the nullspace).
+    floor_c = min(hard_floor, t_star - FLOOR_MARGIN)
+    lo, hi = _lam_interval(T_p, n, floor_c)
+    # The smallest largest tension over [lo, hi]: max_i T_i(lam) is convex, so its
+    # minimiser (the max-min of -T) clipped; with every n_i of one sign (t* = +inf) it falls
+    # all the way towards the end where every cable drops.
+    neg_top, lam_top = max_min_1d(-T_p, -n)
+    if neg_top == math.inf:
+        lam_top = lo if n[0] > 0.0 else hi
+    lam_top = min(max(lam_top, lo), hi)
+    top = -math.inf
+    for i in range(m):
+        top = max(top, T_p[i] + n[i] * lam_top)
+    a, b = _ceiling_interval(T_p, n, max(ceiling, top + FLOOR_MARGIN))
     lo, hi = max(lo, a), min(hi, b)
-    lam = lam_best if lo > hi else min(max(0.0, lo), hi)  # |T|^2 = |T_p|^2 + lam^2
+    lam = lam_top if lo > hi else min(max(0.0, lo), hi)
     for i in range(m):
         T[i] = T_p[i] + n[i] * lam
-    return status, t_star, used
+    return _floor_wins(T, t_star, hard_floor, ceiling)
+
+
+@_jit
+def _least_norm(T_p, N, lo, hi, fallback, T):
+    """T = T_p + N lam with the least-norm lam (|T|^2 = |T_p|^2 + |lam|^2, N orthonormal and
+    perpendicular to T_p) with lo <= T_i <= hi (hi may be +inf), by qp.solve_qp; lam =
+    fallback where the QP finds none (round-off at an empty set's edge)."""
+    m, k = N.shape
+    C, d = np.empty((2 * m, k)), np.empty(2 * m)
+    count = 0
+    for i in range(m):
+        for c in range(k):
+            C[count, c] = N[i, c]
+        d[count] = lo - T_p[i]
+        count += 1
+        if hi < math.inf:
+            for c in range(k):
+                C[count, c] = -N[i, c]
+            d[count] = T_p[i] - hi
+            count += 1
+    w, z0, z, u = np.ones(k), np.zeros(k), np.empty(k), np.empty(2 * m)
+    status, _ = solve_qp(w, z0, C, d, count, z, u, 50 + 4 * count)
+    if status != QP_OPTIMAL:
+        for c in range(k):
+            z[c] = fallback[c]
+    for i in range(m):
+        total = T_p[i]
+        for c in range(k):
+            total += N[i, c] * z[c]
+        T[i] = total
+
+
+@_jit
+def distribution_bounded(T_p, N, floor, hard_floor, ceiling, T):
+    """`distribution_1d_bounded`'s rules (a)-(d) for a nullspace of any dimension k (N (m,
+    k) orthonormal, perpendicular to T_p; k = 0 too): t*, best and the smallest largest
+    tension of case (c) by tension.max_min_lines(_subject_to) (the LP as a small QP, within
+    ~1e-8 relative), each least-norm distribution by qp.solve_qp (exact). Same returns."""
+    m, k = N.shape
+    lam_star, lam = np.zeros(k), np.zeros(k)
+    t_star = max_min_lines(T_p, N, lam_star)
+    # best: the largest minimum with T_i <= ceiling, i.e. -N_i . lam >= T_p[i] - ceiling.
+    E, f = np.empty((m, k)), np.empty(m)
+    for i in range(m):
+        for c in range(k):
+            E[i, c] = -N[i, c]
+        f[i] = T_p[i] - ceiling
+    best = max_min_lines_subject_to(T_p, N, E, f, ceiling, lam)
+    used = min(floor, best - FLOOR_MARGIN)
+    if used >= hard_floor:  # (a), (b)
+        _least_norm(T_p, N, used, ceiling, lam, T)
+        if best >= floor:
+            return FEASIBLE, t_star, used, 0
+        return BELOW_FLOOR, t_star, used, _weakest(T)
+    # (c), (d), as in distribution_1d_bounded. The smallest largest tension with every T_i >=
+    # floor_c: minus the largest minimum of -T subject to N_i . lam >= floor_c - T_p[i].
+    floor_c = min(hard_floor, t_star - FLOOR_MARGIN)
+    minus_T_p = np.empty(m)
+    for i in range(m):
+        minus_T_p[i] = -T_p[i]
+        f[i] = floor_c - T_p[i]
+    top = -max_min_lines_subject_to(minus_T_p, E, N, f, -floor_c, lam)
+    _least_norm(T_p, N, floor_c, max(ceiling, top + FLOOR_MARGIN), lam, T)
+    return _floor_wins(T, t_star, hard_floor, ceiling)
 
 
 @_jit
 def tension_tick(reels, attachments, params, x, out):
     """params = [mass kg, handle (3, m, platform frame), EA N, floor N, ceiling N, time step
-    s, slew rate N/s, warm-up ticks]. x = [p (3), R (9), F_H (3), v (3), residual (m), L0
-    (m), T_assumed (m: the tensions the forward kinematics corrected the lengths for),
-    memory: T_estimate (m), v_previous (3), ticks (1), T_command_previous (m)]. out =
-    [T_command (m), T_estimate (m), T_target (m), t* (1), status (1), next memory (2 m + 4)]:
-    T_target the distribution at the pose (`distribution_1d_bounded`), T_command what the
-    lengths are stretched for: the target, moved towards at most `slew rate` N/s per cable
-    from the estimate at the end of the warm-up (the plant's tensions when the controller
-    takes over are whatever they are, and a jump to the target would shake the platform).
-    status: FEASIBLE, BELOW_FLOOR (the floor lowered to what the pose and the ceiling allow)
-    or GENERAL (not one redundant cable: the minimum-norm distribution, nothing chosen)."""
+    s, slew rate N/s, warm-up ticks, hard floor N]. x = [p (3), R (9), F_H (3), v (3),
+    residual (m), L0 (m), T_assumed (m: the tensions the forward kinematics corrected the
+    lengths for), memory: T_estimate (m), v_previous (3), ticks (1), T_command_previous (m)].
+    out = [T_command (m), T_estimate (m), T_target (m), t* (1), status (1), cable (1), next
+    memory (2 m + 4)]: T_target the distribution at the pose (rules (a)-(d) of
+    `distribution_1d_bounded`: closed form for one redundant cable, `distribution_bounded`
+    for more), T_command what the lengths are stretched for: the target, moved towards at
+    most `slew rate` N/s per cable from the estimate at the end of the warm-up (the plant's
+    tensions when the controller takes over are whatever they are, and a jump to the target
+    would shake the platform). status: FEASIBLE, BELOW_FLOOR, CEILING_EXCEEDED,
+    FLOOR_UNREACHABLE, or GENERAL (W rank-deficient: the minimum-norm distribution, nothing
+    chosen, raised to the hard floor); cable the 1-based cable the status names (0: none)."""
     m = reels.shape[0]
     EA, floor, ceiling = params[4], params[5], params[6]
     step, max_change, warmup = params[7], params[8] * params[7], params[9]
+    hard_floor = params[10]
     p = x[0:3]
     R = x[3:12].reshape((3, 3))
     F = x[12:15]
@@ -302,20 +485,30 @@ def tension_tick(reels, attachments, params, x, out):
     T_cmd = out[0:m]
     T_est = out[m:2 * m]
     T_target = out[2 * m:3 * m]
-    W, T_p, n = np.empty((6, m)), np.empty(m), np.empty(m)
-    if _estimate(reels, attachments, p, R, w, L0, r, T_assumed, EA, W, T_p, n, T_est):
-        status, t_star, _ = distribution_1d_bounded(T_p, n, floor, ceiling, T_target)
+    W, T_p, N = np.empty((6, m)), np.empty(m), np.empty((m, max(m - 6, 0)))
+    if _estimate(reels, attachments, p, R, w, L0, r, T_assumed, EA, W, T_p, N, T_est):
+        if N.shape[1] == 1:  # one redundant cable: closed form
+            n = np.empty(m)
+            for i in range(m):
+                n[i] = N[i, 0]
+            status, t_star, _, cable = distribution_1d_bounded(T_p, n, floor, hard_floor,
+                                                               ceiling, T_target)
+        else:
+            status, t_star, _, cable = distribution_bounded(T_p, N, floor, hard_floor,
+                                                            ceiling, T_target)
     else:
         status, t_star = GENERAL, math.inf
         for i in range(m):
             T_target[i] = T_p[i]
             t_star = min(t_star, T_p[i])
+        cable = _raise_to(T_target, hard_floor)
     for i in range(m):
         before = T_before[i] if started else T_est[i]  # during the warm-up: the estimate
         T_cmd[i] = min(before + max_change, max(before - max_change, T_target[i]))
     out[3 * m] = t_star
     out[3 * m + 1] = status
-    nxt = 3 * m + 2
+    out[3 * m + 2] = cable
+    nxt = 3 * m + 3
     for i in range(m):
         out[nxt + i] = T_est[i]
         out[nxt + m + 4 + i] = T_cmd[i]

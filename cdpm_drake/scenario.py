@@ -16,7 +16,7 @@ import numpy as np
 
 from .operators import (CsvOperator, NoOperator, OperatorError, ScriptedOperator,
                         SpringHandOperator, OPERATOR_TYPES, make_operator)
-from .robot import Robot, RobotError, load_robot, resolve_named_yaml
+from .robot import Robot, RobotError, load_robot, resolve_named_yaml, robot_statics
 
 SCENARIOS_DIR = Path(__file__).resolve().parent / "scenarios"
 
@@ -168,18 +168,23 @@ class Controller:
     # - the target's stretch (robot file: cables.EA), tracked by the length loop.
     tension_control: bool = False
     # Floor of the target distribution, N: every cable at least this taut where the pose
-    # allows; where the largest achievable minimum tension t* is lower, the floor is t*.
+    # and the ceiling allow; where they allow less, the floor is lowered to what they allow
+    # (never below tension_floor).
     min_tension: float = 10.0
     # Ceiling of the target distribution, N: where raising the weakest cable to min_tension
     # would take an internal force that pulls another cable above this, the floor is lowered
     # instead (a cable whose share of the internal force is small can cost hundreds of N).
     max_tension: float = 100.0
-    # The hard floor of every cable's tension, N: the tension target is never below it (where
-    # the pose cannot hold it under max_tension, the ceiling gives way), and the safety
-    # filter keeps the platform where a distribution between tension_floor and max_tension
-    # holds its weight and the measured hand force (the kinetostatic limit). 3 N: the true
-    # tensions ring ~1 N around their target at the platform's lightly damped mode (README),
-    # so a cable at the floor stays taut.
+    # The hard floor of every cable's tension, N: no cable is ever commanded below it. Where
+    # the ceiling allows no more, the ceiling gives way (a cable above max_tension, logged as
+    # tension_status 3); where the pose itself allows no more (t* < tension_floor), the weak
+    # cables are raised to it (status 4); and the safety filter keeps the platform where a
+    # distribution between tension_floor and max_tension holds its weight and the measured
+    # hand force (the kinetostatic limit), so that neither happens. 3 N: on the dynamic plant
+    # the true tensions ring about 1 N around the target at the platform's lightly damped
+    # mode, which the encoders do not see (README, "Full pose and tension control"), so a
+    # cable commanded at 1 N goes slack; 3 N leaves that ripple twice over.
+    # 0 < tension_floor <= min_tension.
     tension_floor: float = 3.0
 
 
@@ -1004,14 +1009,20 @@ def _check_controller(c: Controller, robot: Robot, plant) -> None:
             "controller.tension_control: true needs a plant whose cables stretch "
             "(plant: !DynamicReels {} or !HardwareReels {...}): the kinematic !SimulatedReels "
             "has inextensible cables, whose lengths no stretch can be commanded on")
-    if m > 7:
+    rank = robot_statics(robot).rank
+    if rank < 6:
         raise ScenarioError(
-            f"controller.tension_control works for robots with 6 or 7 cables (at most one "
-            f"redundant cable: its target is computed in closed form every tick); robot "
-            f"{robot.name!r} has {m}")
+            f"controller.tension_control needs a wrench matrix of rank 6 (cables that hold "
+            f"every force and moment: the internal force it sets lives in the rest); robot "
+            f"{robot.name!r} has rank {rank} at its workspace centre")
+    if not (_is_number(c.tension_floor) and math.isfinite(float(c.tension_floor))
+            and float(c.tension_floor) > 0):
+        raise ScenarioError(f"controller.tension_floor must be a finite number > 0 N (the "
+                            f"tension no cable is commanded below), got {c.tension_floor!r}")
     if not (_is_number(c.min_tension) and math.isfinite(float(c.min_tension))
-            and float(c.min_tension) >= 0):
-        raise ScenarioError(f"controller.min_tension must be a finite number >= 0 N, got "
+            and float(c.min_tension) >= float(c.tension_floor)):
+        raise ScenarioError(f"controller.min_tension must be a finite number >= "
+                            f"controller.tension_floor = {c.tension_floor!r} N, got "
                             f"{c.min_tension!r}")
     if not (_is_number(c.max_tension) and math.isfinite(float(c.max_tension))
             and float(c.max_tension) > float(c.min_tension)):

@@ -46,7 +46,7 @@ import math
 import numba
 import numpy as np
 
-from .qp import solve_qp
+from .qp import QP_INFEASIBLE, solve_qp
 
 GRAVITY = 9.81  # m/s^2, along -z of the base frame
 
@@ -693,30 +693,53 @@ def max_min_lines(a, C, lam):
         lam[0] = l if math.isfinite(l) else 0.0
         return t
     # A bounded optimum is a convex combination of the a[j] (LP duality), so <= top.
+    t = max_min_lines_subject_to(a, C, C[:0], a[:0], top, lam)
+    if t > top + 1e-6 * (1.0 + abs(top)):
+        for c in range(k):
+            lam[c] = 0.0
+        return math.inf
+    return t
+
+
+@_jit
+def max_min_lines_subject_to(a, C, E, f, top, lam):
+    """max over lam (k,) of min_j (a[j] + C[j] . lam) subject to E lam >= f (rows of E (J,
+    k), f (J,)), for k >= 1, with the optimum known to be at most `top` where it is bounded:
+    the LP max t s.t. a_j + C_j . lam >= t, E lam >= f as max_min_lines' QP (LINES_WEIGHT, t
+    pulled towards a point far above top), solved by qp.solve_qp. Returns the maximum (-inf
+    when no lam meets E lam >= f) and writes a maximiser into lam. (The tension target's
+    largest minimum under a ceiling, and its smallest largest tension above a floor.)"""
+    K, k = C.shape
+    J = E.shape[0]
     M = top + 1e4 * (1.0 + abs(top))
     w = np.full(k + 1, LINES_WEIGHT)
     w[k] = 1.0
     z0 = np.zeros(k + 1)
     z0[k] = M
-    Cq = np.empty((K, k + 1))
-    d = np.empty(K)
+    Cq = np.empty((K + J, k + 1))
+    d = np.empty(K + J)
     for j in range(K):
         for c in range(k):
             Cq[j, c] = C[j, c]
         Cq[j, k] = -1.0
         d[j] = -a[j]
-    z, u = np.empty(k + 1), np.empty(K)
-    solve_qp(w, z0, Cq, d, K, z, u, 100 + 4 * K)
+    for j in range(J):
+        for c in range(k):
+            Cq[K + j, c] = E[j, c]
+        Cq[K + j, k] = 0.0
+        d[K + j] = f[j]
+    z, u = np.empty(k + 1), np.empty(K + J)
+    status, _ = solve_qp(w, z0, Cq, d, K + J, z, u, 100 + 4 * (K + J))
+    if status == QP_INFEASIBLE:
+        for c in range(k):
+            lam[c] = 0.0
+        return -math.inf
     t = math.inf
     for j in range(K):
         s = a[j]
         for c in range(k):
             s += C[j, c] * z[c]
         t = min(t, s)
-    if t > top + 1e-6 * (1.0 + abs(top)):
-        for c in range(k):
-            lam[c] = 0.0
-        return math.inf
     for c in range(k):
         lam[c] = z[c]
     return t

@@ -13,12 +13,18 @@ Cases, each on the same `--poses` random poses of paper_7cable (1-3 swapped, in 
 - 8 cables (a two-dimensional nullspace), on a suspended 8-cable robot: tension_distribution
   (Drake's MathematicalProgram with Clarabel: an LP and a QP), max_min_tension (the closed
   form over cable triples) and t* by Clarabel's LP alone;
-- holding_tension on a grid (per point, the wrench matrix included).
+- holding_tension on a grid (per point, the wrench matrix included);
+- the full-pose controller's tension_distribution kernel (pose_control.tension_tick: the
+  estimate and the target, bound as the block calls it) for 7, 8 and 9 cables, on random
+  tilted poses, hand forces up to 40 N and ceilings of 100, 40 and 20 N, grouped by the status
+  the target ends in (beyond 7 cables, statuses 0 and 1 take three small QPs, 3 and 4 four):
+  per pose the best of the repeats of 50 calls, its mean over the group and the slowest.
 
 Usage: python scripts/bench_tension.py [--calls 2000] [--poses 200] [--repeats 3]
 """
 
 import argparse
+import dataclasses
 import importlib.util
 import subprocess
 import sys
@@ -29,8 +35,11 @@ from pathlib import Path
 import numpy as np
 from scipy.optimize import linprog
 
+from cdpm_drake import pose_control
 from cdpm_drake.kernel_call import bind
+from cdpm_drake.pose import pose_lengths
 from cdpm_drake.robot import Robot, load_robot
+from cdpm_drake.rotation import rotation_from_rpy
 from cdpm_drake.tension import (_max_min_general, _nullspace_form, distribution_kernel,
                                 gravity_wrench, holding_tension, max_min_tension, step_grid,
                                 tension_distribution, wrench_matrix)
@@ -93,6 +102,56 @@ def suspended8():
         workspace=([0.5, 0.5, 0.5], [3.5, 2.5, 2.5]))
 
 
+def with_cables(robot, reels, attachments, name):
+    """`robot` with more cables (reels and attachment points, m)."""
+    return dataclasses.replace(robot, name=name, reels=np.vstack([robot.reels, reels]),
+                               attachments=np.vstack([robot.attachments, attachments]))
+
+
+def tension_tick_cases(robot, count, rng):
+    """(status, (reels, attachments, params, x, out)) for `count` random poses of `robot`:
+    tilted up to 0.1 rad, a hand force up to 40 N, ceiling 100, 40 or 20 N, at rest."""
+    m = robot.num_cables
+    d = robot.dynamics
+    reels = np.ascontiguousarray(robot.reels)
+    attachments = np.ascontiguousarray(robot.attachments)
+    lo, hi = robot.workspace.lower, robot.workspace.upper
+    cases = []
+    for _ in range(count):
+        p = lo + (hi - lo) * rng.uniform(size=3)
+        R = rotation_from_rpy(rng.uniform(-0.1, 0.1, 3))
+        F = rng.normal(size=3)
+        F *= rng.uniform(0.0, 40.0) / np.linalg.norm(F)
+        ceiling = float(rng.choice([100.0, 40.0, 20.0]))
+        params = np.array([d.mass, *d.handle, d.EA, 10.0, ceiling, 0.002, 50.0, 25.0, 3.0])
+        x = np.concatenate([p, R.ravel(), F, np.zeros(3), np.zeros(m),
+                            pose_lengths(robot, p, R), np.full(m, 20.0), np.zeros(m),
+                            np.zeros(3), [30.0], np.full(m, 20.0)])
+        out = np.empty(pose_control.sizes(m)["tension_out"])
+        status = pose_control.tension_tick(reels, attachments, params, x, out)
+        cases.append((int(status), (reels, attachments, params, x, out)))
+    return cases
+
+
+def tension_tick_rows(count, calls, repeats, rng):
+    """Rows (case, mean over the poses us, slowest pose us) of the tension_distribution
+    kernel: per pose the best of `repeats` means of `calls` calls."""
+    paper = load_robot("paper_7cable")
+    eight = with_cables(paper, [[1.7, 4.6, 2.9]], [[0.1, 0.05, 0.15]], "paper_8cable")
+    nine = with_cables(eight, [[1.7, 0.1, 0.8]], [[0.05, -0.1, -0.1]], "paper_9cable")
+    rows = []
+    for robot in (paper, load_robot("cube_8cable"), eight, nine):
+        cases = tension_tick_cases(robot, count, rng)
+        tick = bind(pose_control.tension_tick, *cases[0][1])
+        for status in sorted({s for s, _ in cases}):
+            group = [c for s, c in cases if s == status]
+            times = [per_call(tick, [c], calls, repeats) for c in group]
+            rows.append((f"tension_tick, {robot.name} ({robot.num_cables} cables), status "
+                         f"{status} ({len(group)} poses)", f"{1e6 * np.mean(times):.2f}",
+                         f"{1e6 * max(times):.2f}"))
+    return rows
+
+
 def main(argv=None) -> int:
     parser = argparse.ArgumentParser(description=__doc__,
                                      formatter_class=argparse.RawDescriptionHelpFormatter)
@@ -151,6 +210,11 @@ def main(argv=None) -> int:
     print(format_table(["case", "per call (us)", "/ HiGHS"], rows))
     if old is None:
         print(f"(the old solver was not found at git commit {OLD_COMMIT})")
+    print()
+    print(f"the full-pose controller's tension_distribution kernel, {args.poses} random poses "
+          f"per robot (floor 10 N, hard floor 3 N), best of {args.repeats}")
+    print(format_table(["case", "mean over the poses (us)", "slowest pose (us)"],
+                       tension_tick_rows(args.poses, 50, args.repeats, rng)))
     return 0
 
 

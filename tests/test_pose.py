@@ -130,13 +130,13 @@ def test_pose_fk_tick_reports_lengths_no_pose_fits():
 
 def _tension(p, R, F, r, L0, T_assumed, v=np.zeros(3), v_prev=np.zeros(3), ticks=0.0,
              floor=10.0, mass=2.5, handle=(0.0, 0.0, -0.15), slew=1e9, T_before=None,
-             ceiling=1e9, warmup=1.0):
-    params = np.array([mass, *handle, EA, floor, ceiling, 0.002, slew, warmup])
+             ceiling=1e9, warmup=1.0, hard_floor=3.0):
+    params = np.array([mass, *handle, EA, floor, ceiling, 0.002, slew, warmup, hard_floor])
     x = np.concatenate([p, np.asarray(R).ravel(), F, v, r, L0, T_assumed, np.zeros(M), v_prev,
                         [ticks], T_before if T_before is not None else np.zeros(M)])
     out = np.empty(S["tension_out"])
     status = pc.tension_tick(REELS, ATTACH, params, x, out)
-    return status, out[:M], out[M:2 * M], out[3 * M], out[3 * M + 2:]
+    return status, out[:M], out[M:2 * M], out[3 * M], out[3 * M + 3:]
 
 
 def test_the_target_balances_weight_hand_and_inertia_with_the_largest_floor_allowed():
@@ -360,7 +360,8 @@ def test_the_bounded_distribution_keeps_the_ceiling_and_the_largest_floor_under_
         T_p = -np.linalg.pinv(W) @ w
         for floor, ceiling in ((10.0, 60.0), (5.0, 1e6)):
             T = np.empty(M)
-            status, t_star, used = pc.distribution_1d_bounded(T_p, n, floor, ceiling, T)
+            status, t_star, used, _ = pc.distribution_1d_bounded(T_p, n, floor, -math.inf,
+                                                                 ceiling, T)
             np.testing.assert_allclose(W @ T + w, 0.0, atol=1e-9)
             best = _bounded_reference(W, w, floor, ceiling)
             if not np.isfinite(best) or best < floor - 1e-6 and T.max() > ceiling + 1e-9:
@@ -398,7 +399,7 @@ def test_the_target_does_not_jump_where_the_weakest_cable_cannot_be_changed():
         n = np.array([1.0, -1.0, 0.5, -0.5, 0.8, -0.3, eps])
         n /= np.linalg.norm(n)
         T = np.empty(7)
-        status, t_star, used = pc.distribution_1d_bounded(T_p, n, 10.0, 1e6, T)
+        status, t_star, used, _ = pc.distribution_1d_bounded(T_p, n, 10.0, -math.inf, 1e6, T)
         assert t_star == pytest.approx(3.0, abs=1e-4)
         assert used == pytest.approx(t_star - pc.FLOOR_MARGIN)
         assert T.min() >= t_star - pc.FLOOR_MARGIN - 1e-9

@@ -420,3 +420,55 @@ def test_an_untagged_operator_overlay_says_the_operator_needs_its_tag():
     # A field no operator has: the plain unknown-field message with the valid types.
     msg = error_of("{operator: {bogus: 3}}")
     assert "unknown field 'operator.bogus'" in msg and "'!SpringHandOperator'" in msg
+
+
+# --- the tension target's hard floor ---------------------------------------------------------
+
+_TENSION = "plant: !DynamicReels {{}}\ncontroller: {{pose: full, tension_control: true, {}}}"
+
+
+@pytest.mark.parametrize("setting, message", [
+    ("tension_floor: 0", "controller.tension_floor must be a finite number > 0 N (the tension "
+                         "no cable is commanded below), got 0.0"),
+    ("tension_floor: -1.5", "controller.tension_floor must be a finite number > 0 N (the "
+                            "tension no cable is commanded below), got -1.5"),
+    ("tension_floor: .inf", "controller.tension_floor must be a finite number > 0 N (the "
+                            "tension no cable is commanded below), got inf"),
+    ("min_tension: 2.5", "controller.min_tension must be a finite number >= "
+                         "controller.tension_floor = 3.0 N, got 2.5"),
+    ("tension_floor: 12.0", "controller.min_tension must be a finite number >= "
+                            "controller.tension_floor = 12.0 N, got 10.0"),
+    ("max_tension: 10.0", "controller.max_tension must be a finite number above "
+                          "controller.min_tension = 10.0 N, got 10.0"),
+])
+def test_the_tension_floors_and_ceiling_are_checked_at_load(setting, message):
+    """0 < tension_floor <= min_tension < max_tension, each message naming the field and the
+    value (defaults: 3, 10 and 100 N)."""
+    with pytest.raises(ScenarioError) as e:
+        load_scenario("exp1_no_interaction", _TENSION.format(setting))
+    assert str(e.value) == message
+
+
+def test_tension_control_needs_a_wrench_matrix_of_rank_six(tmp_path):
+    """cube_8cable with every cable at its own corner of the platform (the design before
+    issue 18): the cables cannot hold a moment about x (rank 5), so no internal force can be
+    set; tension control is refused naming the robot and the rank. The shipped cube is
+    accepted: more than seven cables are no reason to refuse."""
+    text = (ROBOTS_DIR / "cube_8cable.yaml").read_text()
+    start = text.index("attachments:")
+    end = text.index("# Half a metre")
+    corners = "".join(f"  - [{x}, {y}, {z}]\n" for z in (-0.15, 0.15)
+                      for x, y in ((-0.15, -0.15), (0.15, -0.15), (0.15, 0.15), (-0.15, 0.15)))
+    path = tmp_path / "corner_cube.yaml"
+    path.write_text(text[:start].replace("name: cube_8cable", "name: corner_cube")
+                    + "attachments:\n" + corners + text[end:])
+    overlay = f"robot: {path}\nswaps: []\ninitial_position: [2.0, 1.5, 1.5]\n"
+    with pytest.raises(ScenarioError) as e:
+        load_scenario("exp1_no_interaction", overlay + _TENSION.format("min_tension: 10.0"))
+    assert str(e.value) == (
+        "controller.tension_control needs a wrench matrix of rank 6 (cables that hold every "
+        "force and moment: the internal force it sets lives in the rest); robot "
+        "'corner_cube' has rank 5 at its workspace centre")
+    cube = overlay.replace(str(path), "cube_8cable")
+    assert load_scenario("exp1_no_interaction",
+                         cube + _TENSION.format("min_tension: 10.0")).controller.tension_control

@@ -374,3 +374,26 @@ def test_a_hand_force_beyond_the_sensor_range_is_warned_once_and_counted(capsys,
     code, out, err = simulate_cli(capsys, "exp2_interaction", "--duration", "0.1",
                                   "--no-progress", "--out", str(tmp_path / "calm"))
     assert code == 0 and "sensor's range" not in out + err
+
+
+def test_the_tension_summary_counts_each_status_and_names_its_cables():
+    """A synthetic log of 10 ticks: statuses 0 0 1 1 1 3 3 4 2 0 naming cables 0 0 7 7 6 2 2
+    5 0 0 (1-based, 0 none), t* per tick as below (inf where an internal force raises every
+    tension; -1.5 N outside the wrench-feasible workspace). Counted by hand: held 3 of 10;
+    lowered 3 (smallest t* 4.00 N; cable 7 twice, 6 once); ceiling 2 (t* inf: none printed;
+    cable 2 twice); unreachable 1 (t* -1.50; cable 5); rank-deficient 1 (nothing raised:
+    none named); one tick below t* = 0."""
+    log = {"tension_status": np.array([0, 0, 1, 1, 1, 3, 3, 4, 2, 0], dtype=float)[:, None],
+           "tension_cable": np.array([0, 0, 7, 7, 6, 2, 2, 5, 0, 0], dtype=float)[:, None],
+           "t_star": np.array([20, 20, 4, 5, 6, np.inf, np.inf, -1.5, 3, 20.0])[:, None],
+           "tension_estimate": np.array([[2.5, 40.0]] * 10)}
+    assert cli.tension_control_summary(log) == (
+        "tension control: the floor held on 3 of 10 ticks; lowered to what the pose and the "
+        "ceiling allow on 3 (smallest t* 4.00 N; weakest cable: 7 (2 ticks), 6 (1 tick)); "
+        "above controller.max_tension to keep every cable at controller.tension_floor on 2 "
+        "(cable above the ceiling: 2 (2 ticks)); the pose cannot hold every cable at "
+        "controller.tension_floor (t* below it), weak cables raised to it on 1 (smallest t* "
+        "-1.50 N; cable raised most: 5 (1 tick)); the wrench matrix rank-deficient "
+        "(minimum-norm target) on 1 (smallest t* 3.00 N; cable raised most: none named); NO "
+        "tension distribution held on 1 ticks (t* < 0: outside the wrench-feasible "
+        "workspace, a cable must go slack); estimated tensions 2.50 to 40.0 N")

@@ -619,6 +619,31 @@ def test_max_tension_is_the_ceiling_of_the_target():
     assert high["tension_target"].max() > 23.5
 
 
+@covers("Scenario.controller.tension_floor")
+def test_tension_floor_is_the_target_s_hard_floor():
+    """At P0 the pose holds every cable at no more than t* = 16.5-17.6 N (logged t_star).
+    With min_tension 23.5 N and the default hard floor (3 N) the floor is lowered to t* -
+    FLOOR_MARGIN (status 1); with tension_floor 20 or 23.5 N, above t*, it cannot be: the
+    max-min target's weak cables are raised to exactly tension_floor (status 4), and the
+    cable named is one of them, the one raised most (cable 3, the weakest there)."""
+    from cdpm_drake.pose_control import FLOOR_MARGIN, FLOOR_UNREACHABLE
+    from cdpm_drake.tension import BELOW_FLOOR
+
+    lowered = sim(_full_dynamic(tension_control=True, min_tension=23.5), 0.05)
+    assert (lowered["tension_status"] == BELOW_FLOOR).all()
+    np.testing.assert_allclose(lowered["tension_target"].min(axis=1),
+                               lowered["t_star"][:, 0] - FLOOR_MARGIN, atol=1e-9)
+    for floor in (20.0, 23.5):
+        log = sim(_full_dynamic(tension_control=True, min_tension=23.5, tension_floor=floor),
+                  0.05)
+        assert (log["t_star"] < floor).all()
+        assert (log["tension_status"] == FLOOR_UNREACHABLE).all()
+        target = log["tension_target"]
+        np.testing.assert_allclose(target.min(axis=1), floor, rtol=0, atol=1e-12)
+        assert (log["tension_cable"] == 3).all()
+        assert (target[:, 2] == floor).all()  # cable 3 was raised to the floor
+
+
 @covers("Scenario.controller.friction_compensation")
 def test_friction_compensation_makes_up_the_drives_dead_band():
     """On the dynamic plant every reel command is J(p) v + K_l e + 0.9 u_c tanh(e / 20 um),

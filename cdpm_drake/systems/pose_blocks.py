@@ -171,23 +171,27 @@ def build_pose_forward_kinematics(builder, robot, *, initial_position, max_resid
 # --- tension distribution ----------------------------------------------------------------------
 
 
-def build_tension_distribution(builder, robot, *, min_tension, max_tension, slew_rate,
-                               initial_tensions, time_step):
+def build_tension_distribution(builder, robot, *, min_tension, max_tension, tension_floor,
+                               slew_rate, initial_tensions, time_step):
     """The tension estimate and the target tensions at the estimated pose
     (pose_control.tension_tick). Inputs p_WP, R_WP, F_H (N), velocity_command (m/s),
     residual (m), cable_lengths (m), tension_assumed (N: the forward kinematics'); outputs
     tension_command (m, N: what the Jacobian block stretches the cables for: the target, at
     most slew_rate N/s from the last), tension_estimate (m, N), tension_target (m, N: the
-    distribution), t_star (N: the largest achievable minimum tension at the pose, inf where an
-    internal force raises every tension), status (0: the floor holds, 1: lowered, 2: no
-    single redundant cable, nothing chosen), and tension_estimate_previous (the memory's,
-    for the forward kinematics)."""
+    distribution, never below tension_floor), t_star (N: the largest achievable minimum
+    tension at the pose, inf where an internal force raises every tension), status (0: the
+    floor holds, 1: lowered, 2: W rank-deficient, nothing chosen, 3: the ceiling exceeded
+    for the hard floor, 4: the hard floor unreachable, weak cables raised to it), cable (the
+    1-based cable the status names: the weakest for 1, the one above the ceiling for 3, the
+    one raised most for 2 and 4; 0: none), and tension_estimate_previous (the memory's, for
+    the forward kinematics)."""
     m = robot.num_cables
     s = sizes(m)
     d = robot.dynamics
     reels, attachments = _constants(robot)
     params = owned(np.array([d.mass, *d.handle, d.EA, float(min_tension), float(max_tension),
-                             float(time_step), float(slew_rate), float(WARMUP_TICKS)]))
+                             float(time_step), float(slew_rate), float(WARMUP_TICKS),
+                             float(tension_floor)]))
     example = np.zeros(s["tension_x"])
     example[:3] = robot.workspace.center
     example[3:12] = np.eye(3).ravel()
@@ -213,8 +217,8 @@ def build_tension_distribution(builder, robot, *, min_tension, max_tension, slew
         memory=(s["tension_memory"], start),
         outputs=[("tension_command", 0, m), ("tension_estimate", m, m),
                  ("tension_target", 2 * m, m), ("t_star", 3 * m, 1),
-                 ("status", 3 * m + 1, 1)],
-        memory_at=3 * m + 2, time_step=time_step,
+                 ("status", 3 * m + 1, 1), ("cable", 3 * m + 2, 1)],
+        memory_at=3 * m + 3, time_step=time_step,
         memory_outputs=[("tension_estimate_previous", 0, m)], exported=False)
     builder.Connect(force.get_output_port(), route.GetInputPort("F_H_previous"))
     builder.ExportInput(force.get_input_port(), "F_H")
