@@ -272,8 +272,11 @@ def build_diagram(scenario: Scenario | ResolvedScenario,
     return diagram
 
 
-# How fast the commanded tensions may change, N/s per cable (pose_control.tension_tick).
-TENSION_SLEW_RATE = 50.0
+# How fast the commanded tensions may rise and fall, N/s per cable (pose_control.tension_tick
+# says why they differ).
+TENSION_SLEW_RATE = 500.0
+TENSION_FALL_RATE = 50.0
+RIPPLE = 0.1
 # The full-pose length loop's integral gain, 1/s^2 (pose_control.pose_rates_tick).
 LENGTH_INTEGRAL_GAIN = 100.0
 
@@ -290,7 +293,7 @@ def _kinetostatic_params(resolved, *, cue: bool):
         robot, floor=float(c.tension_floor), ceiling=float(c.max_tension),
         rows=wrench_rows(robot), barrier=cue, t_l=f.t_l, t_u=f.t_u, F_u=f.F_u, eps=f.eps,
         force=cue and f.enabled, a_brake=_filter_braking(resolved),
-        time_step=resolved.time_step)
+        time_step=resolved.time_step, ripple=RIPPLE)
 
 
 def _filter_braking(resolved) -> float:
@@ -408,7 +411,7 @@ def _add_pose_blocks(builder, blocks, resolved, fk, force_sensor, lengths, veloc
         builder, "tension_distribution", POSE_MAIN, lambda b: build_tension_distribution(
             b, robot, min_tension=controller.min_tension,
             max_tension=controller.max_tension, tension_floor=controller.tension_floor,
-            slew_rate=TENSION_SLEW_RATE,
+            slew_rate=TENSION_SLEW_RATE, fall_rate=TENSION_FALL_RATE,
             initial_tensions=start, time_step=T))
     for name, port in (("p_WP", fk.GetOutputPort("p_WP")), ("R_WP", R_WP),
                        ("F_H", force_sensor.GetOutputPort("F_H")),

@@ -92,11 +92,12 @@ def margin_scratch(m: int):
 
 # The kinetostatic block's parameters (a flat array, `kinetostatic_params`).
 P_MASS, P_HANDLE, P_FLOOR, P_CEILING, P_ROWS, P_BARRIER = 0, 1, 4, 5, 6, 7
-P_T_L, P_T_U, P_F_U, P_B, P_MID, P_FORCE, P_A_BRAKE, P_T = 8, 9, 10, 11, 12, 13, 14, 15
+P_T_L, P_T_U, P_F_U, P_B, P_MID, P_FORCE, P_A_BRAKE, P_T, P_RIPPLE = range(8, 17)
 
 
 def kinetostatic_params(robot, *, floor, ceiling, rows, barrier, t_l, t_u, F_u, eps,
-                        force: bool, a_brake: float, time_step: float) -> np.ndarray:
+                        force: bool, a_brake: float, time_step: float,
+                        ripple: float = 0.0) -> np.ndarray:
     """The kinetostatic block's parameters: the platform's mass (kg) and handle (m, platform
     frame), the floor and ceiling (N), the wrench rows (3 or 6), whether the safety filter's
     barrier needs the gradient and the look ahead, the cue's logistic t_l, t_u (N), F_u (N),
@@ -106,7 +107,7 @@ def kinetostatic_params(robot, *, floor, ceiling, rows, barrier, t_l, t_u, F_u, 
     d = robot.dynamics
     return np.array([d.mass, *d.handle, floor, ceiling, rows, 1.0 if barrier else 0.0,
                      t_l, t_u, F_u, b, 0.5 * (t_l + t_u), 1.0 if force else 0.0, a_brake,
-                     time_step], dtype=float)
+                     time_step, ripple], dtype=float)
 
 
 @_jit
@@ -128,8 +129,8 @@ RAY_BISECTIONS = 5
 
 
 @_jit
-def _margin_at(reels, attachments, params, scratch, p, R, w):
-    return margin(reels, attachments, int(params[P_ROWS]), p, R, w, params[P_FLOOR],
+def _margin_at(reels, attachments, params, scratch, p, R, w, floor):
+    return margin(reels, attachments, int(params[P_ROWS]), p, R, w, floor,
                   params[P_CEILING], scratch)[0]
 
 
@@ -159,7 +160,8 @@ def kinetostatic_tick(reels, attachments, params, scratch, x, out):
         for a in range(3):
             for b in range(3):
                 R[a, b] = x[9 + 3 * a + b]
-    floor = params[P_FLOOR]
+    floor = params[P_FLOOR] + params[P_RIPPLE] * math.sqrt(F[0] * F[0] + F[1] * F[1]
+                                                         + F[2] * F[2])
     w = np.empty(6)
     zero = np.zeros(3)
     _wrench(R, params[P_MASS:P_MASS + 4], F, zero, w)
@@ -180,13 +182,13 @@ def kinetostatic_tick(reels, attachments, params, scratch, x, out):
             for c in range(3):
                 q[c] = p[c]
             q[k] += FD_STEP_P
-            kq = _margin_at(reels, attachments, params, scratch, q, R, w)
+            kq = _margin_at(reels, attachments, params, scratch, q, R, w, floor)
             out[4 + k] = (kq - kappa) / FD_STEP_P if math.isfinite(kq) else 0.0
     if params[P_FORCE] != 0.0:
         gx, gy, gz = out[4], out[5], out[6]
         g = math.sqrt(gx * gx + gy * gy + gz * gz)
         if g > 0.0:
-            alpha = cue_intensity(kappa + floor, params)
+            alpha = cue_intensity(kappa + params[P_FLOOR], params)
             out[0], out[1], out[2] = alpha * gx / g, alpha * gy / g, alpha * gz / g
     speed = math.sqrt(v[0] * v[0] + v[1] * v[1] + v[2] * v[2])
     if params[P_BARRIER] == 0.0 or kappa < 0.0 or speed <= 1e-9:
@@ -199,7 +201,7 @@ def kinetostatic_tick(reels, attachments, params, scratch, x, out):
         s = reach * k / RAY_SAMPLES
         for c in range(3):
             q[c] = p[c] + s * v[c] / speed
-        if not _margin_at(reels, attachments, params, scratch, q, R, w) >= 0.0:
+        if not _margin_at(reels, attachments, params, scratch, q, R, w, floor) >= 0.0:
             hi = s
             break
         lo = s
@@ -209,7 +211,7 @@ def kinetostatic_tick(reels, attachments, params, scratch, x, out):
         s = 0.5 * (lo + hi)
         for c in range(3):
             q[c] = p[c] + s * v[c] / speed
-        if _margin_at(reels, attachments, params, scratch, q, R, w) >= 0.0:
+        if _margin_at(reels, attachments, params, scratch, q, R, w, floor) >= 0.0:
             lo = s
         else:
             hi = s

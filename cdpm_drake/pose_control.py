@@ -446,25 +446,38 @@ def distribution_bounded(T_p, N, floor, hard_floor, ceiling, T):
     return _floor_wins(T, t_star, hard_floor, ceiling)
 
 
+# The commanded acceleration the target's wrench takes in (tension_tick) is the command's,
+# low-passed with this time constant, s.
+ACCELERATION_TIME = 0.1
+
+
 @_jit
 def tension_tick(reels, attachments, params, x, out):
     """params = [mass kg, handle (3, m, platform frame), EA N, floor N, ceiling N, time step
-    s, slew rate N/s, warm-up ticks, hard floor N]. x = [p (3), R (9), F_H (3), v (3),
+    s, slew rate N/s, warm-up ticks, hard floor N, fall rate N/s]. x = [p (3), R (9), F_H
+    (3), v (3),
     residual (m), L0 (m), T_assumed (m: the tensions the forward kinematics corrected the
-    lengths for), memory: T_estimate (m), v_previous (3), ticks (1), T_command_previous (m)].
+    lengths for), memory: T_estimate (m), v_slow (3: the command low-passed), ticks (1),
+    T_command_previous (m)].
     out = [T_command (m), T_estimate (m), T_target (m), t* (1), status (1), cable (1), next
     memory (2 m + 4)]: T_target the distribution at the pose (rules (a)-(d) of
     `distribution_1d_bounded`: closed form for one redundant cable, `distribution_bounded`
     for more), T_command what the lengths are stretched for: the target, moved towards at
-    most `slew rate` N/s per cable from the estimate at the end of the warm-up (the plant's
-    tensions when the controller takes over are whatever they are, and a jump to the target
-    would shake the platform). status: FEASIBLE, BELOW_FLOOR, CEILING_EXCEEDED,
+    most `slew rate` N/s up and `fall rate` N/s down per cable from the estimate at the end of
+    the warm-up (the plant's tensions when the controller takes over are whatever they are,
+    and a jump to the target would shake the platform). Up fast, because a hand that pushes
+    loads some cables as fast as it pushes (at 50 N/s, a 40 N push ramped in 0.3 s left
+    cable 7 of exp2's robot slack for 0.3 s); down slowly, because a target that drops is
+    where slack starts, and where the weakest cable's share of the internal force is small
+    the target flips between the statuses' distributions tick by tick (4 N on cable 7 along
+    exp2's boundary under 40 N) and a command that follows rings the platform. status: FEASIBLE, BELOW_FLOOR, CEILING_EXCEEDED,
     FLOOR_UNREACHABLE, or GENERAL (W rank-deficient: the minimum-norm distribution, nothing
     chosen, raised to the hard floor); cable the 1-based cable the status names (0: none)."""
     m = reels.shape[0]
     EA, floor, ceiling = params[4], params[5], params[6]
     step, max_change, warmup = params[7], params[8] * params[7], params[9]
     hard_floor = params[10]
+    max_fall = params[11] * step
     p = x[0:3]
     R = x[3:12].reshape((3, 3))
     F = x[12:15]
@@ -473,13 +486,22 @@ def tension_tick(reels, attachments, params, x, out):
     L0 = x[18 + m:18 + 2 * m]
     T_assumed = x[18 + 2 * m:18 + 3 * m]
     mem = 18 + 3 * m
-    v_prev = x[mem + m:mem + m + 3]
+    v_slow = x[mem + m:mem + m + 3]
     ticks = x[mem + m + 3]
     T_before = x[mem + m + 4:mem + 2 * m + 4]
     started = ticks >= warmup
+    # The commanded acceleration, from the command low-passed over ACCELERATION_TIME: (v -
+    # v_slow) / tau is a ramp's acceleration exactly, while a command that alternates
+    # braking and accelerating tick by tick (the safety filter at a barrier) is cut ~7-fold
+    # at 10 Hz. Differenced tick by tick, that alternation moved every target by ~5 N 10
+    # times a second and rang the platform until cables went slack (a 20 N push along
+    # exp2's boundary: 171 slack ticks in 10 s; none with the low-pass).
     a = np.empty(3)
+    lowpass = step / ACCELERATION_TIME
+    v_next = np.empty(3)
     for k in range(3):
-        a[k] = (v[k] - v_prev[k]) / step if ticks > 0.0 else 0.0
+        a[k] = (v[k] - v_slow[k]) / ACCELERATION_TIME if ticks > 0.0 else 0.0
+        v_next[k] = v_slow[k] + lowpass * (v[k] - v_slow[k]) if ticks > 0.0 else v[k]
     w = np.empty(6)
     _wrench(R, params, F, a, w)
     T_cmd = out[0:m]
@@ -504,7 +526,7 @@ def tension_tick(reels, attachments, params, x, out):
         cable = _raise_to(T_target, hard_floor)
     for i in range(m):
         before = T_before[i] if started else T_est[i]  # during the warm-up: the estimate
-        T_cmd[i] = min(before + max_change, max(before - max_change, T_target[i]))
+        T_cmd[i] = min(before + max_change, max(before - max_fall, T_target[i]))
     out[3 * m] = t_star
     out[3 * m + 1] = status
     out[3 * m + 2] = cable
@@ -513,7 +535,7 @@ def tension_tick(reels, attachments, params, x, out):
         out[nxt + i] = T_est[i]
         out[nxt + m + 4 + i] = T_cmd[i]
     for k in range(3):
-        out[nxt + m + k] = v[k]
+        out[nxt + m + k] = v_next[k]
     out[nxt + m + 3] = min(ticks + 1.0, warmup)
     return status
 

@@ -167,10 +167,11 @@ def _add_row(C, d, kind, count, grad, n, rhs, k):
 
 
 @_jit
-def _add_barrier(C, d, kind, lost, count, grad, n, rhs, h, k, prev, ramp, T):
+def _add_barrier(C, d, kind, lost, count, grad, n, rhs, h, h_next, k, prev, ramp, T):
     """A barrier's row on the translation, grad_v . v >= rhs, asking at most `ramp` more
     than the previous command gave it (module docstring), but never letting a margin h >= 0
-    go in one tick (as the virtual wall's cap wins over the acceleration limit)."""
+    go in one tick (h_next: the margin after a tick at the previous command; as the virtual
+    wall's cap wins over the acceleration limit)."""
     lost[count] = h < 0.0
     trans = 0.0
     for c in range(3):
@@ -178,8 +179,8 @@ def _add_barrier(C, d, kind, lost, count, grad, n, rhs, h, k, prev, ramp, T):
     for c in range(3, 6):
         grad[c] = 0.0
     rhs = min(rhs, trans + ramp)
-    if h >= 0.0:
-        rhs = max(rhs, -h / T)
+    if h >= 0.0 and h_next >= 0.0:
+        rhs = max(rhs, trans - h_next / T)
     return _add_row(C, d, kind, count, grad, n, rhs, k)
 
 
@@ -229,6 +230,9 @@ def filter_tick(reels, attachments, pi, pj, d_min, bounds, params, x, out):
     # Only barriers that could bind this tick: the most a velocity within the speed limit can
     # take off a margin is g v_max.
     v_bound = v_max
+    ahead = np.empty(3)
+    for c in range(3):
+        ahead[c] = p[c] + T * prev[c]
     for q in range(P):
         dist = pair_barrier(reels, attachments, pi[q], pj[q], p, R, grad)
         sign = 1.0
@@ -240,10 +244,19 @@ def filter_tick(reels, attachments, pi, pj, d_min, bounds, params, x, out):
         rate = barrier_rate(h, gv, params)
         if rate >= gv * v_bound:
             continue
-        for c in range(6):
+        # Linearised about the position a tick at the previous command reaches, not about
+        # p: a pair's distance is curved, and a platform sliding along its barrier (the
+        # command tangent to the gradient at p) loses margin to the curvature every tick,
+        # which a linearisation at p never sees; it then braked, re-accelerated and braked
+        # again at 20 Hz (a 20 N push along exp2's boundary) and rang the platform.
+        # h(x + T v) ~ h1 + g1 . T (v - v_prev) >= h - T rate(h).
+        h1 = sign * pair_barrier(reels, attachments, pi[q], pj[q], ahead, R, grad) - d_min[q]
+        trans = 0.0
+        for c in range(3):
             grad[c] *= sign
-        count = _add_barrier(C, d, kind, lost, count, grad, n, -rate, h, BIND_PAIR, prev,
-                             gv * ramp, T)
+            trans += grad[c] * prev[c]
+        count = _add_barrier(C, d, kind, lost, count, grad, n,
+                             trans - rate + (h - h1) / T, h, h1, BIND_PAIR, prev, gv * ramp, T)
     for axis in range(3 if params[F_BOX] != 0.0 else 0):
         for side in range(2):
             h = p[axis] - bounds[0, axis] if side == 0 else bounds[1, axis] - p[axis]
@@ -253,16 +266,17 @@ def filter_tick(reels, attachments, pi, pj, d_min, bounds, params, x, out):
             for c in range(6):
                 grad[c] = 0.0
             grad[axis] = 1.0 if side == 0 else -1.0
-            count = _add_barrier(C, d, kind, lost, count, grad, n, -rate, h, BIND_BOX, prev,
-                                 ramp, T)
+            count = _add_barrier(C, d, kind, lost, count, grad, n, -rate, h,
+                                 h + T * grad[axis] * prev[axis], BIND_BOX, prev, ramp, T)
     kappa_used = math.nan
     if params[F_KINETOSTATIC] != 0.0 and math.isfinite(kappa):
         gv = math.sqrt(gk[0] * gk[0] + gk[1] * gk[1] + gk[2] * gk[2])
         kappa_used = kappa
         for c in range(3):
             grad[c] = gk[c]
+        k_next = kappa + T * (gk[0] * prev[0] + gk[1] * prev[1] + gk[2] * prev[2])
         count = _add_barrier(C, d, kind, lost, count, grad, n, -barrier_rate(kappa, gv, params),
-                             kappa, BIND_KINETOSTATIC, prev, gv * ramp, T)
+                             kappa, k_next, BIND_KINETOSTATIC, prev, gv * ramp, T)
         speed = math.sqrt(prev[0] * prev[0] + prev[1] * prev[1] + prev[2] * prev[2])
         if ray < math.inf and speed > 0.0:
             # The look ahead (kinetostatics.kinetostatic_tick): the margin is lost `ray` m
@@ -274,7 +288,7 @@ def filter_tick(reels, attachments, pi, pj, d_min, bounds, params, x, out):
                 along += prev[c] / speed * prev[c]
             cap = _face_cap(ray, params[F_A_BRAKE], T)
             count = _add_barrier(C, d, kind, lost, count, grad, n, -max(cap, along - ramp),
-                                 ray, BIND_KINETOSTATIC, prev, 1e300, T)
+                                 ray, ray - T * along, BIND_KINETOSTATIC, prev, 1e300, T)
     base = count
     z = np.empty(n)
     u = np.empty(rows)

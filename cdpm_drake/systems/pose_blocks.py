@@ -172,7 +172,7 @@ def build_pose_forward_kinematics(builder, robot, *, initial_position, max_resid
 
 
 def build_tension_distribution(builder, robot, *, min_tension, max_tension, tension_floor,
-                               slew_rate, initial_tensions, time_step):
+                               slew_rate, initial_tensions, time_step, fall_rate=None):
     """The tension estimate and the target tensions at the estimated pose
     (pose_control.tension_tick). Inputs p_WP, R_WP, F_H (N), velocity_command (m/s),
     residual (m), cable_lengths (m), tension_assumed (N: the forward kinematics'); outputs
@@ -189,9 +189,10 @@ def build_tension_distribution(builder, robot, *, min_tension, max_tension, tens
     s = sizes(m)
     d = robot.dynamics
     reels, attachments = _constants(robot)
+    fall_rate = slew_rate if fall_rate is None else fall_rate
     params = owned(np.array([d.mass, *d.handle, d.EA, float(min_tension), float(max_tension),
                              float(time_step), float(slew_rate), float(WARMUP_TICKS),
-                             float(tension_floor)]))
+                             float(tension_floor), float(fall_rate)]))
     example = np.zeros(s["tension_x"])
     example[:3] = robot.workspace.center
     example[3:12] = np.eye(3).ravel()
