@@ -50,7 +50,7 @@ LOGGED = (
     ("F_kin", "kinetostatic_force", "F_kin"),
     ("kappa", "kinetostatic_force", "kappa"),
     ("t_c", "kinetostatic_force", "t_c"),
-    ("t_star_hand", "kinetostatic_force", "t_star"),
+    ("t_star_hand", "model_monitor", "t_star"),
     ("model_status", "model_monitor", "status"),
     ("model_residual", "model_monitor", "residual"),
     ("reel_velocity", "jacobian_mapping", "reel_velocity_command"),
@@ -162,23 +162,23 @@ def build_diagram(scenario: Scenario | ResolvedScenario,
             builder, "orientation_hold", POSE_MAIN, lambda b: build_orientation_hold(
                 b, gain=controller.orientation_gain, time_step=T))
         hold.connect_input(R_WP, "R_WP")
-    # Beyond the paper: the kinetostatic limit, for the safety filter's barrier, its felt cue
-    # and the model monitor's check of the hand force.
+    # Beyond the paper: the kinetostatic limit, for the safety filter's barrier and its felt
+    # cue.
     safety = scenario.safety_filter
     filter_on = safety.enabled
     kinetostatic_on = filter_on and safety.kinetostatic
     monitor_on = scenario.model_monitor.enabled
     kinetostatic = None
-    if kinetostatic_on or monitor_on:
+    if kinetostatic_on:
         kinetostatic = blocks["kinetostatic_force"] = FlatBlock(
             builder, "kinetostatic_force", SAFETY_MAIN, lambda b: build_kinetostatic_force(
-                b, robot, params=_kinetostatic_params(resolved, cue=kinetostatic_on),
+                b, robot, params=_kinetostatic_params(resolved),
                 full_pose=full, time_step=T))
         kinetostatic.connect_input(p_WP, "p_WP")
         kinetostatic.connect_input(force_sensor.GetOutputPort("F_H"), "F_H")
         if full:  # at the commanded orientation (safety_filter.py says why)
             kinetostatic.connect_input(hold.GetOutputPort("R_WP_held"), "R_WP")
-        if kinetostatic_on and safety.kinetostatic_force.enabled:
+        if safety.kinetostatic_force.enabled:
             forces.append(kinetostatic.GetOutputPort("F_kin"))
     wall = scenario.wall_force
     if wall.enabled:
@@ -227,14 +227,9 @@ def build_diagram(scenario: Scenario | ResolvedScenario,
     mapping.connect_input(velocity_command, "velocity_command")
     builder.Connect(mapping.GetOutputPort("reel_velocity_command"),
                     plant.GetInputPort("reel_velocity_command"))
-    if kinetostatic is not None and not kinetostatic_on:
-        # Built for the model monitor alone: no look ahead, no command to look along.
-        none = builder.AddNamedSystem("kinetostatic_force_no_command",
-                                      ConstantVectorSource(np.zeros(3)))
-        kinetostatic.connect_input(none.get_output_port(), "velocity_previous")
     if monitor_on:
         _add_model_monitor(builder, blocks, resolved, lengths, p_WP, R_WP if full else None,
-                           kinetostatic, force_sensor.GetOutputPort("F_H"), T)
+                           force_sensor.GetOutputPort("F_H"), T)
 
     wirings = {}
     if options.loggers:
@@ -281,18 +276,18 @@ RIPPLE = 0.1
 LENGTH_INTEGRAL_GAIN = 100.0
 
 
-def _kinetostatic_params(resolved, *, cue: bool):
+def _kinetostatic_params(resolved):
     """The kinetostatic block's parameters (kinetostatics.kinetostatic_params) for the
     scenario: the controller's tension floor and ceiling, the robot's wrench rows, the cue's
-    logistic (on only with `cue`)."""
+    logistic."""
     from .kinetostatics import kinetostatic_params, wrench_rows
 
     scenario, robot = resolved.scenario, resolved.robot
     c, f = scenario.controller, scenario.safety_filter.kinetostatic_force
     return kinetostatic_params(
         robot, floor=float(c.tension_floor), ceiling=float(c.max_tension),
-        rows=wrench_rows(robot), barrier=cue, t_l=f.t_l, t_u=f.t_u, F_u=f.F_u, eps=f.eps,
-        force=cue and f.enabled, a_brake=_filter_braking(resolved),
+        rows=wrench_rows(robot), barrier=True, t_l=f.t_l, t_u=f.t_u, F_u=f.F_u, eps=f.eps,
+        force=f.enabled, a_brake=_filter_braking(resolved),
         time_step=resolved.time_step, ripple=RIPPLE)
 
 
@@ -349,25 +344,26 @@ def _add_safety_filter(builder, blocks, resolved, velocity_desired, omega_desire
     return block.GetOutputPort("velocity_command"), None
 
 
-def _add_model_monitor(builder, blocks, resolved, lengths, p_WP, R_WP, kinetostatic, F_H, T):
+def _add_model_monitor(builder, blocks, resolved, lengths, p_WP, R_WP, F_H, T):
     """The model monitor (model_monitor.py) on the measurements and the estimates."""
+    from .kinetostatics import wrench_rows
     from .model_monitor import monitor_params
 
     scenario, robot = resolved.scenario, resolved.robot
-    mon, c = scenario.model_monitor, scenario.controller
+    mon = scenario.model_monitor
     estimate = "tension_distribution" in blocks
     params = monitor_params(
-        EA=robot.dynamics.EA if estimate else 0.0, slack_tension=mon.slack_tension,
+        robot, EA=robot.dynamics.EA if estimate else 0.0, slack_tension=mon.slack_tension,
         slack_length=mon.slack_length, fit_tolerance=mon.fit_tolerance,
         unholdable=mon.unholdable, ticks=mon.ticks, estimate=estimate,
-        full_pose=R_WP is not None)
+        full_pose=R_WP is not None, rows=wrench_rows(robot),
+        holdable=float(mon.holdable), slack_ticks=mon.slack_ticks)
     block = blocks["model_monitor"] = FlatBlock(
         builder, "model_monitor", SAFETY_MAIN, lambda b: build_model_monitor(
             b, robot, params=params, full_pose=R_WP is not None, estimate=estimate,
             time_step=T))
     block.connect_input(lengths, "cable_lengths")
     block.connect_input(p_WP, "p_WP")
-    block.connect_input(kinetostatic.GetOutputPort("t_star"), "t_star")
     block.connect_input(F_H, "F_H")
     if R_WP is not None:
         block.connect_input(R_WP, "R_WP")

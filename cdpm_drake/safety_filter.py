@@ -21,8 +21,8 @@ barrier never asks for more than the acceleration limit. Where h < 0 (a margin a
 a start inside d_min, a hand force that changed) the barrier asks for a slow return instead,
 grad h . u >= min(gamma |h| / T, g v_return). A barrier that jumps (an estimate that moves
 with the platform's ringing, a hand force that changes the kinetostatic margin) would ask for
-a step of the command: each row asks at most g a_brake T more than the previous command gave
-it, so that a jump is met by braking at a_brake, not by a jerk.
+a step of the command: each row asks at most g a_max T more than the previous command gave
+it, so that a jump is met by braking at the acceleration limit, not by a jerk.
 
 The barriers: every watched pair's distance above its d_min (signed: a pair the interference
 block has seen cross counts negative; the gradient by the envelope theorem,
@@ -79,6 +79,8 @@ BIND_TEXT = ((BIND_PAIR, "cable pairs"), (BIND_BOX, "workspace box"),
 # At most this many cutting planes of the speed and acceleration balls per solve: each cuts
 # the violation of the last solution; 12 leave it below 1e-9 m/s in every case measured.
 MAX_CUTS = 12
+# The speed the platform slows to while a margin is lost, m/s.
+LOST_SPEED = 0.05
 # The braking curve of a barrier assumes this share of a_brake, the ramp allows all of it:
 # the curve is exact only for a barrier whose gradient does not change, and a pair's does as
 # the closest points slide along the cables (a 5 N push on crossing_4cable overshot its d_min
@@ -223,9 +225,14 @@ def filter_tick(reels, attachments, pi, pj, d_min, bounds, params, x, out):
     lost = np.zeros(rows, dtype=np.bool_)  # a barrier whose margin is already lost (h < 0)
     grad = np.empty(6)
     count = 0
-    # A barrier may ask its rate to change by at most a_brake T a tick (per unit of its
-    # translation gradient): always feasible within the acceleration limit.
-    ramp = params[F_A_BRAKE] * T
+    # A barrier may ask its rate to change by at most a_max T a tick (per unit of its
+    # translation gradient): always feasible within the acceleration limit, and as much as
+    # the command asked for may change in a tick (the admittance's command is limited to it
+    # too). A smaller ramp (a_brake) let a hand that pushes into a barrier accelerate the
+    # approach faster than the filter could take it back, and the command cycled between
+    # braking and re-accelerating at ~15 Hz (10 N across exp3's pair 1-3 on the dynamic
+    # plant: the platform rang, 716 slack ticks).
+    ramp = params[F_A_MAX] * T
     smallest = math.inf
     # Only barriers that could bind this tick: the most a velocity within the speed limit can
     # take off a margin is g v_max.
@@ -290,6 +297,16 @@ def filter_tick(reels, attachments, pi, pj, d_min, bounds, params, x, out):
             count = _add_barrier(C, d, kind, lost, count, grad, n, -max(cap, along - ramp),
                                  ray, ray - T * along, BIND_KINETOSTATIC, prev, 1e300, T)
     base = count
+    # While a margin is lost the platform is at a limit its model says it should not be at
+    # (a hand force that changed, a kink of the kinetostatic margin): it slows to LOST_SPEED
+    # there (braking at the acceleration limit), where a gradient that turns from one tick to
+    # the next cannot swing the command about.
+    speed_cap = v_max
+    for r in range(base):
+        if lost[r]:
+            prev_speed = math.sqrt(prev[0] * prev[0] + prev[1] * prev[1] + prev[2] * prev[2])
+            speed_cap = min(v_max, max(LOST_SPEED, prev_speed - a_max * T))
+            break
     z = np.empty(n)
     u = np.empty(rows)
     status = STATUS_HOLD
@@ -312,7 +329,7 @@ def filter_tick(reels, attachments, pi, pj, d_min, bounds, params, x, out):
             speed = math.sqrt(z[0] * z[0] + z[1] * z[1] + z[2] * z[2])
             ex, ey, ez = z[0] - prev[0], z[1] - prev[1], z[2] - prev[2]
             step = math.sqrt(ex * ex + ey * ey + ez * ez)
-            over_speed = speed > v_max * (1.0 + BALL_TOL)
+            over_speed = speed > speed_cap * (1.0 + BALL_TOL)
             over_step = step > a_max * T * (1.0 + BALL_TOL) + BALL_TOL
             if not (over_speed or over_step):
                 ok = True
@@ -321,9 +338,9 @@ def filter_tick(reels, attachments, pi, pj, d_min, bounds, params, x, out):
                 break
             for c in range(6):
                 grad[c] = 0.0
-            if over_speed:  # -(z / |z|) . v >= -v_max
+            if over_speed:  # -(z / |z|) . v >= -speed cap
                 grad[0], grad[1], grad[2] = -z[0] / speed, -z[1] / speed, -z[2] / speed
-                count = _add_row(C, d, kind, count, grad, n, -v_max, BIND_SPEED)
+                count = _add_row(C, d, kind, count, grad, n, -speed_cap, BIND_SPEED)
             if over_step:  # -(e / |e|) . (v - v_prev) >= -a_max T
                 grad[0], grad[1], grad[2] = -ex / step, -ey / step, -ez / step
                 count = _add_row(C, d, kind, count, grad, n,

@@ -185,7 +185,7 @@ class Controller:
     # mode, which the encoders do not see (README, "Full pose and tension control"), so a
     # cable commanded at 1 N goes slack; 3 N leaves that ripple twice over.
     # 0 < tension_floor <= min_tension.
-    tension_floor: float = 3.0
+    tension_floor: float = 5.0
 
 
 # --- The promise made hard (beyond the paper) ---------------------------------------------
@@ -254,11 +254,20 @@ class ModelMonitor:
     slack_length: float = 0.003
     # A cable length this far from the estimated pose (after the modelled stretch), m.
     fit_tolerance: float = 0.01
-    # t* with the measured hand force below -this, N: no tension distribution holds it.
-    unholdable: float = 1.0
+    # t* (the largest minimum tension the cables can have at the estimated pose with the
+    # platform's weight and the measured hand force) below -this, N: no tension
+    # distribution holds the platform against that hand.
+    unholdable: float = 0.0
     # How long a condition must last to be a fault, ticks (5 x 2 ms: within 20 ms of its
     # start, with the tick the estimate needs).
     ticks: int = 5
+    # Where t* is at least this, N, the cables can hold the hand: a slack cable there is a
+    # knock the controller takes up again (a hand that hits the platform with 40 N at once
+    # slackens a cable for ~10-40 ms whatever the controller does: the cables' stretch, not
+    # their lengths, gives first), and must last slack_ticks to be a fault.
+    holdable: float = 2.0
+    # How long a slack cable must last to be a fault where t* >= holdable, ticks.
+    slack_ticks: int = 25
 
 
 # --- Plants ----------------------------------------------------------------------------------
@@ -799,6 +808,7 @@ def _check_safety(scenario: Scenario) -> None:
             raise ScenarioError(f"safety_filter.kinetostatic_force.eps = {cue.eps!r} N must "
                                 f"lie in (0, F_u/2) = (0, {cue.F_u / 2!r}) N")
     mon = scenario.model_monitor
+    _finite_number(mon.holdable, "model_monitor.holdable")
     for name in ("slack_tension", "unholdable"):
         _finite_number(getattr(mon, name), f"model_monitor.{name}")
         if float(getattr(mon, name)) < 0:
@@ -806,8 +816,11 @@ def _check_safety(scenario: Scenario) -> None:
                                 f"{getattr(mon, name)!r}")
     for name in ("slack_length", "fit_tolerance"):
         _positive(getattr(mon, name), f"model_monitor.{name}")
-    if not (isinstance(mon.ticks, int) and mon.ticks >= 1):
-        raise ScenarioError(f"model_monitor.ticks must be an integer >= 1, got {mon.ticks!r}")
+    for name in ("ticks", "slack_ticks"):
+        value = getattr(mon, name)
+        if not (isinstance(value, int) and value >= 1):
+            raise ScenarioError(f"model_monitor.{name} must be an integer >= 1 tick, got "
+                                f"{value!r}")
 
 
 def _check_logistic_set(values: dict, names: dict, pair: str) -> None:

@@ -115,30 +115,32 @@ def build_kinetostatic_force(builder, robot, *, params, full_pose, time_step):
 def build_model_monitor(builder, robot, *, params, full_pose, estimate, time_step):
     """model_monitor.monitor_tick as a block; it raises ModelFault (naming the cable, the
     reason and the numbers) when a condition has lasted its ticks. Inputs cable_lengths (m,
-    m), p_WP (3, m), t_star (1, N), F_H (3, N), and for the full pose R_WP (9), with a
-    tension estimate tension_estimate (m, N); outputs status (1), cable (1, 1-based, 0 none),
-    residual (m, m: each cable's length residual at the estimated pose)."""
+    m), p_WP (3, m), F_H (3, N), and for the full pose R_WP (9), with a tension estimate
+    tension_estimate (m, N); outputs status (1), cable (1, 1-based, 0 none), t_star (1, N: at
+    the estimated pose with the measured hand force), residual (m, m: each cable's length
+    residual at the estimated pose)."""
     m = robot.num_cables
     s = monitor_sizes(m, full_pose, estimate)
     reels, attachments = owned(robot.reels), owned(robot.attachments)
     par = owned(params)
-    ticks = int(params[5])
+    scratch = margin_scratch(m)
     example = np.zeros(s["x"])
     example[:m] = np.linalg.norm(robot.reels - robot.workspace.center - robot.attachments,
                                  axis=1)
     example[m:m + 3] = robot.workspace.center
     if full_pose:
-        example[m + 7:m + 16] = np.eye(3).ravel()
-    check = bind(monitor_tick, reels, attachments, par, example, np.empty(s["out"]))
+        example[m + 6:m + 15] = np.eye(3).ravel()
+    check = bind(monitor_tick, reels, attachments, par, scratch, example, np.empty(s["out"]))
+    at = s["memory_at"]
 
     def tick(x, out):
-        status = check(reels, attachments, par, x, out)
+        status = check(reels, attachments, par, scratch, x, out)
         if status != OK:
             raise ModelFault(fault_message(
-                int(status), int(out[1]), float(out[2]), ticks=ticks, time_step=time_step,
-                estimate=estimate, p=x[m:m + 3], F_H=x[m + 4:m + 7]))
+                int(status), int(out[1]), float(out[2]), ticks=int(out[at + int(status) - 1]),
+                time_step=time_step, estimate=estimate, p=x[m:m + 3], F_H=x[m + 3:m + 6]))
 
-    inputs = [("cable_lengths", m), ("p_WP", 3), ("t_star", 1), ("F_H", 3)]
+    inputs = [("cable_lengths", m), ("p_WP", 3), ("F_H", 3)]
     if full_pose:
         inputs.append(("R_WP", 9))
     if estimate:
@@ -146,5 +148,5 @@ def build_model_monitor(builder, robot, *, params, full_pose, estimate, time_ste
     build_kernel_block(
         builder, ModelMonitorSolve(s["x"], s["out"], tick), inputs=inputs,
         memory=(s["memory"], None),
-        outputs=[("status", 0, 1), ("cable", 1, 1), ("residual", 3, m)],
-        memory_at=s["memory_at"], time_step=time_step)
+        outputs=[("status", 0, 1), ("cable", 1, 1), ("t_star", 3, 1), ("residual", 4, m)],
+        memory_at=at, time_step=time_step)
