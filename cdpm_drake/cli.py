@@ -549,7 +549,8 @@ def run_main(*, scenario, duration=None, out_dir=None, out=None, on_status=None,
         print(line, file=out)
     if result.ending == "fault":
         print(f"cdpm run: error: {result.error}", file=sys.stderr)
-        if not result.enabled and "do not fit robot" in str(result.error):
+        if not result.enabled and any(why in str(result.error) for why in (
+                "do not fit robot", "outside the workspace box", "cannot hold")):
             from .scenario import scenario_names
             which = (scenario.name if scenario.name in scenario_names()
                      else "<this run's scenario file>")

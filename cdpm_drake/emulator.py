@@ -805,6 +805,13 @@ def build_server(args, log=None) -> ReelBridgeServer:
                          "its robot)")
     if args.start is not None:
         start = args.start
+        box = robot.workspace
+        if not box.contains(start):
+            # The controller refuses to enable there (hardware.reels.start_pose_problem): a
+            # rehearsal from such a start rehearses nothing else.
+            raise ValueError(f"--start {[float(x) for x in start]!r} m is outside the workspace "
+                             f"box of robot {robot.name!r} (lower {box.lower.tolist()!r}, "
+                             f"upper {box.upper.tolist()!r} m); give a start inside it")
     lengths = cable_lengths(robot, np.asarray(start, dtype=float))
     for cable, metres in args.length_offset:
         k = int(cable)

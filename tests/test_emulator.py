@@ -456,6 +456,21 @@ def test_cli_errors_name_the_flag(capsys):
     assert "unknown robot 'no_such_robot'" in capsys.readouterr().err
 
 
+def test_cli_refuses_a_start_outside_the_robots_box(capsys):
+    # Issue 27, bug 1: the controller would refuse to enable there; the emulator says so at
+    # once (bad usage, exit 2), naming the start and the box (the scenario's robot's).
+    assert E.main(["--scenario", "exp2_interaction", "--start", "10", "10", "10", "--port",
+                   "0", "--duration", "0.05"]) == 2
+    err = capsys.readouterr().err
+    assert ("cdpm-reel-emulator: error: --start [10.0, 10.0, 10.0] m is outside the workspace "
+            "box of robot 'paper_7cable_swap13' (lower [0.5, 0.8, 0.3], upper [3.0, 4.0, 2.4] "
+            "m)") in err, err
+    # Just inside the upper corner: accepted.
+    args = E._parser().parse_args(["--robot", "paper_7cable", "--start", "3.0", "4.0", "2.4",
+                                   "--port", "0"])
+    E.build_server(args).stop()
+
+
 def test_cli_runs_as_a_process_for_a_bounded_time():
     out = subprocess.run([sys.executable, "-m", "cdpm_drake.emulator", "--port", "0",
                           "--duration", "0.1"], capture_output=True, text=True, timeout=60)

@@ -238,6 +238,25 @@ def test_refusing_to_enable_hints_at_an_emulator_playing_something_else(tmp_path
     assert not (tmp_path / "run").exists()
 
 
+def test_cdpm_run_never_enables_with_the_platform_outside_the_box(tmp_path, capsys):
+    # Issue 27, bug 1: against a bridge whose encoders put the platform at [10, 10, 10] m
+    # (`cdpm emulate --start 10 10 10`), `cdpm run` ran to the end, exit 0. Refused now, before
+    # any enabling command, naming the pose and the box (exp1's robot: paper_7cable_swap13).
+    robot = scenario_robot(load_scenario("exp1_no_interaction"))
+    server = ReelBridgeServer(ReelBridge(robot, cable_lengths(robot, np.array([10.0, 10, 10])),
+                                         time_constant=0.0)).start()
+    code = _run_against(server, tmp_path / "run", 1)
+    err = capsys.readouterr().err
+    assert code == 1
+    assert ("cdpm run: error: refusing to enable the reels: the platform centre p = [10.000, "
+            "10.000, 10.000] m (from the measured cable lengths) is outside the workspace box "
+            "of robot 'paper_7cable_swap13'") in err, err
+    assert "lower [0.500, 0.800, 0.300] m, upper [3.000, 4.000, 2.400] m" in err
+    assert "cdpm emulate --scenario exp1_no_interaction" in err  # the emulator's hint
+    assert not any(c.enable for c in server.commands)
+    assert not (tmp_path / "run").exists()
+
+
 def test_a_bridge_fault_at_startup_hints_at_a_reset(tmp_path, capsys):
     from cdpm_drake.hardware.protocol import FAULT_COMMAND_TIMEOUT
 
