@@ -40,18 +40,30 @@ def info(*, robot: str = "paper_7cable", swaps=None, plot_dir=None, grid_step: f
     out = sys.stdout if out is None else out
     from .kinematics import cable_lengths, condition_number
 
-    r, scenario = _info_target(robot)
-    if swaps is not None:
+    with _robot_warnings_in_report():
+        r, scenario = _info_target(robot)
+        base = r  # before any swap: the statics warnings compare with it
         if scenario is not None:
-            scenario.swaps = [list(s) for s in swaps]
-        else:
-            for i, j in swaps:
-                r = r.with_swapped_attachments(i, j)
-    if scenario is not None:
-        from .scenario import resolve_scenario
+            import copy
 
-        resolved = resolve_scenario(scenario)
-        r = resolved.robot
+            from .scenario import scenario_robot
+
+            unswapped = copy.copy(scenario)
+            unswapped.swaps = []
+            base = scenario_robot(unswapped)
+        if swaps is not None:
+            if scenario is not None:
+                scenario.swaps = [list(s) for s in swaps]
+            else:
+                for i, j in swaps:
+                    r = r.with_swapped_attachments(i, j)
+        if scenario is not None:
+            from .scenario import resolve_scenario
+
+            resolved = resolve_scenario(scenario)
+            r = resolved.robot
+    if np.array_equal(r.attachments, base.attachments):
+        base = None
     c = r.workspace.center
     lengths = cable_lengths(r, c)
     what = (f"scenario {scenario.name!r}: " if scenario is not None else "") + f"robot {r.name!r}"
@@ -82,8 +94,8 @@ def info(*, robot: str = "paper_7cable", swaps=None, plot_dir=None, grid_step: f
     print(format_table(["pair", "distance (mm)", "largest (mm)"], rows), file=out)
     print("(the two are equal where the closest points are the attachment points; d_u must "
           "stay below 'largest' or that pair's force never switches off)", file=out)
-    path = _print_statics(r, scenario, grid_step, out)
-    _print_wrench_feasibility(r, out)
+    path, grid, t_grid, grid_text = _print_statics(r, scenario, grid_step, out, base=base)
+    _print_wrench_feasibility(r, grid, t_grid, grid_text, out)
     if plot_dir is None:
         return []
     from .views.workspace_plots import plot_workspace
@@ -95,6 +107,23 @@ def info(*, robot: str = "paper_7cable", swaps=None, plot_dir=None, grid_step: f
     for png in written:
         print(f"plot: {png}", file=out)
     return written
+
+
+class _robot_warnings_in_report:
+    """Within the block, the warnings that loading a robot logs (its statics, the pairs the
+    interference block skips) are not printed: `cdpm info`'s report says each of them, on
+    its own grid, once."""
+
+    def __enter__(self):
+        import logging
+
+        self._logger = logging.getLogger("cdpm_drake.robot")
+        self._filter = lambda record: record.levelno < logging.WARNING
+        self._logger.addFilter(self._filter)
+        return self
+
+    def __exit__(self, *exc):
+        self._logger.removeFilter(self._filter)
 
 
 # The floor (N) of the statics summary and of the pictures, and the d_u (m) the
@@ -133,52 +162,77 @@ def _info_target(name):
                      f"built-in scenarios: {scenario_names()} (or give a path to a .yaml file)")
 
 
-def _print_statics(r, scenario, step, out):
-    """The statics summary; returns the scenario's simulated path (None without one)."""
+def _print_statics(r, scenario, step, out, base=None):
+    """The statics summary, every share on one grid (the --grid step's); returns the
+    scenario's simulated path (None without one). `base`: the robot before the swaps (None
+    without swaps), which the warnings compare with."""
     from .robot import robot_statics, statics_warnings
     from .tension import holding_tension, step_grid
 
     statics = robot_statics(r)
     mass = r.dynamics.mass
+    grid = step_grid(r.workspace.lower, r.workspace.upper, step)
+    counts = [len(np.arange(lo, hi + 1e-9, step))
+              for lo, hi in zip(r.workspace.lower, r.workspace.upper)]
+    grid_text = (f"{100 * step:g} cm grid from the lower corner: {counts[0]} x {counts[1]} x "
+                 f"{counts[2]} points")
     print(f"statics of the level platform ({mass:g} kg at its centre, moments about the "
           f"centre); t* = the largest achievable minimum cable tension (N):", file=out)
     rank_note = ("" if statics.unreachable is None else
                  f" < 6: no tension produces a {_describe(statics.unreachable)}")
+    centre = r.workspace.center
     print(f"  wrench matrix rank at the workspace centre: {statics.rank}{rank_note}; t* there "
-          f"{_newtons(statics.centre_t_star)}", file=out)
-    grid = step_grid(r.workspace.lower, r.workspace.upper, step)
-    counts = [len(np.arange(lo, hi + 1e-9, step))
-              for lo, hi in zip(r.workspace.lower, r.workspace.upper)]
-    share = float(np.mean(holding_tension(r, grid) >= INFO_FLOOR))
+          f"{_t_star_text(r, centre, statics.centre_t_star)}", file=out)
+    t_grid = t = holding_tension(r, grid)
+    share = float(np.mean(t >= INFO_FLOOR))
     print(f"  held with every cable >= {INFO_FLOOR:g} N on {100 * share:.1f} % of the workspace "
-          f"box ({100 * step:g} cm grid from the lower corner: {counts[0]} x {counts[1]} x "
-          f"{counts[2]} points)", file=out)
-    for message in statics_warnings(r, statics):
+          f"box ({grid_text})", file=out)
+    # The warnings of the same grid and floor (loading the robot computed them on its own
+    # 11^3 grid, and `info` kept them off stderr: they are said here, once).
+    label = f"the same {100 * step:g} cm grid"
+    base_share = (None if base is None else
+                  float(np.mean(holding_tension(base, grid) >= INFO_FLOOR)))
+    import dataclasses
+    for message in statics_warnings(r, dataclasses.replace(statics, share=share,
+                                                           floor=INFO_FLOOR),
+                                    grid=label, base=base, base_share=base_share):
         print(f"  warning: {message}", file=out)
     if scenario is None:
-        return None
+        return None, grid, t_grid, grid_text
     p0 = np.asarray(scenario.initial_position, dtype=float)
-    print(f"  at the start {_fmt(p0, 2)} m: t* {_newtons(float(holding_tension(r, p0)))}",
-          file=out)
+    print(f"  at the start {_fmt(p0, 2)} m: t* "
+          f"{_t_star_text(r, p0, float(holding_tension(r, p0)))}", file=out)
     from .simulation import simulate
 
     log = simulate(scenario=_kinematic_copy(scenario)).log
     t = holding_tension(r, log["p"])
     k = int(np.argmin(t))
     print(f"  along the scenario's path (kinematic plant, {len(t)} ticks): smallest t* "
-          f"{_newtons(t[k])} at t = {log['time'][k]:.3f} s, p = {_fmt(log['p'][k])} m; "
-          f"{100 * np.mean(t >= INFO_FLOOR):.1f} % of the ticks at >= {INFO_FLOOR:g} N",
-          file=out)
-    return log["p"]
+          f"{_t_star_text(r, log['p'][k], t[k])} at t = {log['time'][k]:.3f} s, p = "
+          f"{_fmt(log['p'][k])} m; {100 * np.mean(t >= INFO_FLOOR):.1f} % of the ticks at "
+          f">= {INFO_FLOOR:g} N", file=out)
+    return log["p"], grid, t_grid, grid_text
 
 
-def _newtons(t) -> str:
-    """t* as printed: N with two decimals, or the meaning of an infinite one."""
-    if t == np.inf:
-        return "+inf (an internal force raises every tension: any floor holds)"
+def _t_star_text(r, p, t) -> str:
+    """t* at p (m) as printed: N with two decimals, or what an infinite one means there. +inf
+    needs an internal force that raises every tension: where the wrench matrix is
+    rank-deficient (the cables' lines of action meet) it holds for the weight alone, at that
+    exact pose, and the platform still cannot resist the wrench the rank lacks."""
+    from .tension import RANK_TOL, wrench_matrix
+
     if t == -np.inf:
         return "-inf (no tensions balance the weight)"
-    return f"{t:.2f} N"
+    if t != np.inf:
+        return f"{t:.2f} N"
+    U, s, _ = np.linalg.svd(wrench_matrix(r, p))
+    rank = int(np.sum(s > RANK_TOL * max(s[0], 1e-300)))
+    if rank == 6:
+        return "+inf (an internal force raises every tension: any floor holds)"
+    return (f"+inf for the weight alone (the cables' lines of action meet there, so an "
+            f"internal force raises every tension), but the wrench matrix has rank {rank} < 6 "
+            f"there: the platform cannot resist a {_describe(U[:, rank])}, so no floor holds "
+            "it against anything else")
 
 
 def _kinematic_copy(scenario):
@@ -198,26 +252,55 @@ def _describe(direction) -> str:
     return describe_wrench(direction)
 
 
-# Hand forces (N) and tension floors (N) of the feasibility table, and its grid per axis.
+# Hand forces (N, ascending from 0) and tension floors (N) of the feasibility table, and the
+# points per axis of its grid for robots without a compiled t* (not 7 or 8 cables).
 FEASIBILITY_FORCES = (0.0, 5.0, 10.0, 20.0)
 FEASIBILITY_FLOORS = (0.0, 5.0)
 FEASIBILITY_GRID = 5
 
 
-def _print_wrench_feasibility(r, out) -> None:
+def feasibility_shares(r, points, t_weight) -> list[list[float]]:
+    """[force][floor]: the share of `points` (N, 3) m where the cables hold the level platform
+    (the robot file's mass at its centre) plus a hand force of each FEASIBILITY_FORCES at
+    the handle in each of the 26 directions, with every cable >= each FEASIBILITY_FLOORS.
+    `t_weight`: t* (N) of the weight alone at the points (holding_tension: the 0 N row). A
+    point that fails a force fails every larger one (t*, the minimum over a symmetric set of
+    directions, is concave in the wrench, so it does not rise with the force), so each force
+    is only solved where the one before held: the same shares, about half the work."""
     from .tension import wrench_feasibility
 
     d = r.dynamics
-    n = FEASIBILITY_GRID
-    rows = []
-    for force in FEASIBILITY_FORCES:
-        shares = [wrench_feasibility(r, mass=d.mass, hand_force=force, handle=d.handle,
-                                     min_tension=floor, n=n).share
-                  for floor in FEASIBILITY_FLOORS]
-        rows.append((f"{force:g}", *(f"{100 * share:.1f}" for share in shares)))
-    print(f"wrench feasibility: share of a {n}x{n}x{n} grid of the workspace box where the "
-          f"cables hold the level platform ({d.mass:g} kg, moments about its centre) plus a "
-          f"hand force at the handle {_fmt(d.handle, 2)} m in each of 26 directions:", file=out)
+    t = np.asarray(t_weight, dtype=float)
+    out = []
+    for force in FEASIBILITY_FORCES:  # ascending, from 0 N
+        if force > 0:
+            live = np.flatnonzero(t >= min(FEASIBILITY_FLOORS))
+            t = np.full(len(points), -np.inf)
+            if live.size:
+                t[live] = wrench_feasibility(r, mass=d.mass, hand_force=force,
+                                             handle=d.handle, points=points[live]).t_star
+        out.append([float(np.mean(t >= floor)) for floor in FEASIBILITY_FLOORS])
+    return out
+
+
+def _print_wrench_feasibility(r, points, t_weight, grid_text, out) -> None:
+    from .tension import grid_points, holding_tension
+
+    d = r.dynamics
+    if r.num_cables in (7, 8):  # compiled closed forms: the whole grid in about a second
+        where = f"on the same grid ({grid_text})"
+    else:  # a solver per point and direction: a coarser grid, said so
+        n = FEASIBILITY_GRID
+        points = grid_points(r.workspace.lower, r.workspace.upper, n)
+        t_weight = holding_tension(r, points)
+        where = (f"on a coarser {n} x {n} x {n} grid (corners included: {r.num_cables} cables "
+                 "need a solver per point)")
+    rows = [(f"{force:g}", *(f"{100 * share:.1f}" for share in shares))
+            for force, shares in zip(FEASIBILITY_FORCES,
+                                     feasibility_shares(r, points, t_weight))]
+    print(f"wrench feasibility {where}: the share where the cables hold the level platform "
+          f"({d.mass:g} kg, moments about its centre) plus a hand force at the handle "
+          f"{_fmt(d.handle, 2)} m in each of 26 directions:", file=out)
     print(format_table(["hand force (N)"] + [f"all cables >= {floor:g} N (%)"
                                              for floor in FEASIBILITY_FLOORS], rows), file=out)
 

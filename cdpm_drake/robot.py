@@ -596,10 +596,16 @@ def describe_wrench(direction) -> str:
     return " and ".join(parts[:2])
 
 
-def statics_warnings(robot: "Robot", statics) -> list[str]:
-    """What is wrong with a robot's statics, in words (empty when its box is mostly held)."""
+def statics_warnings(robot: "Robot", statics, *, grid: str | None = None, base=None,
+                     base_share: float | None = None) -> list[str]:
+    """What is wrong with a robot's statics, in words (empty when its box is mostly held).
+    `grid` names the grid of `statics.share` (default: its n x n x n grid). `base` is the
+    robot before its cable swaps (a scenario's, or `cdpm info --swaps`) and `base_share` its
+    share on the same grid: when it alone is held on most of the box, the swaps are the
+    cause, not the robot file."""
     out = []
     n = statics.n
+    grid = f"{n}x{n}x{n} grid" if grid is None else grid
     m = robot.num_cables
     if m < 6:
         # Too few cables for six equations: the rank and the share only restate that.
@@ -618,19 +624,42 @@ def statics_warnings(robot: "Robot", statics) -> list[str]:
     if statics.share < STATICS_WARN_SHARE:
         from .tension import point_platform_share
 
-        point = point_platform_share(robot, statics.floor, n=_POINT_GRID, mass=statics.mass)
-        where = f"{100 * point:.0f} % of it ({_POINT_GRID}x{_POINT_GRID}x{_POINT_GRID} grid)"
-        cause = ("the moment balance fails: a point platform (forces only) would be held on "
-                 f"{where}, so the attachment points are the likely cause"
-                 if point - statics.share >= _MOMENT_BLAME else
-                 f"a point platform (forces only) would be held on {where} too, so the "
-                 "reels cannot hold the platform there: the box reaches beyond "
-                 "what the reels' layout supports")
+        if base is not None and base_share is not None and base_share >= STATICS_WARN_SHARE:
+            # The paper swaps cables to provoke interference; the swapped attachment points
+            # balance the moments worse. The robot file is not at fault.
+            swapped = [f"{i + 1}-{j + 1}" for i, j in _swapped_cables(base, robot)]
+            cause = (f"the swapped cables ({', '.join(swapped)}) are the cause: robot "
+                     f"{base.name!r} without the swaps is held on {100 * base_share:.0f} % of "
+                     "it")
+        else:
+            point = point_platform_share(robot, statics.floor, n=_POINT_GRID,
+                                         mass=statics.mass)
+            where = (f"{100 * point:.0f} % of the box (a coarser {_POINT_GRID}x{_POINT_GRID}"
+                     f"x{_POINT_GRID} grid)")
+            cause = ("the moment balance fails: a point platform (forces only) would be "
+                     f"held on {where}, so the attachment points are the likely cause"
+                     if point - statics.share >= _MOMENT_BLAME else
+                     f"a point platform (forces only) would be held on {where} too, so the "
+                     "reels cannot hold the platform there: the box reaches beyond "
+                     "what the reels' layout supports")
         out.append(f"{robot.name}: the cables hold the level platform ({statics.mass:g} kg at "
                    f"its centre) with every cable >= {statics.floor:g} N on only "
-                   f"{100 * statics.share:.0f} % of the workspace box ({n}x{n}x{n} grid); "
-                   f"{cause}")
+                   f"{100 * statics.share:.0f} % of the workspace box ({grid}); {cause}")
     return out
+
+
+def _swapped_cables(base: "Robot", robot: "Robot") -> list[tuple[int, int]]:
+    """The 0-based cable pairs whose attachment points trade places from `base` to `robot`
+    (each cable once, in order); a cable that moved otherwise is left out."""
+    moved = [i for i in range(base.num_cables)
+             if not np.array_equal(base.attachments[i], robot.attachments[i])]
+    pairs = []
+    for i in moved:
+        for j in moved:
+            if i < j and np.array_equal(base.attachments[i], robot.attachments[j]) \
+                    and np.array_equal(base.attachments[j], robot.attachments[i]):
+                pairs.append((i, j))
+    return pairs
 
 
 def _report_statics(robot: "Robot") -> None:
