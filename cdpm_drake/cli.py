@@ -64,6 +64,7 @@ def info(*, robot: str = "paper_7cable", swaps=None, plot_dir=None, grid_step: f
             r = resolved.robot
     if np.array_equal(r.attachments, base.attachments):
         base = None
+    _check_info_grid(r, grid_step)  # before the report
     c = r.workspace.center
     lengths = cable_lengths(r, c)
     what = (f"scenario {scenario.name!r}: " if scenario is not None else "") + f"robot {r.name!r}"
@@ -124,6 +125,23 @@ class _robot_warnings_in_report:
 
     def __exit__(self, *exc):
         self._logger.removeFilter(self._filter)
+
+
+def _check_info_grid(r, step) -> None:
+    """CliError when the --grid step gives more than INFO_MAX_GRID_POINTS on r's box."""
+    size = r.workspace.upper - r.workspace.lower
+
+    def counts_of(step):
+        return [int(np.floor(s / step + 1e-9)) + 1 for s in size]
+
+    counts = counts_of(step)
+    if np.prod(counts, dtype=float) > INFO_MAX_GRID_POINTS:
+        least = np.ceil(1000 * np.cbrt(np.prod(size) / INFO_MAX_GRID_POINTS)) / 1000
+        while np.prod(counts_of(least), dtype=float) > INFO_MAX_GRID_POINTS:
+            least += 0.001  # whole mm: the smallest step that fits
+        raise CliError(f"--grid {step!r} m gives {counts[0]} x {counts[1]} x {counts[2]} points "
+                       f"on the workspace box of robot {r.name!r}, more than "
+                       f"{INFO_MAX_GRID_POINTS:,}; give a step of at least {least:.3f} m")
 
 
 # The floor (N) of the statics summary and of the pictures, and the d_u (m) the
@@ -305,7 +323,17 @@ def _print_wrench_feasibility(r, points, t_weight, grid_text, out) -> None:
                                              for floor in FEASIBILITY_FLOORS], rows), file=out)
 
 
+# The most points `cdpm info --grid` computes statics on (~1 us a point and hand-force
+# direction for 7 and 8 cables: a few seconds at the default 5 cm, ~140 k points).
+INFO_MAX_GRID_POINTS = 1_000_000
+
+
 def _cmd_info(args) -> int:
+    step = args.grid
+    if not (step > 0 and np.isfinite(step)):
+        raise CliError(f"--grid must be a step in m > 0, got {step!r}")
+    if args.plot is not None:  # before the report: a folder found wanting after it is a waste
+        _writable_dir(args.plot, "--plot")
     info(robot=args.robot, swaps=args.swaps, plot_dir=args.plot, grid_step=args.grid)
     return 0
 
@@ -510,10 +538,11 @@ def _cmd_simulate(args) -> int:
         on_chunk = _live_meshcat(scenario)
         # Something to watch: paced at real time unless told otherwise.
         realtime = 1.0 if realtime is None else realtime
-    code = simulate_main(scenario=scenario, duration=args.duration, out_dir=args.out,
-                         progress=not args.no_progress, on_chunk=on_chunk,
-                         html=args.html, plots=args.plot, realtime_rate=realtime,
-                         chunk=0.04 if args.meshcat else 0.5, force=args.force)
+    with _duration_flag(args.duration):
+        code = simulate_main(scenario=scenario, duration=args.duration, out_dir=args.out,
+                             progress=not args.no_progress, on_chunk=on_chunk,
+                             html=args.html, plots=args.plot, realtime_rate=realtime,
+                             chunk=0.04 if args.meshcat else 0.5, force=args.force)
     if args.meshcat and not args.no_wait and sys.stdin.isatty():
         try:
             input("Meshcat is still serving the last frame; press Enter to quit. ")
@@ -560,6 +589,24 @@ def _save_replay(log, path):
 def _check_duration(duration):
     if duration is not None and not (duration > 0 and np.isfinite(duration)):
         raise CliError(f"--duration must be a number of seconds > 0, got {duration!r}")
+
+
+class _duration_flag:
+    """A log too large for the duration given by --duration is a bad option value (exit 2);
+    by the scenario's duration, an invalid scenario (1, as LogTooLarge is a ScenarioError)."""
+
+    def __init__(self, duration):
+        self._flag = duration is not None
+
+    def __enter__(self):
+        return self
+
+    def __exit__(self, kind, e, tb):
+        from .simulation import LogTooLarge
+
+        if self._flag and isinstance(e, LogTooLarge):
+            raise CliError(f"--{e}") from None
+        return False
 
 
 def _check_duration_tick(duration, resolved) -> None:
@@ -661,8 +708,9 @@ def _cmd_run(args) -> int:
     scenario = _load_scenario_arg(args)
     _check_duration_tick(args.duration, scenario)
     on_view = _live_meshcat(scenario) if args.meshcat else None
-    return run_main(scenario=scenario, duration=args.duration, out_dir=args.out,
-                    on_view=on_view, force=args.force)
+    with _duration_flag(args.duration):
+        return run_main(scenario=scenario, duration=args.duration, out_dir=args.out,
+                        on_view=on_view, force=args.force)
 
 
 # --- plot ------------------------------------------------------------------------------------
