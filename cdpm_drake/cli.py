@@ -391,6 +391,31 @@ def _print_dynamic_summary(log, out) -> None:
               file=out)
 
 
+def print_pair_summary(log, out) -> None:
+    """The cable pairs of a log (`cdpm simulate`'s and `cdpm run`'s): each pair's closest
+    approach beside its d_l and d_u, the ticks it was within d_u and whether it crossed; the
+    peak forces; how many pairs crossed."""
+    from .simulation import summary_header, summary_rows
+
+    T = len(log["time"])
+    rows = summary_rows(log)
+    if rows:
+        print(format_table(summary_header(log), rows), file=out)
+    else:
+        print("no cable pair came within its d_u", file=out)
+    norms = {k: np.linalg.norm(log[k], axis=1).max() if T else 0.0
+             for k in ("F_H", "F_int", "F_d")}
+    print("peak |F_H| {F_H:.2f} N, |F_int| {F_int:.2f} N, |F_d| {F_d:.2f} N".format(**norms),
+          file=out)
+    crossings = int(np.any(log["crossed"], axis=0).sum()) if T else 0
+    if "crossed_true" in log:  # the controller's estimate beside the plant's truth
+        truly = int(np.any(log["crossed_true"], axis=0).sum()) if T else 0
+        print(f"pairs that crossed: {truly} truly (from the true pose), {crossings} by the "
+              "controller's estimate", file=out)
+    else:
+        print(f"pairs that crossed: {crossings}", file=out)
+
+
 def _print_clipped(log, scenario, out) -> None:
     """The ticks whose raw hand force (F_measured) the sensor model clipped, if any."""
     from .scenario import sensor_range_text
@@ -424,13 +449,14 @@ def simulate_main(*, scenario, duration=None, out_dir=None, progress=True, out=N
     same, and the plots and replay asked for)."""
     from .run_folder import RUNS_DIR, RunFolder
     from .scenario import resolve_scenario
-    from .simulation import save_log, simulate, summary_header, summary_rows
+    from .simulation import run_variant, save_log, simulate
 
     out = sys.stdout if out is None else out
     resolved = resolve_scenario(scenario)
     scenario = resolved.scenario
+    variant, tag = run_variant(resolved)
     folder = RunFolder(scenario.name, out_dir, force=force,
-                       root=RUNS_DIR if runs_root is None else runs_root)
+                       root=RUNS_DIR if runs_root is None else runs_root, variant=tag)
     _run_folder_step(folder.plan)
     out_dir = _run_folder_step(folder.create)  # before the run: a long run's log needs a place
     try:
@@ -443,24 +469,10 @@ def simulate_main(*, scenario, duration=None, out_dir=None, progress=True, out=N
     path = save_log(log, out_dir, resolved)
     folder.finish()
     T = log["time"].size
-    print(f"scenario {scenario.name!r}: {T} ticks, {log['time'][-1] if T else 0:.3f} s simulated "
+    print(f"scenario {scenario.name!r} ({', '.join(variant)}): {T} ticks, "
+          f"{log['time'][-1] if T else 0:.3f} s simulated "
           f"in {result.wall_time:.2f} s wall ({result.realtime_factor:.1f}x real time)", file=out)
-    rows = summary_rows(log)
-    if rows:
-        print(format_table(summary_header(log), rows), file=out)
-    else:
-        print("no cable pair came within its d_u", file=out)
-    norms = {k: np.linalg.norm(log[k], axis=1).max() if T else 0.0
-             for k in ("F_H", "F_int", "F_d")}
-    print("peak |F_H| {F_H:.2f} N, |F_int| {F_int:.2f} N, |F_d| {F_d:.2f} N".format(**norms),
-          file=out)
-    crossings = int(np.any(log["crossed"], axis=0).sum()) if T else 0
-    if "crossed_true" in log:  # the controller's estimate beside the plant's truth
-        truly = int(np.any(log["crossed_true"], axis=0).sum()) if T else 0
-        print(f"pairs that crossed: {truly} truly (from the true pose), {crossings} by the "
-              "controller's estimate", file=out)
-    else:
-        print(f"pairs that crossed: {crossings}", file=out)
+    print_pair_summary(log, out)
     _print_clipped(log, scenario, out)
     if T and "tension_status" in log:  # controller.tension_control
         print(tension_control_summary(log), file=out)
@@ -647,12 +659,14 @@ def run_main(*, scenario, duration=None, out_dir=None, out=None, on_status=None,
     from .realtime import report_lines, run
     from .run_folder import RUNS_DIR, RunFolder
     from .scenario import resolve_scenario
+    from .simulation import run_variant
 
     out = sys.stdout if out is None else out
     resolved = resolve_scenario(scenario)
     scenario = resolved.scenario
+    variant, tag = run_variant(resolved)
     folder = RunFolder(scenario.name, out_dir, force=force,
-                       root=RUNS_DIR if runs_root is None else runs_root)
+                       root=RUNS_DIR if runs_root is None else runs_root, variant=tag)
     _run_folder_step(folder.plan)
     out_dir = _run_folder_step(folder.create)
     tty = sys.stderr.isatty()
@@ -675,8 +689,13 @@ def run_main(*, scenario, duration=None, out_dir=None, out=None, on_status=None,
         folder.finish()
     if tty:
         print(file=sys.stderr)
+    plant = scenario.plant
+    where = (f" at {plant.address}:{plant.port}" if hasattr(plant, "address") else "")
+    print(f"scenario {scenario.name!r} ({', '.join(variant)}{where})", file=out)
     for line in report_lines(result):
         print(line, file=out)
+    if result.log and len(result.log["time"]):  # what the cables did, as simulate says it
+        print_pair_summary(result.log, out)
     if result.ending == "fault":
         print(f"cdpm run: error: {result.error}", file=sys.stderr)
         if not result.enabled and any(why in str(result.error) for why in (

@@ -98,6 +98,34 @@ def simulate(*, scenario: Scenario | ResolvedScenario, duration: float | None = 
     return SimulationResult(log=log, wall_time=wall, error=error, diagnosis=diagnosis)
 
 
+def run_variant(scenario: Scenario | ResolvedScenario) -> tuple[list[str], str]:
+    """What kind of run a scenario makes, for a person listing runs: (words for a summary's
+    first line, e.g. ["dynamic plant", "full pose", "tension control"]; a tag for the run
+    folder's name, e.g. "dynamic-full-pose-tension-control", "" for the default: the
+    kinematic plant and the paper's translating controller)."""
+    scenario = scenario.scenario if isinstance(scenario, ResolvedScenario) else scenario
+    plant = scenario.plant
+    words, tags = [], []
+    if isinstance(plant, DynamicReels):
+        words.append("dynamic plant")
+        tags.append("dynamic")
+    elif isinstance(plant, SimulatedReels):
+        words.append("kinematic plant")
+    else:
+        words.append("hardware reels")
+        tags.append("hardware")
+    c = scenario.controller
+    if c.pose == "full":
+        words.append("full pose")
+        tags.append("full-pose")
+        if c.tension_control:
+            words.append("tension control")
+            tags.append("tension-control")
+    else:
+        words.append("translation only")
+    return words, "-".join(tags)
+
+
 # --- will the log fit --------------------------------------------------------------------------
 
 # A run holds its whole log in memory: the loggers' rows, then their copy as the log's arrays
@@ -363,13 +391,19 @@ def save_log(log: dict, out_dir, scenario: Scenario | ResolvedScenario) -> Path:
 
 
 def summary_rows(log: dict):
-    """Per watched pair that was ever active (or, with a true pose logged, truly within its
-    d_u or crossed): (pair, min distance in mm to 0.01 mm as text, ticks active, crossed),
-    and with a true pose also the true minimum and whether the pair truly crossed, after the
-    controller's (`summary_header` names the columns)."""
+    """Per watched pair that ever came within its d_u (or, with a true pose logged, was truly
+    within it or crossed): the pair; its smallest distance in mm (the controller's, and with
+    a true pose the true one); its d_l and d_u in mm (the band of the force: it acts below
+    d_u, and is strongest from d_l); on how many ticks it was within d_u (log `active`: the
+    force on); whether it crossed (1: on some tick), and with a true pose whether it truly
+    crossed. Distances as text to 0.01 mm; `summary_header` names the columns."""
     rows = []
     truth = "pair_distances_true" in log
     T = len(log["time"])
+
+    def mm(x):
+        return f"{1000 * float(x):.2f}" if np.isfinite(x) else "-"
+
     for k, (i, j) in enumerate(log["pairs"]):
         active = log["active"][:, k]
         crossed = log["crossed"][:, k]
@@ -379,19 +413,21 @@ def summary_rows(log: dict):
             d_u = float(log["d_u"][k]) if np.isfinite(log["d_u"][k]) else -np.inf
             show = show or bool(d_true.min() <= d_u) or bool(log["crossed_true"][:, k].any())
         if show and T:
-            d_min = 1000 * float(log["pair_distances"][:, k].min())
-            row = (f"({i},{j})", f"{d_min:.2f}", int(active.sum()), int(crossed.any()))
+            row = (f"({i},{j})", mm(log["pair_distances"][:, k].min()))
             if truth:
-                row += (f"{1000 * float(d_true.min()):.2f}",
-                        int(log["crossed_true"][:, k].any()))
+                row += (mm(d_true.min()),)
+            row += (mm(log["d_l"][k]), mm(log["d_u"][k]), int(active.sum()),
+                    int(crossed.any()))
+            if truth:
+                row += (int(log["crossed_true"][:, k].any()),)
             rows.append(row)
     return rows
 
 
 def summary_header(log: dict) -> list[str]:
     """The column names of `summary_rows(log)`."""
-    head = ["pair", "min distance (mm)", "ticks active", "crossed"]
     if "pair_distances_true" in log:
-        head = ["pair", "min distance, controller (mm)", "ticks active", "crossed",
-                "min distance, true (mm)", "truly crossed"]
-    return head
+        return ["pair", "min distance, controller (mm)", "min distance, true (mm)", "d_l (mm)",
+                "d_u (mm)", "ticks within d_u", "crossed", "truly crossed"]
+    return ["pair", "min distance (mm)", "d_l (mm)", "d_u (mm)", "ticks within d_u",
+            "crossed"]

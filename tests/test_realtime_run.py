@@ -340,6 +340,20 @@ def test_cdpm_run_cli_reports_timing_and_packets(tmp_path, capsys):
     assert "run ended: completed" in out
     assert "tick period p50" in out and "packets: commands sent" in out
     assert (tmp_path / "log.npz").exists() and (tmp_path / "ticks.bin").exists()
+    # Issue 27: the report names the variant first and ends with simulate's pair table: exp1's
+    # pair (1,3) within d_u from the start (56 mm at the start, d_u 61 mm), its closest approach
+    # from the log, d_l and d_u of the scenario's interference defaults.
+    assert out.startswith("scenario 'exp1_no_interaction' (hardware reels, translation only "
+                          "at 127.0.0.1:"), out
+    with np.load(tmp_path / "log.npz") as log:
+        k13 = [tuple(p) for p in log["pairs"]].index((1, 3))
+        closest = 1000 * log["pair_distances"][:, k13].min()
+        within = int(log["active"][:, k13].sum())
+        d_l, d_u = 1000 * log["d_l"][k13], 1000 * log["d_u"][k13]
+    assert "pair   min distance (mm)  d_l (mm)  d_u (mm)  ticks within d_u  crossed" in out, out
+    row = next(line for line in out.splitlines() if line.startswith("(1,3)")).split()
+    assert row == ["(1,3)", f"{closest:.2f}", f"{d_l:.2f}", f"{d_u:.2f}", str(within), "0"], row
+    assert within > 0 and "pairs that crossed: 0" in out
     # A second run into the same directory would overwrite the robot's log: refused.
     code = main(["run", "exp1_no_interaction", "--duration", "1", "--out", str(tmp_path),
                  "--scenario-text", "plant: !HardwareReels {port: 9}"])
