@@ -563,13 +563,23 @@ def _cmd_simulate(args) -> int:
     return code
 
 
-def _writable_dir(path: Path, field: str) -> None:
+def _writable_dir(path: Path, field: str, keep: bool = True) -> None:
+    """CliError unless `path` is (or can be made) a writable folder; `keep=False` removes the
+    folders the check made (a dry run writes nothing)."""
     from .run_folder import RunFolderError, writable_dir
 
+    made = []
+    q = Path(path)
+    while not q.exists() and q != q.parent:
+        made.append(q)
+        q = q.parent
     try:
         writable_dir(path, field)
     except RunFolderError as e:
         raise CliError(str(e)) from None
+    if not keep:
+        for q in made:
+            q.rmdir()
 
 
 def _check_html(path) -> None:
@@ -979,7 +989,7 @@ def _cmd_sweep(args) -> int:
     if args.top < 1:
         raise CliError(f"--top must be an integer >= 1, got {args.top!r}")
     if args.out is not None:
-        _writable_dir(args.out, "--out")
+        _writable_dir(args.out, "--out", keep=not args.dry_run)
     plot = None
     if args.plot:
         from .views.sweep_plots import plot_sweep as plot
