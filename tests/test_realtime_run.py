@@ -430,7 +430,7 @@ def _run_against_dynamic_emulator(out_dir):
         [sys.executable, "-m", "cdpm_drake.emulator", "--scenario", "exp2_interaction",
          "--plant", "dynamic", "--port", "0", "--duration", "300", "--command-timeout", "1.0"],
         stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
-    code = None
+    code, line = None, ""
     try:
         ready, _, _ = select.select([emulator.stdout], [], [], 180.0)
         assert ready, "the emulator did not start within 180 s"
@@ -442,7 +442,7 @@ def _run_against_dynamic_emulator(out_dir):
     finally:
         emulator.send_signal(signal.SIGINT)
         out, err = emulator.communicate(timeout=120)
-    return code, emulator.returncode, out, err
+    return code, emulator.returncode, line + out, err  # its whole stdout, the first line too
 
 
 def test_cdpm_run_against_the_emulated_dynamic_plant(tmp_path):
@@ -481,8 +481,12 @@ def test_cdpm_run_against_the_emulated_dynamic_plant(tmp_path):
     assert error < 0.015, (error, np.diff(log["wall"]).max())
     # The emulator's closing summary: its compute per tick, and what the cables went through.
     assert re.search(r"compute per tick p50 [\d.]+ / p99 [\d.]+ / max [\d.]+ ms", out), out
-    found = re.search(r"dynamic plant over (\d+) ticks: tensions ([\d.]+)\.\.([\d.]+) N, "
-                      r"slack ticks per cable (.*), largest tilt ([\d.]+) deg", out)
+    # Issue 27: its first line says which plant it plays; the summary is the session's.
+    assert ("period 2 ms, plant: dynamic (!DynamicReels: time step 1 ms, reel speed limit 1 "
+            "m/s, start tilt [0.0, 0.0, 0.0] rad, rotation free), start [1.560, 3.240, 1.220] "
+            "m") in out.splitlines()[0], out
+    found = re.search(r"session 1: dynamic plant over (\d+) ticks: tensions ([\d.]+)\.\.([\d.]+) "
+                      r"N, slack ticks per cable (.*), largest tilt ([\d.]+) deg", out)
     assert found, out
     ticks, t_min, t_max = int(found.group(1)), float(found.group(2)), float(found.group(3))
     # (The emulator's world runs on until it is stopped, the reels held and the hand pulling:
