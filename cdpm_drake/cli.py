@@ -78,6 +78,9 @@ def info(*, robot: str = "paper_7cable", swaps=None, plot_dir=None, grid_step: f
           file=out)
     print(f"workspace box: lower {_fmt(r.workspace.lower)} m, upper {_fmt(r.workspace.upper)} m,"
           f" centre {_fmt(c)} m", file=out)
+    from .robot import frame_warnings
+    for message in frame_warnings(r):
+        print(f"warning: {message}", file=out)
     print(f"Jacobian condition number at the centre: {condition_number(r, c):.3f}", file=out)
     lim = r.limits
     print(f"limits: velocity {lim.max_velocity} m/s, acceleration {lim.max_acceleration} m/s^2,"
@@ -1214,19 +1217,27 @@ def _scenario_args(p, default="exp2_interaction"):
                         "'{duration: 5, interference: {default: {F_u: 4.0}}}'")
 
 
-COMPILE_NOTICE = ("cdpm: compiling the per-tick math (numba): once after installing, a few "
-                  "seconds; later runs load it from the cache")
+COMPILE_NOTICE = ("cdpm: compiling per-tick math this command needs for the first time "
+                  "(numba, a few seconds, once: later runs load it from the cache)")
+# Set in the environment once the notice is said: a process this command starts afterwards
+# (an emulator, a worker) inherits it and does not say it again.
+COMPILE_NOTICE_SAID = "CDPM_COMPILE_NOTICE_SAID"
 
 
 class _compile_notice:
     """Within the block, the first compilation of a kernel (numba's "numba:compile" event:
     a cache miss, never a load from the cache) prints COMPILE_NOTICE once on `stream`, so the
-    seconds of a first run after installing are explained; a run that loads everything from
-    numba's cache says nothing."""
+    seconds of a first run are explained; a run that loads everything from numba's cache says
+    nothing, and so does a process started by one that said it already (COMPILE_NOTICE_SAID
+    in its environment). Each command after installing may compile what it alone needs (the
+    dynamic plant's cables, the workspace statics), hence "this command ... first time"."""
 
     def __init__(self, stream=None):
+        import os
+
         self._stream = stream
-        self.said = False
+        self._inherited = os.environ.get(COMPILE_NOTICE_SAID)
+        self.said = bool(self._inherited)
         self._installed = None
 
     def __enter__(self):
@@ -1239,7 +1250,10 @@ class _compile_notice:
         class _Listener(event.Listener):
             def on_start(self, ev):
                 if not notice.said:
+                    import os
+
                     notice.said = True
+                    os.environ[COMPILE_NOTICE_SAID] = "1"
                     print(COMPILE_NOTICE, file=notice._stream or sys.stderr, flush=True)
 
             def on_end(self, ev):
@@ -1250,9 +1264,13 @@ class _compile_notice:
         return self
 
     def __exit__(self, *exc):
+        import os
+
         if self._installed is not None:
             self._installed.__exit__(*exc)
             self._installed = None
+        if self._inherited is None:  # the command is over: the next one may say it again
+            os.environ.pop(COMPILE_NOTICE_SAID, None)
 
 
 def main(argv=None) -> int:

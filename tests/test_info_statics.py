@@ -251,3 +251,14 @@ def test_an_infinite_t_star_where_the_rank_is_low_says_what_it_holds(capsys, tmp
     line = next(x for x in out.splitlines() if "rank at the workspace centre" in x)
     assert "t* there +inf for the weight alone" in line and "rank 3 < 6 there" in line, line
     assert "any floor holds" not in out
+
+
+def test_info_says_a_box_beyond_the_reels_frame_once(capsys, tmp_path, valid_spec,
+                                                     write_robot):
+    valid_spec["workspace"] = {"lower": [1.0, 0.5, 0.5], "upper": [4.5, 2.5, 2.5]}
+    path = write_robot(valid_spec)
+    code, out, err = run_info(capsys, str(path), "--grid", "0.5")
+    assert code == 0, err
+    assert "reels' frame" not in err
+    assert out.count("warning: tetra_4cable: the workspace box's upper x face, "
+                     "workspace.upper[0] = 4.5 m, lies beyond the reels' frame") == 1, out
