@@ -140,6 +140,15 @@ def test_info_refuses_a_grid_it_cannot_compute_before_the_report(capsys, step, m
     assert f"cdpm info: error: {message}" in err, err
 
 
+def test_the_smallest_grid_step_suggested_fits(capsys, valid_spec, write_robot):
+    # conftest's robot: a 2 x 2 x 2 m box. The cube root of 8 m^3 / 10^6 points is 20 mm,
+    # but 20 mm gives 101^3 = 1,030,301 points (both faces); 21 mm: 96^3 = 884,736.
+    path = write_robot(valid_spec)
+    code, out, err = run_cli(capsys, "info", str(path), "--grid", "0.001")
+    assert code == 2
+    assert err.endswith("more than 1,000,000; give a step of at least 0.021 m\n"), err
+
+
 # --- bug 5: a duration whose log cannot fit ----------------------------------------------------
 
 # Values per tick of experiment 2's log (docs/LOG_FORMAT.md): 3-vectors p, F_H, F_int, F_d,
