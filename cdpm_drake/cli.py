@@ -40,18 +40,31 @@ def info(*, robot: str = "paper_7cable", swaps=None, plot_dir=None, grid_step: f
     out = sys.stdout if out is None else out
     from .kinematics import cable_lengths, condition_number
 
-    r, scenario = _info_target(robot)
-    if swaps is not None:
+    with _robot_warnings_in_report():
+        r, scenario = _info_target(robot)
+        base = r  # before any swap: the statics warnings compare with it
         if scenario is not None:
-            scenario.swaps = [list(s) for s in swaps]
-        else:
-            for i, j in swaps:
-                r = r.with_swapped_attachments(i, j)
-    if scenario is not None:
-        from .scenario import resolve_scenario
+            import copy
 
-        resolved = resolve_scenario(scenario)
-        r = resolved.robot
+            from .scenario import scenario_robot
+
+            unswapped = copy.copy(scenario)
+            unswapped.swaps = []
+            base = scenario_robot(unswapped)
+        if swaps is not None:
+            if scenario is not None:
+                scenario.swaps = [list(s) for s in swaps]
+            else:
+                for i, j in swaps:
+                    r = r.with_swapped_attachments(i, j)
+        if scenario is not None:
+            from .scenario import resolve_scenario
+
+            resolved = resolve_scenario(scenario)
+            r = resolved.robot
+    if np.array_equal(r.attachments, base.attachments):
+        base = None
+    _check_info_grid(r, grid_step)  # before the report
     c = r.workspace.center
     lengths = cable_lengths(r, c)
     what = (f"scenario {scenario.name!r}: " if scenario is not None else "") + f"robot {r.name!r}"
@@ -65,6 +78,9 @@ def info(*, robot: str = "paper_7cable", swaps=None, plot_dir=None, grid_step: f
           file=out)
     print(f"workspace box: lower {_fmt(r.workspace.lower)} m, upper {_fmt(r.workspace.upper)} m,"
           f" centre {_fmt(c)} m", file=out)
+    from .robot import frame_warnings
+    for message in frame_warnings(r):
+        print(f"warning: {message}", file=out)
     print(f"Jacobian condition number at the centre: {condition_number(r, c):.3f}", file=out)
     lim = r.limits
     print(f"limits: velocity {lim.max_velocity} m/s, acceleration {lim.max_acceleration} m/s^2,"
@@ -82,8 +98,8 @@ def info(*, robot: str = "paper_7cable", swaps=None, plot_dir=None, grid_step: f
     print(format_table(["pair", "distance (mm)", "largest (mm)"], rows), file=out)
     print("(the two are equal where the closest points are the attachment points; d_u must "
           "stay below 'largest' or that pair's force never switches off)", file=out)
-    path = _print_statics(r, scenario, grid_step, out)
-    _print_wrench_feasibility(r, out)
+    path, grid, t_grid, grid_text = _print_statics(r, scenario, grid_step, out, base=base)
+    _print_wrench_feasibility(r, grid, t_grid, grid_text, out)
     if plot_dir is None:
         return []
     from .views.workspace_plots import plot_workspace
@@ -95,6 +111,40 @@ def info(*, robot: str = "paper_7cable", swaps=None, plot_dir=None, grid_step: f
     for png in written:
         print(f"plot: {png}", file=out)
     return written
+
+
+class _robot_warnings_in_report:
+    """Within the block, the warnings that loading a robot logs (its statics, the pairs the
+    interference block skips) are not printed: `cdpm info`'s report says each of them, on
+    its own grid, once."""
+
+    def __enter__(self):
+        import logging
+
+        self._logger = logging.getLogger("cdpm_drake.robot")
+        self._filter = lambda record: record.levelno < logging.WARNING
+        self._logger.addFilter(self._filter)
+        return self
+
+    def __exit__(self, *exc):
+        self._logger.removeFilter(self._filter)
+
+
+def _check_info_grid(r, step) -> None:
+    """CliError when the --grid step gives more than INFO_MAX_GRID_POINTS on r's box."""
+    size = r.workspace.upper - r.workspace.lower
+
+    def counts_of(step):
+        return [int(np.floor(s / step + 1e-9)) + 1 for s in size]
+
+    counts = counts_of(step)
+    if np.prod(counts, dtype=float) > INFO_MAX_GRID_POINTS:
+        least = np.ceil(1000 * np.cbrt(np.prod(size) / INFO_MAX_GRID_POINTS)) / 1000
+        while np.prod(counts_of(least), dtype=float) > INFO_MAX_GRID_POINTS:
+            least += 0.001  # whole mm: the smallest step that fits
+        raise CliError(f"--grid {step!r} m gives {counts[0]} x {counts[1]} x {counts[2]} points "
+                       f"on the workspace box of robot {r.name!r}, more than "
+                       f"{INFO_MAX_GRID_POINTS:,}; give a step of at least {least:.3f} m")
 
 
 # The floor (N) of the statics summary and of the pictures, and the d_u (m) the
@@ -133,52 +183,77 @@ def _info_target(name):
                      f"built-in scenarios: {scenario_names()} (or give a path to a .yaml file)")
 
 
-def _print_statics(r, scenario, step, out):
-    """The statics summary; returns the scenario's simulated path (None without one)."""
+def _print_statics(r, scenario, step, out, base=None):
+    """The statics summary, every share on one grid (the --grid step's); returns the
+    scenario's simulated path (None without one). `base`: the robot before the swaps (None
+    without swaps), which the warnings compare with."""
     from .robot import robot_statics, statics_warnings
     from .tension import holding_tension, step_grid
 
     statics = robot_statics(r)
     mass = r.dynamics.mass
+    grid = step_grid(r.workspace.lower, r.workspace.upper, step)
+    counts = [len(np.arange(lo, hi + 1e-9, step))
+              for lo, hi in zip(r.workspace.lower, r.workspace.upper)]
+    grid_text = (f"{100 * step:g} cm grid from the lower corner: {counts[0]} x {counts[1]} x "
+                 f"{counts[2]} points")
     print(f"statics of the level platform ({mass:g} kg at its centre, moments about the "
           f"centre); t* = the largest achievable minimum cable tension (N):", file=out)
     rank_note = ("" if statics.unreachable is None else
                  f" < 6: no tension produces a {_describe(statics.unreachable)}")
+    centre = r.workspace.center
     print(f"  wrench matrix rank at the workspace centre: {statics.rank}{rank_note}; t* there "
-          f"{_newtons(statics.centre_t_star)}", file=out)
-    grid = step_grid(r.workspace.lower, r.workspace.upper, step)
-    counts = [len(np.arange(lo, hi + 1e-9, step))
-              for lo, hi in zip(r.workspace.lower, r.workspace.upper)]
-    share = float(np.mean(holding_tension(r, grid) >= INFO_FLOOR))
+          f"{_t_star_text(r, centre, statics.centre_t_star)}", file=out)
+    t_grid = t = holding_tension(r, grid)
+    share = float(np.mean(t >= INFO_FLOOR))
     print(f"  held with every cable >= {INFO_FLOOR:g} N on {100 * share:.1f} % of the workspace "
-          f"box ({100 * step:g} cm grid from the lower corner: {counts[0]} x {counts[1]} x "
-          f"{counts[2]} points)", file=out)
-    for message in statics_warnings(r, statics):
+          f"box ({grid_text})", file=out)
+    # The warnings of the same grid and floor (loading the robot computed them on its own
+    # 11^3 grid, and `info` kept them off stderr: they are said here, once).
+    label = f"the same {100 * step:g} cm grid"
+    base_share = (None if base is None else
+                  float(np.mean(holding_tension(base, grid) >= INFO_FLOOR)))
+    import dataclasses
+    for message in statics_warnings(r, dataclasses.replace(statics, share=share,
+                                                           floor=INFO_FLOOR),
+                                    grid=label, base=base, base_share=base_share):
         print(f"  warning: {message}", file=out)
     if scenario is None:
-        return None
+        return None, grid, t_grid, grid_text
     p0 = np.asarray(scenario.initial_position, dtype=float)
-    print(f"  at the start {_fmt(p0, 2)} m: t* {_newtons(float(holding_tension(r, p0)))}",
-          file=out)
+    print(f"  at the start {_fmt(p0, 2)} m: t* "
+          f"{_t_star_text(r, p0, float(holding_tension(r, p0)))}", file=out)
     from .simulation import simulate
 
     log = simulate(scenario=_kinematic_copy(scenario)).log
     t = holding_tension(r, log["p"])
     k = int(np.argmin(t))
     print(f"  along the scenario's path (kinematic plant, {len(t)} ticks): smallest t* "
-          f"{_newtons(t[k])} at t = {log['time'][k]:.3f} s, p = {_fmt(log['p'][k])} m; "
-          f"{100 * np.mean(t >= INFO_FLOOR):.1f} % of the ticks at >= {INFO_FLOOR:g} N",
-          file=out)
-    return log["p"]
+          f"{_t_star_text(r, log['p'][k], t[k])} at t = {log['time'][k]:.3f} s, p = "
+          f"{_fmt(log['p'][k])} m; {100 * np.mean(t >= INFO_FLOOR):.1f} % of the ticks at "
+          f">= {INFO_FLOOR:g} N", file=out)
+    return log["p"], grid, t_grid, grid_text
 
 
-def _newtons(t) -> str:
-    """t* as printed: N with two decimals, or the meaning of an infinite one."""
-    if t == np.inf:
-        return "+inf (an internal force raises every tension: any floor holds)"
+def _t_star_text(r, p, t) -> str:
+    """t* at p (m) as printed: N with two decimals, or what an infinite one means there. +inf
+    needs an internal force that raises every tension: where the wrench matrix is
+    rank-deficient (the cables' lines of action meet) it holds for the weight alone, at that
+    exact pose, and the platform still cannot resist the wrench the rank lacks."""
+    from .tension import RANK_TOL, wrench_matrix
+
     if t == -np.inf:
         return "-inf (no tensions balance the weight)"
-    return f"{t:.2f} N"
+    if t != np.inf:
+        return f"{t:.2f} N"
+    U, s, _ = np.linalg.svd(wrench_matrix(r, p))
+    rank = int(np.sum(s > RANK_TOL * max(s[0], 1e-300)))
+    if rank == 6:
+        return "+inf (an internal force raises every tension: any floor holds)"
+    return (f"+inf for the weight alone (the cables' lines of action meet there, so an "
+            f"internal force raises every tension), but the wrench matrix has rank {rank} < 6 "
+            f"there: the platform cannot resist a {_describe(U[:, rank])}, so no floor holds "
+            "it against anything else")
 
 
 def _kinematic_copy(scenario):
@@ -198,31 +273,70 @@ def _describe(direction) -> str:
     return describe_wrench(direction)
 
 
-# Hand forces (N) and tension floors (N) of the feasibility table, and its grid per axis.
+# Hand forces (N, ascending from 0) and tension floors (N) of the feasibility table, and the
+# points per axis of its grid for robots without a compiled t* (not 7 or 8 cables).
 FEASIBILITY_FORCES = (0.0, 5.0, 10.0, 20.0)
 FEASIBILITY_FLOORS = (0.0, 5.0)
 FEASIBILITY_GRID = 5
 
 
-def _print_wrench_feasibility(r, out) -> None:
+def feasibility_shares(r, points, t_weight) -> list[list[float]]:
+    """[force][floor]: the share of `points` (N, 3) m where the cables hold the level platform
+    (the robot file's mass at its centre) plus a hand force of each FEASIBILITY_FORCES at
+    the handle in each of the 26 directions, with every cable >= each FEASIBILITY_FLOORS.
+    `t_weight`: t* (N) of the weight alone at the points (holding_tension: the 0 N row). A
+    point that fails a force fails every larger one (t*, the minimum over a symmetric set of
+    directions, is concave in the wrench, so it does not rise with the force), so each force
+    is only solved where the one before held: the same shares, about half the work."""
     from .tension import wrench_feasibility
 
     d = r.dynamics
-    n = FEASIBILITY_GRID
-    rows = []
-    for force in FEASIBILITY_FORCES:
-        shares = [wrench_feasibility(r, mass=d.mass, hand_force=force, handle=d.handle,
-                                     min_tension=floor, n=n).share
-                  for floor in FEASIBILITY_FLOORS]
-        rows.append((f"{force:g}", *(f"{100 * share:.1f}" for share in shares)))
-    print(f"wrench feasibility: share of a {n}x{n}x{n} grid of the workspace box where the "
-          f"cables hold the level platform ({d.mass:g} kg, moments about its centre) plus a "
-          f"hand force at the handle {_fmt(d.handle, 2)} m in each of 26 directions:", file=out)
+    t = np.asarray(t_weight, dtype=float)
+    out = []
+    for force in FEASIBILITY_FORCES:  # ascending, from 0 N
+        if force > 0:
+            live = np.flatnonzero(t >= min(FEASIBILITY_FLOORS))
+            t = np.full(len(points), -np.inf)
+            if live.size:
+                t[live] = wrench_feasibility(r, mass=d.mass, hand_force=force,
+                                             handle=d.handle, points=points[live]).t_star
+        out.append([float(np.mean(t >= floor)) for floor in FEASIBILITY_FLOORS])
+    return out
+
+
+def _print_wrench_feasibility(r, points, t_weight, grid_text, out) -> None:
+    from .tension import grid_points, holding_tension
+
+    d = r.dynamics
+    if r.num_cables in (7, 8):  # compiled closed forms: the whole grid in about a second
+        where = f"on the same grid ({grid_text})"
+    else:  # a solver per point and direction: a coarser grid, said so
+        n = FEASIBILITY_GRID
+        points = grid_points(r.workspace.lower, r.workspace.upper, n)
+        t_weight = holding_tension(r, points)
+        where = (f"on a coarser {n} x {n} x {n} grid (corners included: {r.num_cables} cables "
+                 "need a solver per point)")
+    rows = [(f"{force:g}", *(f"{100 * share:.1f}" for share in shares))
+            for force, shares in zip(FEASIBILITY_FORCES,
+                                     feasibility_shares(r, points, t_weight))]
+    print(f"wrench feasibility {where}: the share where the cables hold the level platform "
+          f"({d.mass:g} kg, moments about its centre) plus a hand force at the handle "
+          f"{_fmt(d.handle, 2)} m in each of 26 directions:", file=out)
     print(format_table(["hand force (N)"] + [f"all cables >= {floor:g} N (%)"
                                              for floor in FEASIBILITY_FLOORS], rows), file=out)
 
 
+# The most points `cdpm info --grid` computes statics on (~1 us a point and hand-force
+# direction for 7 and 8 cables: a few seconds at the default 5 cm, ~140 k points).
+INFO_MAX_GRID_POINTS = 1_000_000
+
+
 def _cmd_info(args) -> int:
+    step = args.grid
+    if not (step > 0 and np.isfinite(step)):
+        raise CliError(f"--grid must be a step in m > 0, got {step!r}")
+    if args.plot is not None:  # before the report: a folder found wanting after it is a waste
+        _writable_dir(args.plot, "--plot")
     info(robot=args.robot, swaps=args.swaps, plot_dir=args.plot, grid_step=args.grid)
     return 0
 
@@ -309,6 +423,31 @@ def _print_dynamic_summary(log, out) -> None:
               file=out)
 
 
+def print_pair_summary(log, out) -> None:
+    """The cable pairs of a log (`cdpm simulate`'s and `cdpm run`'s): each pair's closest
+    approach beside its d_l and d_u, the ticks it was within d_u and whether it crossed; the
+    peak forces; how many pairs crossed."""
+    from .simulation import summary_header, summary_rows
+
+    T = len(log["time"])
+    rows = summary_rows(log)
+    if rows:
+        print(format_table(summary_header(log), rows), file=out)
+    else:
+        print("no cable pair came within its d_u", file=out)
+    norms = {k: np.linalg.norm(log[k], axis=1).max() if T else 0.0
+             for k in ("F_H", "F_int", "F_d")}
+    print("peak |F_H| {F_H:.2f} N, |F_int| {F_int:.2f} N, |F_d| {F_d:.2f} N".format(**norms),
+          file=out)
+    crossings = int(np.any(log["crossed"], axis=0).sum()) if T else 0
+    if "crossed_true" in log:  # the controller's estimate beside the plant's truth
+        truly = int(np.any(log["crossed_true"], axis=0).sum()) if T else 0
+        print(f"pairs that crossed: {truly} truly (from the true pose), {crossings} by the "
+              "controller's estimate", file=out)
+    else:
+        print(f"pairs that crossed: {crossings}", file=out)
+
+
 def _print_clipped(log, scenario, out) -> None:
     """The ticks whose raw hand force (F_measured) the sensor model clipped, if any."""
     from .scenario import sensor_range_text
@@ -342,13 +481,14 @@ def simulate_main(*, scenario, duration=None, out_dir=None, progress=True, out=N
     same, and the plots and replay asked for)."""
     from .run_folder import RUNS_DIR, RunFolder
     from .scenario import resolve_scenario
-    from .simulation import save_log, simulate, summary_header, summary_rows
+    from .simulation import run_variant, save_log, simulate
 
     out = sys.stdout if out is None else out
     resolved = resolve_scenario(scenario)
     scenario = resolved.scenario
+    variant, tag = run_variant(resolved)
     folder = RunFolder(scenario.name, out_dir, force=force,
-                       root=RUNS_DIR if runs_root is None else runs_root)
+                       root=RUNS_DIR if runs_root is None else runs_root, variant=tag)
     _run_folder_step(folder.plan)
     out_dir = _run_folder_step(folder.create)  # before the run: a long run's log needs a place
     try:
@@ -361,24 +501,10 @@ def simulate_main(*, scenario, duration=None, out_dir=None, progress=True, out=N
     path = save_log(log, out_dir, resolved)
     folder.finish()
     T = log["time"].size
-    print(f"scenario {scenario.name!r}: {T} ticks, {log['time'][-1] if T else 0:.3f} s simulated "
+    print(f"scenario {scenario.name!r} ({', '.join(variant)}): {T} ticks, "
+          f"{log['time'][-1] if T else 0:.3f} s simulated "
           f"in {result.wall_time:.2f} s wall ({result.realtime_factor:.1f}x real time)", file=out)
-    rows = summary_rows(log)
-    if rows:
-        print(format_table(summary_header(log), rows), file=out)
-    else:
-        print("no cable pair came within its d_u", file=out)
-    norms = {k: np.linalg.norm(log[k], axis=1).max() if T else 0.0
-             for k in ("F_H", "F_int", "F_d")}
-    print("peak |F_H| {F_H:.2f} N, |F_int| {F_int:.2f} N, |F_d| {F_d:.2f} N".format(**norms),
-          file=out)
-    crossings = int(np.any(log["crossed"], axis=0).sum()) if T else 0
-    if "crossed_true" in log:  # the controller's estimate beside the plant's truth
-        truly = int(np.any(log["crossed_true"], axis=0).sum()) if T else 0
-        print(f"pairs that crossed: {truly} truly (from the true pose), {crossings} by the "
-              "controller's estimate", file=out)
-    else:
-        print(f"pairs that crossed: {crossings}", file=out)
+    print_pair_summary(log, out)
     _print_clipped(log, scenario, out)
     if T and "tension_status" in log:  # controller.tension_control
         print(tension_control_summary(log), file=out)
@@ -456,10 +582,11 @@ def _cmd_simulate(args) -> int:
         on_chunk = _live_meshcat(scenario)
         # Something to watch: paced at real time unless told otherwise.
         realtime = 1.0 if realtime is None else realtime
-    code = simulate_main(scenario=scenario, duration=args.duration, out_dir=args.out,
-                         progress=not args.no_progress, on_chunk=on_chunk,
-                         html=args.html, plots=args.plot, realtime_rate=realtime,
-                         chunk=0.04 if args.meshcat else 0.5, force=args.force)
+    with _duration_flag(args.duration):
+        code = simulate_main(scenario=scenario, duration=args.duration, out_dir=args.out,
+                             progress=not args.no_progress, on_chunk=on_chunk,
+                             html=args.html, plots=args.plot, realtime_rate=realtime,
+                             chunk=0.04 if args.meshcat else 0.5, force=args.force)
     if args.meshcat and not args.no_wait and sys.stdin.isatty():
         try:
             input("Meshcat is still serving the last frame; press Enter to quit. ")
@@ -468,13 +595,23 @@ def _cmd_simulate(args) -> int:
     return code
 
 
-def _writable_dir(path: Path, field: str) -> None:
+def _writable_dir(path: Path, field: str, keep: bool = True) -> None:
+    """CliError unless `path` is (or can be made) a writable folder; `keep=False` removes the
+    folders the check made (a dry run writes nothing)."""
     from .run_folder import RunFolderError, writable_dir
 
+    made = []
+    q = Path(path)
+    while not q.exists() and q != q.parent:
+        made.append(q)
+        q = q.parent
     try:
         writable_dir(path, field)
     except RunFolderError as e:
         raise CliError(str(e)) from None
+    if not keep:
+        for q in made:
+            q.rmdir()
 
 
 def _check_html(path) -> None:
@@ -506,6 +643,24 @@ def _save_replay(log, path):
 def _check_duration(duration):
     if duration is not None and not (duration > 0 and np.isfinite(duration)):
         raise CliError(f"--duration must be a number of seconds > 0, got {duration!r}")
+
+
+class _duration_flag:
+    """A log too large for the duration given by --duration is a bad option value (exit 2);
+    by the scenario's duration, an invalid scenario (1, as LogTooLarge is a ScenarioError)."""
+
+    def __init__(self, duration):
+        self._flag = duration is not None
+
+    def __enter__(self):
+        return self
+
+    def __exit__(self, kind, e, tb):
+        from .simulation import LogTooLarge
+
+        if self._flag and isinstance(e, LogTooLarge):
+            raise CliError(f"--{e}") from None
+        return False
 
 
 def _check_duration_tick(duration, resolved) -> None:
@@ -546,12 +701,14 @@ def run_main(*, scenario, duration=None, out_dir=None, out=None, on_status=None,
     from .realtime import report_lines, run
     from .run_folder import RUNS_DIR, RunFolder
     from .scenario import resolve_scenario
+    from .simulation import run_variant
 
     out = sys.stdout if out is None else out
     resolved = resolve_scenario(scenario)
     scenario = resolved.scenario
+    variant, tag = run_variant(resolved)
     folder = RunFolder(scenario.name, out_dir, force=force,
-                       root=RUNS_DIR if runs_root is None else runs_root)
+                       root=RUNS_DIR if runs_root is None else runs_root, variant=tag)
     _run_folder_step(folder.plan)
     out_dir = _run_folder_step(folder.create)
     tty = sys.stderr.isatty()
@@ -574,11 +731,17 @@ def run_main(*, scenario, duration=None, out_dir=None, out=None, on_status=None,
         folder.finish()
     if tty:
         print(file=sys.stderr)
+    plant = scenario.plant
+    where = (f" at {plant.address}:{plant.port}" if hasattr(plant, "address") else "")
+    print(f"scenario {scenario.name!r} ({', '.join(variant)}{where})", file=out)
     for line in report_lines(result):
         print(line, file=out)
+    if result.log and len(result.log["time"]):  # what the cables did, as simulate says it
+        print_pair_summary(result.log, out)
     if result.ending == "fault":
         print(f"cdpm run: error: {result.error}", file=sys.stderr)
-        if not result.enabled and "do not fit robot" in str(result.error):
+        if not result.enabled and any(why in str(result.error) for why in (
+                "do not fit robot", "outside the workspace box", "cannot hold")):
             from .scenario import scenario_names
             which = (scenario.name if scenario.name in scenario_names()
                      else "<this run's scenario file>")
@@ -606,8 +769,9 @@ def _cmd_run(args) -> int:
     scenario = _load_scenario_arg(args)
     _check_duration_tick(args.duration, scenario)
     on_view = _live_meshcat(scenario) if args.meshcat else None
-    return run_main(scenario=scenario, duration=args.duration, out_dir=args.out,
-                    on_view=on_view, force=args.force)
+    with _duration_flag(args.duration):
+        return run_main(scenario=scenario, duration=args.duration, out_dir=args.out,
+                        on_view=on_view, force=args.force)
 
 
 # --- plot ------------------------------------------------------------------------------------
@@ -857,7 +1021,7 @@ def _cmd_sweep(args) -> int:
     if args.top < 1:
         raise CliError(f"--top must be an integer >= 1, got {args.top!r}")
     if args.out is not None:
-        _writable_dir(args.out, "--out")
+        _writable_dir(args.out, "--out", keep=not args.dry_run)
     plot = None
     if args.plot:
         from .views.sweep_plots import plot_sweep as plot
@@ -1082,19 +1246,27 @@ def _scenario_args(p, default="exp2_interaction"):
                         "'{duration: 5, interference: {default: {F_u: 4.0}}}'")
 
 
-COMPILE_NOTICE = ("cdpm: compiling the per-tick math (numba): once after installing, a few "
-                  "seconds; later runs load it from the cache")
+COMPILE_NOTICE = ("cdpm: compiling per-tick math this command needs for the first time "
+                  "(numba, a few seconds, once: later runs load it from the cache)")
+# Set in the environment once the notice is said: a process this command starts afterwards
+# (an emulator, a worker) inherits it and does not say it again.
+COMPILE_NOTICE_SAID = "CDPM_COMPILE_NOTICE_SAID"
 
 
 class _compile_notice:
     """Within the block, the first compilation of a kernel (numba's "numba:compile" event:
     a cache miss, never a load from the cache) prints COMPILE_NOTICE once on `stream`, so the
-    seconds of a first run after installing are explained; a run that loads everything from
-    numba's cache says nothing."""
+    seconds of a first run are explained; a run that loads everything from numba's cache says
+    nothing, and so does a process started by one that said it already (COMPILE_NOTICE_SAID
+    in its environment). Each command after installing may compile what it alone needs (the
+    dynamic plant's cables, the workspace statics), hence "this command ... first time"."""
 
     def __init__(self, stream=None):
+        import os
+
         self._stream = stream
-        self.said = False
+        self._inherited = os.environ.get(COMPILE_NOTICE_SAID)
+        self.said = bool(self._inherited)
         self._installed = None
 
     def __enter__(self):
@@ -1107,7 +1279,10 @@ class _compile_notice:
         class _Listener(event.Listener):
             def on_start(self, ev):
                 if not notice.said:
+                    import os
+
                     notice.said = True
+                    os.environ[COMPILE_NOTICE_SAID] = "1"
                     print(COMPILE_NOTICE, file=notice._stream or sys.stderr, flush=True)
 
             def on_end(self, ev):
@@ -1118,9 +1293,13 @@ class _compile_notice:
         return self
 
     def __exit__(self, *exc):
+        import os
+
         if self._installed is not None:
             self._installed.__exit__(*exc)
             self._installed = None
+        if self._inherited is None:  # the command is over: the next one may say it again
+            os.environ.pop(COMPILE_NOTICE_SAID, None)
 
 
 def main(argv=None) -> int:

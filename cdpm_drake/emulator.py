@@ -12,6 +12,13 @@ Fault-injection flags impair the link (drop, delay, duplicate, reorder, corrupt)
 bridge (freeze, NaN, stop, fault bits) from `--fault-after` seconds after the controller first
 enables the reels. The protocol is hardware/PROTOCOL.md.
 
+Each controller session (a `cdpm run`) after the first starts where the first did: the plant is
+reset to the start, as a homing between two runs would (its fault bits stay), and the operator's
+clock starts again at the session's first enabling command; the session's line says where the
+last one left the platform. With the dynamic plant, each session's close reports what the
+cables went through in it (tensions, when each went slack, the largest tilt and when, on the
+plant's clock).
+
 Examples:
   cdpm-reel-emulator --robot paper_7cable --start 1.77 3.65 1.22
   cdpm-reel-emulator --scenario exp2_interaction --drop 0.01 --seed 3
@@ -125,6 +132,30 @@ class ReelBridge:
         self.operator_start = None                  # `time` of the first enabling command, s
         self.p = self._best_fit(robot.workspace.center)
         self.v = np.zeros(3)
+        self._start = (self.lengths.copy(), self.p.copy())
+
+    def describe(self) -> str:
+        """The plant it plays, for the emulator's first line."""
+        return (f"plant: kinematic (reels following their commands with a "
+                f"{1e3 * self.time_constant:g} ms first-order lag, speed limit "
+                f"{self.max_reel_speed:g} m/s)")
+
+    def reset(self) -> None:
+        """Back to the start, at rest, the operator's clock stopped until the next enabling
+        command: what a homing between two runs does. Fault bits stay (a real bridge keeps
+        them until it is reset)."""
+        lengths, p = self._start
+        self.lengths = lengths.copy()
+        self.p = p.copy()
+        self.v = np.zeros(3)
+        self.speed = np.zeros_like(self.speed)
+        self.command = np.zeros_like(self.command)
+        self.enabled = False
+        self.operator_start = None
+
+    def platform(self) -> np.ndarray:
+        """The platform centre now (the best fit to the reels' lengths), base frame, m."""
+        return self._best_fit(self.p)
 
     def _best_fit(self, guess):
         try:
@@ -228,6 +259,7 @@ class DynamicBridge:
         self._tensions = slice(*_span(cables.layout["tensions"]))
         self._slack = slice(*_span(cables.layout["slack"]))
         self._rpy = slice(*_span(cables.layout["rpy_true"]))
+        self._p_true = slice(*_span(cables.layout["p_WP_true"]))
         p0 = np.asarray(scenario.initial_position, dtype=float)
         L0 = plant_state_now(self._diagram, self._context)["L0"]
         from .rotation import rotation_from_rpy
@@ -242,13 +274,47 @@ class DynamicBridge:
         self.faults = 0
         self.time = 0.0                             # s stepped so far (the bridge's clock)
         self.operator_start = None                  # `time` of the first enabling command, s
-        # What the cables went through, tick by tick (the closing summary).
+        self._settings = scenario.plant
+        self._initial = self._context.Clone()       # the start: what reset() goes back to
+        self._clear_record()
+
+    def describe(self) -> str:
+        """The plant it plays, for the emulator's first line."""
+        c = self._settings
+        return (f"plant: dynamic (!DynamicReels: time step {1e3 * c.time_step:g} ms, reel "
+                f"speed limit {self.max_reel_speed:g} m/s, start tilt "
+                f"{[float(a) for a in c.initial_rpy]!r} rad, rotation "
+                f"{'locked' if c.lock_rotation else 'free'})")
+
+    def _clear_record(self) -> None:
+        # What the cables went through, tick by tick, since the start or the last reset (the
+        # session's summary).
+        m = self.robot.num_cables
         self.ticks = 0
         self.min_tension = math.inf
         self.max_tension = 0.0
         self.slack_ticks = np.zeros(m, dtype=int)
+        self.first_slack = np.full(m, np.nan)       # plant time of each cable's first slack, s
         self.max_tilt = 0.0
+        self.max_tilt_time = 0.0
         self._observe()
+
+    def reset(self) -> None:
+        """Back to the start pose at rest (the plant's state and clock as built), the
+        operator's clock stopped until the next enabling command, the record cleared: what a
+        homing between two runs does. Fault bits stay (a real bridge keeps them until it is
+        reset)."""
+        self._context.SetTimeStateAndParametersFrom(self._initial)
+        self.command = np.zeros_like(self.command)
+        self._command_port.FixValue(self._context, self.command)
+        self._simulator.Initialize()
+        self.enabled = False
+        self.operator_start = None
+        self._clear_record()
+
+    def platform(self) -> np.ndarray:
+        """The platform centre now (the plant's true position), base frame, m."""
+        return np.array(self._step_port.Eval(self._cables_context)[self._p_true])
 
     @property
     def lengths(self) -> np.ndarray:
@@ -312,12 +378,17 @@ class DynamicBridge:
         self.ticks += 1
         self.min_tension = min(self.min_tension, float(T.min()))
         self.max_tension = max(self.max_tension, float(T.max()))
-        self.slack_ticks += step[self._slack] > 0.5
+        slack = step[self._slack] > 0.5
+        self.slack_ticks += slack
+        now = self.plant_time
+        self.first_slack[slack & np.isnan(self.first_slack)] = now
         r, p, y = (float(a) for a in step[self._rpy])
         # The angle of R = Rz(y) Ry(p) Rx(r) from level: acos((trace R - 1) / 2).
         trace = (math.cos(y) * math.cos(p) + math.sin(y) * math.sin(p) * math.sin(r)
                  + math.cos(y) * math.cos(r) + math.cos(p) * math.cos(r))
-        self.max_tilt = max(self.max_tilt, math.acos(max(-1.0, min(1.0, (trace - 1) / 2))))
+        tilt = math.acos(max(-1.0, min(1.0, (trace - 1) / 2)))
+        if tilt > self.max_tilt:
+            self.max_tilt, self.max_tilt_time = tilt, now
 
     def force(self) -> np.ndarray:
         """The force sample, N: the operator's force on the true platform (the plant's
@@ -326,11 +397,16 @@ class DynamicBridge:
         return np.clip(f, -MAX_FORCE, MAX_FORCE)
 
     def summary(self) -> str:
-        """What the cables went through: tension range, slack ticks per cable, tilt."""
-        slack = ", ".join(f"{i + 1}:{int(n)}" for i, n in enumerate(self.slack_ticks) if n)
+        """What the cables went through since the start or the last reset (a session): the
+        tension range, each cable's slack ticks and when it first went slack, the largest
+        tilt and when; times on the plant's clock (0 at the session's first enabling
+        command, as the controller's log)."""
+        slack = ", ".join(f"{i + 1}:{int(n)} (first at t = {self.first_slack[i]:.3f} s)"
+                          for i, n in enumerate(self.slack_ticks) if n)
         return (f"dynamic plant over {self.ticks} ticks: tensions {self.min_tension:.2f}.."
                 f"{self.max_tension:.2f} N, slack ticks per cable {slack or 'none'}, largest "
-                f"tilt {math.degrees(self.max_tilt):.2f} deg")
+                f"tilt {math.degrees(self.max_tilt):.2f} deg at t = {self.max_tilt_time:.3f} "
+                f"s (plant time 0..{self.plant_time:.3f} s)")
 
 
 @dataclasses.dataclass(frozen=True)
@@ -597,6 +673,15 @@ class ReelBridgeServer:
             self.fault_onset = self.fault_onset_tick = None
             self._frozen, self._held = None, None
             self._delayed.clear()
+            # Each rehearsal starts where the scenario does, as after a homing: the last run
+            # left the platform wherever the hand took it.
+            left = self.bridge.platform()
+            self.bridge.reset()
+            start = self.bridge.platform()
+            self._say(f"session {self.session}: the platform is back at its start "
+                      f"{_vector(start)} m (reset, as a homing would; the last session left it "
+                      f"at {_vector(left)} m, {np.linalg.norm(left - start):.3f} m away), the "
+                      f"operator's clock at 0")
 
     def _close_session(self, now: float, why: str) -> None:
         self.session_open = False
@@ -605,6 +690,8 @@ class ReelBridgeServer:
                   f"{self._session_commands} commands accepted, rejected {rejected}, reels "
                   f"{'enabled' if self.bridge.enabled else 'at rest'}, faults "
                   f"{self.bridge.faults:#06x}")
+        if hasattr(self.bridge, "summary"):  # what the plant went through in the session
+            self._say(f"session {self.session}: {self.bridge.summary()}")
 
     def _note_rejection(self, e: ProtocolError, sender) -> None:
         n = self._session_rejected.get(e.reason, 0)
@@ -694,6 +781,10 @@ class ReelBridgeServer:
 
     def __exit__(self, *exc):
         self.stop()
+
+
+def _vector(v) -> str:
+    return "[" + ", ".join(f"{x:.3f}" for x in np.asarray(v, dtype=float)) + "]"
 
 
 def _count_by_reason(counts: dict) -> str:
@@ -805,6 +896,13 @@ def build_server(args, log=None) -> ReelBridgeServer:
                          "its robot)")
     if args.start is not None:
         start = args.start
+        box = robot.workspace
+        if not box.contains(start):
+            # The controller refuses to enable there (hardware.reels.start_pose_problem): a
+            # rehearsal from such a start rehearses nothing else.
+            raise ValueError(f"--start {[float(x) for x in start]!r} m is outside the workspace "
+                             f"box of robot {robot.name!r} (lower {box.lower.tolist()!r}, "
+                             f"upper {box.upper.tolist()!r} m); give a start inside it")
     lengths = cable_lengths(robot, np.asarray(start, dtype=float))
     for cable, metres in args.length_offset:
         k = int(cable)
@@ -907,7 +1005,8 @@ def _main(argv) -> int:
     host, port = server.address
     robot = server.bridge.robot
     say(f"robot {robot.name!r} ({robot.num_cables} cables) on {host}:{port}, period "
-        f"{server.period * 1e3:g} ms"
+        f"{server.period * 1e3:g} ms, {server.bridge.describe()}, start "
+        f"{_vector(server.bridge.platform())} m"
         + (f", faults {_plan_text(server.faults)} from {server.faults.after:g} s after the "
            "first enable (one session)" if server.faults.any else ""))
     code = 0
@@ -928,8 +1027,6 @@ def _main(argv) -> int:
                 f"statuses sent, commands lost {server.commands_lost}, faults "
                 f"{server.bridge.faults:#06x}")
             say(server.compute_summary())
-            if hasattr(server.bridge, "summary"):
-                say(server.bridge.summary())
     return code
 
 

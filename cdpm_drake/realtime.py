@@ -50,7 +50,7 @@ from pydrake.systems.analysis import Simulator
 from .diagram import LOGGED, BuildOptions, build_diagram
 from .scenario import (DynamicReels, ResolvedScenario, Scenario, ScenarioError, SimulatedReels,
                        resolve_scenario, write_run_scenario)
-from .simulation import assemble_log, mark_ending, tick_targets
+from .simulation import assemble_log, check_log_fits, mark_ending, tick_targets
 
 
 @dataclasses.dataclass
@@ -202,6 +202,9 @@ def run(*, scenario: Scenario | ResolvedScenario, out_dir, duration: float | Non
     diagram = build_diagram(resolved, BuildOptions(loggers=False, tick_log=str(tick_path)))
     reels = diagram.GetSubsystemByName("reels")
     sink = diagram.GetSubsystemByName("tick_log")
+    # The ticks stream to disk, and are read back into memory at the end (log_from_tick_log).
+    row = tick_row_bytes(sink)
+    check_log_fits(duration, scenario.time_step, row, disk_dir=out, disk_bytes_per_tick=row)
     simulator = Simulator(diagram)
     context = simulator.get_context()
     # Written before the run (`cdpm recover` needs it after a kill), once nothing can fail early.
@@ -266,6 +269,13 @@ def run(*, scenario: Scenario | ResolvedScenario, out_dir, duration: float | Non
     np.savez_compressed(log_path, **log)
     return RunResult(log=log, timing=timing, link=link, error=error, ending=ending,
                      log_path=log_path, tick_log_path=tick_path, signal=stop.signal)
+
+
+def tick_row_bytes(sink) -> int:
+    """Bytes of one row of the tick log that `sink` (a TickLogSink) writes: 8 per value of
+    each input port, plus its tick (int64), time, wall time and compute time."""
+    values = sum(sink.get_input_port(k).size() for k in range(sink.num_input_ports()))
+    return 8 * (values + 4)
 
 
 def log_from_tick_log(tick_path, scenario: Scenario | ResolvedScenario,

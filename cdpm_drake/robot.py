@@ -528,6 +528,7 @@ def load_robot(path: str | Path) -> Robot:
             _check_keys(raw[key], section, f"{key}.", src)
     # The dynamic-plant sections likewise (a scalar inertia, a string mass).
     _validate_dynamics(_raw_dynamics(raw), src)
+    _check_raw_fields(raw, src)
     # Check the geometry on the raw data first: Drake's messages for a non-number or a scalar
     # row do not say which field or cable is wrong.
     _as_points(raw["reels"], "reels", src)
@@ -539,6 +540,8 @@ def load_robot(path: str | Path) -> Robot:
     except Exception as e:  # Drake's messages name the field; add the file.
         raise RobotError(f"{src}: {e}") from None
     robot = robot_from_schema(schema, source=src)
+    for message in frame_warnings(robot):
+        _log.warning("%s", message)
     _report_statics(robot)
     if robot.excluded_reasons:
         # Once per load, not per copy: said where the user can see it, since these pairs get
@@ -550,6 +553,31 @@ def load_robot(path: str | Path) -> Robot:
                      len(robot.excluded_reasons),
                      "; ".join(f"{', '.join(pairs)}: {why}" for why, pairs in by_reason.items()))
     return robot
+
+
+def frame_warnings(robot: "Robot") -> list[str]:
+    """The faces of the workspace box that reach beyond the reels' frame, in words: past the
+    last reel exit along x or y, or above the highest one, every cable pulls the platform
+    back (or down), so nothing holds it there. Below the lowest exit is where a suspended
+    robot's platform hangs (gravity pulls it down, the cables up): not a warning."""
+    lo, hi = robot.workspace.lower, robot.workspace.upper
+    a_lo, a_hi = robot.reels.min(axis=0), robot.reels.max(axis=0)
+    out = []
+    for axis, name in enumerate("xyz"):
+        if axis < 2 and lo[axis] < a_lo[axis] - SAME_POINT_TOL:
+            out.append(f"{robot.name}: the workspace box's lower {name} face, workspace.lower"
+                       f"[{axis}] = {_show(lo[axis])!r} m, lies beyond the reels' frame: no "
+                       f"reel exit is at {name} <= {_show(lo[axis])!r} m (the lowest at "
+                       f"{_show(a_lo[axis])!r} m), so there every cable pulls the platform "
+                       f"back along +{name} and nothing holds it")
+        if hi[axis] > a_hi[axis] + SAME_POINT_TOL:
+            pull = "down (with its weight)" if axis == 2 else f"back along -{name}"
+            out.append(f"{robot.name}: the workspace box's upper {name} face, workspace.upper"
+                       f"[{axis}] = {_show(hi[axis])!r} m, lies beyond the reels' frame: no "
+                       f"reel exit is at {name} >= {_show(hi[axis])!r} m (the highest at "
+                       f"{_show(a_hi[axis])!r} m), so there every cable pulls the platform "
+                       f"{pull} and nothing holds it")
+    return out
 
 
 # Statics checked on load: the level platform (platform.mass at its centre) held with every
@@ -596,10 +624,16 @@ def describe_wrench(direction) -> str:
     return " and ".join(parts[:2])
 
 
-def statics_warnings(robot: "Robot", statics) -> list[str]:
-    """What is wrong with a robot's statics, in words (empty when its box is mostly held)."""
+def statics_warnings(robot: "Robot", statics, *, grid: str | None = None, base=None,
+                     base_share: float | None = None) -> list[str]:
+    """What is wrong with a robot's statics, in words (empty when its box is mostly held).
+    `grid` names the grid of `statics.share` (default: its n x n x n grid). `base` is the
+    robot before its cable swaps (a scenario's, or `cdpm info --swaps`) and `base_share` its
+    share on the same grid: when it alone is held on most of the box, the swaps are the
+    cause, not the robot file."""
     out = []
     n = statics.n
+    grid = f"{n}x{n}x{n} grid" if grid is None else grid
     m = robot.num_cables
     if m < 6:
         # Too few cables for six equations: the rank and the share only restate that.
@@ -618,19 +652,42 @@ def statics_warnings(robot: "Robot", statics) -> list[str]:
     if statics.share < STATICS_WARN_SHARE:
         from .tension import point_platform_share
 
-        point = point_platform_share(robot, statics.floor, n=_POINT_GRID, mass=statics.mass)
-        where = f"{100 * point:.0f} % of it ({_POINT_GRID}x{_POINT_GRID}x{_POINT_GRID} grid)"
-        cause = ("the moment balance fails: a point platform (forces only) would be held on "
-                 f"{where}, so the attachment points are the likely cause"
-                 if point - statics.share >= _MOMENT_BLAME else
-                 f"a point platform (forces only) would be held on {where} too, so the "
-                 "reels cannot hold the platform there: the box reaches beyond "
-                 "what the reels' layout supports")
+        if base is not None and base_share is not None and base_share >= STATICS_WARN_SHARE:
+            # The paper swaps cables to provoke interference; the swapped attachment points
+            # balance the moments worse. The robot file is not at fault.
+            swapped = [f"{i + 1}-{j + 1}" for i, j in _swapped_cables(base, robot)]
+            cause = (f"the swapped cables ({', '.join(swapped)}) are the cause: robot "
+                     f"{base.name!r} without the swaps is held on {100 * base_share:.0f} % of "
+                     "it")
+        else:
+            point = point_platform_share(robot, statics.floor, n=_POINT_GRID,
+                                         mass=statics.mass)
+            where = (f"{100 * point:.0f} % of the box (a coarser {_POINT_GRID}x{_POINT_GRID}"
+                     f"x{_POINT_GRID} grid)")
+            cause = ("the moment balance fails: a point platform (forces only) would be "
+                     f"held on {where}, so the attachment points are the likely cause"
+                     if point - statics.share >= _MOMENT_BLAME else
+                     f"a point platform (forces only) would be held on {where} too, so the "
+                     "reels cannot hold the platform there: the box reaches beyond "
+                     "what the reels' layout supports")
         out.append(f"{robot.name}: the cables hold the level platform ({statics.mass:g} kg at "
                    f"its centre) with every cable >= {statics.floor:g} N on only "
-                   f"{100 * statics.share:.0f} % of the workspace box ({n}x{n}x{n} grid); "
-                   f"{cause}")
+                   f"{100 * statics.share:.0f} % of the workspace box ({grid}); {cause}")
     return out
+
+
+def _swapped_cables(base: "Robot", robot: "Robot") -> list[tuple[int, int]]:
+    """The 0-based cable pairs whose attachment points trade places from `base` to `robot`
+    (each cable once, in order); a cable that moved otherwise is left out."""
+    moved = [i for i in range(base.num_cables)
+             if not np.array_equal(base.attachments[i], robot.attachments[i])]
+    pairs = []
+    for i in moved:
+        for j in moved:
+            if i < j and np.array_equal(base.attachments[i], robot.attachments[j]) \
+                    and np.array_equal(base.attachments[j], robot.attachments[i]):
+                pairs.append((i, j))
+    return pairs
 
 
 def _report_statics(robot: "Robot") -> None:
@@ -643,6 +700,33 @@ def _report_statics(robot: "Robot") -> None:
               n, n, n)
     for message in warnings:
         _log.warning("%s", message)
+
+
+def _check_raw_fields(raw: dict, src: str) -> None:
+    """The scalar and list fields of a robot file's raw YAML, named with their value: Drake's
+    typed loader says only "could not convert string to float: 'thin'"."""
+    name = raw.get("name")
+    if not isinstance(name, str) or not name:
+        raise RobotError(f"{src}: name must be a non-empty string, got {_show(name)!r}")
+    if "cable_diameter" in raw and (not _finite(raw["cable_diameter"])
+                                    or float(raw["cable_diameter"]) < 0):
+        raise RobotError(f"{src}: cable_diameter must be a finite value >= 0 m, got "
+                         f"{_show(raw['cable_diameter'])!r}")
+    for field, unit in (("max_velocity", "m/s"), ("max_acceleration", "m/s^2"),
+                        ("max_reel_speed", "m/s")):
+        value = (raw.get("limits") or {}).get(field, 1.0)
+        if not _finite(value) or float(value) <= 0:
+            raise RobotError(f"{src}: limits.{field} must be a finite value > 0 {unit}, got "
+                             f"{_show(value)!r}")
+    pairs = raw.get("ignore_pairs", [])
+    if not _is_sequence(pairs):
+        raise RobotError(f"{src}: ignore_pairs must be a list of cable pairs [i, j], got "
+                         f"{_show(pairs)!r}")
+    for k, pair in enumerate(pairs):
+        if not (_is_sequence(pair) and len(pair) == 2
+                and all(isinstance(c, int) and not isinstance(c, bool) for c in pair)):
+            raise RobotError(f"{src}: ignore_pairs[{k}] must be two cable numbers [i, j], got "
+                             f"{_show(pair)!r}")
 
 
 def _raw_dynamics(raw: dict) -> Dynamics:

@@ -1,7 +1,8 @@
 """Where a run writes: one folder per run, never shared, never overwritten by accident.
 
-By default `runs/<name>/<UTC timestamp>/`, with `runs/<name>/latest` a symlink to the newest
-run (pointed there when the run starts, so a run killed half-way is the latest; back again if
+By default `runs/<name>/<UTC timestamp>[-<variant>]/` (the variant: dynamic, hardware,
+full-pose, tension-control, when not the default), with `runs/<name>/latest` a symlink to the
+newest run (pointed there when the run starts, so a run killed half-way is the latest; back again if
 the run writes nothing). `--out DIR` chooses the folder exactly; an existing, non-empty DIR is
 refused unless `--force`, which empties it first (only when it holds a run: log.npz, ticks.bin
 or scenario.yaml, so a mistyped --out cannot wipe an unrelated folder). The folder is created
@@ -49,8 +50,13 @@ class RunFolder:
     leaves nothing behind); `create()` makes it and points `latest` at it; `discard()` removes
     it again, and restores `latest`, if the run wrote nothing."""
 
-    def __init__(self, name: str, out=None, force: bool = False, root=RUNS_DIR):
+    def __init__(self, name: str, out=None, force: bool = False, root=RUNS_DIR,
+                 variant: str = ""):
+        """`variant`: a tag appended to a default folder's name (<stamp>-<variant>), so that
+        runs of a scenario on the dynamic plant or with the full pose stand out from the
+        default's in a listing ("" for the default)."""
         self.name = name
+        self.variant = variant
         self.explicit = out is not None
         self.force = force
         self.root = Path(root)
@@ -78,11 +84,12 @@ class RunFolder:
         else:
             parent = self.root / self.name
             stamp = utc_stamp()
-            p = parent / stamp
+            tail = f"-{self.variant}" if self.variant else ""
+            p = parent / f"{stamp}{tail}"
             n = 1
             while p.exists():  # two runs in the same millisecond: never share a folder
                 n += 1
-                p = parent / f"{stamp}-{n}"
+                p = parent / f"{stamp}-{n}{tail}"
             self.path = p
         self._planned = True
         return self.path

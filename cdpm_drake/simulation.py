@@ -56,6 +56,7 @@ def simulate(*, scenario: Scenario | ResolvedScenario, duration: float | None = 
         raise ValueError(f"duration must be a finite number > 0 s, got {duration!r}")
     check_duration(duration, scenario.time_step, "duration")
     diagram = build_diagram(resolved) if diagram is None else diagram
+    check_log_fits(duration, scenario.time_step, log_bytes_per_tick(diagram))
     simulator = Simulator(diagram)
     context = simulator.get_mutable_context()
     if realtime_rate is not None:
@@ -95,6 +96,124 @@ def simulate(*, scenario: Scenario | ResolvedScenario, duration: float | None = 
                 "interrupted" if isinstance(error, KeyboardInterrupt) else "fault", error,
                 diagnosis)
     return SimulationResult(log=log, wall_time=wall, error=error, diagnosis=diagnosis)
+
+
+def run_variant(scenario: Scenario | ResolvedScenario) -> tuple[list[str], str]:
+    """What kind of run a scenario makes, for a person listing runs: (words for a summary's
+    first line, e.g. ["dynamic plant", "full pose", "tension control"]; a tag for the run
+    folder's name, e.g. "dynamic-full-pose-tension-control", "" for the default: the
+    kinematic plant and the paper's translating controller)."""
+    scenario = scenario.scenario if isinstance(scenario, ResolvedScenario) else scenario
+    plant = scenario.plant
+    words, tags = [], []
+    if isinstance(plant, DynamicReels):
+        words.append("dynamic plant")
+        tags.append("dynamic")
+    elif isinstance(plant, SimulatedReels):
+        words.append("kinematic plant")
+    else:
+        words.append("hardware reels")
+        tags.append("hardware")
+    c = scenario.controller
+    if c.pose == "full":
+        words.append("full pose")
+        tags.append("full-pose")
+        if c.tension_control:
+            words.append("tension control")
+            tags.append("tension-control")
+    else:
+        words.append("translation only")
+    return words, "-".join(tags)
+
+
+# --- will the log fit --------------------------------------------------------------------------
+
+# A run holds its whole log in memory: the loggers' rows, then their copy as the log's arrays
+# (collect_log, or the tick log read back after `cdpm run`), so about twice the rows' bytes at
+# the end of a run.
+LOG_COPIES = 2
+
+
+class LogTooLarge(ScenarioError):
+    """A duration whose log cannot fit in memory (or on disk); the message names the sizes."""
+
+
+def available_memory() -> int | None:
+    """Bytes of memory a new allocation can get without swapping: Linux's MemAvailable (free
+    memory plus the page cache it can drop), else the free physical pages (os.sysconf); None
+    where neither is known (no check then)."""
+    import os
+
+    try:
+        with open("/proc/meminfo") as f:
+            for line in f:
+                if line.startswith("MemAvailable:"):
+                    return int(line.split()[1]) * 1024
+    except (OSError, ValueError, IndexError):
+        pass
+    try:
+        return int(os.sysconf("SC_AVPHYS_PAGES")) * int(os.sysconf("SC_PAGE_SIZE"))
+    except (AttributeError, ValueError, OSError):
+        return None
+
+
+def log_bytes_per_tick(diagram) -> int:
+    """Bytes one tick adds to the run's in-memory log: 8 (a float64) per value of every
+    VectorLogSink in the diagram and its subdiagrams (the controller's log, the dynamic
+    plant's ground truth), plus its sample time."""
+    from pydrake.systems.framework import Diagram
+    from pydrake.systems.primitives import VectorLogSink
+
+    total, todo = 0, [diagram]
+    while todo:
+        for system in todo.pop().GetSystems():
+            if isinstance(system, Diagram):
+                todo.append(system)
+            elif isinstance(system, VectorLogSink):
+                total += 8 * (system.get_input_port().size() + 1)
+    return total
+
+
+def _bytes(n: float) -> str:
+    """A size in B, kB, MB, GB, TB (powers of 1000), three significant digits."""
+    for unit in ("B", "kB", "MB", "GB", "TB", "PB"):
+        if abs(n) < 1000 or unit == "PB":
+            return f"{n:.3g} {unit}"
+        n /= 1000.0
+
+
+def check_log_fits(duration: float, time_step: float, bytes_per_tick: int, *,
+                   copies: int = LOG_COPIES, memory: int | None = None, disk_dir=None,
+                   disk_bytes_per_tick: int = 0) -> None:
+    """LogTooLarge when the log of a run of `duration` s (ticks 0..n of `time_step` s), of
+    `bytes_per_tick`, held `copies` times, exceeds the memory available (`memory` bytes,
+    default available_memory()), or when `disk_dir` is given and the ticks' rows of
+    `disk_bytes_per_tick` exceed its free space (a real-time run streams them there first).
+    The message names the duration, the sizes and the longest duration that fits."""
+    import shutil
+
+    ticks = int(np.floor(duration / time_step + 1e-9)) + 1
+    limits = []
+    memory = available_memory() if memory is None else memory
+    if memory is not None and bytes_per_tick > 0:
+        limits.append((memory, copies * bytes_per_tick, "memory available"))
+    if disk_dir is not None and disk_bytes_per_tick > 0:
+        try:
+            free = shutil.disk_usage(disk_dir).free
+        except OSError:
+            free = None
+        if free is not None:
+            limits.append((free, disk_bytes_per_tick, f"free disk at {str(disk_dir)!r}"))
+    for room, per_tick, what in limits:
+        if ticks * per_tick > room:
+            longest = max(0, room // per_tick - 1) * time_step
+            held = (f", held {copies} times over" if per_tick == copies * bytes_per_tick
+                    and copies > 1 else "")
+            raise LogTooLarge(
+                f"duration {duration:g} s is {ticks:,} ticks, whose log needs "
+                f"{_bytes(ticks * per_tick)} ({per_tick:,} bytes a tick: "
+                f"{bytes_per_tick // 8:,} logged values of 8 bytes{held}), more than the "
+                f"{_bytes(room)} of {what}; give a duration of at most {longest:.4g} s here")
 
 
 # What plant_fault_causes counts as worth naming: a tilt above this, deg; an FK error above
@@ -272,13 +391,19 @@ def save_log(log: dict, out_dir, scenario: Scenario | ResolvedScenario) -> Path:
 
 
 def summary_rows(log: dict):
-    """Per watched pair that was ever active (or, with a true pose logged, truly within its
-    d_u or crossed): (pair, min distance in mm to 0.01 mm as text, ticks active, crossed),
-    and with a true pose also the true minimum and whether the pair truly crossed, after the
-    controller's (`summary_header` names the columns)."""
+    """Per watched pair that ever came within its d_u (or, with a true pose logged, was truly
+    within it or crossed): the pair; its smallest distance in mm (the controller's, and with
+    a true pose the true one); its d_l and d_u in mm (the band of the force: it acts below
+    d_u, and is strongest from d_l); on how many ticks it was within d_u (log `active`: the
+    force on); whether it crossed (1: on some tick), and with a true pose whether it truly
+    crossed. Distances as text to 0.01 mm; `summary_header` names the columns."""
     rows = []
     truth = "pair_distances_true" in log
     T = len(log["time"])
+
+    def mm(x):
+        return f"{1000 * float(x):.2f}" if np.isfinite(x) else "-"
+
     for k, (i, j) in enumerate(log["pairs"]):
         active = log["active"][:, k]
         crossed = log["crossed"][:, k]
@@ -288,19 +413,21 @@ def summary_rows(log: dict):
             d_u = float(log["d_u"][k]) if np.isfinite(log["d_u"][k]) else -np.inf
             show = show or bool(d_true.min() <= d_u) or bool(log["crossed_true"][:, k].any())
         if show and T:
-            d_min = 1000 * float(log["pair_distances"][:, k].min())
-            row = (f"({i},{j})", f"{d_min:.2f}", int(active.sum()), int(crossed.any()))
+            row = (f"({i},{j})", mm(log["pair_distances"][:, k].min()))
             if truth:
-                row += (f"{1000 * float(d_true.min()):.2f}",
-                        int(log["crossed_true"][:, k].any()))
+                row += (mm(d_true.min()),)
+            row += (mm(log["d_l"][k]), mm(log["d_u"][k]), int(active.sum()),
+                    int(crossed.any()))
+            if truth:
+                row += (int(log["crossed_true"][:, k].any()),)
             rows.append(row)
     return rows
 
 
 def summary_header(log: dict) -> list[str]:
     """The column names of `summary_rows(log)`."""
-    head = ["pair", "min distance (mm)", "ticks active", "crossed"]
     if "pair_distances_true" in log:
-        head = ["pair", "min distance, controller (mm)", "ticks active", "crossed",
-                "min distance, true (mm)", "truly crossed"]
-    return head
+        return ["pair", "min distance, controller (mm)", "min distance, true (mm)", "d_l (mm)",
+                "d_u (mm)", "ticks within d_u", "crossed", "truly crossed"]
+    return ["pair", "min distance (mm)", "d_l (mm)", "d_u (mm)", "ticks within d_u",
+            "crossed"]

@@ -639,6 +639,65 @@ def _cell(value) -> str:
 
 # --- Metrics ---------------------------------------------------------------------------------
 
+# Quantities in m are shown in mm (tables, pictures) (the paper's distances are in mm).
+UNIT_SCALE = {"m": (1000.0, "mm")}
+
+# A swept field's last name -> (what it is, unit in SI), by the section it is in
+# (scenario.py's comments). "" for the section: a top-level field.
+FIELDS = {
+    ("interference", "d_l"): ("d_l", "m"), ("interference", "d_u"): ("d_u", "m"),
+    ("interference", "F_u"): ("F_u", "N"), ("interference", "eps"): ("eps", "N"),
+    ("interference", "F_max"): ("F_max, the clip of |F_int|", "N"),
+    ("interference", "gradient_floor"): ("gradient floor", "-"),
+    ("admittance", "mass"): ("admittance mass M", "kg"),
+    ("admittance", "damping"): ("admittance damping C", "N s/m"),
+    ("limits", "max_velocity"): ("speed limit", "m/s"),
+    ("limits", "max_acceleration"): ("acceleration limit", "m/s^2"),
+    ("wall_force", "margin"): ("wall force margin", "m"),
+    ("wall_force", "max_force"): ("wall force at the face", "N"),
+    ("sensor", "filter_window"): ("sensor filter window", "samples"),
+    ("sensor", "noise_std"): ("sensor noise std", "N"),
+    ("sensor", "axial_range"): ("sensor axial range", "N"),
+    ("sensor", "transverse_range"): ("sensor transverse range", "N"),
+    ("operator", "max_force"): ("hand's largest force", "N"),
+    ("operator", "stiffness"): ("hand stiffness", "N/m"),
+    ("operator", "damping"): ("hand damping", "N s/m"),
+    ("operator", "release_time"): ("hand lets go at", "s"),
+    ("plant", "time_constant"): ("reel time constant", "s"),
+    ("plant", "max_reel_speed"): ("reel speed limit", "m/s"),
+    ("plant", "time_step"): ("plant time step", "s"),
+    ("plant", "min_tension"): ("start tension floor", "N"),
+    ("plant", "max_length_residual"): ("largest length residual", "m"),
+    ("", "duration"): ("duration", "s"),
+    ("", "time_step"): ("control period", "s"),
+    ("", "random_seed"): ("random seed", "-"),
+}
+
+
+def field_axis(field: str) -> tuple[str, float]:
+    """(label with its unit, scale from the field's SI value to the drawn one) of a swept
+    field path: `interference.default.d_u` -> ("d_u, every pair (mm)", 1000);
+    `interference.pairs[1,3].F_u` -> ("F_u of pair 1-3 (N)", 1); `initial_position[2]` ->
+    ("start z (mm)", 1000). A field not in FIELDS keeps its path, without a unit."""
+    parts = field.split(".")
+    last = parts[-1]
+    pair = re.search(r"pairs\[(\d+)\s*[,-]\s*(\d+)\]", field)
+    start = re.fullmatch(r"initial_position\[(\d)\]", field)
+    if start and int(start.group(1)) < 3:
+        what, unit = f"start {'xyz'[int(start.group(1))]}", "m"
+    elif (parts[0] if len(parts) > 1 else "", last) in FIELDS:
+        what, unit = FIELDS[(parts[0] if len(parts) > 1 else "", last)]
+        if parts[0] == "interference" and len(parts) == 3 and parts[1] == "default":
+            what += ", every pair"
+        elif pair:
+            what += f" of pair {pair.group(1)}-{pair.group(2)}"
+    else:
+        return field, 1.0
+    scale, shown = UNIT_SCALE.get(unit, (1.0, unit))
+    return (f"{what} ({shown})" if shown != "-" else what), scale
+
+
+
 # name -> (unit, which way is better, what). docs/SWEEP_FORMAT.md says the same in prose.
 METRICS = {
     "min_distance": ("m", "max", "smallest distance of any watched cable pair over the run"),
@@ -1170,24 +1229,54 @@ def run_sweep(sweep: Sweep, out_dir, *, workers: int | None = None, ray: bool = 
                           ray_chunk=ray_chunk, ray_init=ray_init, keep_logs=keep_logs,
                           retry_errors=retry_errors, progress=progress, before_run=before_run)
     finally:
-        lock.close()
+        _unlock(lock, out_dir)
+
+
+LOCK_FILE = ".sweep.lock"
 
 
 def _lock(out_dir: Path):
-    """An exclusive lock on DIR/.sweep.lock: two sweeps writing one directory would run the
-    same variants twice and race on results.csv."""
-    f = open(out_dir / ".sweep.lock", "a+")
-    try:
-        import fcntl
-    except ImportError:  # not POSIX: no lock
-        return f
-    try:
-        fcntl.flock(f.fileno(), fcntl.LOCK_EX | fcntl.LOCK_NB)
-    except OSError:
+    """An exclusive lock on DIR/.sweep.lock, which says who holds it (pid, start time): two
+    sweeps writing one directory would run the same variants twice and race on results.csv.
+    The file exists only while a sweep runs (`_unlock` removes it)."""
+    path = out_dir / LOCK_FILE
+    while True:
+        f = open(path, "a+")
+        try:
+            import fcntl
+        except ImportError:  # not POSIX: no lock
+            return f
+        try:
+            fcntl.flock(f.fileno(), fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except OSError:
+            f.seek(0)
+            holder = f.read().strip()
+            f.close()
+            raise SweepError(f"--out {str(out_dir)!r} is in use by another cdpm sweep"
+                             + (f" ({holder})" if holder else "")
+                             + "; wait for it or give another --out") from None
+        # A sweep that finished between our open and our lock removed the file we hold:
+        # lock the one at the path now, or a third sweep could take that one alongside.
+        try:
+            current = os.stat(path).st_ino == os.fstat(f.fileno()).st_ino
+        except FileNotFoundError:
+            current = False
+        if current:
+            f.seek(0)
+            f.truncate()
+            f.write(f"pid {os.getpid()}, since {time.strftime('%Y-%m-%d %H:%M:%S')}\n")
+            f.flush()
+            return f
         f.close()
-        raise SweepError(f"--out {str(out_dir)!r} is in use by another cdpm sweep; wait for it "
-                         "or give another --out") from None
-    return f
+
+
+def _unlock(f, out_dir: Path) -> None:
+    """Remove DIR/.sweep.lock while still holding it (a sweep waiting for it then finds it
+    gone and takes a new one), then release it."""
+    try:
+        (out_dir / LOCK_FILE).unlink(missing_ok=True)
+    finally:
+        f.close()
 
 
 def _run_sweep(sweep, out_dir, *, workers, ray, ray_address, ray_chunk, ray_init, keep_logs,
@@ -1331,18 +1420,62 @@ def best_table(columns: list[str], rows: list[dict], metric: str, top: int = 5) 
     fields = swept_fields(columns)
     shown = [metric] + [m for m in ("min_distance", "operator_effort", "crossings")
                         if m != metric]
-    headers = ["run"] + fields + ["random_seed"] + [f"{m} ({METRICS[m][0]})" for m in shown]
-    body = [[r["run"]] + [r[f] for f in fields] + [r["random_seed"]]
-            + [_short(r.get(m, "")) for m in shown] for r in best]
-    return format_table(headers, body)
+    table = ([("run", [r["run"] for r in best])]
+             + [field_column(f, [r[f] for r in best]) for f in fields]
+             + [("random_seed", [r["random_seed"] for r in best])]
+             + [metric_column(m, [r.get(m, "") for r in best]) for m in shown])
+    return format_table([h for h, _ in table], list(zip(*[c for _, c in table])))
 
 
-def _short(cell: str) -> str:
-    try:
-        x = float(cell)
-    except ValueError:
-        return cell
-    return f"{x:.6g}"
+# Decimals of a metric in the tables, by the unit it is shown in: distances to 0.01 mm (as
+# the summaries), forces and effort to 0.01 N (N s), times and speeds to 0.001, degrees to
+# 0.01; a count ("-") whole, another unitless number to 0.01.
+TABLE_DECIMALS = {"mm": 2, "N": 2, "N s": 2, "s": 3, "m/s": 3, "deg": 2}
+
+
+def _unit_of(label: str) -> str:
+    """The unit in a label's last parentheses ("d_u, every pair (mm)" -> "mm"), or ""."""
+    return label.rsplit("(", 1)[1].rstrip(")") if label.endswith(")") else ""
+
+
+def _numbers(cells) -> list:
+    out = []
+    for c in cells:
+        try:
+            x = float(c)
+        except (TypeError, ValueError):
+            x = None
+        out.append(x if x is not None and math.isfinite(x) else None)
+    return out
+
+
+def _column(cells, scale: float, decimals: int | None) -> list[str]:
+    """Cells as numbers in the shown unit, all with the same decimals (`decimals`, or the
+    fewest, at most 6, that show every value exactly); a cell that is no number as it is."""
+    nums = _numbers(cells)
+    values = [None if x is None else scale * x for x in nums]
+    if decimals is None:
+        decimals = next((d for d in range(7) if all(
+            v is None or abs(v - round(v, d)) <= 1e-9 * max(1.0, abs(v)) for v in values)), 6)
+    return [str(c) if v is None else f"{v:.{decimals}f}" for c, v in zip(cells, values)]
+
+
+def field_column(field: str, cells) -> tuple[str, list[str]]:
+    """(header, cells) of a swept field in a table: its path with the unit it is shown in
+    (m as mm, as the summaries and pictures), every value with the same decimals."""
+    label, scale = field_axis(field)
+    unit = _unit_of(label) if label != field else ""
+    return (f"{field} ({unit})" if unit else field), _column(cells, scale, None)
+
+
+def metric_column(metric: str, cells) -> tuple[str, list[str]]:
+    """(header, cells) of a metric in a table: its name with the unit it is shown in (m as
+    mm), decimals by that unit (TABLE_DECIMALS)."""
+    unit = METRICS[metric][0]
+    scale, shown = UNIT_SCALE.get(unit, (1.0, unit))
+    nums = [x for x in _numbers(cells) if x is not None]
+    decimals = TABLE_DECIMALS.get(shown, 0 if all(x == int(x) for x in nums) else 2)
+    return f"{metric} ({shown})", _column(cells, scale, decimals)
 
 
 # --- The command -----------------------------------------------------------------------------
@@ -1372,9 +1505,14 @@ def sweep_main(*, sweep, out_dir=None, workers=None, ray=False, ray_address=None
           f"{total_sim:g} s simulated in all; fields: {', '.join(s.fields) or '-'}", file=out)
     if dry_run:
         from .text import format_table
-        rows = [[v.run] + [_cell(v.values[f]) for f in s.fields] + [v.random_seed]
-                for v in s.variants]
-        print(format_table(["run"] + s.fields + ["random_seed"], rows), file=out)
+        table = ([("run", [v.run for v in s.variants])]
+                 + [field_column(f, [_cell(v.values[f]) for v in s.variants])
+                    for f in s.fields]
+                 + [("random_seed", [v.random_seed for v in s.variants])])
+        print(format_table([h for h, _ in table], list(zip(*[c for _, c in table]))),
+              file=out)
+        print(f"dry run: nothing ran; the results would go to {out_dir / 'results.csv'} "
+              f"(each run's scenario.yaml under {out_dir / 'runs'}/)", file=out)
         return 0
     outcome = run_sweep(s, out_dir, workers=workers, ray=ray, ray_address=ray_address,
                         ray_chunk=ray_chunk, ray_init=ray_init, keep_logs=keep_logs,
@@ -1393,7 +1531,8 @@ def sweep_main(*, sweep, out_dir=None, workers=None, ray=False, ray_address=None
         print(f"  ... and {len(errors) - 10} more (see the error column)", file=out)
     columns = columns_for(s)
     if ok:
-        print(f"best runs by {metric} ({METRICS[metric][0]}, "
+        shown = UNIT_SCALE.get(METRICS[metric][0], (1.0, METRICS[metric][0]))[1]
+        print(f"best runs by {metric} ({shown}, "
               f"{'largest' if _better(metric) == 'max' else 'smallest'} first):", file=out)
         print(best_table(columns, outcome.rows, metric, top), file=out)
     if plot is not None:  # the views hang off the CLI, which passes them in

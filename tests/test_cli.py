@@ -228,6 +228,40 @@ def test_a_first_compilation_is_announced_once(capsys):
     assert thrice(1) == 3  # an int signature compiles again, outside the block: not said
 
 
+def test_a_process_started_after_the_notice_does_not_say_it_again(monkeypatch):
+    # Issue 27: the notice showed several times in one command. Once said, it is in the
+    # environment of what the command starts (an emulator, a worker), and gone after it.
+    import io
+    import os
+
+    import numba
+
+    monkeypatch.delenv(cli.COMPILE_NOTICE_SAID, raising=False)
+
+    @numba.njit
+    def once(x):
+        return x + 1.0
+
+    @numba.njit
+    def again(x):
+        return x + 2.0
+
+    stream = io.StringIO()
+    with cli._compile_notice(stream):
+        assert once(1.0) == 2.0
+        assert os.environ[cli.COMPILE_NOTICE_SAID] == "1"
+        child = subprocess.run([sys.executable, "-c", f"import os, sys; from cdpm_drake import "
+                                f"cli; n = cli._compile_notice(sys.stderr); print(n.said)"],
+                               capture_output=True, text=True, timeout=120)
+        assert child.stdout.strip() == "True", child.stderr
+    assert stream.getvalue().count(cli.COMPILE_NOTICE) == 1
+    assert cli.COMPILE_NOTICE_SAID not in os.environ
+    stream = io.StringIO()
+    with cli._compile_notice(stream):  # the next command in this process: said again
+        assert again(1.0) == 3.0
+    assert stream.getvalue() == cli.COMPILE_NOTICE + "\n"
+
+
 def test_the_first_run_after_installing_says_it_compiles_and_the_next_does_not(tmp_path):
     # An empty numba cache (NUMBA_CACHE_DIR) is a fresh install's; the second run loads it.
     import os

@@ -8,6 +8,7 @@ and the closed-form fixed points of the implicit reel-drive step.
 """
 
 import dataclasses
+import re
 from pathlib import Path
 
 import numpy as np
@@ -631,24 +632,33 @@ def test_meshcat_draws_the_true_rotated_platform_and_slack_cables(dynamic_log):
     assert prop(meshcat, view.cable_slack_path(3), "visible") is False
 
 
-def test_cdpm_info_prints_the_wrench_feasibility_table(capsys, monkeypatch):
+def test_cdpm_info_prints_the_wrench_feasibility_table(capsys):
+    # Issue 27: the table is on the grid of the share line above it (one grid for one
+    # quantity), so its 0 N row at the 5 N floor is that line's share. Each cell is checked
+    # against wrench_feasibility on the whole grid for that force and floor, without the
+    # table's shortcut (solving each force only where the smaller one held).
     from cdpm_drake import cli
-    from cdpm_drake.tension import wrench_feasibility
+    from cdpm_drake.tension import step_grid, wrench_feasibility
 
-    monkeypatch.setattr(cli, "FEASIBILITY_GRID", 3)  # 27 points: the same code, faster
-
-    assert cli.main(["info", "paper_7cable"]) == 0
+    assert cli.main(["info", "paper_7cable", "--grid", "0.25"]) == 0
     out = capsys.readouterr().out
     robot = load_robot("paper_7cable")
     d = robot.dynamics
+    points = step_grid(robot.workspace.lower, robot.workspace.upper, 0.25)
     table = out.split("wrench feasibility")[1]
-    assert "share of a 3x3x3 grid" in table
+    assert table.startswith(" on the same grid (25 cm grid from the lower corner: 11 x 13 x 9 "
+                            "points)"), table
+    rows = {}
     for force in cli.FEASIBILITY_FORCES:
         shares = [wrench_feasibility(robot, mass=d.mass, hand_force=force, handle=d.handle,
-                                     min_tension=floor, n=cli.FEASIBILITY_GRID).share
+                                     min_tension=floor, points=points).share
                   for floor in cli.FEASIBILITY_FLOORS]
+        rows[force] = shares
         row = f"{force:g}" + "".join(f"  {100 * s:.1f}" for s in shares)
         assert " ".join(row.split()) in [" ".join(line.split()) for line in table.splitlines()]
+    assert 0.0 < rows[20.0][1] < rows[5.0][1] < rows[0.0][1]  # the shortcut had work to skip
+    share = re.search(r"held with every cable >= 5 N on ([0-9.]+) %", out)
+    assert float(share[1]) == pytest.approx(100 * rows[0.0][1], abs=0.05)
 
 
 def test_the_plant_diagram_graphviz_is_stable_across_builds():

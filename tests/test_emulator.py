@@ -212,6 +212,132 @@ def test_a_faulted_dynamic_bridge_stops_its_drives_with_their_own_dynamics():
     assert fresh.faults & FAULT_OVERSPEED and not fresh.enabled
 
 
+def test_emulate_plant_dynamic_honours_the_scenarios_own_dynamic_reels(tmp_path):
+    """Issue 27: `cdpm emulate --scenario FILE --plant dynamic` with a scenario whose plant is
+    a !DynamicReels of its own: its time step, reel speed limit, start tilt and locked
+    rotation are the bridge's, not the defaults'."""
+    from cdpm_drake.rotation import rotation_from_rpy
+
+    scenario = tmp_path / "tilted.yaml"
+    scenario.write_text(
+        "name: tilted\nrobot: paper_7cable\nswaps: [[1, 3]]\n"
+        "initial_position: [1.56, 3.24, 1.22]\n"
+        "operator: !NoOperator {}\n"
+        "plant: !DynamicReels {time_step: 0.0005, max_reel_speed: 0.5, "
+        "initial_rpy: [0.02, -0.01, 0.03], lock_rotation: true}\n")
+    args = E._parser().parse_args(["--scenario", str(scenario), "--plant", "dynamic",
+                                   "--port", "0"])
+    server = E.build_server(args)
+    try:
+        bridge = server.bridge
+        mbp = bridge._plant.GetSubsystemByName("platform_plant")
+        assert mbp.time_step() == 0.0005 and bridge._h == 0.0005
+        # The start tilt: the true orientation at the start, and the encoders zeroed at the
+        # tilted pose (its rigid lengths).
+        step = bridge._step_port.Eval(bridge._cables_context)
+        np.testing.assert_allclose(step[bridge._rpy], [0.02, -0.01, 0.03], atol=1e-12)
+        robot = bridge.robot
+        R = rotation_from_rpy([0.02, -0.01, 0.03])
+        rigid = np.linalg.norm(robot.reels - ([1.56, 3.24, 1.22] + robot.attachments @ R.T),
+                               axis=1)
+        np.testing.assert_allclose(bridge.lengths, rigid, atol=1e-12)
+        # Locked rotation: reels paying out unevenly for 0.2 s turn nothing.
+        bridge.set_command(np.array([0.05, -0.05, 0.04, -0.03, 0.02, 0.0, -0.04]), True)
+        for _ in range(100):
+            bridge.step(0.002)
+        assert bridge.plant_time == pytest.approx(0.2)
+        step = bridge._step_port.Eval(bridge._cables_context)
+        np.testing.assert_allclose(step[bridge._rpy], [0.02, -0.01, 0.03], atol=1e-9)
+        assert np.abs(bridge.speed).max() > 0.03  # the reels did move
+        # The scenario's reel speed limit, 0.5 m/s (the robot file's is 1 m/s).
+        bridge.set_command(np.full(7, 0.45), True)
+        assert bridge.faults == 0
+        bridge.set_command(np.full(7, 0.55), True)
+        assert bridge.faults & FAULT_OVERSPEED
+    finally:
+        server.stop()
+
+
+def test_a_reset_puts_the_kinematic_bridge_back_at_its_start(robot, p0):
+    # Issue 27: a second rehearsal started where the last one ended. A reset (a homing) puts
+    # the reels back at their start lengths, at rest, with the operator's clock stopped; a
+    # fault bit the bridge raised stays.
+    seen = []
+    start = cable_lengths(robot, p0)
+    bridge = ReelBridge(robot, start, force=lambda t, p, v: seen.append(t) or np.zeros(3),
+                        time_constant=0.01)
+    bridge.set_command(np.full(7, 0.05), enable=True)
+    for _ in range(100):
+        bridge.step(0.002)
+    bridge.force()
+    assert np.abs(bridge.lengths - start).min() > 0.005 and seen[-1] == pytest.approx(0.2)
+    bridge.raise_fault(FAULT_DRIVE)
+    bridge.reset()
+    np.testing.assert_array_equal(bridge.lengths, start)
+    assert not bridge.speed.any() and not bridge.command.any() and not bridge.enabled
+    np.testing.assert_allclose(bridge.platform(), p0, atol=1e-9)
+    assert bridge.operator_start is None and bridge.faults == FAULT_DRIVE
+    bridge.faults = 0
+    bridge.step(0.5)  # at rest, the operator's clock stopped: t stays 0 until enabled
+    bridge.force()
+    assert seen[-1] == 0.0 and np.array_equal(bridge.lengths, start)
+
+
+def test_a_reset_dynamic_bridge_replays_a_fresh_one_bit_for_bit():
+    # After a reset the plant is the one built at the start: the same commands give the same
+    # encoders and force as a fresh bridge's, and the session's record starts again.
+    resolved = _dynamic_resolved()
+    command = np.array([0.01, -0.02, 0.005, 0.0, 0.015, -0.01, 0.02])
+
+    def drive(bridge, ticks=100):
+        bridge.set_command(command, enable=True)
+        for _ in range(ticks):
+            bridge.step(0.002)
+        return bridge.lengths.copy(), bridge.force().copy()
+
+    used = E.DynamicBridge(resolved)
+    start = used.lengths.copy()
+    drive(used, 150)
+    assert used.ticks == 151 and np.abs(used.lengths - start).max() > 1e-3
+    used.reset()
+    np.testing.assert_array_equal(used.lengths, start)
+    assert used.plant_time == 0.0 and used.ticks == 1 and used.operator_start is None
+    lengths, force = drive(used)
+    fresh_lengths, fresh_force = drive(E.DynamicBridge(resolved))
+    np.testing.assert_array_equal(lengths, fresh_lengths)
+    np.testing.assert_array_equal(force, fresh_force)
+
+
+def test_the_dynamic_summary_says_when_each_cable_went_slack_and_when_it_tilted_most():
+    # Cable 3 paid out at 0.2 m/s for 0.5 s goes slack; the plant's own logger (the same
+    # plant under its own Simulator) says on which ticks, the bridge's summary must agree.
+    from cdpm_drake.rotation import rotation_angle, rotations_from_rpy
+
+    resolved = _dynamic_resolved()
+    command = np.zeros(7)
+    command[2] = 0.2
+    bridge = E.DynamicBridge(resolved)
+    bridge.set_command(command, enable=True)
+    for _ in range(250):
+        bridge.step(0.002)
+    _, _, truth = _plant_alone_run(resolved, command, 0.5)
+    slack = truth["slack"][:251] > 0.5
+    t = 0.002 * np.arange(251)
+    assert slack[:, 2].any()
+    for i in range(7):
+        if slack[:, i].any():
+            first = t[np.argmax(slack[:, i])]
+            assert bridge.first_slack[i] == pytest.approx(first, abs=1e-9)
+            assert f"{i + 1}:{int(slack[1:, i].sum())} (first at t = {first:.3f} s)" \
+                in bridge.summary()
+        else:
+            assert np.isnan(bridge.first_slack[i])
+    tilt = rotation_angle(rotations_from_rpy(truth["rpy_true"][:251]))
+    assert bridge.max_tilt_time == pytest.approx(t[np.argmax(tilt)], abs=1e-9)
+    assert bridge.summary().endswith(f"largest tilt {np.degrees(tilt.max()):.2f} deg at t = "
+                                     f"{t[np.argmax(tilt)]:.3f} s (plant time 0..0.500 s)")
+
+
 # --- the server on loopback ------------------------------------------------------------------
 
 
@@ -456,11 +582,29 @@ def test_cli_errors_name_the_flag(capsys):
     assert "unknown robot 'no_such_robot'" in capsys.readouterr().err
 
 
+def test_cli_refuses_a_start_outside_the_robots_box(capsys):
+    # Issue 27, bug 1: the controller would refuse to enable there; the emulator says so at
+    # once (bad usage, exit 2), naming the start and the box (the scenario's robot's).
+    assert E.main(["--scenario", "exp2_interaction", "--start", "10", "10", "10", "--port",
+                   "0", "--duration", "0.05"]) == 2
+    err = capsys.readouterr().err
+    assert ("cdpm-reel-emulator: error: --start [10.0, 10.0, 10.0] m is outside the workspace "
+            "box of robot 'paper_7cable_swap13' (lower [0.5, 0.8, 0.3], upper [3.0, 4.0, 2.4] "
+            "m)") in err, err
+    # Just inside the upper corner: accepted.
+    args = E._parser().parse_args(["--robot", "paper_7cable", "--start", "3.0", "4.0", "2.4",
+                                   "--port", "0"])
+    E.build_server(args).stop()
+
+
 def test_cli_runs_as_a_process_for_a_bounded_time():
     out = subprocess.run([sys.executable, "-m", "cdpm_drake.emulator", "--port", "0",
                           "--duration", "0.1"], capture_output=True, text=True, timeout=60)
     assert out.returncode == 0, out.stderr
     assert "robot 'paper_7cable' (7 cables) on 127.0.0.1:" in out.stdout
+    # Issue 27: the first line says which plant it plays, and where the platform starts.
+    assert (", period 2 ms, plant: kinematic (reels following their commands with a 20 ms "
+            "first-order lag, speed limit 1 m/s), start [1.750, 2.400, 1.350] m") in out.stdout
     assert "0 commands received" in out.stdout
 
 
@@ -552,6 +696,40 @@ def test_sessions_are_reported_as_they_open_and_close(robot, p0):
     closed = next(s for s in said if s.startswith("session 1 closed"))
     assert "no command for 0.1 s" in closed and "5 commands accepted" in closed
     assert server.session == 2
+
+
+def test_a_new_session_starts_at_the_scenarios_start_and_says_so(robot, p0):
+    # Issue 27: the second rehearsal against one emulator started 0.46 m from the scenario's
+    # start. The bridge is reset as a new session opens, and the session line says from where.
+    from cdpm_drake.kinematics import forward_kinematics
+
+    said = []
+    server = ReelBridgeServer(ReelBridge(robot, cable_lengths(robot, p0), time_constant=0),
+                              log=said.append, session_timeout=0.1,
+                              command_timeout=10.0).start()
+    first, second = Controller(server), Controller(server)
+    try:
+        for _ in range(50):  # 0.1 m/s on cable 1 for a while
+            first.send(np.r_[0.1, np.zeros(6)], enable=True)
+            time.sleep(0.004)
+        first.send(np.zeros(7), enable=False)
+        assert _wait(lambda: any("session 1 closed" in s for s in said))
+        with server._lock:
+            left = forward_kinematics(robot, server.bridge.lengths.copy(), max_residual=np.inf)
+        second.send(np.zeros(7), enable=False)
+        assert _wait(lambda: any("session 2: the platform is back" in s for s in said))
+        with server._lock:
+            np.testing.assert_array_equal(server.bridge.lengths, cable_lengths(robot, p0))
+    finally:
+        first.close()
+        second.close()
+        server.stop()
+    line = next(s for s in said if s.startswith("session 2: the platform is back"))
+    away = np.linalg.norm(left - p0)
+    assert away > 0.005
+    assert line == (f"session 2: the platform is back at its start {E._vector(p0)} m (reset, "
+                    f"as a homing would; the last session left it at {E._vector(left)} m, "
+                    f"{away:.3f} m away), the operator's clock at 0"), line
 
 
 def test_rejected_commands_are_reported_by_reason(capsys):

@@ -159,23 +159,115 @@ def test_state_starts_from_the_measured_lengths(robot, p0, emulator):
         reels.close()
 
 
-def test_refuses_to_enable_when_lengths_do_not_fit_the_robot(robot, p0, emulator):
-    lengths = cable_lengths(robot, p0)
-    lengths[2] += 0.05  # cable 3 miscalibrated by 5 cm
+def _refused_with(robot, emulator, lengths):
+    """Initialise the reels against an emulator whose encoders read `lengths` (m); returns the
+    ReelFault's message, after checking that no command enabled the reels or asked them to
+    move."""
     server = emulator(lengths=lengths)
     diagram, reels = _diagram(robot, server, _command())
-    simulator = Simulator(diagram)
     try:
-        with pytest.raises(ReelFault, match=r"refusing to enable the reels: the measured cable "
-                                            r"lengths .* do not fit robot 'paper_7cable' .* "
-                                            r"max_length_residual = 0.005 m"):
-            simulator.Initialize()
+        with pytest.raises(ReelFault) as refused:
+            Simulator(diagram).Initialize()
     finally:
         reels.close()
     time.sleep(0.01)
     commands = list(server.commands)
     assert commands and not any(c.enable for c in commands)
     assert all(np.all(c.velocity == 0) for c in commands)
+    return str(refused.value)
+
+
+def _refused_at(robot, emulator, p):
+    """_refused_with the lengths of the level platform at p (m)."""
+    return _refused_with(robot, emulator, cable_lengths(robot, np.asarray(p, dtype=float)))
+
+
+def test_refuses_to_enable_when_lengths_do_not_fit_the_robot(robot, p0, emulator):
+    lengths = cable_lengths(robot, p0)
+    lengths[2] += 0.05  # cable 3 miscalibrated by 5 cm
+    assert re.search(r"refusing to enable the reels: the measured cable lengths .* do not fit "
+                     r"robot 'paper_7cable' .* max_length_residual = 0.005 m",
+                     _refused_with(robot, emulator, lengths))
+
+
+def test_refuses_to_enable_outside_the_workspace_box(robot, emulator):
+    # Issue 27, bug 1: `cdpm emulate --start 10 10 10`, lengths that fit the robot exactly (the
+    # platform 7.6 m beyond the box's upper z face), ran to the end.
+    message = _refused_at(robot, emulator, [10.0, 10.0, 10.0])
+    assert message.startswith("refusing to enable the reels: the platform centre p = [10.000, "
+                              "10.000, 10.000] m (from the measured cable lengths) is outside "
+                              "the workspace box of robot 'paper_7cable'"), message
+    # The box of hardware/robots/paper_7cable.yaml; the largest excess is along z: 10 - 2.4 m.
+    assert "lower [0.500, 0.800, 0.300] m, upper [3.000, 4.000, 2.400] m (7600.0 mm beyond " \
+           "its z upper face)" in message, message
+
+
+def _t_star_lp(robot, p, point=False):
+    """t* of the level platform at p by scipy's LP (conftest.highs_t_star), with W built here
+    from the cable directions u_i (attachment point to reel exit) and the moments b_i x u_i
+    about the centre, independent of tension.py; `point`: the platform as a point (its
+    centre; forces only, the first three rows)."""
+    from conftest import highs_t_star
+
+    b = np.zeros_like(robot.attachments) if point else robot.attachments  # a point: no b_i
+    u = robot.reels - (np.asarray(p) + b)
+    u /= np.linalg.norm(u, axis=1, keepdims=True)
+    W = np.vstack([u.T, np.cross(b, u).T])
+    weight = np.array([0.0, 0.0, -robot.dynamics.mass * 9.81, 0.0, 0.0, 0.0])
+    return highs_t_star(W[:3], weight[:3]) if point else highs_t_star(W, weight)
+
+
+def test_refuses_to_enable_where_the_cables_cannot_hold_the_platform(robot, emulator):
+    # Inside the box (on its lower x face), where no tensions >= 0 hold the level platform.
+    p = [0.5, 1.44, 1.56]
+    t_star = _t_star_lp(robot, p)
+    assert t_star == pytest.approx(-3.01, abs=0.01)
+    message = _refused_at(robot, emulator, p)
+    assert (f"the cables cannot hold the level platform (2.5 kg) at the platform centre p = "
+            f"[0.500, 1.440, 1.560] m (from the measured cable lengths): its largest achievable "
+            f"minimum tension t* is {t_star:.2f} N < 0 N") in message, message
+
+
+def test_the_start_check_bounds(robot):
+    """What start_pose_problem lets through: inside the box to within 1 mm
+    (START_BOX_TOLERANCE), and held with t* >= 0 N (START_MIN_T_STAR), also where t* is below
+    the 5 N floor of `cdpm info` (hardware/reels.py says why)."""
+    from cdpm_drake.hardware.reels import start_pose_problem
+
+    held = [1.0, 1.44, 0.72]  # t* 3.58 N by the LP: held, below 5 N
+    assert 0.0 < _t_star_lp(robot, held) < 5.0
+    assert start_pose_problem(robot, held) == ""
+    upper = robot.workspace.upper
+    face = np.array([upper[0], 2.4, 1.2])  # on the upper x face, t* > 0 there
+    assert _t_star_lp(robot, face) > 0.0
+    assert start_pose_problem(robot, face + [0.0009, 0, 0]) == ""
+    out = start_pose_problem(robot, face + [0.0011, 0, 0])
+    assert "outside the workspace box" in out and "(1.1 mm beyond its x upper face)" in out
+    below = start_pose_problem(robot, [1.75, 0.7, 1.2])
+    assert "(100.0 mm beyond its y lower face)" in below, below
+
+
+def test_a_robot_that_cannot_balance_moments_is_judged_as_a_point():
+    """The README's four-cable robot translates only (rank < 6): off the centre its level
+    platform's moments never balance (t* = -inf), so its start is judged by the forces
+    alone, the platform as a point."""
+    from cdpm_drake.hardware.reels import start_pose_problem
+    from cdpm_drake.robot import Robot
+
+    reels = [[0.0, 0.0, 0.0], [4.0, 0.0, 0.0], [2.0, 3.0, 0.0], [2.0, 1.5, 3.0]]
+    b = [[-0.1, -0.1, 0.0], [0.1, -0.1, 0.0], [0.0, 0.1, 0.0], [0.0, 0.0, 0.1]]
+    four = Robot("four", reels, b, ([1.5, 1.0, 0.5], [2.5, 2.0, 2.0]))
+    held = [2.1, 1.5, 1.25]
+    assert _t_star_lp(four, held) == -np.inf and _t_star_lp(four, held, point=True) >= 0
+    assert start_pose_problem(four, held) == ""
+    corner = [2.4, 1.9, 1.9]  # inside the box; the bottom cables pull the point off balance
+    t_point = _t_star_lp(four, corner, point=True)
+    assert t_point < 0
+    message = start_pose_problem(four, corner)
+    assert ("cannot hold the platform as a point (forces only: the robot's cables cannot "
+            f"balance moments) (2.5 kg) at the platform centre p = [2.400, 1.900, 1.900] m "
+            f"(from the measured cable lengths): its largest achievable minimum tension t* is "
+            f"{t_point:.2f} N < 0 N") in message, message
 
 
 def test_refuses_to_enable_when_the_bridge_reports_a_fault(robot, emulator):

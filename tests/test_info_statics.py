@@ -168,3 +168,97 @@ def test_the_interference_picture_colours_each_slice_by_the_closest_pairs_margin
                                    atol=1e-9)
     # Cables 1 and 3 swapped: that pair is the one within d_u (listed under the slices).
     assert "pairs within d_u: 1-3" in fig.axes[0].get_xlabel()
+
+
+# --- issue 27: one grid, one warning, a cause that is true ------------------------------------
+
+
+def test_info_says_each_robot_warning_once_and_on_the_grid_it_prints(capsys, tmp_path):
+    # paper_7cable's attachment points before issue 18 (held on a quarter of the box), with
+    # one pair ignored: loading logs both warnings; `info` says each once, in its report, and
+    # the share in the statics warning is the one of the grid the report prints.
+    from test_robot_statics import PRE_18
+
+    from conftest import to_yaml
+
+    base = load_robot("paper_7cable")
+    spec = {"name": "pre18", "reels": base.reels.tolist(), "attachments": PRE_18,
+            "workspace": {"lower": base.workspace.lower.tolist(),
+                          "upper": base.workspace.upper.tolist()},
+            "ignore_pairs": [[1, 2]]}
+    path = tmp_path / "pre18.yaml"
+    path.write_text(to_yaml(spec) + "\n")
+    code, out, err = run_info(capsys, str(path), "--grid", "0.25")
+    assert code == 0, err
+    assert "workspace box" not in err and "skips" not in err, err
+    assert out.count("warning: pre18: the cables hold the level platform") == 1, out
+    assert out.count("pair (1, 2) skipped: listed in ignore_pairs") == 1, out
+    share, step, _ = share_line(out)
+    robot = load_robot(path)
+    pts = step_grid(robot.workspace.lower, robot.workspace.upper, 0.25)
+    w = gravity_wrench(robot.dynamics.mass)
+    lp = 100 * np.mean([highs_t_star(wrench_matrix(robot, p), w) >= 5.0 for p in pts])
+    assert share == pytest.approx(lp, abs=0.05)
+    assert (f"with every cable >= 5 N on only {lp:.0f} % of the workspace box (the same 25 cm "
+            "grid); the moment balance fails") in out, out
+
+
+def test_info_of_exp2_blames_its_swap_not_the_robot_file(capsys):
+    # Experiment 2 swaps cables 1 and 3 (to make them interfere); the robot file's attachment
+    # points hold the platform on most of the box without that swap. Shares by HiGHS on the
+    # report's grid.
+    code, out, err = run_info(capsys, "exp2_interaction", "--grid", "0.25")
+    assert code == 0, err
+    base = load_robot("paper_7cable")
+    swapped = scenario_robot(load_scenario("exp2_interaction"))
+    pts = step_grid(base.workspace.lower, base.workspace.upper, 0.25)
+    w = gravity_wrench(base.dynamics.mass)
+
+    def lp(robot):
+        return 100 * np.mean([highs_t_star(wrench_matrix(robot, p), w) >= 5.0 for p in pts])
+
+    held, held_unswapped = lp(swapped), lp(base)
+    assert held < 50.0 <= held_unswapped
+    (warning,) = [line for line in out.splitlines() if "warning:" in line]
+    assert warning.endswith(
+        f"with every cable >= 5 N on only {held:.0f} % of the workspace box (the same 25 cm "
+        f"grid); the swapped cables (1-3) are the cause: robot 'paper_7cable' without the "
+        f"swaps is held on {held_unswapped:.0f} % of it"), warning
+    assert "attachment points" not in warning
+
+
+def test_an_infinite_t_star_where_the_rank_is_low_says_what_it_holds(capsys, tmp_path):
+    # The README's four-cable robot: at its box centre the four cables' lines of action meet
+    # (numpy: rank 3), the weight is in W's range and a positive nullspace vector raises every
+    # tension (HiGHS: unbounded, +inf), yet the platform turns under any moment about y.
+    from conftest import to_yaml
+
+    spec = {"name": "four", "reels": [[0.0, 0.0, 0.0], [4.0, 0.0, 0.0], [2.0, 3.0, 0.0],
+                                      [2.0, 1.5, 3.0]],
+            "attachments": [[-0.1, -0.1, 0.0], [0.1, -0.1, 0.0], [0.0, 0.1, 0.0],
+                            [0.0, 0.0, 0.1]],
+            "workspace": {"lower": [1.5, 1.0, 0.5], "upper": [2.5, 2.0, 2.0]}}
+    path = tmp_path / "four.yaml"
+    path.write_text(to_yaml(spec) + "\n")
+    robot = load_robot(path)
+    c = robot.workspace.center
+    W = wrench_matrix(robot, c)
+    s = np.linalg.svd(W, compute_uv=False)
+    assert int(np.sum(s > 1e-9 * s[0])) == 3
+    assert highs_t_star(W, gravity_wrench(robot.dynamics.mass)) == np.inf
+    code, out, err = run_info(capsys, str(path), "--grid", "0.25")
+    assert code == 0, err
+    line = next(x for x in out.splitlines() if "rank at the workspace centre" in x)
+    assert "t* there +inf for the weight alone" in line and "rank 3 < 6 there" in line, line
+    assert "any floor holds" not in out
+
+
+def test_info_says_a_box_beyond_the_reels_frame_once(capsys, tmp_path, valid_spec,
+                                                     write_robot):
+    valid_spec["workspace"] = {"lower": [1.0, 0.5, 0.5], "upper": [4.5, 2.5, 2.5]}
+    path = write_robot(valid_spec)
+    code, out, err = run_info(capsys, str(path), "--grid", "0.5")
+    assert code == 0, err
+    assert "reels' frame" not in err
+    assert out.count("warning: tetra_4cable: the workspace box's upper x face, "
+                     "workspace.upper[0] = 4.5 m, lies beyond the reels' frame") == 1, out

@@ -238,6 +238,25 @@ def test_refusing_to_enable_hints_at_an_emulator_playing_something_else(tmp_path
     assert not (tmp_path / "run").exists()
 
 
+def test_cdpm_run_never_enables_with_the_platform_outside_the_box(tmp_path, capsys):
+    # Issue 27, bug 1: against a bridge whose encoders put the platform at [10, 10, 10] m
+    # (`cdpm emulate --start 10 10 10`), `cdpm run` ran to the end, exit 0. Refused now, before
+    # any enabling command, naming the pose and the box (exp1's robot: paper_7cable_swap13).
+    robot = scenario_robot(load_scenario("exp1_no_interaction"))
+    server = ReelBridgeServer(ReelBridge(robot, cable_lengths(robot, np.array([10.0, 10, 10])),
+                                         time_constant=0.0)).start()
+    code = _run_against(server, tmp_path / "run", 1)
+    err = capsys.readouterr().err
+    assert code == 1
+    assert ("cdpm run: error: refusing to enable the reels: the platform centre p = [10.000, "
+            "10.000, 10.000] m (from the measured cable lengths) is outside the workspace box "
+            "of robot 'paper_7cable_swap13'") in err, err
+    assert "lower [0.500, 0.800, 0.300] m, upper [3.000, 4.000, 2.400] m" in err
+    assert "cdpm emulate --scenario exp1_no_interaction" in err  # the emulator's hint
+    assert not any(c.enable for c in server.commands)
+    assert not (tmp_path / "run").exists()
+
+
 def test_a_bridge_fault_at_startup_hints_at_a_reset(tmp_path, capsys):
     from cdpm_drake.hardware.protocol import FAULT_COMMAND_TIMEOUT
 
@@ -321,6 +340,20 @@ def test_cdpm_run_cli_reports_timing_and_packets(tmp_path, capsys):
     assert "run ended: completed" in out
     assert "tick period p50" in out and "packets: commands sent" in out
     assert (tmp_path / "log.npz").exists() and (tmp_path / "ticks.bin").exists()
+    # Issue 27: the report names the variant first and ends with simulate's pair table: exp1's
+    # pair (1,3) within d_u from the start (56 mm at the start, d_u 61 mm), its closest approach
+    # from the log, d_l and d_u of the scenario's interference defaults.
+    assert out.startswith("scenario 'exp1_no_interaction' (hardware reels, translation only "
+                          "at 127.0.0.1:"), out
+    with np.load(tmp_path / "log.npz") as log:
+        k13 = [tuple(p) for p in log["pairs"]].index((1, 3))
+        closest = 1000 * log["pair_distances"][:, k13].min()
+        within = int(log["active"][:, k13].sum())
+        d_l, d_u = 1000 * log["d_l"][k13], 1000 * log["d_u"][k13]
+    assert "pair   min distance (mm)  d_l (mm)  d_u (mm)  ticks within d_u  crossed" in out, out
+    row = next(line for line in out.splitlines() if line.startswith("(1,3)")).split()
+    assert row == ["(1,3)", f"{closest:.2f}", f"{d_l:.2f}", f"{d_u:.2f}", str(within), "0"], row
+    assert within > 0 and "pairs that crossed: 0" in out
     # A second run into the same directory would overwrite the robot's log: refused.
     code = main(["run", "exp1_no_interaction", "--duration", "1", "--out", str(tmp_path),
                  "--scenario-text", "plant: !HardwareReels {port: 9}"])
@@ -397,7 +430,7 @@ def _run_against_dynamic_emulator(out_dir):
         [sys.executable, "-m", "cdpm_drake.emulator", "--scenario", "exp2_interaction",
          "--plant", "dynamic", "--port", "0", "--duration", "300", "--command-timeout", "1.0"],
         stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
-    code = None
+    code, line = None, ""
     try:
         ready, _, _ = select.select([emulator.stdout], [], [], 180.0)
         assert ready, "the emulator did not start within 180 s"
@@ -409,7 +442,7 @@ def _run_against_dynamic_emulator(out_dir):
     finally:
         emulator.send_signal(signal.SIGINT)
         out, err = emulator.communicate(timeout=120)
-    return code, emulator.returncode, out, err
+    return code, emulator.returncode, line + out, err  # its whole stdout, the first line too
 
 
 def test_cdpm_run_against_the_emulated_dynamic_plant(tmp_path):
@@ -448,8 +481,12 @@ def test_cdpm_run_against_the_emulated_dynamic_plant(tmp_path):
     assert error < 0.015, (error, np.diff(log["wall"]).max())
     # The emulator's closing summary: its compute per tick, and what the cables went through.
     assert re.search(r"compute per tick p50 [\d.]+ / p99 [\d.]+ / max [\d.]+ ms", out), out
-    found = re.search(r"dynamic plant over (\d+) ticks: tensions ([\d.]+)\.\.([\d.]+) N, "
-                      r"slack ticks per cable (.*), largest tilt ([\d.]+) deg", out)
+    # Issue 27: its first line says which plant it plays; the summary is the session's.
+    assert ("period 2 ms, plant: dynamic (!DynamicReels: time step 1 ms, reel speed limit 1 "
+            "m/s, start tilt [0.0, 0.0, 0.0] rad, rotation free), start [1.560, 3.240, 1.220] "
+            "m") in out.splitlines()[0], out
+    found = re.search(r"session 1: dynamic plant over (\d+) ticks: tensions ([\d.]+)\.\.([\d.]+) "
+                      r"N, slack ticks per cable (.*), largest tilt ([\d.]+) deg", out)
     assert found, out
     ticks, t_min, t_max = int(found.group(1)), float(found.group(2)), float(found.group(3))
     # (The emulator's world runs on until it is stopped, the reels held and the hand pulling:

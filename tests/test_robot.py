@@ -277,7 +277,7 @@ def test_empty_or_inverted_workspace(write_robot, valid_spec, lower, upper, axis
 def test_name_must_be_a_string(write_robot, valid_spec):
     valid_spec["name"] = 5
     path = write_robot(valid_spec)
-    assert_names(load_error(path), str(path), "'name'", "5")
+    assert_names(load_error(path), str(path), "name must be a non-empty string, got 5")
 
 
 def test_empty_name(write_robot, valid_spec):
@@ -292,6 +292,57 @@ def test_bad_cable_diameter(write_robot, valid_spec, field, value):
     valid_spec[field] = value
     path = write_robot(valid_spec)
     assert_names(load_error(path), str(path), field, repr(value))
+
+
+@pytest.mark.parametrize("field, value, message", [
+    # Issue 27: Drake's loader said only "could not convert string to float: 'thin'".
+    ("cable_diameter", "thin", "cable_diameter must be a finite value >= 0 m, got 'thin'"),
+    ("limits", {"max_velocity": "fast"},
+     "limits.max_velocity must be a finite value > 0 m/s, got 'fast'"),
+    ("ignore_pairs", [[1, "x"]], "ignore_pairs[0] must be two cable numbers [i, j], got "
+                                 "[1, 'x']"),
+    ("ignore_pairs", 5, "ignore_pairs must be a list of cable pairs [i, j], got 5"),
+    ("name", [1], "name must be a non-empty string, got [1]")])
+def test_a_wrong_kind_of_value_names_the_field(write_robot, valid_spec, field, value, message):
+    valid_spec[field] = value
+    path = write_robot(valid_spec)
+    assert_names(load_error(path), f"{path}: {message}")
+
+
+def test_a_box_beyond_the_reels_frame_is_warned_naming_the_face(write_robot, valid_spec,
+                                                                 caplog):
+    # Issue 27: accepted silently. The reels span x 0..4, y 0..3, z 0..3 (conftest's robot).
+    import logging
+
+    valid_spec["workspace"] = {"lower": [-0.5, 0.5, -0.5], "upper": [3.0, 3.2, 2.5]}
+    path = write_robot(valid_spec)
+    with caplog.at_level(logging.WARNING, logger="cdpm_drake.robot"):
+        load_robot(path)
+    frame = [r.getMessage() for r in caplog.records if "reels' frame" in r.getMessage()]
+    assert frame == [
+        "tetra_4cable: the workspace box's lower x face, workspace.lower[0] = -0.5 m, lies "
+        "beyond the reels' frame: no reel exit is at x <= -0.5 m (the lowest at 0.0 m), so "
+        "there every cable pulls the platform back along +x and nothing holds it",
+        "tetra_4cable: the workspace box's upper y face, workspace.upper[1] = 3.2 m, lies "
+        "beyond the reels' frame: no reel exit is at y >= 3.2 m (the highest at 3.0 m), so "
+        "there every cable pulls the platform back along -y and nothing holds it"]
+    # Below the lowest exit (z -0.5 < 0) is where a suspended platform hangs: no warning.
+    valid_spec["workspace"] = {"lower": [1.0, 0.5, -0.5], "upper": [3.0, 2.5, 3.5]}
+    caplog.clear()
+    with caplog.at_level(logging.WARNING, logger="cdpm_drake.robot"):
+        load_robot(write_robot(valid_spec, "high.yaml"))
+    frame = [r.getMessage() for r in caplog.records if "reels' frame" in r.getMessage()]
+    assert frame == [
+        "tetra_4cable: the workspace box's upper z face, workspace.upper[2] = 3.5 m, lies "
+        "beyond the reels' frame: no reel exit is at z >= 3.5 m (the highest at 3.0 m), so "
+        "there every cable pulls the platform down (with its weight) and nothing holds it"]
+
+
+def test_the_shipped_robots_boxes_lie_within_their_reels_frames():
+    from cdpm_drake.robot import frame_warnings
+
+    for name in SHIPPED_ROBOTS:
+        assert frame_warnings(load_robot(name)) == []
 
 
 def test_bad_limit(write_robot, valid_spec):

@@ -131,17 +131,27 @@ def test_a_run_folder_moves_and_reruns_bit_for_bit(capsys, tmp_path, write_robot
 
 def test_summary_reports_ticks_and_the_logged_minimum_distances(exp1_run):
     _, out, out_dir = exp1_run
-    assert re.search(r"scenario 'exp1_no_interaction': 101 ticks, 0\.200 s simulated", out), out
+    assert re.search(r"scenario 'exp1_no_interaction' \(kinematic plant, translation only\): "
+                     r"101 ticks, 0\.200 s simulated", out), out
     assert f"log: {out_dir / 'log.npz'}" in out
     with np.load(out_dir / "log.npz") as log:
         pairs = [f"({i},{j})" for i, j in log["pairs"]]
         d_min = 1000 * log["pair_distances"].min(axis=0)
         active = log["active"].any(axis=0)
-    rows = re.findall(r"^\s*(\(\d+,\d+\))\s+([0-9.]+)\s+(\d+)\s+([01])\s*$", out, re.MULTILINE)
+        within = log["active"].sum(axis=0)
+        d_l, d_u = 1000 * log["d_l"], 1000 * log["d_u"]
+    # Issue 27: "ticks active" was never defined; each pair's band is printed beside it.
+    assert "pair   min distance (mm)  d_l (mm)  d_u (mm)  ticks within d_u  crossed" in out
+    rows = re.findall(r"^\s*(\(\d+,\d+\))\s+([0-9.]+)\s+([0-9.]+)\s+([0-9.]+)\s+(\d+)\s+([01])\s*$",
+                      out, re.MULTILINE)
     assert rows  # exp1 starts with cables 1 and 3 at 57 mm, inside d_u = 61 mm
     assert {r[0] for r in rows} == {p for p, a in zip(pairs, active) if a}
-    for pair, dist, _, _ in rows:
-        assert float(dist) == pytest.approx(d_min[pairs.index(pair)], abs=0.005)  # 0.01 mm
+    for pair, dist, low, up, ticks, _ in rows:
+        k = pairs.index(pair)
+        assert float(dist) == pytest.approx(d_min[k], abs=0.005)  # 0.01 mm
+        # exp1's interference defaults: d_l 50 mm, d_u 61 mm (scenario file).
+        assert (low, up) == (f"{d_l[k]:.2f}", f"{d_u[k]:.2f}") == ("50.00", "61.00")
+        assert int(ticks) == within[k]
 
 
 @pytest.mark.parametrize("name", scenario_names())
@@ -150,7 +160,7 @@ def test_every_shipped_scenario_runs_through_the_cli(capsys, tmp_path, name):
                                   "--no-progress")
     assert code == 0, err
     assert (tmp_path / "log.npz").is_file() and (tmp_path / "scenario.yaml").is_file()
-    assert f"scenario {name!r}: 51 ticks" in out
+    assert f"scenario {name!r} (kinematic plant, translation only): 51 ticks" in out
 
 
 def test_scenario_text_overlay_reaches_the_run(capsys, tmp_path):
@@ -350,6 +360,40 @@ def test_latest_points_at_a_run_as_it_starts_and_back_if_it_writes_nothing(tmp_p
     lone.create()
     lone.discard()
     assert not (tmp_path / "fresh").exists()
+
+
+@pytest.mark.parametrize("overlay, words, tag", [
+    ("{}", "kinematic plant, translation only", ""),
+    ("plant: !DynamicReels {}", "dynamic plant, translation only", "-dynamic"),
+    ("{plant: !DynamicReels {}, controller: {pose: full}}", "dynamic plant, full pose",
+     "-dynamic-full-pose"),
+    ("{plant: !DynamicReels {}, controller: {pose: full, tension_control: true}}",
+     "dynamic plant, full pose, tension control", "-dynamic-full-pose-tension-control")])
+def test_a_runs_variant_is_named_in_its_summary_and_its_folder(capsys, tmp_path, monkeypatch,
+                                                              overlay, words, tag):
+    # Issue 27: runs of the dynamic plant or the full pose were indistinguishable from the
+    # default's in runs/<scenario>/; `latest` still points at the newest.
+    monkeypatch.chdir(tmp_path)
+    code, out, err = simulate_cli(capsys, "exp2_interaction", "--duration", "0.01",
+                                  "--no-progress", "--scenario-text", overlay)
+    assert code == 0, err
+    assert out.startswith(f"scenario 'exp2_interaction' ({words}): 6 ticks"), out
+    (folder,) = [p for p in (tmp_path / "runs" / "exp2_interaction").iterdir()
+                 if p.name != "latest"]
+    assert re.fullmatch(r"\d{8}T\d{6}\.\d{3}Z" + re.escape(tag), folder.name), folder.name
+    latest = tmp_path / "runs" / "exp2_interaction" / "latest"
+    assert latest.resolve() == folder.resolve()
+    assert f"log: runs/exp2_interaction/{folder.name}/log.npz" in out
+
+
+def test_two_runs_in_one_millisecond_keep_their_variant_last(tmp_path, monkeypatch):
+    from cdpm_drake import run_folder
+
+    monkeypatch.setattr(run_folder, "utc_stamp", lambda: "20261201T211039.123Z")
+    first = run_folder.RunFolder("exp", root=tmp_path, variant="dynamic").create()
+    second = run_folder.RunFolder("exp", root=tmp_path, variant="dynamic").create()
+    assert (first.name, second.name) == ("20261201T211039.123Z-dynamic",
+                                         "20261201T211039.123Z-2-dynamic")
 
 
 def test_a_hand_force_beyond_the_sensor_range_is_warned_once_and_counted(capsys, tmp_path):

@@ -535,6 +535,56 @@ def test_nothing_to_draw_says_why():
         [{"status": "fault"}, {"status": "error"}], "min_distance")
 
 
+def test_tables_show_distances_in_mm_with_even_digits():
+    # Issue 27: the best-runs table showed d_u as 0.0605 / 0.061 m and min_distance as
+    # 0.0598295 m beside summaries and pictures in mm. Rows as results.csv holds them (m).
+    columns = ["run", "interference.default.d_u", "interference.default.F_u", "random_seed",
+               "status", "min_distance", "operator_effort", "crossings"]
+    rows = [{"run": "ra", "interference.default.d_u": "0.0605", "interference.default.F_u":
+             "5.0", "random_seed": "0", "status": "ok", "min_distance": "0.0598295",
+             "operator_effort": "28.3237", "crossings": "0"},
+            {"run": "rb", "interference.default.d_u": "0.061", "interference.default.F_u":
+             "2.5", "random_seed": "0", "status": "ok", "min_distance": "0.05975",
+             "operator_effort": "30.6", "crossings": "1"}]
+    lines = sw.best_table(columns, rows, "min_distance").splitlines()
+    assert lines[0].split() == ["run", "interference.default.d_u", "(mm)",
+                                "interference.default.F_u", "(N)", "random_seed",
+                                "min_distance", "(mm)", "operator_effort", "(N", "s)",
+                                "crossings", "(-)"]
+    # d_u: one decimal shows both exactly; F_u likewise; 0.01 mm, 0.01 N s, whole counts.
+    assert lines[2].split() == ["ra", "60.5", "5.0", "0", "59.83", "28.32", "0"]
+    assert lines[3].split() == ["rb", "61.0", "2.5", "0", "59.75", "30.60", "1"]
+
+
+def test_a_dry_run_says_where_the_results_would_go(tmp_path, capsys):
+    path = write(tmp_path, SMALL)
+    out = tmp_path / "out"
+    assert main(["sweep", str(path), "--out", str(out), "--dry-run"]) == 0
+    text = capsys.readouterr().out
+    assert f"the results would go to {out / 'results.csv'}" in text
+    assert "interference.default.F_u (N)" in text and "admittance.damping (N s/m)" in text
+    assert not out.exists()
+
+
+def test_the_lock_says_who_holds_it_and_is_gone_after_the_sweep(tmp_path):
+    import os
+
+    s = sw.load_sweep(write(tmp_path, SMALL))
+    out = tmp_path / "out"
+    out.mkdir()
+    held = sw._lock(out)  # as a running cdpm sweep holds it
+    try:
+        assert (out / ".sweep.lock").read_text().startswith(f"pid {os.getpid()}, since ")
+        with pytest.raises(sw.SweepError, match=rf"is in use by another cdpm sweep \(pid "
+                                                rf"{os.getpid()}, since "):
+            sw.run_sweep(s, out, workers=1, progress=False)
+    finally:
+        sw._unlock(held, out)
+    assert not (out / ".sweep.lock").exists()
+    sw.run_sweep(s, out, workers=1, progress=False)
+    assert (out / "results.csv").exists() and not (out / ".sweep.lock").exists()
+
+
 def test_spaced_axes():
     # np.linspace / np.geomspace, both ends included, rounded to 12 significant digits.
     assert sw.axis_values(sw.Axis(field="x", linspace=[0.06, 0.062, 3])) == [0.06, 0.061, 0.062]

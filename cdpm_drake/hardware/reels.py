@@ -203,7 +203,7 @@ class HardwareReelsSystem(LeafSystem):
                 f"{status.faults:#06x} ({', '.join(fault_names(status.faults))}) at startup",
                 context.get_time())
         try:
-            forward_kinematics(self._robot, status.lengths,
+            p = forward_kinematics(self._robot, status.lengths,
                                    max_residual=c.max_length_residual)
         except KinematicsError as e:
             self.shutdown()
@@ -213,6 +213,10 @@ class HardwareReelsSystem(LeafSystem):
                 f"{self._robot.name!r} ({self._robot.source}) within max_length_residual = "
                 f"{c.max_length_residual:g} m: {e}. Check the robot file, the cable numbering "
                 f"and the encoders' zero offsets.", context.get_time()) from None
+        problem = start_pose_problem(self._robot, p)
+        if problem:
+            self.shutdown()
+            raise ReelFault(f"refusing to enable the reels: {problem}", context.get_time())
         state.get_mutable_discrete_state(self._lengths).SetFromVector(status.lengths)
         state.get_mutable_discrete_state(self._force).SetFromVector(status.force)
         book = np.zeros(BOOK_SIZE)
@@ -357,6 +361,63 @@ class HardwareReelsSystem(LeafSystem):
                         f"{c.resume_within * 1e3:g} ms")
         return (f"reel fault at t = {t:.3f} s: {why}; zero reel velocity sent. "
                 f"{self._link_summary()}")
+
+
+# Where the reels may be enabled: the platform centre that the measured lengths give inside
+# the robot's workspace box, give or take START_BOX_TOLERANCE (m: an encoder offset well below
+# a millimetre must not refuse a platform resting on a face, which the virtual wall keeps
+# inside from the first tick; a platform centimetres out is outside), and held by its
+# cables: t* of the level platform there (tension.holding_tension) >= START_MIN_T_STAR (N).
+# Zero is where holding stops being possible at all: below it no set of tensions >= 0
+# balances the platform's weight (a cable would have to push), so the platform is not at rest
+# where the lengths put it (it hangs tilted, a cable is slack, or the lengths are wrong), and
+# the controller's model of it fails from the first tick. A higher floor (the 5 N of `cdpm
+# info`) would refuse poses the cables do hold: 21 % of the built-in robot's box (27 % with
+# exp2's swapped cables; 11 x 11 x 11 grid), where a run may start and move on from.
+START_BOX_TOLERANCE = 0.001
+START_MIN_T_STAR = 0.0
+
+
+def start_pose_problem(robot, p) -> str:
+    """Why the reels must not be enabled with the platform centre at p (base frame, m), in
+    words naming the pose and the box; "" when they may. A robot whose cables cannot balance
+    moments (wrench-matrix rank < 6 at the workspace centre: it is modelled as translating)
+    is judged by the forces alone (the platform as a point)."""
+    from ..robot import robot_statics
+    from ..tension import gravity_wrench, holding_tension, max_min_tension
+
+    p = np.asarray(p, dtype=float)
+    box = robot.workspace
+    where = (f"the platform centre p = {_vector(p)} m (from the measured cable lengths)")
+    if not box.contains(p, START_BOX_TOLERANCE):
+        out = np.maximum(box.lower - p, p - box.upper)
+        k = int(np.argmax(out))
+        return (f"{where} is outside the workspace box of robot {robot.name!r} "
+                f"({robot.source}): lower {_vector(box.lower)} m, upper {_vector(box.upper)} m "
+                f"({1000 * out[k]:.1f} mm beyond its {'xyz'[k]} "
+                f"{'lower' if p[k] < box.lower[k] else 'upper'} face). Bring the platform "
+                "into the box (by hand with the drives off, or by a homing) first")
+    mass = robot.dynamics.mass
+    if robot_statics(robot).rank < 6:
+        rho = robot.reels - p  # the cables' directions from a point platform
+        t_star = max_min_tension((rho / np.linalg.norm(rho, axis=1, keepdims=True)).T,
+                                 gravity_wrench(mass)[:3])
+        model = "the platform as a point (forces only: the robot's cables cannot balance moments)"
+    else:
+        t_star = float(holding_tension(robot, p))
+        model = "the level platform"
+    if not t_star >= START_MIN_T_STAR:
+        return (f"the cables cannot hold {model} ({mass:g} kg) at {where}: its largest "
+                f"achievable minimum tension t* is {t_star:.2f} N < {START_MIN_T_STAR:g} N, "
+                "so no cable tensions >= 0 balance its weight there (a cable would have to "
+                "push); the platform is not at rest where the lengths put it (tilted, a cable "
+                "slack, or the encoders are off). `cdpm info` shows where in the box the "
+                "cables hold it")
+    return ""
+
+
+def _vector(v) -> str:
+    return "[" + ", ".join(f"{x:.3f}" for x in np.asarray(v, dtype=float)) + "]"
 
 
 def start_realtime(simulator, rate: float = 1.0) -> None:

@@ -207,16 +207,28 @@ class TickLogWriter:
 
 def tick_log_header(path) -> dict:
     """The header of a tick log: {'dtype', 'metadata', 'version', 'data_offset'}."""
+    fixed = len(MAGIC) + _LEN.size  # the magic and the header's length: 12 bytes
     with open(path, "rb") as f:
-        head = f.read(len(MAGIC) + _LEN.size)
-        if len(head) < len(MAGIC) + _LEN.size or head[:len(MAGIC)] != MAGIC:
+        head = f.read(fixed)
+        if head[:len(MAGIC)] != MAGIC[:len(head)]:
             raise TickLogError(f"{str(path)!r} is not a tick log (magic {head[:8]!r}, "
                                f"expected {MAGIC!r})")
+        if len(head) < fixed:  # what there is agrees with the magic: cut short
+            raise TickLogError(f"{str(path)!r} is truncated: {len(head)} bytes, where a tick "
+                               f"log's header alone takes at least {fixed} (the magic "
+                               f"{MAGIC!r} and the header's length) plus its JSON")
         (n,) = _LEN.unpack_from(head, len(MAGIC))
         raw = f.read(n)
     if len(raw) < n:
-        raise TickLogError(f"{str(path)!r}: header truncated ({len(raw)} of {n} bytes)")
-    header = json.loads(raw.decode())
+        raise TickLogError(f"{str(path)!r} is truncated: {fixed + len(raw)} bytes, where its "
+                           f"header takes {fixed + n} (header truncated: {len(raw)} of its "
+                           f"{n} bytes of JSON)")
+    try:
+        header = json.loads(raw.decode())
+        header["dtype"]
+    except (UnicodeDecodeError, json.JSONDecodeError, TypeError, KeyError) as e:
+        raise TickLogError(f"{str(path)!r}: the header is damaged ({type(e).__name__}: "
+                           f"{e}); not a tick log this reader can use") from None
     if header.get("version") != FORMAT_VERSION:
         raise TickLogError(f"{str(path)!r}: tick log version {header.get('version')!r}, this "
                            f"reader knows version {FORMAT_VERSION}")

@@ -14,6 +14,8 @@ when a log lacks them.
 """
 
 import warnings
+import zipfile
+import zlib
 from collections.abc import Mapping
 from pathlib import Path
 
@@ -91,6 +93,13 @@ def load_log(path) -> dict:
             if not hasattr(data, "files"):  # a bare .npy array, not an archive
                 raise ValueError("a single array, not an .npz archive")
             log = {k: data[k] for k in data.files}
+    except (zipfile.BadZipFile, zlib.error, EOFError) as e:
+        # A cut copy (a full disk, a transfer stopped part-way) or flipped bytes: the archive's
+        # directory, at its end, or a member's checksum does not hold.
+        raise LogError(f"{str(path)!r} is damaged or truncated ({path.stat().st_size} bytes): "
+                       f"not a whole .npz archive ({e}); rerun it (cdpm simulate "
+                       "RUN_DIR/scenario.yaml), or for a cdpm run convert its ticks.bin "
+                       "again (remove log.npz, then cdpm recover RUN_DIR)") from None
     except (OSError, ValueError) as e:
         why = ("not a NumPy .npz archive" if "pickle" in str(e) or "allow_pickle" in str(e)
                else str(e))
