@@ -504,3 +504,55 @@ def test_the_legend_shows_the_within_d_u_dots_as_they_look(log):
     handle = legend.legend_handles[[t.get_text() for t in legend.get_texts()].index(
         "a pair within d_u")]
     assert to_rgba(handle.get_color(), handle.get_alpha()) == to_rgba("tab:orange", 1.0)
+
+
+# --- issue 27, part B ---------------------------------------------------------------------
+
+
+def _full_pose(log, tension_control=True):
+    """A full-pose run's log (docs/LOG_FORMAT.md): the dynamic plant's truth, the controller's
+    orientation estimate `rpy` (each component its own ramp, none equal to the truth's) and,
+    with tension control, its tensions."""
+    log = _dynamic(log)
+    T = len(log["time"])
+    s = np.linspace(0.0, 1.0, T)[:, None]
+    log["rpy_true"] = s * np.array([0.010, -0.020, 0.030])  # rad
+    log["rpy"] = s * np.array([0.012, -0.018, 0.025])
+    if tension_control:
+        log["tension_estimate"] = np.full((T, 7), 11.0)
+        log["tension_target"] = np.full((T, 7), 10.5)
+        log["t_star"] = np.full((T, 1), 30.0)
+    return log
+
+
+def test_pose_error_is_titled_by_the_run_s_controller_and_draws_its_orientation_estimate():
+    # Issue 27, bug 6: a full-pose run's figure said "translating platform, rigid cables" and
+    # drew the true rotation only. The log says which controller ran: `rpy` only for
+    # controller.pose: full, `tension_estimate` only with its tension control.
+    base = synthetic_log(0.1)
+    cases = {"translating platform, rigid cables": _dynamic(base),
+             "full pose, rigid cables": _full_pose(base, tension_control=False),
+             "full pose, cables stretched under the estimated tensions": _full_pose(base)}
+    for model, log in cases.items():
+        title = plots.figure_pose_error(log).get_suptitle().replace("\n", " ")
+        assert f"pose estimate ({model})" in title
+        assert sum(m in title for m in cases) == 1
+    log = cases["full pose, cables stretched under the estimated tensions"]
+    rotation = plots.figure_pose_error(log).axes[1]
+    lines = {line.get_label(): line for line in rotation.get_lines()}
+    # Each component, true and estimated, is the log's in degrees (180 / pi per rad), in
+    # the order roll, pitch, yaw of docs/LOG_FORMAT.md.
+    for c, name in enumerate(("roll", "pitch", "yaw")):
+        np.testing.assert_allclose(lines[f"{name} (true)"].get_ydata(),
+                                   log["rpy_true"][:, c] * 180.0 / np.pi, rtol=1e-12)
+        np.testing.assert_allclose(lines[f"{name} (controller's estimate)"].get_ydata(),
+                                   log["rpy"][:, c] * 180.0 / np.pi, rtol=1e-12)
+        assert lines[f"{name} (true)"].get_color() == lines[
+            f"{name} (controller's estimate)"].get_color()
+    # The translating controller has no estimate of its own: the truth alone.
+    labels = [line.get_label() for line in plots.figure_pose_error(
+        cases["translating platform, rigid cables"]).axes[1].get_lines()]
+    assert not any("estimate" in label for label in labels)
+    # A misshapen estimate is named, as the figure's other keys are.
+    with pytest.raises(plots.LogError, match="'rpy' has shape"):
+        plots.figure_pose_error(dict(log, rpy=log["rpy"][:5]))

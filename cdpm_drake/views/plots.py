@@ -35,12 +35,15 @@ _NEEDS = {
     "tensions": ("time", "tensions", "slack"),
     "pose_error": ("time", "p", "p_true", "rpy_true"),
 }
+# Keys a figure draws when the log holds them (a full-pose or tension-controlled run's).
+_MAY_USE = {"pose_error": ("rpy",), "tensions": ("tension_estimate", "tension_target", "t_star")}
 # Figures drawn only for logs that hold their keys.
 OPTIONAL = ("timing", "tensions", "pose_error")
 # Keys with one row per tick.
 _PER_TICK = ("time", "p", "F_H", "F_int", "F_d", "pair_distances", "active", "crossed",
              "lengths", "reel_velocity", "wall", "tensions", "slack", "p_true", "rpy_true",
-             "lengths_commanded", "pair_distances_true", "crossed_true")
+             "lengths_commanded", "pair_distances_true", "crossed_true", "rpy",
+             "tension_estimate", "tension_target", "t_star")
 LOG_KEYS = ("time", "p", "F_H", "F_int", "F_wall", "F_d", "velocity_admittance", "velocity",
             "reel_velocity", "lengths", "pair_distances", "active", "crossed", "pairs", "d_l",
             "d_u", "F_u", "eps", "F_max", "reels", "attachments", "workspace_lower",
@@ -115,7 +118,7 @@ def _check(log: Mapping, figure: str) -> None:
                        f"the log holds {sorted(log)!r}")
     if "time" in _NEEDS[figure]:
         T = len(log["time"])
-        for key in _NEEDS[figure]:
+        for key in _NEEDS[figure] + tuple(k for k in _MAY_USE.get(figure, ()) if k in log):
             arr = np.asarray(log[key])
             if key in _PER_TICK and (arr.ndim == 0 or arr.shape[0] != T):
                 raise LogError(f"log key {key!r} has shape {arr.shape!r}; expected one row per "
@@ -702,29 +705,53 @@ def figure_tensions(log: Mapping) -> Figure:
     return fig
 
 
+def pose_model(log: Mapping) -> str:
+    """What the run's controller assumed of the pose, from the keys its log holds
+    (docs/LOG_FORMAT.md): `rpy` only for `controller.pose: full`, `tension_estimate` only with
+    its tension control (the one whose forward kinematics stretches the cables)."""
+    if "rpy" not in log:
+        return "translating platform, rigid cables"
+    if "tension_estimate" in log:
+        return "full pose, cables stretched under the estimated tensions"
+    return "full pose, rigid cables"
+
+
 def figure_pose_error(log: Mapping) -> Figure:
     """The controller's position estimate minus the true position (mm, per axis and its norm),
-    and the platform's true roll, pitch, yaw (deg), vs time (s) (a dynamic plant's log)."""
+    and the platform's true roll, pitch, yaw (deg) beside the controller's own estimate of
+    them (a full-pose controller's `rpy`; the translating one assumes a level platform), vs
+    time (s) (a dynamic plant's log)."""
     _check(log, "pose_error")
     t = np.asarray(log["time"], dtype=float)
     error = 1000.0 * (np.asarray(log["p"], float) - np.asarray(log["p_true"], float))
     rpy = np.degrees(np.asarray(log["rpy_true"], dtype=float))
+    estimate = (np.degrees(np.asarray(log["rpy"], dtype=float)).reshape(len(t), 3)
+                if "rpy" in log else None)
     fig = Figure(figsize=(9, 6), layout="constrained")
     top, bottom = fig.subplots(2, 1, sharex=True)
     for c, axis in enumerate("xyz"):
         top.plot(t, error[:, c], linewidth=1.0, label=f"p_{axis} - p_true,{axis}")
     top.plot(t, np.linalg.norm(error, axis=1), color="black", linewidth=1.2, label="|p - p_true|")
-    top.set_ylabel("FK estimate error (mm)")
+    top.set_ylabel("position estimate error (mm)")
     for c, name in enumerate(("roll", "pitch", "yaw")):
-        bottom.plot(t, rpy[:, c], linewidth=1.0, label=name)
+        color = f"C{c}"
+        if estimate is None:
+            bottom.plot(t, rpy[:, c], color=color, linewidth=1.0, label=f"{name} (true)")
+            continue
+        # As in the distances figure: the truth wide and solid, the estimate thin and dashed
+        # on top, so that both show where they coincide.
+        bottom.plot(t, rpy[:, c], color=color, linewidth=2.2, alpha=0.6,
+                    label=f"{name} (true)")
+        bottom.plot(t, estimate[:, c], color=color, linewidth=1.0, linestyle="--",
+                    label=f"{name} (controller's estimate)")
     bottom.set_ylabel("platform rotation (deg)")
     bottom.set_xlabel("time (s)")
     for ax in (top, bottom):
         ax.grid(True, alpha=0.3)
         _mark_fault_time(ax, log)
         ax.legend(loc="upper left", bbox_to_anchor=(1.01, 1.0), fontsize="small")
-    _suptitle(fig, log, f"{_title(log)}\nThe controller's forward kinematics (translating "
-              "platform, rigid cables) against the true platform")
+    _suptitle(fig, log, f"{_title(log)}\nThe controller's pose estimate ({pose_model(log)}) "
+              "against the true platform")
     return fig
 
 
