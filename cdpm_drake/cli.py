@@ -652,14 +652,16 @@ def _export_parser(sub) -> None:
         "export", help="write a log as CSV: one row per tick, named columns with units",
         description="Write a log.npz as CSV for spreadsheets and other tools: one row per "
                     "tick, one column per value, named with its unit (p_x [m], F_H_z [N], "
-                    "lengths_1 [m], pair_distances_1-3 [m], active_1-3 [0/1]), cables and "
-                    "pairs numbered from 1 (views/log_csv.py). The per-run constants (robot, "
-                    "logistic parameters, how the run ended) stay in log.npz.")
+                    "lengths_1 [m], pair_distances_1-3 [m], active_1-3 [0/1], "
+                    "rpy_true_roll [rad]), cables numbered from 1 and pairs by their cables "
+                    "(docs/LOG_FORMAT.md). The per-run constants (robot, logistic parameters, "
+                    "how the run ended) stay in log.npz.")
     p.add_argument("log", type=Path,
                    help="a log.npz, the run folder holding it (or only ticks.bin: recovered "
                         "first), or runs/<name> (its latest run)")
-    fmt = p.add_mutually_exclusive_group(required=True)
-    fmt.add_argument("--csv", action="store_true", help="comma-separated values")
+    # CSV is the only format, so the default; --csv stays accepted (scripts written for it).
+    p.add_argument("--csv", action="store_true",
+                   help="comma-separated values (the default and only format)")
     p.add_argument("--out", type=Path, metavar="FILE",
                    help="output file (default: log.csv beside the log; - for stdout)")
     p.set_defaults(func=_cmd_export)
