@@ -236,12 +236,23 @@ def test_logistic_curves_follow_eqs_26_28_for_each_parameter_set(log):
     assert len(fig.axes) == 2
     assert [ax.get_title() for ax in fig.axes] == ["20 cable pairs", "cables 5-7"]
     for ax, (d_l, d_u, F_u, eps) in zip(fig.axes, (EXP1, EXP3)):
-        curve = _lines(ax, "F_u = ")[f"F_u = {F_u:g} N, eps = {eps:g} N"]
+        curve = _lines(ax, "applied: ")[f"applied: F_u = {F_u:g} N, eps = {eps:g} N"]
         d = np.asarray(curve.get_xdata()) / 1000.0
+        alpha = np.asarray(curve.get_ydata())
         assert d.min() == pytest.approx(max(0.0, d_l - (d_u - d_l)))
         assert d.max() == pytest.approx(d_u + (d_u - d_l))
-        # The helper's own transcription of eqs. 26 and 28.
-        np.testing.assert_allclose(curve.get_ydata(), logistic(d, d_l, d_u, F_u, eps))
+        # Issue 27: what the controller applies. Within d_u the helper's own transcription of
+        # eqs. 26 and 28; beyond it zero (the pair is not active: interference.py's
+        # `near = dist <= d_u`); at d_u the step from eps to 0, drawn as a vertical.
+        within = d < d_u - 1e-12
+        np.testing.assert_allclose(alpha[within], logistic(d[within], d_l, d_u, F_u, eps))
+        assert np.all(alpha[d > d_u + 1e-12] == 0.0)
+        step = np.flatnonzero(np.isclose(d, d_u, rtol=0, atol=1e-12))
+        assert step.tolist() == [step[0], step[0] + 1]
+        np.testing.assert_allclose(alpha[step], [eps, 0.0], rtol=1e-9)
+        # The logistic's tail beyond d_u, faint, for reference: never zero there.
+        tail = [line for line in ax.get_lines() if line.get_gid() == "beyond d_u"][0]
+        assert tail.get_alpha() < 1 and np.all(np.asarray(tail.get_ydata()) > 0)
         marks = [line for line in ax.get_lines() if line.get_gid() == "conditions (27)"][0]
         # Eq. 27: F_u - eps at d_l, eps at d_u.
         np.testing.assert_allclose(marks.get_xdata(), [1000 * d_l, 1000 * d_u])

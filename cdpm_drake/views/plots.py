@@ -529,20 +529,42 @@ def logistic_grid(d_l: float, d_u: float, num: int = 400) -> np.ndarray:
     return np.linspace(max(0.0, d_l - w), d_u + w, num)
 
 
+def applied_curve(d_l: float, d_u: float, F_u: float, eps: float, num: int = 400):
+    """(distances m, intensity N) of what the interference block applies to an uncrossed pair
+    over logistic_grid: the logistic (eq. 26) up to d_u and zero beyond, where the pair is
+    not active (interference.py: `near = dist <= d_u`); d_u appears twice, with eps and with
+    0, so that the step from eps to zero is drawn as the vertical it is."""
+    d = logistic_grid(d_l, d_u, num)
+    tol = 1e-9 * (d_u - d_l)  # a grid point at d_u up to round-off is the step's
+    below, beyond = d[d < d_u - tol], d[d > d_u + tol]
+    x = np.concatenate([below, [d_u, d_u], beyond])
+    y = np.concatenate([logistic_intensity(below, d_l, d_u, F_u, eps),
+                        [logistic_intensity(d_u, d_l, d_u, F_u, eps), 0.0],
+                        np.zeros(beyond.size)])
+    return x, y
+
+
 def figure_logistic(log: Mapping) -> Figure:
     """Interference force intensity alpha (N) vs cable distance (mm), one axis per distinct set
-    of logistic parameters of the log (eqs. 26-28, Fig. 8), with d_l, d_u, F_u - eps and eps
-    marked."""
+    of logistic parameters of the log (eqs. 26-28, Fig. 8), as the controller applies it: the
+    logistic up to d_u, zero beyond (the step at d_u that F_int takes, see forces.png), the
+    logistic's own tail beyond d_u faint; d_l, d_u, F_u - eps and eps marked."""
     _check(log, "logistic")
     sets = logistic_sets(log)
     fig = Figure(figsize=(max(8, 5 * len(sets)), 4.5), layout="constrained")
     axes = np.atleast_1d(fig.subplots(1, max(1, len(sets)), squeeze=False)[0])
     for ax, ((d_l, d_u, F_u, eps), users) in zip(axes, sets):
-        d = logistic_grid(d_l, d_u)
         who = ("cables " + ", ".join(f"{i}-{j}" for i, j in users) if len(users) <= 4
                else f"{len(users)} cable pairs")
-        ax.plot(1000.0 * d, logistic_intensity(d, d_l, d_u, F_u, eps), color="tab:blue",
-                label=f"F_u = {F_u:g} N, eps = {eps:g} N")
+        d, alpha = applied_curve(d_l, d_u, F_u, eps)
+        applied, = ax.plot(1000.0 * d, alpha, color="tab:blue", linewidth=1.8, zorder=3,
+                           label=f"applied: F_u = {F_u:g} N, eps = {eps:g} N")
+        applied.set_gid("applied")
+        tail = d[d >= d_u]
+        faint, = ax.plot(1000.0 * tail, logistic_intensity(tail, d_l, d_u, F_u, eps),
+                         color="tab:blue", linewidth=1.0, linestyle=":", alpha=0.5,
+                         label="eq. 26 beyond d_u (not applied)")
+        faint.set_gid("beyond d_u")
         ax.axvline(1000.0 * d_l, color="0.3", linestyle="--", linewidth=0.8,
                    label=f"d_l = {1000 * d_l:g} mm")
         ax.axvline(1000.0 * d_u, color="0.3", linestyle=":", linewidth=0.8,
@@ -551,7 +573,7 @@ def figure_logistic(log: Mapping) -> Figure:
                    label=f"F_u - eps = {F_u - eps:g} N")
         ax.axhline(eps, color="tab:red", linestyle=":", linewidth=0.6, label=f"eps = {eps:g} N")
         marks, = ax.plot([1000.0 * d_l, 1000.0 * d_u], [F_u - eps, eps], linestyle="none",
-                         marker="o", color="tab:red")
+                         marker="o", color="tab:red", zorder=4)
         marks.set_gid("conditions (27)")
         ax.set_title(who, fontsize="medium")
         ax.set_xlabel("distance between cables $d_{ij}$ (mm)")
@@ -562,8 +584,8 @@ def figure_logistic(log: Mapping) -> Figure:
                      ha="center", transform=axes[0].transAxes)
         axes[0].set_xlabel("distance between cables $d_{ij}$ (mm)")
     axes[0].set_ylabel(r"force intensity $\alpha_{ij}$ (N)")
-    _suptitle(fig, log, f"{_title(log)}\nInterference force intensity, logistic function "
-              "(eqs. 26-28, Fig. 8)")
+    _suptitle(fig, log, f"{_title(log)}\nInterference force intensity as applied: the "
+              "logistic function (eqs. 26-28, Fig. 8) within d_u, zero beyond")
     return fig
 
 
