@@ -35,8 +35,11 @@ _NEEDS = {
     "tensions": ("time", "tensions", "slack"),
     "pose_error": ("time", "p", "p_true", "rpy_true"),
 }
+# A figure drawn from other keys when the log lacks its _NEEDS: the tensions of a
+# tension-controlled run on the robot (no plant's truth there) are the controller's estimate.
+_OR_NEEDS = {"tensions": ("time", "tension_estimate")}
 # Keys a figure draws when the log holds them (a full-pose or tension-controlled run's).
-_MAY_USE = {"pose_error": ("rpy",), "tensions": ("tension_estimate", "tension_target", "t_star")}
+_MAY_USE = {"pose_error": ("rpy",), "tensions": ("tensions", "slack", "tension_estimate", "t_star")}
 # Figures drawn only for logs that hold their keys.
 OPTIONAL = ("timing", "tensions", "pose_error")
 # Keys with one row per tick.
@@ -72,6 +75,8 @@ EVENT_ALPHA = 0.35
 # An interrupted run (Ctrl-C, SIGTERM) is marked as a fault is, in a neutral dark grey: it is
 # where the log ends, not an error (and orange is the trajectory's "within d_u").
 INTERRUPT_COLOR = "0.2"
+# The tension target's floor and ceiling: neither a cable's colour nor the estimate's grey.
+LIMIT_COLOR = "darkgoldenrod"
 # Most lines of a fault message in a title; the rest is cut with "...".
 TITLE_FAULT_LINES = 6
 
@@ -106,19 +111,29 @@ def load_log(path) -> dict:
     return log
 
 
+def _needs(log: Mapping, figure: str) -> tuple:
+    """The keys the figure reads from this log: _NEEDS, or its _OR_NEEDS when the log holds
+    those and not all of _NEEDS."""
+    if figure in _OR_NEEDS and not all(k in log for k in _NEEDS[figure]) and all(
+            k in log for k in _OR_NEEDS[figure]):
+        return _OR_NEEDS[figure]
+    return _NEEDS[figure]
+
+
 def has_keys(log: Mapping, figure: str) -> bool:
     """Whether the log holds every key the figure needs."""
-    return all(k in log for k in _NEEDS[figure])
+    return all(k in log for k in _needs(log, figure))
 
 
 def _check(log: Mapping, figure: str) -> None:
-    missing = [k for k in _NEEDS[figure] if k not in log]
+    needs = _needs(log, figure)
+    missing = [k for k in needs if k not in log]
     if missing:
         raise LogError(f"the {figure} plot needs log key(s) {missing!r} (docs/LOG_FORMAT.md); "
                        f"the log holds {sorted(log)!r}")
-    if "time" in _NEEDS[figure]:
+    if "time" in needs:
         T = len(log["time"])
-        for key in _NEEDS[figure] + tuple(k for k in _MAY_USE.get(figure, ()) if k in log):
+        for key in needs + tuple(k for k in _MAY_USE.get(figure, ()) if k in log):
             arr = np.asarray(log[key])
             if key in _PER_TICK and (arr.ndim == 0 or arr.shape[0] != T):
                 raise LogError(f"log key {key!r} has shape {arr.shape!r}; expected one row per "
@@ -692,38 +707,83 @@ def figure_timing(log: Mapping) -> Figure:
 
 
 def figure_tensions(log: Mapping) -> Figure:
-    """Each cable's tension (N) vs time (s) above, and below one row per cable (1..m) with a
-    mark at every tick where it was slack, so that cables slack at the same time never hide
-    each other (a dynamic plant's log)."""
+    """Each cable's tension (N) vs time (s): the dynamic plant's true tensions, and below one
+    row per cable (1..m) with a mark at every tick where it was slack, so that cables slack at
+    the same time never hide each other. A tension-controlled run's log adds, in the same
+    colours, the controller's estimate of each tension (dashed; alone on the robot, where the
+    log has no truth), the target's floor and ceiling (controller.min_tension, max_tension:
+    log keys controller_min_tension, controller_max_tension) and t*, the largest achievable
+    minimum tension at the estimated pose (where it is below the floor, the floor is
+    lowered to it; where it is +inf, not drawn)."""
     _check(log, "tensions")
     t = np.asarray(log["time"], dtype=float)
-    tensions = np.asarray(log["tensions"], dtype=float).reshape(len(t), -1)
-    slack = np.asarray(log["slack"]).reshape(len(t), -1) > 0.5
+    truth = "tensions" in log and "slack" in log
+    estimate = (np.asarray(log["tension_estimate"], dtype=float).reshape(len(t), -1)
+                if "tension_estimate" in log else None)
+    tensions = (np.asarray(log["tensions"], dtype=float).reshape(len(t), -1) if truth
+                else estimate)
     m = tensions.shape[1]
     fig = Figure(figsize=(9, 5.5 + 0.12 * m), layout="constrained")
-    ax, rows = fig.subplots(2, 1, sharex=True,
-                            gridspec_kw={"height_ratios": [3.0, 0.6 + 0.12 * m]})
+    if truth:
+        ax, rows = fig.subplots(2, 1, sharex=True,
+                                gridspec_kw={"height_ratios": [3.0, 0.6 + 0.12 * m]})
+    else:
+        ax, rows = fig.subplots(), None
     for i in range(1, m + 1):
         style = cable_style(i)
-        ax.plot(t, tensions[:, i - 1], linewidth=1.0, label=f"cable {i}", **style)
-        n = int(slack[:, i - 1].sum())
-        if n:
-            ticks, = rows.plot(t[slack[:, i - 1]], np.full(n, i), "|", color=style["color"],
-                               markersize=7, label=f"cable {i} slack ({n} ticks)")
-            ticks.set_gid(f"slack cable {i}")
+        if truth:
+            ax.plot(t, tensions[:, i - 1], linewidth=1.0, label=f"cable {i}", **style)
+        if estimate is not None:
+            line, = ax.plot(t, estimate[:, i - 1], color=style["color"],
+                            linewidth=0.9 if truth else 1.0,
+                            linestyle="--" if truth else style["linestyle"],
+                            label="_" if truth else f"cable {i} (estimate)")
+            line.set_gid(f"estimate cable {i}")
+    if estimate is not None:
+        if truth:  # one legend entry for the dashes of every cable
+            ax.plot([], [], color="0.3", linestyle="--", linewidth=0.9,
+                    label="controller's estimate (dashed)")
+        for key, style, what in (("controller_min_tension", "--", "floor min_tension"),
+                                 ("controller_max_tension", "-.", "ceiling max_tension")):
+            if key in log and np.isfinite(float(log[key])):
+                value = float(log[key])
+                ax.axhline(value, color=LIMIT_COLOR, linestyle=style, linewidth=1.4,
+                           label=f"{what} = {value:g} N").set_gid(key)
+        if "t_star" in log:
+            t_star = np.asarray(log["t_star"], dtype=float).reshape(len(t), -1)[:, 0]
+            shown = np.where(np.isfinite(t_star), t_star, np.nan)
+            line, = ax.plot(t, shown, color="black", linewidth=1.6, alpha=0.8,
+                            label="t* at the estimated pose")
+            line.set_gid("t_star")
     ax.set_ylabel("tension (N)")
-    rows.set_yticks(range(1, m + 1), [str(i) for i in range(1, m + 1)])
-    rows.set_ylim(m + 0.5, 0.5)  # cable 1 on top, as in the legend
-    rows.set_ylabel("slack\n(cable)")
-    rows.set_xlabel("time (s)")
-    if not slack.any():
-        rows.text(0.5, 0.5, "no cable went slack", ha="center", va="center",
-                  transform=rows.transAxes, color="0.4")
+    if rows is not None:
+        slack = np.asarray(log["slack"]).reshape(len(t), -1) > 0.5
+        for i in range(1, m + 1):
+            n = int(slack[:, i - 1].sum())
+            if n:
+                ticks, = rows.plot(t[slack[:, i - 1]], np.full(n, i), "|",
+                                   color=cable_style(i)["color"], markersize=7,
+                                   label=f"cable {i} slack ({n} ticks)")
+                ticks.set_gid(f"slack cable {i}")
+        rows.set_yticks(range(1, m + 1), [str(i) for i in range(1, m + 1)])
+        rows.set_ylim(m + 0.5, 0.5)  # cable 1 on top, as in the legend
+        rows.set_ylabel("slack\n(cable)")
+        rows.set_xlabel("time (s)")
+        if not slack.any():
+            rows.text(0.5, 0.5, "no cable went slack", ha="center", va="center",
+                      transform=rows.transAxes, color="0.4")
+    else:
+        ax.set_xlabel("time (s)")
     for a in (ax, rows):
-        a.grid(True, alpha=0.3)
-        _mark_fault_time(a, log)
+        if a is not None:
+            a.grid(True, alpha=0.3)
+            _mark_fault_time(a, log)
     ax.legend(loc="upper left", bbox_to_anchor=(1.01, 1.0), fontsize="small")
-    _suptitle(fig, log, f"{_title(log)}\nCable tensions (dynamic plant)")
+    what = ("Cable tensions (dynamic plant)" if estimate is None else
+            "Cable tensions: the plant's (solid) and the controller's estimate (dashed), the "
+            "target's floor and ceiling, t*" if truth else
+            "Cable tensions as the controller estimates them, the target's floor and ceiling, t*")
+    _suptitle(fig, log, f"{_title(log)}\n{what}")
     return fig
 
 
