@@ -621,3 +621,52 @@ def test_a_tension_controlled_log_holds_the_target_s_floor_and_ceiling(tmp_path,
     assert main(["simulate", "exp2_interaction", "--duration", "0.01", "--out",
                  str(tmp_path / "plain"), "--no-progress"]) == 0
     assert "controller_min_tension" not in plots.load_log(tmp_path / "plain")
+
+
+def _crossing_lines(fig, ax, label):
+    """The labels of the lines of `ax` that pass through the box of the text `label`, in the
+    figure as drawn (display pixels, after the layout): each line sampled at its points and
+    interpolated across the box's width; vertical lines (the mark itself) skipped."""
+    from matplotlib.backends.backend_agg import FigureCanvasAgg
+
+    FigureCanvasAgg(fig).draw()
+    box = label.get_window_extent()
+    xs = np.linspace(box.x0, box.x1, 50)
+    hits = []
+    for line in ax.get_lines():
+        xy = line.get_transform().transform(
+            np.column_stack([line.get_xdata(), line.get_ydata()]).astype(float))
+        xy = xy[np.all(np.isfinite(xy), axis=1)]
+        if len(xy) == 0 or np.ptp(xy[:, 0]) == 0:
+            continue
+        xy = xy[np.argsort(xy[:, 0])]
+        inside = (xs >= xy[0, 0]) & (xs <= xy[-1, 0])
+        ys = np.concatenate([np.interp(xs[inside], xy[:, 0], xy[:, 1]),
+                             xy[(xy[:, 0] >= box.x0) & (xy[:, 0] <= box.x1), 1]])
+        if np.any((ys >= box.y0) & (ys <= box.y1)):
+            hits.append(line.get_label())
+    return hits
+
+
+@pytest.mark.parametrize("d13, d57", [((0.045, 0.070), (0.066, 0.058)),
+                                      ((0.0615, 0.0615), (0.058, 0.058))])
+def test_the_interrupted_label_is_not_written_over_a_line(d13, d57):
+    # Issue 27: "interrupted" was written at the top of the axis, over the d_u line (a pair
+    # that stays near d_u has it at the top) or over a curve ending high (pair 1-3 at 70 mm).
+    # Its box, as drawn, crosses no curve and no level line of its axis.
+    log = dict(synthetic_log(0.5, d13=d13, d57=d57), ending=np.array("interrupted"),
+               fault_time=np.array(np.nan), fault_message=np.array(""))
+    for make in (plots.figure_distances, plots.figure_forces):
+        fig = make(log)
+        for ax in fig.axes:
+            label = [t for t in ax.texts if t.get_gid() == "interrupted label"][0]
+            assert _crossing_lines(fig, ax, label) == [], make.__name__
+    # Where nothing is in the way it stays at the top: a curve along the bottom only.
+    from matplotlib.figure import Figure
+
+    fig = Figure()
+    ax = fig.add_subplot()
+    ax.plot(log["time"], np.zeros(len(log["time"])))
+    ax.set_ylim(-0.1, 1.0)
+    plots._mark_fault_time(ax, log)
+    assert ax.texts[0].get_position()[1] == pytest.approx(0.97)

@@ -195,12 +195,56 @@ def _mark_fault_time(ax, log: Mapping) -> None:
     if stop is None or not np.isfinite(stop[1]):
         return
     gid, when, _, color = stop
+    # Left of the line (a run ends at its fault: the right is axis margin), as high as it
+    # goes without covering a curve or a level line (d_u, a limit) drawn there.
+    label = ax.text(when, 0.97, f"{gid} ", color=color, fontsize="small", ha="right",
+                    va="top", transform=ax.get_xaxis_transform(), gid=f"{gid} label",
+                    zorder=6, bbox=dict(facecolor="white", edgecolor="none", alpha=0.8,
+                                        pad=0.5))
+    label.set_y(_free_top(ax, when, label))
     line = ax.axvline(when, color=color, linestyle="-", linewidth=1.4, zorder=5)
     line.set_gid(gid)
-    # Left of the line: a run ends at its fault, so the right is usually empty axis margin.
-    ax.text(when, 0.97, f"{gid} ", color=color, fontsize="small", ha="right",
-            va="top", transform=ax.get_xaxis_transform(), gid=f"{gid} label", zorder=6,
-            bbox=dict(facecolor="white", edgecolor="none", alpha=0.8, pad=0.5))
+
+
+def _free_top(ax, when: float, text) -> float:
+    """The highest top (axes fraction, 0.97 down) for `text`, right-aligned at x = when, whose
+    box no line of the axes crosses; 0.97 when there is none. Lines are sampled in axes
+    fractions (data lines and level lines alike), the box measured in the figure's font."""
+    from matplotlib.backends.backend_agg import RendererAgg
+
+    ax.get_xlim(), ax.get_ylim()  # apply a pending autoscale: transData is lazy
+    fig = ax.figure
+    renderer = RendererAgg(fig.bbox.width, fig.bbox.height, fig.dpi)
+    box = text.get_window_extent(renderer)
+    # Constrained layout shrinks the axes afterwards: their size now is an upper bound.
+    width = 1.2 * box.width / max(ax.bbox.width, 1.0)
+    height = 1.3 * box.height / max(ax.bbox.height, 1.0)
+    to_axes = ax.transAxes.inverted()
+    x_right = to_axes.transform(ax.transData.transform((when, 0.0)))[0]
+    xs = np.linspace(x_right - width, x_right, 24)
+    samples = []
+    for line in ax.get_lines():
+        xy = np.column_stack([np.asarray(line.get_xdata(), float),
+                              np.asarray(line.get_ydata(), float)])
+        if len(xy) == 0:
+            continue
+        frac = to_axes.transform(line.get_transform().transform(xy))
+        x, y = frac[:, 0], frac[:, 1]
+        ok = np.isfinite(x) & np.isfinite(y)
+        x, y = x[ok], y[ok]
+        if x.size == 0 or np.ptp(x) == 0.0:
+            continue  # a vertical line: not one that a label left of the mark can cover
+        order = np.argsort(x, kind="stable")
+        x, y = x[order], y[order]
+        inside = (xs >= x[0]) & (xs <= x[-1])
+        samples.append(np.interp(xs[inside], x, y))
+        samples.append(y[(x >= xs[0]) & (x <= xs[-1])])
+    taken = np.concatenate(samples) if samples else np.zeros(0)
+    pad = 0.04  # a wide line's own width, and some air
+    for top in np.arange(0.97, height, -0.01):
+        if not np.any((taken <= top + pad) & (taken >= top - height - pad)):
+            return float(top)
+    return 0.97
 
 
 def _suptitle(fig: Figure, log: Mapping, text: str) -> None:
