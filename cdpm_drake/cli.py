@@ -613,11 +613,30 @@ def _cmd_plot(args) -> int:
     _check_html(args.html)
     out_dir = args.out if args.out is not None else (
         target if target.is_dir() else target.parent)
-    for png in plot_log(log, out_dir):
+    only = None
+    if args.html is not None:
+        # Asked for the replay: the figures already drawn from this log stay as they are;
+        # only those missing (or older than the log) are drawn.
+        from .views.plots import FIGURE_FILES, figures_of
+        log_file = target / "log.npz" if target.is_dir() else target
+        only = [name for name in figures_of(log)
+                if _older(Path(out_dir) / FIGURE_FILES[name], log_file)]
+        kept = len(figures_of(log)) - len(only)
+        if kept:
+            print(f"plot: {kept} figure(s) already drawn from this log kept in {out_dir}")
+    for png in plot_log(log, out_dir, only=only):
         print(f"plot: {png}")
     if args.html is not None:
         print(f"3D replay: {_save_replay(log, args.html)} (open it in a browser)")
     return 0
+
+
+def _older(path: Path, than: Path) -> bool:
+    """Whether `path` is missing or was written before `than` (a figure before its log)."""
+    try:
+        return path.stat().st_mtime < than.stat().st_mtime
+    except OSError:
+        return True
 
 
 # --- export ----------------------------------------------------------------------------------
@@ -1002,7 +1021,8 @@ def _parser() -> argparse.ArgumentParser:
                         "pictures from results.csv)")
     p.add_argument("--out", type=Path, help="output directory (default: the log's directory)")
     p.add_argument("--html", type=Path, metavar="FILE",
-                   help="also save a self-contained 3D replay of the log")
+                   help="save a self-contained 3D replay of the log; the PNGs already drawn "
+                        "from this log are kept, only missing ones drawn")
     p.set_defaults(func=_cmd_plot)
 
     p = sub.add_parser("diagram", help="write the controller diagram as graphviz (.dot, .svg)",

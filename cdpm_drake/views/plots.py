@@ -887,17 +887,24 @@ FIGURES = {"distances": figure_distances, "forces": figure_forces,
            "pose_error": figure_pose_error}
 
 
-def plot_log(log: Mapping[str, np.ndarray], out_dir, dpi: int = 120) -> list[Path]:
+def figures_of(log: Mapping) -> list[str]:
+    """The names (FIGURES' keys) of the figures `plot_log` draws for this log: every one but
+    the OPTIONAL ones whose keys the log lacks."""
+    return [name for name in FIGURES if name not in OPTIONAL or has_keys(log, name)]
+
+
+def plot_log(log: Mapping[str, np.ndarray], out_dir, dpi: int = 120,
+             only=None) -> list[Path]:
     """Write the figures as PNGs in out_dir (created if needed); returns their paths in the
     order of FIGURES, leaving out the OPTIONAL ones whose keys the log lacks (tensions and
-    pose_error need a dynamic plant's log)."""
+    pose_error need a dynamic plant's log) and, with `only` (names), the others."""
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     paths = []
-    for name, make in FIGURES.items():
-        if name in OPTIONAL and not has_keys(log, name):
+    for name in figures_of(log):
+        if only is not None and name not in only:
             continue
         path = out / FIGURE_FILES[name]
-        make(log).savefig(path, dpi=dpi)
+        FIGURES[name](log).savefig(path, dpi=dpi)
         paths.append(path)
     return paths
