@@ -770,8 +770,16 @@ def _cmd_list(args) -> int:
 # --- diagram ---------------------------------------------------------------------------------
 
 
-def diagram_main(*, scenario, out_dir, depth=1, svg=True, out=None) -> int:
-    """Write the controller diagram, with the simulated, the hardware and the dynamic plant."""
+# The diagrams `cdpm diagram` writes, each at full depth (NAME) and as an overview
+# (NAME_overview), as .dot and .svg (README, "Look at it").
+DIAGRAMS = ("controller_simulated", "controller_hardware", "controller_dynamic",
+            "plant_dynamic", "controller_full_pose")
+
+
+def diagram_main(*, scenario, out_dir, depth=None, svg=True, out=None) -> int:
+    """Write the controller diagram, with the simulated, the hardware and the dynamic plant,
+    the dynamic plant alone and the full-pose controller (DIAGRAMS); `depth` levels of
+    sub-diagrams in the full-depth pictures (None: every level)."""
     import dataclasses
 
     from .diagram import BuildOptions, build_diagram
@@ -813,7 +821,7 @@ def diagram_main(*, scenario, out_dir, depth=1, svg=True, out=None) -> int:
 
 
 def _cmd_diagram(args) -> int:
-    if args.depth < 1:
+    if args.depth is not None and args.depth < 1:
         raise CliError(f"--depth must be an integer >= 1, got {args.depth!r}")
     return diagram_main(scenario=_load_scenario_arg(args).scenario, out_dir=args.out, depth=args.depth,
                         svg=not args.no_svg)
@@ -1026,13 +1034,16 @@ def _parser() -> argparse.ArgumentParser:
     p.set_defaults(func=_cmd_plot)
 
     p = sub.add_parser("diagram", help="write the controller diagram as graphviz (.dot, .svg)",
-                       description="Write the Fig. 5 diagram of a scenario, with the simulated "
-                                   "and with the hardware plant, as .dot and .svg files.")
+                       description="Write the Fig. 5 diagram of a scenario as .dot and .svg "
+                                   "files, each at full depth and as a readable overview: with "
+                                   "the simulated, the hardware and the dynamic plant, the "
+                                   "dynamic plant alone, and the full-pose controller.")
     _scenario_args(p)
     p.add_argument("--out", type=Path, default=Path("diagrams"),
                    help="output directory (default: diagrams)")
-    p.add_argument("--depth", type=int, default=1,
-                   help="how many levels of sub-diagrams to expand (default: 1)")
+    p.add_argument("--depth", type=int, default=None,
+                   help="how many levels of sub-diagrams the full-depth pictures expand "
+                        "(default: every level, the plant's insides too)")
     p.add_argument("--no-svg", action="store_true", help="write only the .dot files")
     p.set_defaults(func=_cmd_diagram)
 
