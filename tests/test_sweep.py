@@ -385,6 +385,11 @@ def test_rows_equal_cdpm_simulate_of_their_resolved_scenario(tmp_path, capsys):
         assert float(row["time_below_d_l"]) == pytest.approx(float(np.sum(below * dt)),
                                                              abs=1e-12)
         assert int(row["crossings"]) == int(np.any(log["crossed"], axis=0).sum())
+        # The real-time factor: simulated seconds (the log's span) per wall second of the run.
+        assert float(row["sim_s"]) == pytest.approx(float(log["time"][-1] - log["time"][0]))
+        assert float(row["wall_s"]) > 0
+        assert float(row["rtf"]) == pytest.approx(float(row["sim_s"]) / float(row["wall_s"]),
+                                                  rel=1e-12)
         # And every metric is what run_metrics gives for the simulate log, to the last bit.
         scenario = load_scenario(run_dir / "scenario.yaml")
         expected = sw.run_metrics(log, scenario)
