@@ -945,7 +945,7 @@ MUTANTS = [
       "    if isinstance(value, float) and not math.isfinite(value):\n        return \"\"",
       "a NaN axis value is shown as nothing in a variant's label",
       ("tests/test_sweep.py",)),
-    # --- issue 27 part B: honest pictures and columns, tests for what no test read -------
+    # --- everyday use, round 3, part B: honest pictures and columns, what no test read ---
     M("pose_error_estimate_is_truth", "cdpm_drake/views/plots.py",
       'np.degrees(np.asarray(log["rpy"], dtype=float))',
       'np.degrees(np.asarray(log["rpy_true"], dtype=float))',
