@@ -806,11 +806,30 @@ def _cmd_plot(args) -> int:
     _check_html(args.html)
     out_dir = args.out if args.out is not None else (
         target if target.is_dir() else target.parent)
-    for png in plot_log(log, out_dir):
+    only = None
+    if args.html is not None:
+        # Asked for the replay: the figures already drawn from this log stay as they are;
+        # only those missing (or older than the log) are drawn.
+        from .views.plots import FIGURE_FILES, figures_of
+        log_file = target / "log.npz" if target.is_dir() else target
+        only = [name for name in figures_of(log)
+                if _older(Path(out_dir) / FIGURE_FILES[name], log_file)]
+        kept = len(figures_of(log)) - len(only)
+        if kept:
+            print(f"plot: {kept} figure(s) already drawn from this log kept in {out_dir}")
+    for png in plot_log(log, out_dir, only=only):
         print(f"plot: {png}")
     if args.html is not None:
         print(f"3D replay: {_save_replay(log, args.html)} (open it in a browser)")
     return 0
+
+
+def _older(path: Path, than: Path) -> bool:
+    """Whether `path` is missing or was written before `than` (a figure before its log)."""
+    try:
+        return path.stat().st_mtime < than.stat().st_mtime
+    except OSError:
+        return True
 
 
 # --- export ----------------------------------------------------------------------------------
@@ -845,14 +864,16 @@ def _export_parser(sub) -> None:
         "export", help="write a log as CSV: one row per tick, named columns with units",
         description="Write a log.npz as CSV for spreadsheets and other tools: one row per "
                     "tick, one column per value, named with its unit (p_x [m], F_H_z [N], "
-                    "lengths_1 [m], pair_distances_1-3 [m], active_1-3 [0/1]), cables and "
-                    "pairs numbered from 1 (views/log_csv.py). The per-run constants (robot, "
-                    "logistic parameters, how the run ended) stay in log.npz.")
+                    "lengths_1 [m], pair_distances_1-3 [m], active_1-3 [0/1], "
+                    "rpy_true_roll [rad]), cables numbered from 1 and pairs by their cables "
+                    "(docs/LOG_FORMAT.md). The per-run constants (robot, logistic parameters, "
+                    "how the run ended) stay in log.npz.")
     p.add_argument("log", type=Path,
                    help="a log.npz, the run folder holding it (or only ticks.bin: recovered "
                         "first), or runs/<name> (its latest run)")
-    fmt = p.add_mutually_exclusive_group(required=True)
-    fmt.add_argument("--csv", action="store_true", help="comma-separated values")
+    # CSV is the only format, so the default; --csv stays accepted (scripts written for it).
+    p.add_argument("--csv", action="store_true",
+                   help="comma-separated values (the default and only format)")
     p.add_argument("--out", type=Path, metavar="FILE",
                    help="output file (default: log.csv beside the log; - for stdout)")
     p.set_defaults(func=_cmd_export)
@@ -942,8 +963,16 @@ def _cmd_list(args) -> int:
 # --- diagram ---------------------------------------------------------------------------------
 
 
-def diagram_main(*, scenario, out_dir, depth=1, svg=True, out=None) -> int:
-    """Write the controller diagram, with the simulated, the hardware and the dynamic plant."""
+# The diagrams `cdpm diagram` writes, each at full depth (NAME) and as an overview
+# (NAME_overview), as .dot and .svg (README, "Look at it").
+DIAGRAMS = ("controller_simulated", "controller_hardware", "controller_dynamic",
+            "plant_dynamic", "controller_full_pose")
+
+
+def diagram_main(*, scenario, out_dir, depth=None, svg=True, out=None) -> int:
+    """Write the controller diagram, with the simulated, the hardware and the dynamic plant,
+    the dynamic plant alone and the full-pose controller (DIAGRAMS); `depth` levels of
+    sub-diagrams in the full-depth pictures (None: every level)."""
     import dataclasses
 
     from .diagram import BuildOptions, build_diagram
@@ -985,7 +1014,7 @@ def diagram_main(*, scenario, out_dir, depth=1, svg=True, out=None) -> int:
 
 
 def _cmd_diagram(args) -> int:
-    if args.depth < 1:
+    if args.depth is not None and args.depth < 1:
         raise CliError(f"--depth must be an integer >= 1, got {args.depth!r}")
     return diagram_main(scenario=_load_scenario_arg(args).scenario, out_dir=args.out, depth=args.depth,
                         svg=not args.no_svg)
@@ -1193,17 +1222,21 @@ def _parser() -> argparse.ArgumentParser:
                         "pictures from results.csv)")
     p.add_argument("--out", type=Path, help="output directory (default: the log's directory)")
     p.add_argument("--html", type=Path, metavar="FILE",
-                   help="also save a self-contained 3D replay of the log")
+                   help="save a self-contained 3D replay of the log; the PNGs already drawn "
+                        "from this log are kept, only missing ones drawn")
     p.set_defaults(func=_cmd_plot)
 
     p = sub.add_parser("diagram", help="write the controller diagram as graphviz (.dot, .svg)",
-                       description="Write the Fig. 5 diagram of a scenario, with the simulated "
-                                   "and with the hardware plant, as .dot and .svg files.")
+                       description="Write the Fig. 5 diagram of a scenario as .dot and .svg "
+                                   "files, each at full depth and as a readable overview: with "
+                                   "the simulated, the hardware and the dynamic plant, the "
+                                   "dynamic plant alone, and the full-pose controller.")
     _scenario_args(p)
     p.add_argument("--out", type=Path, default=Path("diagrams"),
                    help="output directory (default: diagrams)")
-    p.add_argument("--depth", type=int, default=1,
-                   help="how many levels of sub-diagrams to expand (default: 1)")
+    p.add_argument("--depth", type=int, default=None,
+                   help="how many levels of sub-diagrams the full-depth pictures expand "
+                        "(default: every level, the plant's insides too)")
     p.add_argument("--no-svg", action="store_true", help="write only the .dot files")
     p.set_defaults(func=_cmd_diagram)
 

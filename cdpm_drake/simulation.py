@@ -347,6 +347,9 @@ def assemble_log(time_column, signals: dict, scenario: Scenario | ResolvedScenar
         for key in ("d_l", "d_u", "F_u", "eps"):
             log[key] = np.full(P, np.nan)
         log["F_max"] = np.array(0.0)
+    if "tension_target" in log:  # tension control: its target's floor and ceiling
+        log["controller_min_tension"] = np.array(float(scenario.controller.min_tension))
+        log["controller_max_tension"] = np.array(float(scenario.controller.max_tension))
     log["reels"] = robot.reels.copy()
     log["attachments"] = robot.attachments.copy()
     log["workspace_lower"] = robot.workspace.lower.copy()

@@ -8,6 +8,7 @@ from pathlib import Path
 
 import pytest
 
+from cdpm_drake.cli import DIAGRAMS as DIAGRAM_NAMES
 from cdpm_drake.cli import main
 from cdpm_drake.diagram import BuildOptions, PLANT_PORTS, build_diagram
 from cdpm_drake.hardware.config import HardwareReels
@@ -19,10 +20,9 @@ DIAGRAMS = Path(__file__).resolve().parent.parent / "diagrams"
 
 def test_committed_dot_files_are_up_to_date(tmp_path):
     assert main(["diagram", "--out", str(tmp_path), "--no-svg"]) == 0
-    for name in ("controller_simulated", "controller_hardware", "controller_simulated_overview",
-                 "controller_hardware_overview", "controller_dynamic", "plant_dynamic",
-                 "controller_dynamic_overview", "plant_dynamic_overview",
-                 "controller_full_pose", "controller_full_pose_overview"):
+    written = sorted(p.stem for p in tmp_path.glob("*.dot"))
+    assert written == sorted(list(DIAGRAM_NAMES) + [f"{n}_overview" for n in DIAGRAM_NAMES])
+    for name in written:
         fresh = (tmp_path / f"{name}.dot").read_text()
         committed = (DIAGRAMS / f"{name}.dot").read_text()
         assert fresh == committed, (f"diagrams/{name}.dot is out of date: run `cdpm diagram` "
@@ -116,7 +116,8 @@ def test_overview_has_every_top_level_system_and_connection_with_short_names(pla
     assert "cdpm_drake." not in dot and "pydrake." not in dot and "drake::" not in dot
     # One edge per connection between blocks, from an output port cell to an input port cell;
     # the connections inside a flat block are not drawn.
-    edges = re.findall(r"^  n(\d+):o(\d+):s -> n(\d+):i(\d+):n;$", dot, flags=re.M)
+    edges = re.findall(r"^  n(\d+):o(\d+):s -> n(\d+):i(\d+):n(?: \[constraint=false\])?;$",
+                       dot, flags=re.M)
     between = [(src, dst) for (dst, _), (src, _) in diagram.connection_map().items()
                if in_flat.get(src.get_name(), src.get_name())
                != in_flat.get(dst.get_name(), dst.get_name())]
@@ -162,7 +163,7 @@ def test_overview_of_any_diagram_shows_exported_ports_and_collapses_subdiagrams(
     assert "doubler" in nodes["n0"] and "of gain" in nodes["n0"]
     # Input 1 of the adder receives "y"; input 0 is exported, so it keeps its own name.
     assert nodes["n1"].split()[:2] == ["u0", "y"]
-    assert 'in0 [shape=cds, label="command"]' in dot and "in0 -> n0:i0:n;" in dot
+    assert 'in0 [shape=cds, label="command", width=' in dot and "in0 -> n0:i0:n;" in dot
     assert "in1 -> n1:i0:n;" in dot and "n1:o0:s -> out0;" in dot
     width, _ = _svg_size(render_svg(dot))
     assert 0 < width < README_WIDTH_PT
@@ -200,14 +201,14 @@ def test_the_dynamic_plant_overview_fits_the_readme_with_the_multibody_plant_col
     assert "wiring" not in " ".join(nodes.values()) and "Selector" not in dot
     cables, state, mbp_node = (int(index[n][1:]) for n in ("cables", "reel_state",
                                                              "platform_plant"))
-    edges = re.findall(r"^  n(\d+):o\d+:s -> n(\d+):i\d+:n(?: \[label=\" (\w+)\"\])?;$", dot,
-                       flags=re.M)
+    edges = re.findall(r"^  n(\d+):o\d+:s -> n(\d+):i\d+:n(?: \[label=\" (\w+)\""
+                       r"(?:, constraint=false)?\]| \[constraint=false\])?;$", dot, flags=re.M)
     assert (str(mbp_node), str(cables), "") in edges  # the state into the cables' inputs
     assert (str(cables), str(mbp_node), "generalized_force") in edges
     assert (str(cables), str(state), "") in edges  # into its input named next_reels
     assert (str(state), str(cables), "") in edges  # and back into the cables' inputs
     assert "next_reels" in nodes[index["reel_state"]].split()
-    assert 'in0 [shape=cds, label="reel_velocity_command"]' in dot
+    assert 'in0 [shape=cds, label="reel_velocity_command", width=' in dot
     assert f"in0 -> n{cables}:i0:n;" in dot and f"n{cables}:o0:s -> out1;" in dot
 
 
@@ -234,3 +235,103 @@ def test_overview_draws_only_the_used_ports_of_a_system_with_many():
     # At MAX_PORTS ports, every port is drawn, used or not.
     few_label = next(label for label in nodes.values() if " few " in f" {label} ")
     assert "ports" not in few_label and len(few_label.split()) >= MAX_PORTS + 2
+
+
+# --- issue 27, part B ------------------------------------------------------------------------
+
+
+def test_the_readme_counts_and_names_the_diagrams_cdpm_diagram_writes():
+    # Issue 27: the README said "all eight diagrams" where ten are written. The sentence
+    # names the full-depth ones and counts both kinds; both against cli.DIAGRAMS, which the
+    # test above holds to what `cdpm diagram` writes.
+    flat = " ".join((DIAGRAMS.parent / "README.md").read_text().split())
+    m = re.search(r"`cdpm diagram` regenerates the (\w+) diagrams, (\w+) at full depth "
+                  r"\(([^)]*)\) and the overview of each", flat)
+    assert m, "the README's sentence on `cdpm diagram` changed"
+    words = {2 * len(DIAGRAM_NAMES): m.group(1), len(DIAGRAM_NAMES): m.group(2)}
+    numbers = {"four": 4, "five": 5, "six": 6, "eight": 8, "ten": 10, "twelve": 12}
+    assert {n: numbers[w] for n, w in words.items()} == {n: n for n in words}
+    assert re.findall(r"`(\w+)`", m.group(3)) == list(DIAGRAM_NAMES)
+
+
+def test_the_full_depth_files_are_drawn_at_full_depth():
+    # Issue 27: "full-depth" while the default depth collapsed the plant, so that
+    # controller_dynamic.dot equalled controller_simulated.dot. Now every sub-diagram is
+    # expanded: each controller's plant shows its own systems (scenario.py's plants: the
+    # simulated reels and their state; the dynamic one's MultibodyPlant, cables, drives,
+    # encoders); --depth 1 still collapses them.
+    dynamic = (DIAGRAMS / "controller_dynamic.dot").read_text()
+    simulated = (DIAGRAMS / "controller_simulated.dot").read_text()
+    assert dynamic != simulated
+    for part in ("platform_plant", "cables", "reel_state", "encoders"):
+        assert f"name={part}" in dynamic, part
+        assert f"name={part}" not in simulated, part
+    assert "name=simulated_reels" in simulated
+    assert "name=platform_plant" in (DIAGRAMS / "controller_full_pose.dot").read_text()
+    scenario = dataclasses.replace(load_scenario("exp2_interaction"), plant=SimulatedReels())
+    diagram = build_diagram(scenario, BuildOptions(loggers=False))
+    assert "name=simulated_reels" not in stable_graphviz(diagram, max_depth=1)
+    assert stable_graphviz(diagram) == simulated
+
+
+def _overflowing_text(svg: str) -> list:
+    """The texts of the SVG's nodes that do not fit their cell with 1 pt to spare on either
+    side when drawn in DejaVu Sans (a browser's usual fallback for Helvetica, about a sixth
+    wider; widths from matplotlib's copy of the font, independent of graphviz's estimate):
+    a table cell is the polygon drawn before the text, an arrow-shaped port node's body ends
+    where its point begins."""
+    from cdpm_drake.views.diagram_graph import text_width
+
+    bad = []
+    for node in re.findall(r'<g id="node\d+" class="node">(.*?)</g>', svg, flags=re.S):
+        cell = None
+        for m in re.finditer(r'<polygon [^>]*points="([^"]+)"|<text ([^>]*)>([^<]*)</text>',
+                             node):
+            if m.group(1):
+                xs = sorted({float(p.split(",")[0]) for p in m.group(1).split()})
+                # Five distinct x: the cds arrow (its point the last); four: a rectangle.
+                cell = (xs[0], xs[-2] if len(xs) == 3 else xs[-1])
+                continue
+            attrs, text = m.group(2), m.group(3).replace("&amp;", "&")
+            x = float(re.search(r' x="([-\d.]+)"', attrs).group(1))
+            size = float(re.search(r'font-size="([\d.]+)"', attrs).group(1))
+            width = text_width(text, size, 'font-weight="bold"' in attrs)
+            anchor = re.search(r'text-anchor="(\w+)"', attrs).group(1)
+            lo = {"start": x, "middle": x - width / 2, "end": x - width}[anchor]
+            if lo < cell[0] + 1.0 or lo + width > cell[1] - 1.0:
+                bad.append((text, round(lo - cell[0], 1), round(cell[1] - lo - width, 1)))
+    return bad
+
+
+@pytest.mark.parametrize("name", [f"{n}_overview" for n in DIAGRAM_NAMES])
+def test_every_name_fits_its_cell_in_a_wider_font(name):
+    # Issue 27: port names ran over their cells in plant_dynamic_overview (graphviz sized the
+    # cells by Helvetica's widths: applied_generalized_force left 0.6 pt, the arrow-shaped
+    # ports' names reached into their points).
+    assert _overflowing_text((DIAGRAMS / f"{name}.svg").read_text()) == []
+
+
+def test_the_full_pose_overview_ranks_the_blocks_in_signal_order():
+    # Issue 27: a tangle of crossing edges: graphviz broke the loops itself and ranked the
+    # tension distribution (whose memory feeds the forward kinematics) above the forward
+    # kinematics. The two memory edges between blocks are drawn without a rank constraint
+    # (the reel command's loop back to the plant is graphviz's), so the blocks come top to
+    # bottom as the signals flow.
+    dot = (DIAGRAMS / "controller_full_pose_overview.dot").read_text()
+    nodes = _nodes(dot)
+    ids = {name: k for k, label in nodes.items()
+           for name in ("reels", "forward_kinematics", "tension_distribution", "admittance",
+                        "safety_limits", "jacobian_mapping") if name in label.split()}
+    free = re.findall(r"^  (n\d+):o\d+:s -> (n\d+):i\d+:n \[constraint=false\];$", dot,
+                      flags=re.M)
+    assert sorted(free) == sorted([(ids["tension_distribution"], ids["forward_kinematics"]),
+                                   (ids["safety_limits"], ids["admittance"])])
+    # Laid out: the blocks' heights in that order (graphviz's y grows upwards).
+    import pygraphviz
+
+    graph = pygraphviz.AGraph(string=dot)
+    graph.layout(prog="dot")
+    y = {name: float(graph.get_node(k).attr["pos"].split(",")[1]) for name, k in ids.items()}
+    order = ["reels", "forward_kinematics", "admittance", "safety_limits",
+             "tension_distribution", "jacobian_mapping"]
+    assert sorted(order, key=lambda name: -y[name]) == order

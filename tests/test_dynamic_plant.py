@@ -585,7 +585,7 @@ def test_plot_log_adds_tensions_and_pose_error_for_a_dynamic_log(dynamic_log, tm
     norm = [line for line in fig.axes[0].get_lines() if line.get_label() == "|p - p_true|"][0]
     np.testing.assert_allclose(norm.get_ydata(), 1000 * np.linalg.norm(
         dynamic_log["p"] - dynamic_log["p_true"], axis=1))
-    roll = [line for line in fig.axes[1].get_lines() if line.get_label() == "roll"][0]
+    roll = [line for line in fig.axes[1].get_lines() if line.get_label() == "roll (true)"][0]
     assert roll.get_ydata()[5] == pytest.approx(np.degrees(0.1))
 
 

@@ -32,7 +32,8 @@ CASES = {
              (["MISSING/log.npz"], 1, "does not exist"),
              ([], 2, "the following arguments are required: log")],
     "export": [(["MISSING", "--csv"], 1, "does not exist"),
-               (["EMPTY"], 2, "one of the arguments --csv is required")],
+               (["EMPTY"], 1, "does not exist"),  # CSV is the default format
+               (["EMPTY", "--xlsx"], 2, "unrecognized arguments: --xlsx")],
     "diagram": [(["MISSING/s.yaml"], 1, "does not exist"),
                 (["exp1_no_interaction", "--depth", "0"], 2, "--depth must be")],
     "sweep": [(["MISSING/sweep.yaml"], 1, "does not exist"),

@@ -3,12 +3,14 @@ cables and pairs numbered from 1, values that read back exactly."""
 
 import csv
 import io
+import re
+from pathlib import Path
 
 import numpy as np
 import pytest
 
 from cdpm_drake.cli import main
-from cdpm_drake.views.log_csv import csv_columns, log_to_csv
+from cdpm_drake.views.log_csv import COLUMNS, TENSION_STATUS, csv_columns, log_to_csv
 from helpers_synthetic_log import synthetic_log
 
 
@@ -87,10 +89,136 @@ def test_cdpm_export_writes_log_csv_beside_the_log(tmp_path, capsys):
 
 
 def test_cdpm_export_errors(tmp_path, capsys):
-    # No log there: cannot be found (1); no format: bad usage (2).
+    # No log there: cannot be found (1); an unknown format: bad usage (2).
     assert main(["export", str(tmp_path / "nothing"), "--csv"]) == 1
     assert "does not exist" in capsys.readouterr().err
     with pytest.raises(SystemExit) as e:
-        main(["export", str(tmp_path)])
+        main(["export", str(tmp_path), "--xlsx"])
     assert e.value.code == 2
-    assert "one of the arguments --csv is required" in capsys.readouterr().err
+
+
+# --- issue 27, part B: every column named and united alike ---------------------------------
+
+REPO = Path(__file__).resolve().parent.parent
+
+
+def _documented_per_tick_keys():
+    """{key: unit as docs/LOG_FORMAT.md writes it} of every per-tick key ((T,), (T, ...)):
+    the table's rows and the bulleted keys of the full pose and the dynamic plant, and the
+    prose of cdpm run's `tick`, `wall` and `compute`."""
+    doc = (REPO / "docs" / "LOG_FORMAT.md").read_text()
+    keys = {}
+    for key, unit in re.findall(r"^\| `(\w+)` \| \(T,[^)]*\) \| ([^|]*) \|", doc,
+                                flags=re.M):
+        keys[key] = unit.strip()
+    for key, unit in re.findall(r"^- `(\w+)`, \(T,[^)]*\)(?:, ([^:]+))?:", doc,
+                                flags=re.M):
+        keys[key] = unit.strip()
+    for key, unit in (("tick", "-"), ("wall", "s"), ("compute", "s")):
+        assert f"`{key}` (T,)" in doc or f"as `{key}` (T,)" in doc, key
+        keys[key] = unit
+    return keys
+
+
+def test_every_documented_per_tick_key_has_its_unit_in_the_csv():
+    # The doc's units, spelled as the CSV spells them: a bool is a flag, 0/1; tension_status
+    # (no unit in the doc) is a status code.
+    keys = _documented_per_tick_keys()
+    assert {"pair_distances_true", "crossed_true", "rpy", "t_star", "tension_status",
+            "lengths_commanded", "omega"} <= keys.keys()
+    for key, unit in keys.items():
+        assert key in COLUMNS, key
+        expected = {"bool": "0/1", "": TENSION_STATUS}.get(unit, unit)
+        assert COLUMNS[key][0] == expected, (key, unit, COLUMNS[key])
+
+
+def _full_pose_dynamic_log():
+    """A synthetic log with every key a full-pose, tension-controlled run on the dynamic plant
+    writes, each (T, n) key's column c filled with its own numbers, so that a column that
+    holds another column's values cannot pass."""
+    log = synthetic_log(duration=0.01)
+    T, m, P = len(log["time"]), 7, 21
+    rng = np.random.default_rng(27)
+    for key, width in (("lengths_commanded", m), ("rpy", 3), ("omega", 3),
+                       ("tension_estimate", m), ("tension_target", m), ("tension_command", m),
+                       ("t_star", 1), ("tensions", m), ("p_true", 3), ("rpy_true", 3),
+                       ("pair_distances_true", P)):
+        log[key] = rng.uniform(-1.0, 1.0, (T, width))
+    log["tension_status"] = rng.integers(0, 3, (T, 1)).astype(float)
+    for key, width in (("slack", m), ("crossed_true", P)):
+        log[key] = rng.uniform(size=(T, width)) < 0.5
+    for key in ("p", "F_H", "F_measured", "F_int", "F_wall", "F_d", "velocity_admittance",
+                "velocity", "reel_velocity", "lengths", "pair_distances"):
+        log[key] = rng.uniform(-1.0, 1.0, np.shape(log.get(key, log["p"])))
+    for key in ("active", "crossed"):
+        log[key] = rng.uniform(size=log[key].shape) < 0.5
+    return log
+
+
+def test_every_column_holds_the_log_value_its_name_says():
+    # Issue 27, bug 7: pair_distances_true_2 held pair 1-3, tensions and rpy had no unit.
+    # Each header is read back here by its own rules (docs/LOG_FORMAT.md: x y z, roll pitch
+    # yaw in that order; cables 1..m; pairs by their cables, as log["pairs"] lists them) and
+    # its cells compared with that entry of the log.
+    log = _full_pose_dynamic_log()
+    header, rows = _read(log_to_csv(log))
+    data = np.array([[_number(c) for c in r] for r in rows])
+    pairs = [f"{i}-{j}" for i, j in log["pairs"]]
+    parts = {"x": 0, "y": 1, "z": 2, "roll": 0, "pitch": 1, "yaw": 2}
+    seen = set()
+    for col, name in enumerate(header):
+        m = re.fullmatch(r"(\w+?)(?:_(x|y|z|roll|pitch|yaw|\d+-\d+|\d+))? \[([^\]]+)\]", name)
+        assert m, f"column {name!r} lacks a unit in brackets"
+        key, part, unit = m.groups()
+        if key not in log:  # the greedy key ate a component: e.g. "F_H_z" -> "F_H", "z"
+            key, _, part = name.split(" [")[0].rpartition("_")
+        values = np.asarray(log[key])
+        if part is None:
+            expected = values.reshape(len(values), -1)[:, 0]
+        elif part in parts:
+            expected = values[:, parts[part]]
+        elif "-" in part:
+            expected = values[:, pairs.index(part)]
+        else:
+            expected = values[:, int(part) - 1]
+        np.testing.assert_array_equal(data[:, col], expected.astype(float), err_msg=name)
+        if values.dtype == bool:
+            assert unit == "0/1", name
+        seen.add(key)
+    # Every per-tick key is exported: 200 columns for 7 cables and 21 pairs (25 of time and
+    # the eight 3-vectors, 8 x 7 per cable, 5 x 21 per pair, 4 x 3 orientations and vectors,
+    # t_star and tension_status).
+    assert seen == set(_documented_per_tick_keys()) - {"tick", "wall", "compute"}
+    assert len(header) == 25 + 8 * 7 + 5 * 21 + 4 * 3 + 2 == 200
+    # The names the issue asked for, verbatim.
+    for name in ("pair_distances_true_1-3 [m]", "crossed_true_5-7 [0/1]", "rpy_roll [rad]",
+                 "rpy_true_yaw [rad]", "omega_z [rad/s]", "tensions_7 [N]", "slack_1 [0/1]",
+                 "tension_estimate_3 [N]", "lengths_commanded_7 [m]", "t_star [N]",
+                 f"tension_status [{TENSION_STATUS}]"):
+        assert name in header, name
+    # Flags and codes as integers.
+    status = header.index(f"tension_status [{TENSION_STATUS}]")
+    assert {r[status] for r in rows} <= {"0", "1", "2"}
+    assert {r[header.index("crossed_true_1-3 [0/1]")] for r in rows} == {"0", "1"}
+
+
+def test_cdpm_export_of_a_full_pose_dynamic_run_names_every_column(tmp_path, capsys):
+    # A real log of the full pose with tension control on the dynamic plant, exported without
+    # --csv (CSV is the default and only format): 200 columns, each with its unit.
+    run = tmp_path / "run"
+    assert main(["simulate", "exp2_interaction", "--duration", "0.01", "--out", str(run),
+                 "--no-progress", "--scenario-text",
+                 "{controller: {pose: full, tension_control: true}, plant: !DynamicReels {}}"]
+                ) == 0
+    capsys.readouterr()
+    assert main(["export", str(run)]) == 0
+    assert "(6 rows, one per tick; 200 columns)" in capsys.readouterr().out
+    header, rows = _read((run / "log.csv").read_text())
+    assert all(re.search(r" \[[^\]]+\]$", name) for name in header), header
+    k13 = [tuple(p) for p in np.load(run / "log.npz")["pairs"]].index((1, 3))
+    with np.load(run / "log.npz") as log:
+        np.testing.assert_array_equal(
+            [float(r[header.index("pair_distances_true_1-3 [m]")]) for r in rows],
+            log["pair_distances_true"][:, k13])
+        np.testing.assert_array_equal(
+            [float(r[header.index("rpy_pitch [rad]")]) for r in rows], log["rpy"][:, 1])

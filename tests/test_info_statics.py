@@ -262,3 +262,58 @@ def test_info_says_a_box_beyond_the_reels_frame_once(capsys, tmp_path, valid_spe
     assert "reels' frame" not in err
     assert out.count("warning: tetra_4cable: the workspace box's upper x face, "
                      "workspace.upper[0] = 4.5 m, lies beyond the reels' frame") == 1, out
+
+# --- issue 27, part B: the pictures' layout and scales ---------------------------------------
+
+
+def test_the_interference_scale_comes_from_the_slices_margins():
+    # Issue 27: a +-20 mm scale hid exp2's 2.5 mm of margin (a pale green). Now red is the
+    # slices' most negative margin and green their largest, 0 (d_u) the yellow middle; the
+    # margins computed here from interference.pair_distances on the same slices.
+    robot = load_robot("paper_7cable").with_swapped_attachments(1, 3)
+    path = np.array([[1.56, 3.24, 1.22], [1.87, 3.68, 0.53], [1.28, 3.60, 1.04]])
+    d_u = 0.062
+    fig = wp.figure_interference_workspace(robot, d_u=d_u, path=path, step=0.1)
+    centre = wp.slice_centre(robot, path)
+    margins = []
+    for fixed, _ in wp.SLICES:
+        u, v, pts = wp.slice_points(robot, fixed, centre[fixed], 0.1)
+        margins.append(1000 * (pair_distances(robot, pts.reshape(-1, 3)).min(-1) - d_u))
+    lo, hi = min(m.min() for m in margins), max(m.max() for m in margins)
+    assert 0.5 < hi < 5.0 and lo < -10.0  # a few mm of margin, tens within d_u
+    for mesh in _meshes(fig):
+        norm = mesh.norm
+        assert (norm.vmin, norm.vcenter, norm.vmax) == pytest.approx((lo, 0.0, hi))
+    # The largest margin gets the scale's full green, the deepest the full red.
+    assert float(norm(hi)) == pytest.approx(1.0) and float(norm(lo)) == pytest.approx(0.0)
+    assert float(norm(0.5 * hi)) == pytest.approx(0.75)
+    # Ticks on both sides of 0, within the scale.
+    ticks = fig.axes[-1].get_yticks()
+    assert (ticks > 0).sum() >= 2 and (ticks < 0).sum() >= 2
+    assert lo <= ticks.min() and ticks.max() <= hi
+
+
+@pytest.mark.parametrize("which", ["wrench", "interference"])
+def test_the_colour_bar_stands_beside_the_slices_and_the_legend_below_them(which):
+    # Issue 27: the wrench map's legend covered the 5 N line, its colour bar stood far off
+    # (equal-aspect slices shrunk inside wide axes: measured 4.8 % of the figure's width from
+    # the last slice). As drawn: the colour bar starts within 2 % of the figure's width after
+    # the last slice, the slices as close to each other, and the path's legend is the
+    # figure's, below every slice.
+    from matplotlib.backends.backend_agg import FigureCanvasAgg
+
+    robot = load_robot("paper_7cable").with_swapped_attachments(1, 3)
+    path = np.array([[1.56, 3.24, 1.22], [1.87, 3.68, 0.53]])
+    fig = (wp.figure_wrench_workspace(robot, path=path, step=0.1) if which == "wrench" else
+           wp.figure_interference_workspace(robot, d_u=0.062, path=path, step=0.1))
+    renderer = FigureCanvasAgg(fig).get_renderer()
+    fig.draw(renderer)
+    slices, bar = fig.axes[:3], fig.axes[3]
+    drawn = [ax.get_position(original=False) for ax in slices]  # after the equal aspect
+    assert 0 < bar.get_position().x0 - drawn[-1].x1 < 0.02
+    for left, right in zip(drawn, drawn[1:]):
+        assert 0 < right.x0 - left.x1 < 0.06  # the gap holds the right one's tick labels
+    assert all(ax.get_legend() is None for ax in slices)
+    legend = fig.legends[0].get_window_extent(renderer)
+    assert [t.get_text() for t in fig.legends[0].get_texts()] == ["path (projected)", "start"]
+    assert all(legend.y1 <= ax.get_tightbbox(renderer).y0 for ax in slices)

@@ -230,3 +230,22 @@ def test_the_corrections_are_scaled_together_after_a_stall():
     errors[1] = 0.001
     command, _, _ = tick(P, np.zeros(3), l_d - errors, memory, gain=40.0)
     np.testing.assert_allclose(command, 40.0 * errors, rtol=1e-9, atol=1e-12)
+
+
+@pytest.mark.parametrize("sign", [1.0, -1.0], ids=["reeled_out", "reeled_in"])
+def test_the_correction_bound_holds_for_cables_reeled_in_and_out(sign):
+    """Issue 27: the bound was only pinned for a cable paid out (positive error). The largest
+    correction may as well reel a cable in: 15 mm of error the other way on cable 2, 0.5 mm
+    on cable 5 the first way: K_l e = -+0.6 and +-0.02 m/s, both scaled by MAX_CORRECTION /
+    0.6 m/s (the largest in size, whatever its sign), so cable 2 gets -+MAX_CORRECTION."""
+    from cdpm_drake.kinematics import MAX_CORRECTION
+
+    measured = cable_lengths(ROBOT, P)
+    _, _, memory = tick(P, np.zeros(3), measured, np.zeros(M + 4))
+    l_d = cable_lengths(ROBOT, memory[:3]) + memory[3:3 + M]
+    errors = np.zeros(M)
+    errors[1], errors[4] = sign * 0.015, -sign * 0.0005
+    command, _, _ = tick(P, np.zeros(3), l_d - errors, memory, gain=40.0)
+    np.testing.assert_allclose(command, 40.0 * errors * MAX_CORRECTION / 0.6, rtol=1e-9,
+                               atol=1e-12)
+    assert command[1] == pytest.approx(sign * MAX_CORRECTION, rel=1e-9)

@@ -236,12 +236,23 @@ def test_logistic_curves_follow_eqs_26_28_for_each_parameter_set(log):
     assert len(fig.axes) == 2
     assert [ax.get_title() for ax in fig.axes] == ["20 cable pairs", "cables 5-7"]
     for ax, (d_l, d_u, F_u, eps) in zip(fig.axes, (EXP1, EXP3)):
-        curve = _lines(ax, "F_u = ")[f"F_u = {F_u:g} N, eps = {eps:g} N"]
+        curve = _lines(ax, "applied: ")[f"applied: F_u = {F_u:g} N, eps = {eps:g} N"]
         d = np.asarray(curve.get_xdata()) / 1000.0
+        alpha = np.asarray(curve.get_ydata())
         assert d.min() == pytest.approx(max(0.0, d_l - (d_u - d_l)))
         assert d.max() == pytest.approx(d_u + (d_u - d_l))
-        # The helper's own transcription of eqs. 26 and 28.
-        np.testing.assert_allclose(curve.get_ydata(), logistic(d, d_l, d_u, F_u, eps))
+        # Issue 27: what the controller applies. Within d_u the helper's own transcription of
+        # eqs. 26 and 28; beyond it zero (the pair is not active: interference.py's
+        # `near = dist <= d_u`); at d_u the step from eps to 0, drawn as a vertical.
+        within = d < d_u - 1e-12
+        np.testing.assert_allclose(alpha[within], logistic(d[within], d_l, d_u, F_u, eps))
+        assert np.all(alpha[d > d_u + 1e-12] == 0.0)
+        step = np.flatnonzero(np.isclose(d, d_u, rtol=0, atol=1e-12))
+        assert step.tolist() == [step[0], step[0] + 1]
+        np.testing.assert_allclose(alpha[step], [eps, 0.0], rtol=1e-9)
+        # The logistic's tail beyond d_u, faint, for reference: never zero there.
+        tail = [line for line in ax.get_lines() if line.get_gid() == "beyond d_u"][0]
+        assert tail.get_alpha() < 1 and np.all(np.asarray(tail.get_ydata()) > 0)
         marks = [line for line in ax.get_lines() if line.get_gid() == "conditions (27)"][0]
         # Eq. 27: F_u - eps at d_l, eps at d_u.
         np.testing.assert_allclose(marks.get_xdata(), [1000 * d_l, 1000 * d_u])
@@ -504,3 +515,158 @@ def test_the_legend_shows_the_within_d_u_dots_as_they_look(log):
     handle = legend.legend_handles[[t.get_text() for t in legend.get_texts()].index(
         "a pair within d_u")]
     assert to_rgba(handle.get_color(), handle.get_alpha()) == to_rgba("tab:orange", 1.0)
+
+
+# --- issue 27, part B ---------------------------------------------------------------------
+
+
+def _full_pose(log, tension_control=True):
+    """A full-pose run's log (docs/LOG_FORMAT.md): the dynamic plant's truth, the controller's
+    orientation estimate `rpy` (each component its own ramp, none equal to the truth's) and,
+    with tension control, its tensions."""
+    log = _dynamic(log)
+    T = len(log["time"])
+    s = np.linspace(0.0, 1.0, T)[:, None]
+    log["rpy_true"] = s * np.array([0.010, -0.020, 0.030])  # rad
+    log["rpy"] = s * np.array([0.012, -0.018, 0.025])
+    if tension_control:
+        log["tension_estimate"] = np.full((T, 7), 11.0)
+        log["tension_target"] = np.full((T, 7), 10.5)
+        log["t_star"] = np.full((T, 1), 30.0)
+    return log
+
+
+def test_pose_error_is_titled_by_the_run_s_controller_and_draws_its_orientation_estimate():
+    # Issue 27, bug 6: a full-pose run's figure said "translating platform, rigid cables" and
+    # drew the true rotation only. The log says which controller ran: `rpy` only for
+    # controller.pose: full, `tension_estimate` only with its tension control.
+    base = synthetic_log(0.1)
+    cases = {"translating platform, rigid cables": _dynamic(base),
+             "full pose, rigid cables": _full_pose(base, tension_control=False),
+             "full pose, cables stretched under the estimated tensions": _full_pose(base)}
+    for model, log in cases.items():
+        title = plots.figure_pose_error(log).get_suptitle().replace("\n", " ")
+        assert f"pose estimate ({model})" in title
+        assert sum(m in title for m in cases) == 1
+    log = cases["full pose, cables stretched under the estimated tensions"]
+    rotation = plots.figure_pose_error(log).axes[1]
+    lines = {line.get_label(): line for line in rotation.get_lines()}
+    # Each component, true and estimated, is the log's in degrees (180 / pi per rad), in
+    # the order roll, pitch, yaw of docs/LOG_FORMAT.md.
+    for c, name in enumerate(("roll", "pitch", "yaw")):
+        np.testing.assert_allclose(lines[f"{name} (true)"].get_ydata(),
+                                   log["rpy_true"][:, c] * 180.0 / np.pi, rtol=1e-12)
+        np.testing.assert_allclose(lines[f"{name} (controller's estimate)"].get_ydata(),
+                                   log["rpy"][:, c] * 180.0 / np.pi, rtol=1e-12)
+        assert lines[f"{name} (true)"].get_color() == lines[
+            f"{name} (controller's estimate)"].get_color()
+    # The translating controller has no estimate of its own: the truth alone.
+    labels = [line.get_label() for line in plots.figure_pose_error(
+        cases["translating platform, rigid cables"]).axes[1].get_lines()]
+    assert not any("estimate" in label for label in labels)
+    # A misshapen estimate is named, as the figure's other keys are.
+    with pytest.raises(plots.LogError, match="'rpy' has shape"):
+        plots.figure_pose_error(dict(log, rpy=log["rpy"][:5]))
+
+
+def test_tensions_of_a_tension_controlled_run_draw_the_estimate_floor_ceiling_and_t_star():
+    # Issue 27: the log has the controller's estimate and t*, the run's controller.min_tension
+    # and max_tension (log keys controller_min_tension, controller_max_tension); draw them.
+    log = _full_pose(synthetic_log(0.1))
+    T = len(log["time"])
+    log["tension_estimate"] = 10.0 + np.arange(T * 7).reshape(T, 7) * 1e-3
+    log["t_star"] = np.linspace(3.0, 30.0, T)[:, None]
+    log["t_star"][:4] = np.inf  # an internal force raises every tension: nothing to draw
+    log["controller_min_tension"] = np.array(7.5)
+    log["controller_max_tension"] = np.array(80.0)
+    ax = plots.figure_tensions(log).axes[0]
+    by_gid = {line.get_gid(): line for line in ax.get_lines() if line.get_gid()}
+    truth = {line.get_label(): line for line in ax.get_lines()}
+    for i in range(1, 8):
+        estimate = by_gid[f"estimate cable {i}"]
+        np.testing.assert_array_equal(estimate.get_ydata(), log["tension_estimate"][:, i - 1])
+        assert estimate.get_linestyle() == "--"
+        assert estimate.get_color() == truth[f"cable {i}"].get_color()  # cable i's colour
+    assert list(by_gid["controller_min_tension"].get_ydata()) == [7.5, 7.5]
+    assert list(by_gid["controller_max_tension"].get_ydata()) == [80.0, 80.0]
+    t_star = np.asarray(by_gid["t_star"].get_ydata())
+    assert np.all(np.isnan(t_star[:4]))
+    np.testing.assert_array_equal(t_star[4:], log["t_star"][4:, 0])
+    labels = [text.get_text() for text in ax.get_legend().get_texts()]
+    assert {"floor min_tension = 7.5 N", "ceiling max_tension = 80 N",
+            "controller's estimate (dashed)"} <= set(labels)
+    # On the robot (no plant's truth) the estimate is the figure, and plot_log writes it.
+    robot = {k: v for k, v in log.items() if k not in ("tensions", "slack", "p_true",
+                                                       "rpy_true")}
+    fig = plots.figure_tensions(robot)
+    assert len(fig.axes) == 1
+    lines = {line.get_label(): line for line in fig.axes[0].get_lines()}
+    np.testing.assert_array_equal(lines["cable 3 (estimate)"].get_ydata(),
+                                  log["tension_estimate"][:, 2])
+    assert plots.has_keys(robot, "tensions") and not plots.has_keys(robot, "pose_error")
+
+
+def test_a_tension_controlled_log_holds_the_target_s_floor_and_ceiling(tmp_path, capsys):
+    from cdpm_drake.cli import main
+
+    run = tmp_path / "run"
+    assert main(["simulate", "exp2_interaction", "--duration", "0.01", "--out", str(run),
+                 "--no-progress", "--scenario-text",
+                 "{controller: {pose: full, tension_control: true, min_tension: 7.5, "
+                 "max_tension: 80.0}, plant: !DynamicReels {}}"]) == 0
+    log = plots.load_log(run)
+    assert float(log["controller_min_tension"]) == 7.5
+    assert float(log["controller_max_tension"]) == 80.0
+    # Without tension control there is no target, so no floor or ceiling either.
+    assert main(["simulate", "exp2_interaction", "--duration", "0.01", "--out",
+                 str(tmp_path / "plain"), "--no-progress"]) == 0
+    assert "controller_min_tension" not in plots.load_log(tmp_path / "plain")
+
+
+def _crossing_lines(fig, ax, label):
+    """The labels of the lines of `ax` that pass through the box of the text `label`, in the
+    figure as drawn (display pixels, after the layout): each line sampled at its points and
+    interpolated across the box's width; vertical lines (the mark itself) skipped."""
+    from matplotlib.backends.backend_agg import FigureCanvasAgg
+
+    FigureCanvasAgg(fig).draw()
+    box = label.get_window_extent()
+    xs = np.linspace(box.x0, box.x1, 50)
+    hits = []
+    for line in ax.get_lines():
+        xy = line.get_transform().transform(
+            np.column_stack([line.get_xdata(), line.get_ydata()]).astype(float))
+        xy = xy[np.all(np.isfinite(xy), axis=1)]
+        if len(xy) == 0 or np.ptp(xy[:, 0]) == 0:
+            continue
+        xy = xy[np.argsort(xy[:, 0])]
+        inside = (xs >= xy[0, 0]) & (xs <= xy[-1, 0])
+        ys = np.concatenate([np.interp(xs[inside], xy[:, 0], xy[:, 1]),
+                             xy[(xy[:, 0] >= box.x0) & (xy[:, 0] <= box.x1), 1]])
+        if np.any((ys >= box.y0) & (ys <= box.y1)):
+            hits.append(line.get_label())
+    return hits
+
+
+@pytest.mark.parametrize("d13, d57", [((0.045, 0.070), (0.066, 0.058)),
+                                      ((0.0615, 0.0615), (0.058, 0.058))])
+def test_the_interrupted_label_is_not_written_over_a_line(d13, d57):
+    # Issue 27: "interrupted" was written at the top of the axis, over the d_u line (a pair
+    # that stays near d_u has it at the top) or over a curve ending high (pair 1-3 at 70 mm).
+    # Its box, as drawn, crosses no curve and no level line of its axis.
+    log = dict(synthetic_log(0.5, d13=d13, d57=d57), ending=np.array("interrupted"),
+               fault_time=np.array(np.nan), fault_message=np.array(""))
+    for make in (plots.figure_distances, plots.figure_forces):
+        fig = make(log)
+        for ax in fig.axes:
+            label = [t for t in ax.texts if t.get_gid() == "interrupted label"][0]
+            assert _crossing_lines(fig, ax, label) == [], make.__name__
+    # Where nothing is in the way it stays at the top: a curve along the bottom only.
+    from matplotlib.figure import Figure
+
+    fig = Figure()
+    ax = fig.add_subplot()
+    ax.plot(log["time"], np.zeros(len(log["time"])))
+    ax.set_ylim(-0.1, 1.0)
+    plots._mark_fault_time(ax, log)
+    assert ax.texts[0].get_position()[1] == pytest.approx(0.97)

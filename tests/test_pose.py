@@ -286,6 +286,35 @@ def test_the_length_loop_is_pi_with_the_drives_dead_band_made_up():
     assert nxt[3 + M + 3] == pytest.approx(pc.MAX_INTEGRAL_SPEED / 100.0)
 
 
+@pytest.mark.parametrize("sign", [1.0, -1.0], ids=["reeled_out", "reeled_in"])
+@pytest.mark.parametrize("tension", [False, True], ids=["offsets", "tension_control"])
+def test_the_pose_loop_s_corrections_keep_the_bound_for_cables_reeled_in_and_out(sign,
+                                                                                 tension):
+    """Issue 27: the full-pose length loop scales its corrections as the translating one
+    (kinematics.add_scaled_corrections): at rest, 15 mm of error on cable 2 and 0.5 mm the
+    other way on cable 5 give K_l e = 0.3 and 0.01 m/s in size at K_l = 20 1/s; both are
+    scaled by MAX_CORRECTION / 0.3 m/s, whichever way the largest reels its cable, so cable
+    2 gets MAX_CORRECTION in size and cable 5 keeps its 1/30 of it, its own sign."""
+    from cdpm_drake.kinematics import MAX_CORRECTION
+
+    p, R = random_poses(11, 1)[0]
+    Tn = np.full(M, 20.0) if tension else np.zeros(M)
+    target = pose_lengths(ROBOT, p, R) * (EA / (EA + Tn) if tension else 1.0)
+    e = np.zeros(M)
+    e[1], e[4] = sign * 0.015, -sign * 0.0005
+    memory = np.r_[p, np.zeros(2 * M), 1.0]  # started, no offsets, no integral
+    cmd, l_d, _ = _rates(p, R, np.zeros(3), np.zeros(3), R, target - e, Tn, memory,
+                         gain=20.0, tension=tension)
+    np.testing.assert_allclose(l_d, target, rtol=0, atol=1e-12)
+    np.testing.assert_allclose(cmd, 20.0 * e * MAX_CORRECTION / 0.3, rtol=1e-9, atol=1e-12)
+    assert cmd[1] == pytest.approx(sign * MAX_CORRECTION, rel=1e-9)
+    # Below the bound (1 mm: 0.02 m/s) nothing is scaled, either way.
+    e[1] = sign * 0.001
+    cmd, _, _ = _rates(p, R, np.zeros(3), np.zeros(3), R, target - e, Tn, memory, gain=20.0,
+                       tension=tension)
+    np.testing.assert_allclose(cmd, 20.0 * e, rtol=1e-9, atol=1e-12)
+
+
 def test_the_tension_command_slews_from_the_estimate():
     p, R = random_poses(10, 1)[0]
     L0 = pose_lengths(ROBOT, p, R)

@@ -441,3 +441,33 @@ def test_the_tension_summary_counts_each_status_and_names_its_cables():
         "(minimum-norm target) on 1 (smallest t* 3.00 N; cable raised most: none named); NO "
         "tension distribution held on 1 ticks (t* < 0: outside the wrench-feasible "
         "workspace, a cable must go slack); estimated tensions 2.50 to 40.0 N")
+
+def test_plot_html_keeps_the_figures_already_drawn_from_the_log(capsys, tmp_path):
+    # Issue 27: `cdpm plot LOG --html FILE` redrew every PNG. Now the replay is written and
+    # only the figures missing (cables.png, deleted) or older than the log (forces.png) are
+    # drawn; the others keep their bytes and times.
+    import os
+
+    run = tmp_path / "run"
+    assert cli.main(["simulate", "exp1_no_interaction", "--duration", "0.02", "--out",
+                     str(run), "--no-progress", "--plot"]) == 0
+    log_time = (run / "log.npz").stat().st_mtime
+    pngs = sorted(run.glob("*.png"))
+    assert len(pngs) == 5
+    for png in pngs:  # drawn 100 s after the log: no file system's clock can tie that
+        os.utime(png, (log_time + 100.0, log_time + 100.0))
+    os.utime(run / "forces.png", (log_time - 100.0, log_time - 100.0))
+    (run / "cables.png").unlink()
+    capsys.readouterr()
+    assert cli.main(["plot", str(run), "--html", str(tmp_path / "replay.html")]) == 0
+    out = capsys.readouterr().out
+    assert (tmp_path / "replay.html").stat().st_size > 10_000
+    assert f"plot: 3 figure(s) already drawn from this log kept in {run}" in out
+    assert sorted(re.findall(r"^plot: (\S+\.png)$", out, flags=re.M)) == [
+        str(run / "cables.png"), str(run / "forces.png")]
+    for name in ("distances.png", "trajectory.png", "logistic.png"):
+        assert (run / name).stat().st_mtime == log_time + 100.0, name
+    assert (run / "forces.png").stat().st_mtime > log_time
+    # Without --html, `cdpm plot` draws them all, as before.
+    assert cli.main(["plot", str(run)]) == 0
+    assert len(re.findall(r"^plot: ", capsys.readouterr().out, flags=re.M)) == 5

@@ -282,6 +282,80 @@ def test_metrics_of_a_closed_form_log(interference):
         assert math.isnan(m["crossings"])  # no interference block: no crossing flags
 
 
+def _dynamic_log():
+    """synthetic_log (1 s, 501 ticks) with the dynamic plant's truth written in closed form:
+    tensions 20 N but cable 6 at 3.25 N on tick 123; cables 2 and 7 slack together on ticks
+    10-19 and cable 2 alone on ticks 15-29 (20 ticks with a slack cable, 35 cable-ticks);
+    the platform level but at tick 300 rolled by 0.03 rad and pitched by 0.04 rad (a rotation
+    of 0.05 rad from level, sqrt(0.03^2 + 0.04^2) to first order); pair 5-7 truly closest
+    (41.5 mm at tick 250), pairs 1-3 and 2-4 truly crossed (1-3 on two separate spells)."""
+    log = synthetic_log(duration=1.0)
+    T, m = len(log["time"]), 7
+    pairs = [tuple(p) for p in log["pairs"]]
+    log["tensions"] = np.full((T, m), 20.0)
+    log["tensions"][123, 5] = 3.25
+    log["slack"] = np.zeros((T, m), dtype=bool)
+    log["slack"][10:20, [1, 6]] = True
+    log["slack"][15:30, 1] = True
+    log["p_true"] = log["p"].copy()
+    log["rpy_true"] = np.zeros((T, 3))
+    log["rpy_true"][300] = [0.03, 0.04, 0.0]
+    log["rpy_true"][301] = [0.01, 0.0, 0.0]
+    log["pair_distances_true"] = np.full((T, len(pairs)), 0.2)
+    log["pair_distances_true"][250, pairs.index((5, 7))] = 0.0415
+    log["pair_distances_true"][400, pairs.index((1, 3))] = 0.0420
+    log["crossed_true"] = np.zeros((T, len(pairs)), dtype=bool)
+    log["crossed_true"][100:110, pairs.index((1, 3))] = True
+    log["crossed_true"][200:205, pairs.index((1, 3))] = True
+    log["crossed_true"][300, pairs.index((2, 4))] = True
+    return log
+
+
+def test_the_dynamic_plant_s_metrics_follow_their_definitions_and_units():
+    # Issue 27: no test read these. Each from the closed form of _dynamic_log, in the unit
+    # of docs/SWEEP_FORMAT.md: ticks (not cable-ticks, not seconds), N, degrees, m, pairs.
+    log = _dynamic_log()
+    m = sw.run_metrics(log, _synthetic_scenario())
+    assert m["slack_ticks"] == 20 and isinstance(m["slack_ticks"], int)
+    assert m["min_tension"] == 3.25
+    # The rotation from level of R = Rz(0) Ry(0.04) Rx(0.03): its angle is
+    # arccos((trace R - 1) / 2), trace R = cos 0.04 + cos 0.03 + cos 0.03 cos 0.04.
+    trace = math.cos(0.04) + math.cos(0.03) + math.cos(0.03) * math.cos(0.04)
+    angle = math.degrees(math.acos((trace - 1.0) / 2.0))
+    assert angle == pytest.approx(2.8647, abs=1e-4)  # ~ sqrt(0.03^2 + 0.04^2) rad in degrees
+    assert m["max_rotation"] == pytest.approx(angle, rel=1e-9)
+    assert m["min_distance_true"] == 0.0415 and m["min_distance_true_pair"] == "5-7"
+    assert m["crossings_true"] == 2  # pairs, not ticks (16) nor spells (3)
+    # The controller's side of the same log: unchanged by the truth.
+    assert m["min_distance"] == pytest.approx(0.045, abs=1e-12)
+    assert m["min_distance_pair"] == "1-3"
+    # Without the truth (the kinematic plant) every truth metric is empty.
+    plain = sw.run_metrics(synthetic_log(duration=0.1), _synthetic_scenario())
+    for key in ("slack_ticks", "min_tension", "max_rotation", "min_distance_true",
+                "crossings_true"):
+        assert math.isnan(plain[key]), key
+    assert plain["min_distance_true_pair"] == ""
+
+
+def test_the_peak_forces_and_speed_are_norms_of_the_logged_vectors():
+    # The synthetic log's F_int is the logistic of the active pairs along fixed directions;
+    # one tick made larger by hand in each force: the peak is that tick's norm (not a
+    # component, not a sum over ticks).
+    log = synthetic_log(duration=0.2)
+    log["F_int"][37] = [0.0, 3.0, 4.0]
+    log["F_d"][41] = [-12.0, 16.0, 0.0]
+    log["velocity"][12] = [3.0, 0.0, -4.0]  # the path itself moves at 1.2 m/s
+    m = sw.run_metrics(log, _synthetic_scenario())
+    assert m["peak_F_int"] == 5.0 and m["peak_F_d"] == 20.0 and m["peak_speed"] == 5.0
+
+
+def test_every_metric_s_unit_is_the_one_docs_sweep_format_gives():
+    doc = (REPO / "docs" / "SWEEP_FORMAT.md").read_text()
+    units = dict(re.findall(r"^\| `(\w+)` \| ([^|]+?) \|", doc, flags=re.M))
+    for name, (unit, _, _) in sw.METRICS.items():
+        assert units.get(name) == unit, (name, unit, units.get(name))
+
+
 # --- Running ---------------------------------------------------------------------------------
 
 
@@ -311,6 +385,11 @@ def test_rows_equal_cdpm_simulate_of_their_resolved_scenario(tmp_path, capsys):
         assert float(row["time_below_d_l"]) == pytest.approx(float(np.sum(below * dt)),
                                                              abs=1e-12)
         assert int(row["crossings"]) == int(np.any(log["crossed"], axis=0).sum())
+        # The real-time factor: simulated seconds (the log's span) per wall second of the run.
+        assert float(row["sim_s"]) == pytest.approx(float(log["time"][-1] - log["time"][0]))
+        assert float(row["wall_s"]) > 0
+        assert float(row["rtf"]) == pytest.approx(float(row["sim_s"]) / float(row["wall_s"]),
+                                                  rel=1e-12)
         # And every metric is what run_metrics gives for the simulate log, to the last bit.
         scenario = load_scenario(run_dir / "scenario.yaml")
         expected = sw.run_metrics(log, scenario)

@@ -129,3 +129,26 @@ def test_a_cell_without_an_ok_run_says_how_its_runs_ended():
                                  min_distance="0.05")]
     fig = sp.figure_heatmap(UNITS_COLUMNS, rows, "min_distance")
     assert "fault" in [t.get_text() for t in fig.axes[0].texts]
+
+
+@pytest.mark.parametrize("dpi", [90, 110])  # the figure's own, and plot_sweep's PNGs
+def test_every_pareto_label_stays_inside_the_frame(dpi):
+    # Issue 27: the label of the front's last point, the rightmost and topmost run, ran over
+    # the frame. As drawn (at the figure's dpi and at the PNGs'), every label's box lies
+    # inside the axes.
+    from matplotlib.backends.backend_agg import FigureCanvasAgg
+
+    pts = {"A": (1, 1), "B": (2, 3), "C": (3, 2), "D": (4, 4), "E": (2, 1)}
+    rows = [row(k, "1", "1", 0, d, e) for k, (e, d) in pts.items()]
+    fig = sp.figure_pareto(COLUMNS, rows)
+    fig.set_dpi(dpi)
+    canvas = FigureCanvasAgg(fig)
+    canvas.draw()
+    ax = fig.axes[0]
+    frame = ax.get_window_extent(canvas.get_renderer())
+    labels = [t for t in ax.texts if t.get_text() == "a 1, b 1"]
+    assert len(labels) == 3  # A, B, D: the front
+    for label in labels:
+        box = label.get_window_extent(canvas.get_renderer())
+        assert frame.x0 <= box.x0 and box.x1 <= frame.x1, (box, frame)
+        assert frame.y0 <= box.y0 and box.y1 <= frame.y1, (box, frame)

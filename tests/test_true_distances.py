@@ -231,3 +231,40 @@ def test_the_distances_figure_draws_the_truth_and_the_estimate():
     np.testing.assert_allclose(lines["cables 1-3 true (plant's pose)"], 1000 * truth[:, 0])
     np.testing.assert_allclose(lines["cables 1-3 controller's estimate"], 1000 * estimate[:, 0])
     assert not any("2-4" in label for label in lines)  # never within d_u, either way
+
+
+def test_crossed_true_flags_crossings_onto_either_side():
+    """Issue 27: a pair that truly crosses is flagged whichever side it started on. The path
+    of the tests above through the touching pose of (1,3), run forwards and backwards (the
+    same flip between the same two poses, from opposite sides), with the platform rotating
+    as it goes: both runs flag (1,3) crossed from the flip on, and the controller's rule run
+    tick by tick (`interference_force` with its side memory, on the rotated attachment
+    points) remembers opposite sides, so one run ends at side +2 and the other at -2."""
+    start = np.array([1.77, 3.65, 1.22])
+    touch = np.array([1.50033384, 5.57563667, 1.52269465])  # as in the tests above
+    k13 = ROBOT.pair_position(1, 3)
+    s = np.linspace(0, 1.3, 401)
+    params = InterferenceParams(d_l=np.full(ROBOT.num_pairs, 0.05),
+                                d_u=np.full(ROBOT.num_pairs, 0.061),
+                                F_u=np.full(ROBOT.num_pairs, 2.0),
+                                eps=np.full(ROBOT.num_pairs, 0.1), F_max=2.0,
+                                pairs=tuple(ROBOT.pairs))
+    ends = []
+    for order in (slice(None), slice(None, None, -1)):
+        p = (start + s[:, None] * (touch - start))[order]
+        rpy = (np.outer(s, [0.0, 0.0, 1e-4]))[order]  # a slow yaw, 0.13 mrad at the end
+        out = true_pair_distances(ROBOT, p, rpy, params.d_u)
+        side, expected = None, []
+        for q, angles in zip(p, rpy):
+            rotated = dataclasses.replace(
+                ROBOT, attachments=ROBOT.attachments @ rotation_from_rpy(angles).T)
+            r = interference_force(rotated, q, params, side=side)
+            side = r.side
+            expected.append(r.crossed)
+        expected = np.array(expected)
+        np.testing.assert_array_equal(out["crossed_true"], expected)
+        flagged = np.flatnonzero(out["crossed_true"][:, k13])
+        assert flagged.size and not out["crossed_true"][0, k13]
+        assert out["crossed_true"][flagged[0]:, k13].all()  # crossed from the flip on
+        ends.append(int(side[k13]))
+    assert sorted(ends) == [-2, 2]

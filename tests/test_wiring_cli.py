@@ -641,10 +641,14 @@ def test_diagram_draws_the_scenario_given_into_out(tmp_path):
 
 @covers("diagram --depth", "diagram --no-svg")
 def test_diagram_depth_expands_the_plant_and_no_svg_skips_svg(tmp_path):
-    # At depth 2 the simulated plant's inside (simulated_reels, operator) is drawn.
+    # At depth 1 the simulated plant is one box; by default (full depth) and at depth 2 its
+    # inside (simulated_reels, operator) is drawn.
     scenario = _scenario_file(tmp_path)
-    assert cdpm("diagram", scenario, "--out", tmp_path / "d1", "--no-svg") == 0
+    assert cdpm("diagram", scenario, "--out", tmp_path / "d1", "--no-svg", "--depth", 1) == 0
     assert cdpm("diagram", scenario, "--out", tmp_path / "d2", "--depth", 2) == 0
+    assert cdpm("diagram", scenario, "--out", tmp_path / "full", "--no-svg") == 0
+    assert (tmp_path / "full" / "controller_simulated.dot").read_text() == (
+        tmp_path / "d2" / "controller_simulated.dot").read_text()
     shallow = (tmp_path / "d1" / "controller_simulated.dot").read_text()
     deep = (tmp_path / "d2" / "controller_simulated.dot").read_text()
     assert "simulated_reels" not in shallow and "simulated_reels" in deep

@@ -1,6 +1,7 @@
 """The controller diagram as graphviz, .svg via pygraphviz: the full-depth picture from Drake's
 GetGraphvizString (NAME.dot) and a readable overview of the top level (NAME_overview.dot)."""
 
+import math
 import re
 from pathlib import Path
 
@@ -10,7 +11,9 @@ from pathlib import Path
 _ID = re.compile(r"\b(s|clusters|cluster|_)(\d+)")
 
 
-def stable_graphviz(diagram, max_depth: int = 1) -> str:
+def stable_graphviz(diagram, max_depth: int | None = None) -> str:
+    """Drake's graphviz of `diagram`, `max_depth` levels of sub-diagrams expanded (None:
+    every level, the full depth), with stable node names and edge order."""
     text = diagram.GetGraphvizString(max_depth=max_depth)
     ids: dict[str, str] = {}
 
@@ -44,9 +47,11 @@ def render_svg(dot_text: str) -> str:
     return pygraphviz.AGraph(string=dot_text).draw(format="svg", prog="dot").decode()
 
 
-def write_diagrams(diagrams: dict, out_dir, *, svg: bool = True, max_depth: int = 1) -> list[Path]:
+def write_diagrams(diagrams: dict, out_dir, *, svg: bool = True,
+                   max_depth: int | None = None) -> list[Path]:
     """Write NAME.dot and NAME_overview.dot (and their .svg) for each {NAME: diagram}: Drake's
-    full-depth graphviz and the readable top level (overview_graphviz); returns the paths."""
+    graphviz at full depth (every sub-diagram expanded, the plant's too; `max_depth` levels
+    when given) and the readable top level (overview_graphviz); returns the paths."""
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     paths = []
@@ -85,15 +90,39 @@ def _short_type(system) -> str:
 MAX_PORTS = 6
 
 
+# Graphviz sizes a cell by its own estimate of the text (Helvetica's widths); a viewer
+# without Helvetica draws it in its sans-serif fallback, often DejaVu Sans, up to a sixth
+# wider, and long port names ran over their cells. Each cell gets at least the width of its
+# text in DejaVu Sans (matplotlib's copy) plus its padding and border, points.
+WIDTH_FONT = "DejaVu Sans"
+
+
+def text_width(text: str, size: float, bold: bool = False) -> float:
+    """The width (pt) of `text` at `size` pt in WIDTH_FONT, unhinted (as a browser draws it
+    at any zoom)."""
+    from matplotlib.font_manager import FontProperties
+    from matplotlib.textpath import text_to_path
+
+    font = FontProperties(family=WIDTH_FONT, size=size, weight="bold" if bold else "normal")
+    return text_to_path.get_text_width_height_descent(text, font, ismath=False)[0]
+
+
+def _cell_width(text: str, size: float, padding: float, bold: bool = False) -> int:
+    """A TD's WIDTH (pt): the text's, its padding and border on both sides, a point of air."""
+    return math.ceil(text_width(text, size, bold) + 2 * padding + 2 + 2)
+
+
 def _port_row(names, prefix: str, used=None) -> str:
     """A row of port cells `prefix<k>`; with more than MAX_PORTS names, only the indices in
     `used` and a last cell `+n ports`."""
     shown = list(enumerate(names))
     if used is not None and len(names) > MAX_PORTS:
         shown = [(k, n) for k, n in shown if k in used]
-    cells = "".join(f'<TD PORT="{prefix}{k}">{_html(n)}</TD>' for k, n in shown)
+    cells = "".join(f'<TD PORT="{prefix}{k}" WIDTH="{_cell_width(n, 10, 2)}">{_html(n)}</TD>'
+                    for k, n in shown)
     if len(shown) < len(names):
-        cells += f'<TD><I>+{len(names) - len(shown)} ports</I></TD>'
+        more = f"+{len(names) - len(shown)} ports"
+        cells += f'<TD WIDTH="{_cell_width(more, 10, 2)}"><I>{more}</I></TD>'
     return ('<TR><TD BORDER="0" CELLPADDING="0"><TABLE BORDER="0" CELLBORDER="1" '
             f'CELLSPACING="0" CELLPADDING="2"><TR>{cells}</TR></TABLE></TD></TR>')
 
@@ -243,27 +272,78 @@ def overview_graphviz(diagram, title: str | None = None) -> str:
         if inputs:
             rows.append(_port_row(inputs, "i", {i for n, i in used_in if n == j}))
         fill = ' BGCOLOR="#e8eef8"' if shaded else ""
-        rows.append(f'<TR><TD{fill}><B>{_html(name)}</B><BR/>'
+        width = max(_cell_width(name, 10, 3, bold=True), _cell_width(kind, 8, 3))
+        rows.append(f'<TR><TD{fill} WIDTH="{width}"><B>{_html(name)}</B><BR/>'
                     f'<FONT POINT-SIZE="8" COLOR="#555555">{_html(kind)}</FONT></TD></TR>')
         if outputs:
             rows.append(_port_row(outputs, "o", {i for n, i in used_out if n == j}))
         lines.append(f'  n{j} [label=<<TABLE BORDER="0" CELLBORDER="1" CELLSPACING="0" '
                      f'CELLPADDING="3">{"".join(rows)}</TABLE>>];')
     for p, (name, targets) in enumerate(exported_in):
-        lines.append(f'  in{p} [shape=cds, label="{_html(name)}"];')
+        lines.append(f'  in{p} [shape=cds, label="{_html(name)}", '
+                     f'width={_port_node_width(name)}];')
         for j, i in targets:
             lines.append(f'  in{p} -> n{j}:i{i}:n;')
     for p, (name, sources) in enumerate(exported_out):
-        lines.append(f'  out{p} [shape=cds, label="{_html(name)}"];')
+        lines.append(f'  out{p} [shape=cds, label="{_html(name)}", '
+                     f'width={_port_node_width(name)}];')
         for j, i in sources:
             lines.append(f'  n{j}:o{i}:s -> out{p};')
+    feedback = feedback_edges(len(nodes), connections,
+                              [j for _, targets in exported_in for j, _ in targets])
     for s, sk, d, dk in connections:
         label = labels.get((d, dk))
-        label = "" if label is None or label == nodes[d][2][dk] else (
-            f' [label=" {_html(label)}"]')
-        lines.append(f"  n{s}:o{sk}:s -> n{d}:i{dk}:n{label};")
+        attributes = [] if label is None or label == nodes[d][2][dk] else [
+            f'label=" {_html(label)}"']
+        if (s, sk, d, dk) in feedback:
+            attributes.append("constraint=false")
+        attributes = f" [{', '.join(attributes)}]" if attributes else ""
+        lines.append(f"  n{s}:o{sk}:s -> n{d}:i{dk}:n{attributes};")
     lines.append("}")
     return "\n".join(lines) + "\n"
+
+
+def feedback_edges(num_nodes: int, connections, roots=()) -> set:
+    """The connections (s, sk, d, dk) that carry a block's memory back to a block before it,
+    to draw without a rank constraint. Found by a depth-first walk from the roots (the nodes
+    the diagram's own inputs feed), then from node 0 on (the plant, added first), each
+    node's edges taken in order of its output ports: the signals flow from the plant's
+    first output (cable_lengths) through the blocks, and an edge to a node still on the walk
+    closes a loop. The loop through a walk's root (the reel command back to the plant) is
+    left out: graphviz turns that one round itself and keeps it short. Without these hints
+    graphviz breaks the loops in the order of its node ids and may rank a block's memory
+    above the block that feeds it (the full-pose overview: 24 edge crossings, 13 with)."""
+    out = {}
+    for edge in sorted(connections, key=lambda e: (e[0], e[1], e[2], e[3])):
+        out.setdefault(edge[0], []).append(edge)
+    state = [0] * num_nodes  # 0 unseen, 1 on the walk, 2 done
+    back = set()
+    for root in list(dict.fromkeys(roots)) + list(range(num_nodes)):
+        if state[root]:
+            continue
+        state[root] = 1
+        stack = [(root, iter(out.get(root, [])))]
+        while stack:
+            node, edges = stack[-1]
+            edge = next(edges, None)
+            if edge is None:
+                state[node] = 2
+                stack.pop()
+                continue
+            target = edge[2]
+            if state[target] == 1 and target != root:
+                back.add(edge)
+            elif state[target] == 0:
+                state[target] = 1
+                stack.append((target, iter(out.get(target, []))))
+    return back
+
+
+def _port_node_width(name: str) -> str:
+    """The width (in) of a diagram port's arrow-shaped node: its name in WIDTH_FONT at the
+    graph's 10 pt, centred, clear of the arrow's 12 pt point on both sides (graphviz centres
+    the name on the whole shape), as graphviz writes inches."""
+    return f"{(text_width(name, 10) + 36) / 72:.2f}"
 
 
 def _inside(names) -> str:

@@ -1,11 +1,14 @@
-"""A log as CSV (`cdpm export LOG --csv`): one row per tick, one named column per value.
+"""A log as CSV (`cdpm export LOG`): one row per tick, one named column per value.
 
 Every per-tick key of docs/LOG_FORMAT.md that the log holds becomes columns named
-`<key>_<component> [<unit>]`: the x, y, z of a vector (`p_x [m]`, `F_H_z [N]`), cables
-numbered from 1 (`lengths_1 [m]`, `tensions_7 [N]`), cable pairs as `i-j` from 1
-(`pair_distances_1-3 [m]`, `active_1-3 [0/1]`), roll, pitch and yaw of `rpy_true`. Flags are
-0 or 1, NaN an empty cell, floats in the shortest form that reads back exactly. The per-run
-constants (robot geometry, logistic parameters, how the run ended) stay in log.npz. No Drake.
+`<key>_<component> [<unit>]`: the x, y, z of a vector (`p_x [m]`, `F_H_z [N]`,
+`omega_z [rad/s]`), cables numbered from 1 (`lengths_1 [m]`, `tensions_7 [N]`), cable pairs
+by their cable numbers `i-j` (`pair_distances_1-3 [m]`, `crossed_true_1-3 [0/1]`), roll,
+pitch and yaw of an orientation (`rpy_true_roll [rad]`); a key with one value per tick is
+one column (`t_star [N]`). Flags are 0 or 1 (`[0/1]`), status codes integers labelled with
+their meaning, NaN an empty cell, floats in the shortest form that reads back exactly. The
+per-run constants (robot geometry, logistic parameters, how the run ended) stay in log.npz.
+No Drake.
 """
 
 import csv
@@ -16,8 +19,12 @@ from pathlib import Path
 
 import numpy as np
 
+# tension_status's codes (docs/LOG_FORMAT.md), as its column's "unit".
+TENSION_STATUS = "code: 0 floor held/1 floor lowered/2 no redundant cable"
 # Per-tick keys in docs/LOG_FORMAT.md's order: (unit, what the columns are).
-# "xyz": three components; "cables": one per cable; "pairs": one per watched pair.
+# "xyz": three components; "rpy": roll, pitch, yaw; "cables": one per cable; "pairs": one per
+# watched pair; None: one value per tick. The units "0/1" (flags) and TENSION_STATUS (codes)
+# are written as integers.
 COLUMNS = {
     "time": ("s", None),
     "tick": ("-", None),
@@ -31,17 +38,30 @@ COLUMNS = {
     "velocity": ("m/s", "xyz"),
     "reel_velocity": ("m/s", "cables"),
     "lengths": ("m", "cables"),
+    "lengths_commanded": ("m", "cables"),
     "pair_distances": ("m", "pairs"),
     "active": ("0/1", "pairs"),
     "crossed": ("0/1", "pairs"),
     "wall": ("s", None),
     "compute": ("s", None),
+    # The full-pose controller (controller.pose: full) and its tension control.
+    "rpy": ("rad", "rpy"),
+    "omega": ("rad/s", "xyz"),
+    "tension_estimate": ("N", "cables"),
+    "tension_target": ("N", "cables"),
+    "tension_command": ("N", "cables"),
+    "t_star": ("N", None),
+    "tension_status": (TENSION_STATUS, None),
+    # The dynamic plant's ground truth.
     "tensions": ("N", "cables"),
     "slack": ("0/1", "cables"),
     "p_true": ("m", "xyz"),
     "rpy_true": ("rad", "rpy"),
+    "pair_distances_true": ("m", "pairs"),
+    "crossed_true": ("0/1", "pairs"),
 }
 _PARTS = {"xyz": ("x", "y", "z"), "rpy": ("roll", "pitch", "yaw")}
+_INTEGERS = ("0/1", TENSION_STATUS)
 
 
 def csv_columns(log: Mapping) -> list[tuple[str, np.ndarray]]:
@@ -58,9 +78,11 @@ def csv_columns(log: Mapping) -> list[tuple[str, np.ndarray]]:
         if values.ndim == 0 or values.shape[0] != T:
             continue  # not one row per tick (a malformed log): left out, not misaligned
         unit, kind = COLUMNS.get(key, ("", None))
+        if unit in _INTEGERS and np.all(np.isfinite(values)):
+            values = values.astype(int)
         suffix = f" [{unit}]" if unit else ""
-        if values.ndim == 1:
-            columns.append((f"{key}{suffix}", values))
+        if values.ndim == 1 or (kind is None and values.shape[1] == 1):
+            columns.append((f"{key}{suffix}", values.reshape(T)))
             continue
         width = values.shape[1]
         if kind in _PARTS and width == len(_PARTS[kind]):

@@ -37,12 +37,18 @@ _NEEDS = {
     "tensions": ("time", "tensions", "slack"),
     "pose_error": ("time", "p", "p_true", "rpy_true"),
 }
+# A figure drawn from other keys when the log lacks its _NEEDS: the tensions of a
+# tension-controlled run on the robot (no plant's truth there) are the controller's estimate.
+_OR_NEEDS = {"tensions": ("time", "tension_estimate")}
+# Keys a figure draws when the log holds them (a full-pose or tension-controlled run's).
+_MAY_USE = {"pose_error": ("rpy",), "tensions": ("tensions", "slack", "tension_estimate", "t_star")}
 # Figures drawn only for logs that hold their keys.
 OPTIONAL = ("timing", "tensions", "pose_error")
 # Keys with one row per tick.
 _PER_TICK = ("time", "p", "F_H", "F_int", "F_d", "pair_distances", "active", "crossed",
              "lengths", "reel_velocity", "wall", "tensions", "slack", "p_true", "rpy_true",
-             "lengths_commanded", "pair_distances_true", "crossed_true")
+             "lengths_commanded", "pair_distances_true", "crossed_true", "rpy",
+             "tension_estimate", "tension_target", "t_star")
 LOG_KEYS = ("time", "p", "F_H", "F_int", "F_wall", "F_d", "velocity_admittance", "velocity",
             "reel_velocity", "lengths", "pair_distances", "active", "crossed", "pairs", "d_l",
             "d_u", "F_u", "eps", "F_max", "reels", "attachments", "workspace_lower",
@@ -71,6 +77,8 @@ EVENT_ALPHA = 0.35
 # An interrupted run (Ctrl-C, SIGTERM) is marked as a fault is, in a neutral dark grey: it is
 # where the log ends, not an error (and orange is the trajectory's "within d_u").
 INTERRUPT_COLOR = "0.2"
+# The tension target's floor and ceiling: neither a cable's colour nor the estimate's grey.
+LIMIT_COLOR = "darkgoldenrod"
 # Most lines of a fault message in a title; the rest is cut with "...".
 TITLE_FAULT_LINES = 6
 
@@ -112,19 +120,29 @@ def load_log(path) -> dict:
     return log
 
 
+def _needs(log: Mapping, figure: str) -> tuple:
+    """The keys the figure reads from this log: _NEEDS, or its _OR_NEEDS when the log holds
+    those and not all of _NEEDS."""
+    if figure in _OR_NEEDS and not all(k in log for k in _NEEDS[figure]) and all(
+            k in log for k in _OR_NEEDS[figure]):
+        return _OR_NEEDS[figure]
+    return _NEEDS[figure]
+
+
 def has_keys(log: Mapping, figure: str) -> bool:
     """Whether the log holds every key the figure needs."""
-    return all(k in log for k in _NEEDS[figure])
+    return all(k in log for k in _needs(log, figure))
 
 
 def _check(log: Mapping, figure: str) -> None:
-    missing = [k for k in _NEEDS[figure] if k not in log]
+    needs = _needs(log, figure)
+    missing = [k for k in needs if k not in log]
     if missing:
         raise LogError(f"the {figure} plot needs log key(s) {missing!r} (docs/LOG_FORMAT.md); "
                        f"the log holds {sorted(log)!r}")
-    if "time" in _NEEDS[figure]:
+    if "time" in needs:
         T = len(log["time"])
-        for key in _NEEDS[figure]:
+        for key in needs + tuple(k for k in _MAY_USE.get(figure, ()) if k in log):
             arr = np.asarray(log[key])
             if key in _PER_TICK and (arr.ndim == 0 or arr.shape[0] != T):
                 raise LogError(f"log key {key!r} has shape {arr.shape!r}; expected one row per "
@@ -186,12 +204,56 @@ def _mark_fault_time(ax, log: Mapping) -> None:
     if stop is None or not np.isfinite(stop[1]):
         return
     gid, when, _, color = stop
+    # Left of the line (a run ends at its fault: the right is axis margin), as high as it
+    # goes without covering a curve or a level line (d_u, a limit) drawn there.
+    label = ax.text(when, 0.97, f"{gid} ", color=color, fontsize="small", ha="right",
+                    va="top", transform=ax.get_xaxis_transform(), gid=f"{gid} label",
+                    zorder=6, bbox=dict(facecolor="white", edgecolor="none", alpha=0.8,
+                                        pad=0.5))
+    label.set_y(_free_top(ax, when, label))
     line = ax.axvline(when, color=color, linestyle="-", linewidth=1.4, zorder=5)
     line.set_gid(gid)
-    # Left of the line: a run ends at its fault, so the right is usually empty axis margin.
-    ax.text(when, 0.97, f"{gid} ", color=color, fontsize="small", ha="right",
-            va="top", transform=ax.get_xaxis_transform(), gid=f"{gid} label", zorder=6,
-            bbox=dict(facecolor="white", edgecolor="none", alpha=0.8, pad=0.5))
+
+
+def _free_top(ax, when: float, text) -> float:
+    """The highest top (axes fraction, 0.97 down) for `text`, right-aligned at x = when, whose
+    box no line of the axes crosses; 0.97 when there is none. Lines are sampled in axes
+    fractions (data lines and level lines alike), the box measured in the figure's font."""
+    from matplotlib.backends.backend_agg import RendererAgg
+
+    ax.get_xlim(), ax.get_ylim()  # apply a pending autoscale: transData is lazy
+    fig = ax.figure
+    renderer = RendererAgg(fig.bbox.width, fig.bbox.height, fig.dpi)
+    box = text.get_window_extent(renderer)
+    # Constrained layout shrinks the axes afterwards: their size now is an upper bound.
+    width = 1.2 * box.width / max(ax.bbox.width, 1.0)
+    height = 1.3 * box.height / max(ax.bbox.height, 1.0)
+    to_axes = ax.transAxes.inverted()
+    x_right = to_axes.transform(ax.transData.transform((when, 0.0)))[0]
+    xs = np.linspace(x_right - width, x_right, 24)
+    samples = []
+    for line in ax.get_lines():
+        xy = np.column_stack([np.asarray(line.get_xdata(), float),
+                              np.asarray(line.get_ydata(), float)])
+        if len(xy) == 0:
+            continue
+        frac = to_axes.transform(line.get_transform().transform(xy))
+        x, y = frac[:, 0], frac[:, 1]
+        ok = np.isfinite(x) & np.isfinite(y)
+        x, y = x[ok], y[ok]
+        if x.size == 0 or np.ptp(x) == 0.0:
+            continue  # a vertical line: not one that a label left of the mark can cover
+        order = np.argsort(x, kind="stable")
+        x, y = x[order], y[order]
+        inside = (xs >= x[0]) & (xs <= x[-1])
+        samples.append(np.interp(xs[inside], x, y))
+        samples.append(y[(x >= xs[0]) & (x <= xs[-1])])
+    taken = np.concatenate(samples) if samples else np.zeros(0)
+    pad = 0.04  # a wide line's own width, and some air
+    for top in np.arange(0.97, height, -0.01):
+        if not np.any((taken <= top + pad) & (taken >= top - height - pad)):
+            return float(top)
+    return 0.97
 
 
 def _suptitle(fig: Figure, log: Mapping, text: str) -> None:
@@ -535,20 +597,42 @@ def logistic_grid(d_l: float, d_u: float, num: int = 400) -> np.ndarray:
     return np.linspace(max(0.0, d_l - w), d_u + w, num)
 
 
+def applied_curve(d_l: float, d_u: float, F_u: float, eps: float, num: int = 400):
+    """(distances m, intensity N) of what the interference block applies to an uncrossed pair
+    over logistic_grid: the logistic (eq. 26) up to d_u and zero beyond, where the pair is
+    not active (interference.py: `near = dist <= d_u`); d_u appears twice, with eps and with
+    0, so that the step from eps to zero is drawn as the vertical it is."""
+    d = logistic_grid(d_l, d_u, num)
+    tol = 1e-9 * (d_u - d_l)  # a grid point at d_u up to round-off is the step's
+    below, beyond = d[d < d_u - tol], d[d > d_u + tol]
+    x = np.concatenate([below, [d_u, d_u], beyond])
+    y = np.concatenate([logistic_intensity(below, d_l, d_u, F_u, eps),
+                        [logistic_intensity(d_u, d_l, d_u, F_u, eps), 0.0],
+                        np.zeros(beyond.size)])
+    return x, y
+
+
 def figure_logistic(log: Mapping) -> Figure:
     """Interference force intensity alpha (N) vs cable distance (mm), one axis per distinct set
-    of logistic parameters of the log (eqs. 26-28, Fig. 8), with d_l, d_u, F_u - eps and eps
-    marked."""
+    of logistic parameters of the log (eqs. 26-28, Fig. 8), as the controller applies it: the
+    logistic up to d_u, zero beyond (the step at d_u that F_int takes, see forces.png), the
+    logistic's own tail beyond d_u faint; d_l, d_u, F_u - eps and eps marked."""
     _check(log, "logistic")
     sets = logistic_sets(log)
     fig = Figure(figsize=(max(8, 5 * len(sets)), 4.5), layout="constrained")
     axes = np.atleast_1d(fig.subplots(1, max(1, len(sets)), squeeze=False)[0])
     for ax, ((d_l, d_u, F_u, eps), users) in zip(axes, sets):
-        d = logistic_grid(d_l, d_u)
         who = ("cables " + ", ".join(f"{i}-{j}" for i, j in users) if len(users) <= 4
                else f"{len(users)} cable pairs")
-        ax.plot(1000.0 * d, logistic_intensity(d, d_l, d_u, F_u, eps), color="tab:blue",
-                label=f"F_u = {F_u:g} N, eps = {eps:g} N")
+        d, alpha = applied_curve(d_l, d_u, F_u, eps)
+        applied, = ax.plot(1000.0 * d, alpha, color="tab:blue", linewidth=1.8, zorder=3,
+                           label=f"applied: F_u = {F_u:g} N, eps = {eps:g} N")
+        applied.set_gid("applied")
+        tail = d[d >= d_u]
+        faint, = ax.plot(1000.0 * tail, logistic_intensity(tail, d_l, d_u, F_u, eps),
+                         color="tab:blue", linewidth=1.0, linestyle=":", alpha=0.5,
+                         label="eq. 26 beyond d_u (not applied)")
+        faint.set_gid("beyond d_u")
         ax.axvline(1000.0 * d_l, color="0.3", linestyle="--", linewidth=0.8,
                    label=f"d_l = {1000 * d_l:g} mm")
         ax.axvline(1000.0 * d_u, color="0.3", linestyle=":", linewidth=0.8,
@@ -557,7 +641,7 @@ def figure_logistic(log: Mapping) -> Figure:
                    label=f"F_u - eps = {F_u - eps:g} N")
         ax.axhline(eps, color="tab:red", linestyle=":", linewidth=0.6, label=f"eps = {eps:g} N")
         marks, = ax.plot([1000.0 * d_l, 1000.0 * d_u], [F_u - eps, eps], linestyle="none",
-                         marker="o", color="tab:red")
+                         marker="o", color="tab:red", zorder=4)
         marks.set_gid("conditions (27)")
         ax.set_title(who, fontsize="medium")
         ax.set_xlabel("distance between cables $d_{ij}$ (mm)")
@@ -568,8 +652,8 @@ def figure_logistic(log: Mapping) -> Figure:
                      ha="center", transform=axes[0].transAxes)
         axes[0].set_xlabel("distance between cables $d_{ij}$ (mm)")
     axes[0].set_ylabel(r"force intensity $\alpha_{ij}$ (N)")
-    _suptitle(fig, log, f"{_title(log)}\nInterference force intensity, logistic function "
-              "(eqs. 26-28, Fig. 8)")
+    _suptitle(fig, log, f"{_title(log)}\nInterference force intensity as applied: the "
+              "logistic function (eqs. 26-28, Fig. 8) within d_u, zero beyond")
     return fig
 
 
@@ -676,64 +760,133 @@ def figure_timing(log: Mapping) -> Figure:
 
 
 def figure_tensions(log: Mapping) -> Figure:
-    """Each cable's tension (N) vs time (s) above, and below one row per cable (1..m) with a
-    mark at every tick where it was slack, so that cables slack at the same time never hide
-    each other (a dynamic plant's log)."""
+    """Each cable's tension (N) vs time (s): the dynamic plant's true tensions, and below one
+    row per cable (1..m) with a mark at every tick where it was slack, so that cables slack at
+    the same time never hide each other. A tension-controlled run's log adds, in the same
+    colours, the controller's estimate of each tension (dashed; alone on the robot, where the
+    log has no truth), the target's floor and ceiling (controller.min_tension, max_tension:
+    log keys controller_min_tension, controller_max_tension) and t*, the largest achievable
+    minimum tension at the estimated pose (where it is below the floor, the floor is
+    lowered to it; where it is +inf, not drawn)."""
     _check(log, "tensions")
     t = np.asarray(log["time"], dtype=float)
-    tensions = np.asarray(log["tensions"], dtype=float).reshape(len(t), -1)
-    slack = np.asarray(log["slack"]).reshape(len(t), -1) > 0.5
+    truth = "tensions" in log and "slack" in log
+    estimate = (np.asarray(log["tension_estimate"], dtype=float).reshape(len(t), -1)
+                if "tension_estimate" in log else None)
+    tensions = (np.asarray(log["tensions"], dtype=float).reshape(len(t), -1) if truth
+                else estimate)
     m = tensions.shape[1]
     fig = Figure(figsize=(9, 5.5 + 0.12 * m), layout="constrained")
-    ax, rows = fig.subplots(2, 1, sharex=True,
-                            gridspec_kw={"height_ratios": [3.0, 0.6 + 0.12 * m]})
+    if truth:
+        ax, rows = fig.subplots(2, 1, sharex=True,
+                                gridspec_kw={"height_ratios": [3.0, 0.6 + 0.12 * m]})
+    else:
+        ax, rows = fig.subplots(), None
     for i in range(1, m + 1):
         style = cable_style(i)
-        ax.plot(t, tensions[:, i - 1], linewidth=1.0, label=f"cable {i}", **style)
-        n = int(slack[:, i - 1].sum())
-        if n:
-            ticks, = rows.plot(t[slack[:, i - 1]], np.full(n, i), "|", color=style["color"],
-                               markersize=7, label=f"cable {i} slack ({n} ticks)")
-            ticks.set_gid(f"slack cable {i}")
+        if truth:
+            ax.plot(t, tensions[:, i - 1], linewidth=1.0, label=f"cable {i}", **style)
+        if estimate is not None:
+            line, = ax.plot(t, estimate[:, i - 1], color=style["color"],
+                            linewidth=0.9 if truth else 1.0,
+                            linestyle="--" if truth else style["linestyle"],
+                            label="_" if truth else f"cable {i} (estimate)")
+            line.set_gid(f"estimate cable {i}")
+    if estimate is not None:
+        if truth:  # one legend entry for the dashes of every cable
+            ax.plot([], [], color="0.3", linestyle="--", linewidth=0.9,
+                    label="controller's estimate (dashed)")
+        for key, style, what in (("controller_min_tension", "--", "floor min_tension"),
+                                 ("controller_max_tension", "-.", "ceiling max_tension")):
+            if key in log and np.isfinite(float(log[key])):
+                value = float(log[key])
+                ax.axhline(value, color=LIMIT_COLOR, linestyle=style, linewidth=1.4,
+                           label=f"{what} = {value:g} N").set_gid(key)
+        if "t_star" in log:
+            t_star = np.asarray(log["t_star"], dtype=float).reshape(len(t), -1)[:, 0]
+            shown = np.where(np.isfinite(t_star), t_star, np.nan)
+            line, = ax.plot(t, shown, color="black", linewidth=1.6, alpha=0.8,
+                            label="t* at the estimated pose")
+            line.set_gid("t_star")
     ax.set_ylabel("tension (N)")
-    rows.set_yticks(range(1, m + 1), [str(i) for i in range(1, m + 1)])
-    rows.set_ylim(m + 0.5, 0.5)  # cable 1 on top, as in the legend
-    rows.set_ylabel("slack\n(cable)")
-    rows.set_xlabel("time (s)")
-    if not slack.any():
-        rows.text(0.5, 0.5, "no cable went slack", ha="center", va="center",
-                  transform=rows.transAxes, color="0.4")
+    if rows is not None:
+        slack = np.asarray(log["slack"]).reshape(len(t), -1) > 0.5
+        for i in range(1, m + 1):
+            n = int(slack[:, i - 1].sum())
+            if n:
+                ticks, = rows.plot(t[slack[:, i - 1]], np.full(n, i), "|",
+                                   color=cable_style(i)["color"], markersize=7,
+                                   label=f"cable {i} slack ({n} ticks)")
+                ticks.set_gid(f"slack cable {i}")
+        rows.set_yticks(range(1, m + 1), [str(i) for i in range(1, m + 1)])
+        rows.set_ylim(m + 0.5, 0.5)  # cable 1 on top, as in the legend
+        rows.set_ylabel("slack\n(cable)")
+        rows.set_xlabel("time (s)")
+        if not slack.any():
+            rows.text(0.5, 0.5, "no cable went slack", ha="center", va="center",
+                      transform=rows.transAxes, color="0.4")
+    else:
+        ax.set_xlabel("time (s)")
     for a in (ax, rows):
-        a.grid(True, alpha=0.3)
-        _mark_fault_time(a, log)
+        if a is not None:
+            a.grid(True, alpha=0.3)
+            _mark_fault_time(a, log)
     ax.legend(loc="upper left", bbox_to_anchor=(1.01, 1.0), fontsize="small")
-    _suptitle(fig, log, f"{_title(log)}\nCable tensions (dynamic plant)")
+    what = ("Cable tensions (dynamic plant)" if estimate is None else
+            "Cable tensions: the plant's (solid) and the controller's estimate (dashed), the "
+            "target's floor and ceiling, t*" if truth else
+            "Cable tensions as the controller estimates them, the target's floor and ceiling, t*")
+    _suptitle(fig, log, f"{_title(log)}\n{what}")
     return fig
+
+
+def pose_model(log: Mapping) -> str:
+    """What the run's controller assumed of the pose, from the keys its log holds
+    (docs/LOG_FORMAT.md): `rpy` only for `controller.pose: full`, `tension_estimate` only with
+    its tension control (the one whose forward kinematics stretches the cables)."""
+    if "rpy" not in log:
+        return "translating platform, rigid cables"
+    if "tension_estimate" in log:
+        return "full pose, cables stretched under the estimated tensions"
+    return "full pose, rigid cables"
 
 
 def figure_pose_error(log: Mapping) -> Figure:
     """The controller's position estimate minus the true position (mm, per axis and its norm),
-    and the platform's true roll, pitch, yaw (deg), vs time (s) (a dynamic plant's log)."""
+    and the platform's true roll, pitch, yaw (deg) beside the controller's own estimate of
+    them (a full-pose controller's `rpy`; the translating one assumes a level platform), vs
+    time (s) (a dynamic plant's log)."""
     _check(log, "pose_error")
     t = np.asarray(log["time"], dtype=float)
     error = 1000.0 * (np.asarray(log["p"], float) - np.asarray(log["p_true"], float))
     rpy = np.degrees(np.asarray(log["rpy_true"], dtype=float))
+    estimate = (np.degrees(np.asarray(log["rpy"], dtype=float)).reshape(len(t), 3)
+                if "rpy" in log else None)
     fig = Figure(figsize=(9, 6), layout="constrained")
     top, bottom = fig.subplots(2, 1, sharex=True)
     for c, axis in enumerate("xyz"):
         top.plot(t, error[:, c], linewidth=1.0, label=f"p_{axis} - p_true,{axis}")
     top.plot(t, np.linalg.norm(error, axis=1), color="black", linewidth=1.2, label="|p - p_true|")
-    top.set_ylabel("FK estimate error (mm)")
+    top.set_ylabel("position estimate error (mm)")
     for c, name in enumerate(("roll", "pitch", "yaw")):
-        bottom.plot(t, rpy[:, c], linewidth=1.0, label=name)
+        color = f"C{c}"
+        if estimate is None:
+            bottom.plot(t, rpy[:, c], color=color, linewidth=1.0, label=f"{name} (true)")
+            continue
+        # As in the distances figure: the truth wide and solid, the estimate thin and dashed
+        # on top, so that both show where they coincide.
+        bottom.plot(t, rpy[:, c], color=color, linewidth=2.2, alpha=0.6,
+                    label=f"{name} (true)")
+        bottom.plot(t, estimate[:, c], color=color, linewidth=1.0, linestyle="--",
+                    label=f"{name} (controller's estimate)")
     bottom.set_ylabel("platform rotation (deg)")
     bottom.set_xlabel("time (s)")
     for ax in (top, bottom):
         ax.grid(True, alpha=0.3)
         _mark_fault_time(ax, log)
         ax.legend(loc="upper left", bbox_to_anchor=(1.01, 1.0), fontsize="small")
-    _suptitle(fig, log, f"{_title(log)}\nThe controller's forward kinematics (translating "
-              "platform, rigid cables) against the true platform")
+    _suptitle(fig, log, f"{_title(log)}\nThe controller's pose estimate ({pose_model(log)}) "
+              "against the true platform")
     return fig
 
 
@@ -743,17 +896,24 @@ FIGURES = {"distances": figure_distances, "forces": figure_forces,
            "pose_error": figure_pose_error}
 
 
-def plot_log(log: Mapping[str, np.ndarray], out_dir, dpi: int = 120) -> list[Path]:
+def figures_of(log: Mapping) -> list[str]:
+    """The names (FIGURES' keys) of the figures `plot_log` draws for this log: every one but
+    the OPTIONAL ones whose keys the log lacks."""
+    return [name for name in FIGURES if name not in OPTIONAL or has_keys(log, name)]
+
+
+def plot_log(log: Mapping[str, np.ndarray], out_dir, dpi: int = 120,
+             only=None) -> list[Path]:
     """Write the figures as PNGs in out_dir (created if needed); returns their paths in the
     order of FIGURES, leaving out the OPTIONAL ones whose keys the log lacks (tensions and
-    pose_error need a dynamic plant's log)."""
+    pose_error need a dynamic plant's log) and, with `only` (names), the others."""
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     paths = []
-    for name, make in FIGURES.items():
-        if name in OPTIONAL and not has_keys(log, name):
+    for name in figures_of(log):
+        if only is not None and name not in only:
             continue
         path = out / FIGURE_FILES[name]
-        make(log).savefig(path, dpi=dpi)
+        FIGURES[name](log).savefig(path, dpi=dpi)
         paths.append(path)
     return paths

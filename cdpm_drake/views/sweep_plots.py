@@ -215,17 +215,42 @@ def figure_pareto(columns, rows) -> Figure:
     fx = [sx * metric_value(r, x) for r in front]
     fy = [sy * metric_value(r, y) for r in front]
     ax.plot(fx, fy, color="tab:red", marker="o", label="Pareto front")
+    labels = []
     for k, (r, px, py) in enumerate(zip(front, fx, fy)):
         text = ", ".join(f"{_short(f)} {_value_text(f, r[f])}" for f in fields) or r["run"]
         # Alternate above and below: neighbours on the front often sit close together.
-        ax.annotate(text, (px, py), textcoords="offset points", fontsize=7,
-                    xytext=(6, 6) if k % 2 == 0 else (6, -12))
+        labels.append(ax.annotate(text, (px, py), textcoords="offset points", fontsize=7,
+                                  xytext=(6, 6) if k % 2 == 0 else (6, -12),
+                                  annotation_clip=False))
     ax.set_xlabel(f"{lx}, smaller is better")
     ax.set_ylabel(f"{ly}, larger is better")
     ax.set_title("Keeping the cables apart against fighting the operator")
     ax.legend(loc="lower right")
     ax.grid(True, alpha=0.3)
+    _keep_inside(fig, ax, labels)
     return fig
+
+
+def _keep_inside(fig, ax, labels) -> None:
+    """Move each point's label to the other side of its point where it would run over the
+    axes' frame (the front's last point is often the rightmost run, its best the topmost)."""
+    from matplotlib.backends.backend_agg import FigureCanvasAgg
+
+    canvas = FigureCanvasAgg(fig)
+    canvas.draw()  # the layout: where the frame and the labels are
+    renderer = canvas.get_renderer()
+    frame = ax.get_window_extent(renderer)
+    for label in labels:
+        box = label.get_window_extent(renderer)
+        dx, dy = label.xyann
+        if box.x1 > frame.x1:
+            label.set_horizontalalignment("right")
+            dx = -abs(dx)
+        if box.y1 > frame.y1:
+            dy = -12
+        elif box.y0 < frame.y0:
+            dy = 6
+        label.xyann = (dx, dy)
 
 
 def _file_part(field: str) -> str:

@@ -7,8 +7,8 @@ interference-free workspace), as three orthogonal slices of the workspace box.
   its centre, moments about the centre), the floor drawn as a contour; where an internal force
   raises every tension (t* = +inf) the colour is the scale's top.
 - `figure_interference_workspace`: each slice coloured by how far the closest watched pair
-  is beyond its d_u (red within, green beyond), the boundary drawn as a contour, and the pairs
-  that come within d_u listed.
+  is beyond its d_u (red within, green beyond, each side scaled to the slices' extremes),
+  the boundary drawn as a contour, and the pairs that come within d_u listed.
 Both draw a path (a scenario's logged positions) projected onto every slice, with its start.
 The slices pass through the path's middle (or the box centre). Figures are built without
 pyplot (no global state); `plot_workspace` writes both as PNGs. Positions in m, tensions in N,
@@ -29,8 +29,9 @@ SLICES = ((2, (0, 1)), (1, (0, 2)), (0, (1, 2)))
 FILES = {"wrench": "workspace_wrench.png", "interference": "workspace_interference.png"}
 # The t* colour scale: floor - T_BELOW .. floor + T_ABOVE N (beyond: the ends' colours).
 T_BELOW, T_ABOVE = 10.0, 25.0
-# The interference picture's colour scale: margins d - d_u of -MARGIN_SPAN .. MARGIN_SPAN mm.
-MARGIN_SPAN = 20.0
+# The interference picture's colour scale spans the slices' own margins d - d_u (red: the
+# most negative, green: the largest), each side at least MIN_MARGIN_SPAN mm.
+MIN_MARGIN_SPAN = 0.5
 
 
 def slice_centre(robot, path=None) -> np.ndarray:
@@ -72,6 +73,31 @@ def _panel_title(fixed, value):
     return f"{AXES[fixed]} = {value:.2f} m"
 
 
+# Height of each slice's drawing area, in; the figure's width follows from the slices' shapes.
+PANEL_HEIGHT = 3.6
+
+
+def _slice_figure(robot, extra_height: float = 0.0):
+    """(figure, its three axes) for three slices drawn to scale (equal aspect): the axes'
+    widths in proportion to the slices' widths over their heights, the figure about as wide
+    as they are, and the "compressed" layout, which packs fixed-aspect axes and their colour
+    bar together (the constrained one shrinks each slice inside a wide axes and leaves the
+    colour bar far off to the right)."""
+    span = robot.workspace.upper - robot.workspace.lower
+    ratios = [span[drawn[0]] / span[drawn[1]] for _, drawn in SLICES]
+    width = PANEL_HEIGHT * sum(ratios) + 3.2  # the axes' labels, the gaps, the colour bar
+    fig = Figure(figsize=(max(width, 9.0), PANEL_HEIGHT + 1.7 + extra_height),
+                 layout="compressed")
+    return fig, fig.subplots(1, 3, width_ratios=ratios)
+
+
+def _path_legend(fig, path):
+    """The path's legend below the slices (in a slice it would cover the contours)."""
+    if path is not None and len(path):
+        fig.legend(*fig.axes[0].get_legend_handles_labels(), loc="outside lower center",
+                   ncol=2, fontsize=9)
+
+
 def wrench_slices(robot, centre, step: float, mass=None):
     """[(fixed axis, drawn axes, u, v, t* (len(v), len(u)))] of the three slices."""
     out = []
@@ -87,8 +113,7 @@ def figure_wrench_workspace(robot, *, floor: float = 5.0, path=None, step: float
     the path. The share of each slice held at >= floor is in its title."""
     centre = slice_centre(robot, path)
     mass = robot.dynamics.mass if mass is None else mass
-    fig = Figure(figsize=(15, 5.2), layout="constrained")
-    axes = fig.subplots(1, 3)
+    fig, axes = _slice_figure(robot)
     vmin, vmax = floor - T_BELOW, floor + T_ABOVE
     image = None
     for ax, (fixed, drawn, u, v, t) in zip(axes, wrench_slices(robot, centre, step, mass)):
@@ -103,10 +128,9 @@ def figure_wrench_workspace(robot, *, floor: float = 5.0, path=None, step: float
         ax.set_aspect("equal")
         ax.set_title(f"{_panel_title(fixed, centre[fixed])}: {100 * np.mean(t >= floor):.0f} % "
                      f"held at >= {floor:g} N")
-    bar = fig.colorbar(image, ax=list(axes), shrink=0.9)
+    bar = fig.colorbar(image, ax=list(axes), shrink=0.9, pad=0.01)
     bar.set_label("t* (N)")
-    if path is not None and len(path):
-        axes[0].legend(loc="upper right", fontsize=8)
+    _path_legend(fig, path)
     fig.suptitle((title or f"{robot.name}: wrench-feasible workspace of the level platform "
                            f"({mass:g} kg at its centre, moments about the centre)")
                  + f"\nt* = largest achievable minimum cable tension; black line: t* = "
@@ -128,6 +152,27 @@ def interference_slices(robot, centre, step: float, d_u):
     return out
 
 
+def margin_norm(margins):
+    """The colour scale of margins (m, arrays) in mm: 0 at the middle (yellow), the most
+    negative margin red and the largest green, each side scaled on its own, so that a few mm
+    of margin on one side is not washed out by tens on the other."""
+    from matplotlib.colors import TwoSlopeNorm
+
+    lo = min(float(np.min(m)) for m in margins) * 1000.0
+    hi = max(float(np.max(m)) for m in margins) * 1000.0
+    return TwoSlopeNorm(0.0, vmin=min(lo, -MIN_MARGIN_SPAN), vmax=max(hi, MIN_MARGIN_SPAN))
+
+
+def margin_ticks(norm) -> np.ndarray:
+    """Colour bar ticks (mm) for margin_norm's scale: a few round values on each side of 0,
+    each side by its own step (one locator over both would leave a short side bare)."""
+    from matplotlib.ticker import MaxNLocator
+
+    ticks = np.concatenate([MaxNLocator(4).tick_values(norm.vmin, 0.0),
+                            MaxNLocator(4).tick_values(0.0, norm.vmax)])
+    return np.unique(ticks[(ticks >= norm.vmin) & (ticks <= norm.vmax)])
+
+
 def figure_interference_workspace(robot, *, d_u, path=None, step: float = 0.05,
                                   title: str | None = None) -> Figure:
     """Three slices of the box coloured by the smallest margin d - d_u (mm) over the watched
@@ -135,15 +180,15 @@ def figure_interference_workspace(robot, *, d_u, path=None, step: float = 0.05,
     within its d_u; the pairs that do are listed under each slice with their least distance."""
     centre = slice_centre(robot, path)
     d_u = np.broadcast_to(np.asarray(d_u, dtype=float), (robot.num_pairs,))
-    fig = Figure(figsize=(15, 5.6), layout="constrained")
-    axes = fig.subplots(1, 3)
+    fig, axes = _slice_figure(robot, extra_height=0.4)
+    slices = interference_slices(robot, centre, step, d_u)
+    norm = margin_norm([s[5] for s in slices])
     image = None
-    for ax, (fixed, drawn, u, v, dmin, margin, _, d) in zip(
-            axes, interference_slices(robot, centre, step, d_u)):
+    for ax, (fixed, drawn, u, v, dmin, margin, _, d) in zip(axes, slices):
         # The margin d - d_u of the closest pair (per pair's own d_u): red within, green
-        # beyond, saturated at MARGIN_SPAN so the boundary stands out.
-        image = ax.pcolormesh(u, v, 1000 * margin, cmap="RdYlGn", vmin=-MARGIN_SPAN,
-                              vmax=MARGIN_SPAN, shading="nearest")
+        # beyond, each side scaled to the slices' own extremes (margin_norm).
+        image = ax.pcolormesh(u, v, 1000 * margin, cmap="RdYlGn", norm=norm,
+                              shading="nearest")
         if margin.min() < 0 < margin.max():
             ax.contour(u, v, margin, levels=[0.0], colors="black", linewidths=1.6)
         _draw_path(ax, path, drawn)
@@ -157,12 +202,13 @@ def figure_interference_workspace(robot, *, d_u, path=None, step: float = 0.05,
         ax.set_aspect("equal")
         ax.set_title(f"{_panel_title(fixed, centre[fixed])}: {100 * np.mean(margin >= 0):.0f} % "
                      "interference-free")
-    bar = fig.colorbar(image, ax=list(axes), shrink=0.9)
+    bar = fig.colorbar(image, ax=list(axes), shrink=0.9, pad=0.01)
     du_text = (f"{1000 * d_u[0]:.0f} mm" if np.all(d_u == d_u[0])
                else f"{1000 * d_u.min():.0f}-{1000 * d_u.max():.0f} mm per pair")
-    bar.set_label(f"smallest margin d - d_u over the pairs (mm; +-{MARGIN_SPAN:g} and beyond)")
-    if path is not None and len(path):
-        axes[0].legend(loc="upper right", fontsize=8)
+    bar.set_label("smallest margin d - d_u over the pairs (mm)")
+    ticks = margin_ticks(norm)
+    bar.set_ticks(ticks, labels=[f"{t:g}" for t in ticks])
+    _path_legend(fig, path)
     fig.suptitle((title or f"{robot.name}: interference-free workspace (watched pairs)")
                  + f"\nblack line: some pair reaches its d_u ({du_text}); red side: within "
                    "it (the interference force acts there)")
