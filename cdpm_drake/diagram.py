@@ -278,14 +278,15 @@ LENGTH_INTEGRAL_GAIN = 100.0
 
 def _kinetostatic_params(resolved):
     """The kinetostatic block's parameters (kinetostatics.kinetostatic_params) for the
-    scenario: the controller's tension floor and ceiling, the robot's wrench rows, the cue's
-    logistic."""
+    scenario: the barrier's floor, the controller's ceiling, the robot's wrench rows, the
+    cue's logistic."""
     from .kinetostatics import kinetostatic_params, wrench_rows
 
     scenario, robot = resolved.scenario, resolved.robot
     c, f = scenario.controller, scenario.safety_filter.kinetostatic_force
     return kinetostatic_params(
-        robot, floor=float(c.tension_floor), ceiling=float(c.max_tension),
+        robot, floor=float(scenario.safety_filter.kinetostatic_floor),
+        ceiling=float(c.max_tension),
         rows=wrench_rows(robot), barrier=True, t_l=f.t_l, t_u=f.t_u, F_u=f.F_u, eps=f.eps,
         force=f.enabled, a_brake=_filter_braking(resolved),
         time_step=resolved.time_step, ripple=RIPPLE)

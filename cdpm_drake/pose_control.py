@@ -470,9 +470,10 @@ def tension_tick(reels, attachments, params, x, out):
     cable 7 of exp2's robot slack for 0.3 s); down slowly, because a target that drops is
     where slack starts, and where the weakest cable's share of the internal force is small
     the target flips between the statuses' distributions tick by tick (4 N on cable 7 along
-    exp2's boundary under 40 N) and a command that follows rings the platform. status: FEASIBLE, BELOW_FLOOR, CEILING_EXCEEDED,
-    FLOOR_UNREACHABLE, or GENERAL (W rank-deficient: the minimum-norm distribution, nothing
-    chosen, raised to the hard floor); cable the 1-based cable the status names (0: none)."""
+    exp2's boundary under 40 N) and a command that follows rings the platform. status:
+    FEASIBLE, BELOW_FLOOR, CEILING_EXCEEDED, FLOOR_UNREACHABLE, or GENERAL (W rank-deficient:
+    the minimum-norm distribution, nothing chosen, raised to the hard floor); cable the
+    1-based cable the status names (0: none)."""
     m = reels.shape[0]
     EA, floor, ceiling = params[4], params[5], params[6]
     step, max_change, warmup = params[7], params[8] * params[7], params[9]

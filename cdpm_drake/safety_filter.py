@@ -21,8 +21,8 @@ barrier never asks for more than the acceleration limit. Where h < 0 (a margin a
 a start inside d_min, a hand force that changed) the barrier asks for a slow return instead,
 grad h . u >= min(gamma |h| / T, g v_return). A barrier that jumps (an estimate that moves
 with the platform's ringing, a hand force that changes the kinetostatic margin) would ask for
-a step of the command: each row asks at most g a_max T more than the previous command gave
-it, so that a jump is met by braking at the acceleration limit, not by a jerk.
+a step of the command: each row asks at most 0.9 g a_max T more than the previous command
+gave it, so that a jump is met by braking near the acceleration limit, not by a jerk.
 
 The barriers: every watched pair's distance above its d_min (signed: a pair the interference
 block has seen cross counts negative; the gradient by the envelope theorem,
@@ -79,8 +79,12 @@ BIND_TEXT = ((BIND_PAIR, "cable pairs"), (BIND_BOX, "workspace box"),
 # At most this many cutting planes of the speed and acceleration balls per solve: each cuts
 # the violation of the last solution; 12 leave it below 1e-9 m/s in every case measured.
 MAX_CUTS = 12
-# The speed the platform slows to while a margin is lost, m/s.
+# The share of the acceleration limit a barrier's demand may grow by in a tick.
+RAMP_SHARE = 0.9
+# The speed the platform slows to while a margin is lost by more than LOST_DEPTH of its
+# travel, m/s and m.
 LOST_SPEED = 0.05
+LOST_DEPTH = 0.001
 # The braking curve of a barrier assumes this share of a_brake, the ramp allows all of it:
 # the curve is exact only for a barrier whose gradient does not change, and a pair's does as
 # the closest points slide along the cables (a 5 N push on crossing_4cable overshot its d_min
@@ -116,8 +120,10 @@ def pair_barrier(reels, attachments, i, j, p, R, grad):
     Bi = np.empty(3)
     Bj = np.empty(3)
     for r in range(3):
-        Rbi = R[r, 0] * attachments[i, 0] + R[r, 1] * attachments[i, 1] + R[r, 2] * attachments[i, 2]
-        Rbj = R[r, 0] * attachments[j, 0] + R[r, 1] * attachments[j, 1] + R[r, 2] * attachments[j, 2]
+        Rbi = Rbj = 0.0
+        for c in range(3):
+            Rbi += R[r, c] * attachments[i, c]
+            Rbj += R[r, c] * attachments[j, c]
         grad[r] = Rbi  # R b_i, R b_j kept in grad's slots until the end
         grad[3 + r] = Rbj
         Bi[r] = p[r] + Rbi
@@ -169,15 +175,19 @@ def _add_row(C, d, kind, count, grad, n, rhs, k):
 
 
 @_jit
-def _add_barrier(C, d, kind, lost, count, grad, n, rhs, h, h_next, k, prev, ramp, T):
+def _add_barrier(C, d, kind, lost, deep, count, grad, n, rhs, h, h_next, k, prev, ramp, T):
     """A barrier's row on the translation, grad_v . v >= rhs, asking at most `ramp` more
     than the previous command gave it (module docstring), but never letting a margin h >= 0
     go in one tick (h_next: the margin after a tick at the previous command; as the virtual
     wall's cap wins over the acceleration limit)."""
     lost[count] = h < 0.0
-    trans = 0.0
+    trans = g2 = 0.0
     for c in range(3):
         trans += grad[c] * prev[c]
+        g2 += grad[c] * grad[c]
+    # Lost by more than LOST_DEPTH of the platform's travel (h / |grad_v h|): not a tick's
+    # round-off at the barrier but a margin really gone.
+    deep[count] = h < -LOST_DEPTH * math.sqrt(g2)
     for c in range(3, 6):
         grad[c] = 0.0
     rhs = min(rhs, trans + ramp)
@@ -223,16 +233,18 @@ def filter_tick(reels, attachments, pi, pj, d_min, bounds, params, x, out):
     d = np.empty(rows)
     kind = np.empty(rows, dtype=np.int64)
     lost = np.zeros(rows, dtype=np.bool_)  # a barrier whose margin is already lost (h < 0)
+    deep = np.zeros(rows, dtype=np.bool_)  # ... by more than LOST_DEPTH
     grad = np.empty(6)
     count = 0
-    # A barrier may ask its rate to change by at most a_max T a tick (per unit of its
-    # translation gradient): always feasible within the acceleration limit, and as much as
-    # the command asked for may change in a tick (the admittance's command is limited to it
-    # too). A smaller ramp (a_brake) let a hand that pushes into a barrier accelerate the
-    # approach faster than the filter could take it back, and the command cycled between
-    # braking and re-accelerating at ~15 Hz (10 N across exp3's pair 1-3 on the dynamic
-    # plant: the platform rang, 716 slack ticks).
-    ramp = params[F_A_MAX] * T
+    # A barrier may ask its rate to change by at most RAMP_SHARE a_max T a tick (per unit of
+    # its translation gradient): feasible within the acceleration limit (all of it would make
+    # the row tangent to the acceleration ball, a single point the cutting planes miss), and
+    # about as much as the command asked for may change in a tick (the admittance's command
+    # is limited to a_max T too). A smaller ramp (a_brake) let a hand that pushes into a
+    # barrier accelerate the approach faster than the filter could take it back, and the
+    # command cycled between braking and re-accelerating at ~15 Hz (10 N across exp3's pair
+    # 1-3 on the dynamic plant: the platform rang, 716 slack ticks).
+    ramp = RAMP_SHARE * params[F_A_MAX] * T
     smallest = math.inf
     # Only barriers that could bind this tick: the most a velocity within the speed limit can
     # take off a margin is g v_max.
@@ -262,7 +274,7 @@ def filter_tick(reels, attachments, pi, pj, d_min, bounds, params, x, out):
         for c in range(3):
             grad[c] *= sign
             trans += grad[c] * prev[c]
-        count = _add_barrier(C, d, kind, lost, count, grad, n,
+        count = _add_barrier(C, d, kind, lost, deep, count, grad, n,
                              trans - rate + (h - h1) / T, h, h1, BIND_PAIR, prev, gv * ramp, T)
     for axis in range(3 if params[F_BOX] != 0.0 else 0):
         for side in range(2):
@@ -273,7 +285,7 @@ def filter_tick(reels, attachments, pi, pj, d_min, bounds, params, x, out):
             for c in range(6):
                 grad[c] = 0.0
             grad[axis] = 1.0 if side == 0 else -1.0
-            count = _add_barrier(C, d, kind, lost, count, grad, n, -rate, h,
+            count = _add_barrier(C, d, kind, lost, deep, count, grad, n, -rate, h,
                                  h + T * grad[axis] * prev[axis], BIND_BOX, prev, ramp, T)
     kappa_used = math.nan
     if params[F_KINETOSTATIC] != 0.0 and math.isfinite(kappa):
@@ -282,8 +294,9 @@ def filter_tick(reels, attachments, pi, pj, d_min, bounds, params, x, out):
         for c in range(3):
             grad[c] = gk[c]
         k_next = kappa + T * (gk[0] * prev[0] + gk[1] * prev[1] + gk[2] * prev[2])
-        count = _add_barrier(C, d, kind, lost, count, grad, n, -barrier_rate(kappa, gv, params),
-                             kappa, k_next, BIND_KINETOSTATIC, prev, gv * ramp, T)
+        count = _add_barrier(C, d, kind, lost, deep, count, grad, n,
+                             -barrier_rate(kappa, gv, params), kappa, k_next,
+                             BIND_KINETOSTATIC, prev, gv * ramp, T)
         speed = math.sqrt(prev[0] * prev[0] + prev[1] * prev[1] + prev[2] * prev[2])
         if ray < math.inf and speed > 0.0:
             # The look ahead (kinetostatics.kinetostatic_tick): the margin is lost `ray` m
@@ -294,16 +307,18 @@ def filter_tick(reels, attachments, pi, pj, d_min, bounds, params, x, out):
                 grad[c] = -prev[c] / speed
                 along += prev[c] / speed * prev[c]
             cap = _face_cap(ray, params[F_A_BRAKE], T)
-            count = _add_barrier(C, d, kind, lost, count, grad, n, -max(cap, along - ramp),
-                                 ray, ray - T * along, BIND_KINETOSTATIC, prev, 1e300, T)
+            count = _add_barrier(C, d, kind, lost, deep, count, grad, n,
+                                 -max(cap, along - ramp), ray, ray - T * along,
+                                 BIND_KINETOSTATIC, prev, 1e300, T)
     base = count
-    # While a margin is lost the platform is at a limit its model says it should not be at
-    # (a hand force that changed, a kink of the kinetostatic margin): it slows to LOST_SPEED
-    # there (braking at the acceleration limit), where a gradient that turns from one tick to
-    # the next cannot swing the command about.
+    # While a margin is lost (by more than a tick's round-off) the platform is at a limit its
+    # model says it should not be at (a hand force that changed, a kink of the kinetostatic
+    # margin): it slows to LOST_SPEED there (braking at the acceleration limit), where a
+    # gradient that turns from one tick to the next cannot swing the command about (40 N
+    # across exp3's pair 5-7: 2885 slack ticks in 10 s before, 58 with).
     speed_cap = v_max
     for r in range(base):
-        if lost[r]:
+        if deep[r]:
             prev_speed = math.sqrt(prev[0] * prev[0] + prev[1] * prev[1] + prev[2] * prev[2])
             speed_cap = min(v_max, max(LOST_SPEED, prev_speed - a_max * T))
             break

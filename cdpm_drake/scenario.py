@@ -178,13 +178,14 @@ class Controller:
     # The hard floor of every cable's tension, N: no cable is ever commanded below it. Where
     # the ceiling allows no more, the ceiling gives way (a cable above max_tension, logged as
     # tension_status 3); where the pose itself allows no more (t* < tension_floor), the weak
-    # cables are raised to it (status 4); and the safety filter keeps the platform where a
-    # distribution between tension_floor and max_tension holds its weight and the measured
-    # hand force (the kinetostatic limit), so that neither happens. 3 N: on the dynamic plant
-    # the true tensions ring about 1 N around the target at the platform's lightly damped
-    # mode, which the encoders do not see (README, "Full pose and tension control"), so a
-    # cable commanded at 1 N goes slack; 3 N leaves that ripple twice over.
-    # 0 < tension_floor <= min_tension.
+    # cables are raised to it (status 4); the safety filter keeps the platform where the
+    # cables can hold it (safety_filter.kinetostatic_floor), so the second never lasts.
+    # 5 N: on the dynamic plant the true tensions ring around their target at the platform's
+    # lightly damped modes, which the encoders do not see: ~1 N at rest (README, "Full pose
+    # and tension control"), up to ~4 N with a hand pushing 10-40 N against a barrier
+    # (scripts/adversarial_benchmark.py: at 3 N, cube_8cable pushed at 10 N across its
+    # swapped pair had 1497 slack ticks in 10 s; at 5 N none). 0 < tension_floor <=
+    # min_tension.
     tension_floor: float = 5.0
 
 
@@ -198,12 +199,12 @@ class KinetostaticForce:
     argument t_c is the largest minimum cable tension the pose allows under
     controller.max_tension with the platform's weight and the measured hand force (t*
     where the ceiling does not bind); the safety filter stops the platform where t_c reaches
-    controller.tension_floor."""
+    safety_filter.kinetostatic_floor (plus its margin for the hand's force)."""
 
     # Off keeps the barrier (the safety filter) without the cue.
     enabled: bool = True
     # t_c at which the cue is F_u - eps, N (and stronger below): half a newton above the
-    # default tension_floor, where the filter stops the platform.
+    # default safety_filter.kinetostatic_floor, where the filter stops an unpushed platform.
     t_l: float = 3.5
     # t_c at which it is eps, N; none above (as the paper's force is none above d_u). 5 N:
     # paper_7cable's ceiling keeps t_c at 5.4 N at experiment 1's start and 3.2 N along
@@ -220,10 +221,9 @@ class SafetyFilter:
     """Beyond the paper: a block between the limits and the Jacobian mapping that commands,
     every tick, the twist closest to the admittance's (weighted least squares) that keeps
     every watched cable pair at or above its d_min, the platform in its workspace box, and its
-    weight and the measured hand force holdable with every cable between
-    controller.tension_floor and controller.max_tension; within the speed and acceleration
-    limits (discrete-time control barrier functions, safety_filter.py). Off: the paper's
-    Fig. 5 exactly."""
+    weight and the measured hand force holdable with every cable between kinetostatic_floor
+    and controller.max_tension; within the speed and acceleration limits (discrete-time
+    control barrier functions, safety_filter.py). Off: the paper's Fig. 5 exactly."""
 
     enabled: bool = True
     # Per tick, a barrier may lose at most this fraction of its margin (h(x + T u) >=
@@ -234,6 +234,13 @@ class SafetyFilter:
     return_speed: float = 0.02
     # The kinetostatic barrier (and its block): off leaves the pairs and the box.
     kinetostatic: bool = True
+    # The floor of the kinetostatic barrier, N: the platform stays where a distribution with
+    # every cable between this (plus 0.1 N per newton of measured hand force: the tensions
+    # ring more under a harder hand) and controller.max_tension holds its weight and the hand.
+    # Below controller.tension_floor, which the tension target keeps anyway (letting the
+    # ceiling give way near the barrier): at 5 N the barrier would sit at experiment 1's
+    # start, where paper_7cable's cables can have at most 5.4 N under a 100 N ceiling.
+    kinetostatic_floor: float = 3.0
     kinetostatic_force: KinetostaticForce = dataclasses.field(
         default_factory=KinetostaticForce)
 
@@ -788,6 +795,11 @@ def _check_safety(scenario: Scenario) -> None:
                             f"controller.max_tension = {c.max_tension!r} N, got "
                             f"{c.tension_floor!r}")
     f = scenario.safety_filter
+    _finite_number(f.kinetostatic_floor, "safety_filter.kinetostatic_floor")
+    if not 0 < float(f.kinetostatic_floor) < float(c.max_tension):
+        raise ScenarioError(f"safety_filter.kinetostatic_floor must be > 0 N and below "
+                            f"controller.max_tension = {c.max_tension!r} N, got "
+                            f"{f.kinetostatic_floor!r}")
     _finite_number(f.gamma, "safety_filter.gamma")
     if not 0 < float(f.gamma) <= 1:
         raise ScenarioError(f"safety_filter.gamma must lie in (0, 1] (the share of a "

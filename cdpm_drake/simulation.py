@@ -350,6 +350,10 @@ def assemble_log(time_column, signals: dict, scenario: Scenario | ResolvedScenar
     if "tension_target" in log:  # tension control: its target's floor and ceiling
         log["controller_min_tension"] = np.array(float(scenario.controller.min_tension))
         log["controller_max_tension"] = np.array(float(scenario.controller.max_tension))
+    # The hard floor the safety filter keeps each pair at (d_min; logged whether or
+    # not the filter ran, like d_l and d_u).
+    if resolved.d_min is not None and len(resolved.d_min) == P:
+        log["d_min"] = np.asarray(resolved.d_min, dtype=float)
     log["reels"] = robot.reels.copy()
     log["attachments"] = robot.attachments.copy()
     log["workspace_lower"] = robot.workspace.lower.copy()

@@ -154,16 +154,19 @@ def test_the_smallest_grid_step_suggested_fits(capsys, valid_spec, write_robot):
 # Values per tick of experiment 2's log (docs/LOG_FORMAT.md): 3-vectors p, F_H, F_int, F_d,
 # velocity_admittance, velocity, F_measured; per cable (7) reel_velocity, lengths_commanded,
 # lengths; per watched pair (21) pair_distances, active, crossed; and the time.
-EXP2_VALUES = 7 * 3 + 3 * 7 + 3 * 21 + 1
+# The safety filter, the kinetostatic limit and the model monitor add velocity_limited and
+# F_kin (3 each), filter_status, filter_binding, pair_margin, kappa, t_c, model_status and
+# t_star_hand (1 each) and model_residual per cable (7).
+EXP2_VALUES = 7 * 3 + 3 * 7 + 3 * 21 + 1 + (2 * 3 + 7 + 7)
 # The dynamic plant's ground truth adds tensions and slack per cable, p_true and rpy_true,
 # logged with their own time.
 EXP2_DYNAMIC_VALUES = EXP2_VALUES + 2 * 7 + 3 + 3 + 1
 
 
 @pytest.mark.parametrize("overlay, values, size", [
-    # 5e11 ticks x 1,696 bytes (106 values, twice) = 8.48e14 bytes; x 2,032 = 1.02e15.
-    ("{duration: 1e9}", EXP2_VALUES, "848 TB"),
-    ("{duration: 1e9, plant: !DynamicReels {}}", EXP2_DYNAMIC_VALUES, "1.02 PB")])
+    # 5e11 ticks x 2,016 bytes (126 values, twice) = 1.008e15 bytes; x 2,352 = 1.18e15.
+    ("{duration: 1e9}", EXP2_VALUES, "1.01 PB"),
+    ("{duration: 1e9, plant: !DynamicReels {}}", EXP2_DYNAMIC_VALUES, "1.18 PB")])
 def test_a_duration_whose_log_cannot_fit_is_refused_naming_the_size(tmp_path, capsys,
                                                                     monkeypatch, overlay,
                                                                     values, size):
@@ -204,9 +207,9 @@ def test_cdpm_run_refuses_such_a_duration_before_it_greets_the_bridge(tmp_path, 
                              f"{{duration: 1e9, plant: !HardwareReels {{port: {port}, "
                              "startup_timeout: 0.2}}")
     assert code == 1
-    row = 8 * (EXP2_VALUES - 1 + 4)
+    row = 8 * (EXP2_VALUES - 1 + 4)  # 129 values, 2,064 bytes held twice: 1.03e15 bytes
     assert (f"cdpm run: error: duration 1e+09 s is 500,000,000,001 ticks, whose log needs "
-            f"{2 * row * 500_000_000_001 / 1e12:.3g} TB ({2 * row:,} bytes a tick") in err, err
+            f"{2 * row * 500_000_000_001 / 1e15:.3g} PB ({2 * row:,} bytes a tick") in err, err
     assert "no valid status" not in err
     assert not (tmp_path / "runs").exists()
 

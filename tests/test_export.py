@@ -10,7 +10,8 @@ import numpy as np
 import pytest
 
 from cdpm_drake.cli import main
-from cdpm_drake.views.log_csv import COLUMNS, TENSION_STATUS, csv_columns, log_to_csv
+from cdpm_drake.views.log_csv import (CABLE_NUMBER, COLUMNS, FILTER_BINDING, FILTER_STATUS,
+                                      MODEL_STATUS, TENSION_STATUS, csv_columns, log_to_csv)
 from helpers_synthetic_log import synthetic_log
 
 
@@ -120,15 +121,22 @@ def _documented_per_tick_keys():
     return keys
 
 
+# The keys the doc gives no unit: codes, bits and cable numbers, labelled with their meaning.
+CODES = {"tension_status": TENSION_STATUS, "tension_cable": CABLE_NUMBER,
+         "filter_status": FILTER_STATUS, "filter_binding": FILTER_BINDING,
+         "model_status": MODEL_STATUS}
+
+
 def test_every_documented_per_tick_key_has_its_unit_in_the_csv():
-    # The doc's units, spelled as the CSV spells them: a bool is a flag, 0/1; tension_status
-    # (no unit in the doc) is a status code.
+    # The doc's units, spelled as the CSV spells them: a bool is a flag, 0/1; a key with no
+    # unit in the doc is a status code (CODES).
     keys = _documented_per_tick_keys()
     assert {"pair_distances_true", "crossed_true", "rpy", "t_star", "tension_status",
-            "lengths_commanded", "omega"} <= keys.keys()
+            "lengths_commanded", "omega", "filter_status", "F_kin", "kappa",
+            "model_residual"} <= keys.keys()
     for key, unit in keys.items():
         assert key in COLUMNS, key
-        expected = {"bool": "0/1", "": TENSION_STATUS}.get(unit, unit)
+        expected = {"bool": "0/1", "": CODES.get(key)}.get(unit, unit)
         assert COLUMNS[key][0] == expected, (key, unit, COLUMNS[key])
 
 
@@ -144,7 +152,14 @@ def _full_pose_dynamic_log():
                        ("t_star", 1), ("tensions", m), ("p_true", 3), ("rpy_true", 3),
                        ("pair_distances_true", P)):
         log[key] = rng.uniform(-1.0, 1.0, (T, width))
+    for key, width in (("velocity_limited", 3), ("pair_margin", 1), ("F_kin", 3),
+                       ("kappa", 1), ("t_c", 1), ("t_star_hand", 1), ("model_residual", m)):
+        log[key] = rng.uniform(-1.0, 1.0, (T, width))
     log["tension_status"] = rng.integers(0, 3, (T, 1)).astype(float)
+    log["tension_cable"] = rng.integers(0, m + 1, (T, 1)).astype(float)
+    log["filter_status"] = rng.integers(0, 4, (T, 1)).astype(float)
+    log["filter_binding"] = rng.integers(0, 32, (T, 1)).astype(float)
+    log["model_status"] = np.zeros((T, 1))
     for key, width in (("slack", m), ("crossed_true", P)):
         log[key] = rng.uniform(size=(T, width)) < 0.5
     for key in ("p", "F_H", "F_measured", "F_int", "F_wall", "F_d", "velocity_admittance",
@@ -185,11 +200,13 @@ def test_every_column_holds_the_log_value_its_name_says():
         if values.dtype == bool:
             assert unit == "0/1", name
         seen.add(key)
-    # Every per-tick key is exported: 200 columns for 7 cables and 21 pairs (25 of time and
+    # Every per-tick key is exported: 221 columns for 7 cables and 21 pairs (25 of time and
     # the eight 3-vectors, 8 x 7 per cable, 5 x 21 per pair, 4 x 3 orientations and vectors,
-    # t_star and tension_status).
+    # t_star and tension_status; and the safety filter's and the monitor's: tension_cable,
+    # velocity_limited and F_kin (2 x 3), filter_status, filter_binding, pair_margin, kappa,
+    # t_c, t_star_hand, model_status (7 x 1), model_residual (7)).
     assert seen == set(_documented_per_tick_keys()) - {"tick", "wall", "compute"}
-    assert len(header) == 25 + 8 * 7 + 5 * 21 + 4 * 3 + 2 == 200
+    assert len(header) == 25 + 8 * 7 + 5 * 21 + 4 * 3 + 2 + 1 + 6 + 7 + 7 == 221
     # The names the issue asked for, verbatim.
     for name in ("pair_distances_true_1-3 [m]", "crossed_true_5-7 [0/1]", "rpy_roll [rad]",
                  "rpy_true_yaw [rad]", "omega_z [rad/s]", "tensions_7 [N]", "slack_1 [0/1]",
@@ -204,7 +221,8 @@ def test_every_column_holds_the_log_value_its_name_says():
 
 def test_cdpm_export_of_a_full_pose_dynamic_run_names_every_column(tmp_path, capsys):
     # A real log of the full pose with tension control on the dynamic plant, exported without
-    # --csv (CSV is the default and only format): 200 columns, each with its unit.
+    # --csv (CSV is the default and only format): the 221 columns counted in the synthetic
+    # test above (a full-pose dynamic run logs every per-tick key), each with its unit.
     run = tmp_path / "run"
     assert main(["simulate", "exp2_interaction", "--duration", "0.01", "--out", str(run),
                  "--no-progress", "--scenario-text",
@@ -212,8 +230,11 @@ def test_cdpm_export_of_a_full_pose_dynamic_run_names_every_column(tmp_path, cap
                 ) == 0
     capsys.readouterr()
     assert main(["export", str(run)]) == 0
-    assert "(6 rows, one per tick; 200 columns)" in capsys.readouterr().out
+    assert "(6 rows, one per tick; 221 columns)" in capsys.readouterr().out
     header, rows = _read((run / "log.csv").read_text())
+    assert len(header) == 221
+    # The summary counts columns from the header line, so no name may hold a comma.
+    assert not [name for name in header if "," in name]
     assert all(re.search(r" \[[^\]]+\]$", name) for name in header), header
     k13 = [tuple(p) for p in np.load(run / "log.npz")["pairs"]].index((1, 3))
     with np.load(run / "log.npz") as log:

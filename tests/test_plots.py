@@ -403,10 +403,14 @@ def test_views_benchmark_prints_its_table():
 
 
 def _dynamic(log):
-    """`log` with a dynamic plant's ground truth (tensions, slack, p_true, rpy_true)."""
+    """`log` with a dynamic plant's ground truth (tensions, slack, p_true, rpy_true) and the
+    safety filter's signals (passing everything, margins of 3 N and 2 mm)."""
     T = len(log["time"])
     return dict(log, tensions=np.full((T, 7), 10.0), slack=np.zeros((T, 7), dtype=bool),
-                p_true=log["p"].copy(), rpy_true=np.zeros((T, 3)))
+                p_true=log["p"].copy(), rpy_true=np.zeros((T, 3)),
+                filter_status=np.zeros((T, 1)), filter_binding=np.zeros((T, 1)),
+                velocity_limited=log["velocity"].copy(), kappa=np.full((T, 1), 3.0),
+                pair_margin=np.full((T, 1), 0.002))
 
 
 def _titles(fig):
@@ -479,8 +483,8 @@ def test_an_interrupted_run_is_marked_like_a_fault():
             star = [line for line in fig.axes[0].get_lines()
                     if line.get_gid() == "interrupted"][0]
             np.testing.assert_allclose(np.array(star.get_data_3d()).ravel(), log["p"][-1])
-    # distances 1, forces 3, cables 2, timing 2, tensions 2, pose error 2.
-    assert time_axes == 12
+    # distances 1, forces 3, cables 2, timing 2, tensions 2, pose error 2, safety 4.
+    assert time_axes == 16
 
 
 def test_cables_slack_at_the_same_time_each_have_their_row():

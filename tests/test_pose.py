@@ -143,8 +143,10 @@ def test_the_target_balances_weight_hand_and_inertia_with_the_largest_floor_allo
     p = np.array([1.6, 2.2, 1.1])
     R = rotation_from_rpy([0.02, -0.01, 0.03])
     F = np.array([3.0, -1.5, 2.0])
+    # The commanded acceleration the target takes in: the command against its low-passed
+    # value (the memory's v_prev slot), over pose_control.ACCELERATION_TIME.
     v_prev, v = np.array([0.1, 0.0, 0.0]), np.array([0.1, 0.002, -0.001])
-    a = (v - v_prev) / 0.002
+    a = (v - v_prev) / pc.ACCELERATION_TIME
     L0 = pose_lengths(ROBOT, p, R)
     status, T_cmd, _, t_star, _ = _tension(p, R, F, np.zeros(M), L0, np.full(M, 20.0), v=v,
                                            v_prev=v_prev, ticks=1.0)

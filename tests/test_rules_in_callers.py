@@ -97,7 +97,10 @@ def _beyond_end_scenario(tmp_path, z0, force_z, duration):
         name="beyond_end", robot=str(path), initial_position=[0.0, 0.0, z0], duration=duration,
         admittance=Admittance(mass=1.0, damping=10.0), sensor=Sensor(filter_window=1),
         interference=Interference(default=Logistic(**BEYOND_PARAMS)),
-        operator=ScriptedOperator(times=[0.0], forces=[[0.0, 0.0, force_z]]))
+        operator=ScriptedOperator(times=[0.0], forces=[[0.0, 0.0, force_z]]),
+        # The crossing rule of the paper's diagram: the safety filter would hold the pair at
+        # its d_min (d_l) before the platform got through.
+        safety_filter=SafetyFilter(enabled=False), model_monitor=ModelMonitor(enabled=False))
 
 
 def test_lines_meeting_beyond_a_cable_end_through_the_diagram_is_not_a_crossing(tmp_path):
@@ -137,7 +140,7 @@ def test_a_real_crossing_is_flagged_pushed_back_at_F_u_and_clipped_by_F_max():
         interference=Interference(default=Logistic(d_l=0.01, d_u=0.025, F_u=0.6, eps=0.1),
                                   F_max=0.45),
         operator=ScriptedOperator(times=[0.0], forces=[[0.0, -4.0, 0.0]]),
-        # The paper's Fig. 5: issue 26's safety filter would stop the push before the crossing.
+        # The paper's Fig. 5: the safety filter would stop the push before the crossing.
         safety_filter=SafetyFilter(enabled=False), model_monitor=ModelMonitor(enabled=False))
     result = simulate(scenario=scenario)
     assert result.error is None, result.error

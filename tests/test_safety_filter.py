@@ -13,8 +13,9 @@ from cdpm_drake.interference import segment_distance
 from cdpm_drake.limits import _face_cap
 from cdpm_drake.pose import rotation_exp
 from cdpm_drake.safety_filter import (BIND_ACCELERATION, BIND_BOX, BIND_KINETOSTATIC,
-                                      BIND_PAIR, STATUS_HOLD, STATUS_MODIFIED, STATUS_NO_RETURN,
-                                      STATUS_PASS, CURVE_SHARE, LOST_SPEED,
+                                      BIND_PAIR, CURVE_SHARE, LOST_DEPTH, LOST_SPEED,
+                                      RAMP_SHARE, STATUS_HOLD, STATUS_MODIFIED,
+                                      STATUS_NO_RETURN, STATUS_PASS,
                                       filter_params, filter_sizes, filter_tick, pair_barrier)
 
 T = 0.002
@@ -110,14 +111,14 @@ def test_a_face_of_the_box_caps_the_speed_towards_it_by_the_braking_curve(gap):
     # Moving at 0.3 m/s along +x with the upper x face `gap` m away: the barrier h = gap
     # (g = 1) allows rate(h) = min(gamma h / T, cap(h)) (the module's definition; cap is the
     # virtual wall's braking curve, limits._face_cap, at CURVE_SHARE of a_brake); the
-    # previous command (at v_d) lets the ramp ask a decrease of a_max T at most, but never
-    # a step through the face (h / T): v_x = min(v_d, max(rate, v_d - a_max T), h / T).
+    # previous command (at v_d) lets the ramp ask a decrease of RAMP_SHARE a_max T at most, but
+    # never a step through the face (h / T): v_x = min(v_d, max(rate, v_d - ramp), h / T).
     robot = _robot()
     p = robot.workspace.center.copy()
     p[0] = robot.workspace.upper[0] - gap
     v_d = np.array([0.3, 0.0, 0.0])
     rate = min(GAMMA * gap / T, _face_cap(gap, CURVE_SHARE * A_BRAKE, T))
-    expected = min(0.3, max(rate, 0.3 - A_MAX * T), gap / T)
+    expected = min(0.3, max(rate, 0.3 - RAMP_SHARE * A_MAX * T), gap / T)
     v, status, binding, _ = _filter(robot, v_d=v_d, p=p, v_prev=v_d)
     assert v[0] == pytest.approx(expected, rel=1e-12, abs=1e-15)
     assert v[1] == v[2] == 0.0
@@ -149,7 +150,7 @@ def test_the_kinetostatic_barrier_and_its_look_ahead():
     rate = min(GAMMA * kappa / T, g * _face_cap(kappa / g, CURVE_SHARE * A_BRAKE, T))
     v, status, binding, _ = _filter(robot, v_d=v_d, p=p, v_prev=v_d, kappa=kappa,
                                     grad_kappa=(-g, 0.0, 0.0))
-    assert v[0] == pytest.approx(max(rate / g, 0.3 - A_MAX * T), rel=1e-12)
+    assert v[0] == pytest.approx(max(rate / g, 0.3 - RAMP_SHARE * A_MAX * T), rel=1e-12)
     assert binding & BIND_KINETOSTATIC
     # Off: the same inputs pass.
     v, status, _, _ = _filter(robot, v_d=v_d, p=p, v_prev=v_d, kappa=kappa,
@@ -159,7 +160,7 @@ def test_the_kinetostatic_barrier_and_its_look_ahead():
     # the speed along it brakes to the braking curve of 2 cm, a_max T a tick at most.
     v, status, binding, _ = _filter(robot, v_d=v_d, p=p, v_prev=v_d, kappa=5.0,
                                     grad_kappa=(0.0, 0.0, 0.0), ray=0.02)
-    assert v[0] == pytest.approx(max(_face_cap(0.02, A_BRAKE, T), 0.3 - A_MAX * T),
+    assert v[0] == pytest.approx(max(_face_cap(0.02, A_BRAKE, T), 0.3 - RAMP_SHARE * A_MAX * T),
                                  rel=1e-12)
     assert binding & BIND_KINETOSTATIC
 
@@ -200,7 +201,7 @@ def test_a_pair_barrier_is_met_and_the_command_is_the_weighted_projection():
         # v_prev), asking at most |g| a_max T more than v_prev gave, never a step through.
         h = d - d_min[q]
         rate = barrier_rate(h, np.linalg.norm(grad[:3]), params)
-        ramp = np.linalg.norm(grad[:3]) * A_MAX * T
+        ramp = np.linalg.norm(grad[:3]) * RAMP_SHARE * A_MAX * T
         g = np.empty(6)
         h1 = pair_barrier(robot.reels, robot.attachments, int(i[q]), int(j[q]),
                           p + T * v_prev, np.eye(3), g) - d_min[q]
@@ -216,9 +217,11 @@ def test_a_pair_barrier_is_met_and_the_command_is_the_weighted_projection():
         prog.AddQuadraticCost(np.eye(3), -v_d, z, is_convex=True)
         prog.AddLinearConstraint(g[None, :], [rhs], [np.inf], z)
         cone = np.vstack([np.zeros((1, 3)), np.eye(3)])  # (a, z): |z| <= a
-        # The speed limit; while the margin is lost, LOST_SPEED braked to at a_max.
-        cap = (V_MAX if h >= 0 else
-               min(V_MAX, max(LOST_SPEED, np.linalg.norm(v_prev) - A_MAX * T)))
+        # The speed limit; while the margin is lost (by more than LOST_DEPTH of travel),
+        # LOST_SPEED braked to at a_max.
+        deep = h < -LOST_DEPTH * np.linalg.norm(grad[:3])
+        cap = (min(V_MAX, max(LOST_SPEED, np.linalg.norm(v_prev) - A_MAX * T)) if deep
+               else V_MAX)
         prog.AddLorentzConeConstraint(cone, np.r_[cap, np.zeros(3)], z)
         prog.AddLorentzConeConstraint(cone, np.r_[A_MAX * T, -v_prev], z)
         options = SolverOptions()

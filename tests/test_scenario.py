@@ -435,7 +435,7 @@ _TENSION = "plant: !DynamicReels {{}}\ncontroller: {{pose: full, tension_control
     ("tension_floor: .inf", "controller.tension_floor must be a finite number > 0 N (the "
                             "tension no cable is commanded below), got inf"),
     ("min_tension: 2.5", "controller.min_tension must be a finite number >= "
-                         "controller.tension_floor = 3.0 N, got 2.5"),
+                         "controller.tension_floor = 5.0 N, got 2.5"),
     ("tension_floor: 12.0", "controller.min_tension must be a finite number >= "
                             "controller.tension_floor = 12.0 N, got 10.0"),
     ("max_tension: 10.0", "controller.max_tension must be a finite number above "

@@ -345,9 +345,10 @@ def test_the_eight_cable_estimate_follows_the_true_tensions(cube_push):
     """The dynamic plant's true tensions (logged, never wired to the controller) against the
     controller's estimate, after the 25-tick warm-up: split along the true pose's wrench
     matrix, the internal force (the nullspace part, what the redundant lengths measure; 29-81
-    N in these runs, norm) within 1 N (0.48 and 0.62 N measured; 99 % of the ticks within
-    0.5 N); the whole within 2 N (0.91 and 1.22 N: the rest is the wrench model, the hand
-    force a tick old and the commanded against the true acceleration)."""
+    N in these runs, norm) within 1.25 N (0.98 and 1.00 N measured since the commanded
+    tensions rise at up to 500 N/s: the estimate is a tick behind them; 0.48 and 0.62 N at
+    50 N/s; 99 % of the ticks within 1 N); the whole within 2 N (the rest is the wrench
+    model, the hand force a tick old and the commanded against the true acceleration)."""
     robot, log = cube_push
     internal, error, whole = [], [], []
     for k in range(pc.WARMUP_TICKS, len(log["time"])):
@@ -358,7 +359,7 @@ def test_the_eight_cable_estimate_follows_the_true_tensions(cube_push):
         error.append(np.linalg.norm(N.T @ e))
         whole.append(np.abs(e).max())
     assert min(internal) > 25.0  # an estimate without the internal force would be that far off
-    assert max(error) < 1.0 and np.percentile(error, 99) < 0.5
+    assert max(error) < 1.25 and np.percentile(error, 99) < 1.0
     assert max(whole) < 2.0
 
 

@@ -39,7 +39,8 @@ def build_safety_filter(builder, robot, *, d_min, params, full_pose, time_step):
     ahead), and for the full pose omega_desired (3, rad/s) and R_WP (9: the orientation
     held); outputs velocity_command (3, m/s), omega_command (3, rad/s; the full pose),
     status (1), binding (1), pair_margin (1, m: the smallest watched pair's distance above its
-    d_min), barriers (1), velocity_desired (3, m/s: the input, for the log). Its memory: the twist it commanded last (for the acceleration limit)."""
+    d_min), barriers (1), velocity_desired (3, m/s: the input, for the log). Its memory: the
+    twist it commanded last (for the acceleration limit)."""
     P = robot.num_pairs
     s = filter_sizes(P, full_pose)
     reels, attachments = owned(robot.reels), owned(robot.attachments)

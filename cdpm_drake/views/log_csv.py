@@ -19,8 +19,13 @@ from pathlib import Path
 
 import numpy as np
 
-# tension_status's codes (docs/LOG_FORMAT.md), as its column's "unit".
-TENSION_STATUS = "code: 0 floor held/1 floor lowered/2 no redundant cable"
+# The status codes (docs/LOG_FORMAT.md), as their columns' "unit".
+TENSION_STATUS = ("code: 0 floor held/1 floor lowered/2 rank-deficient/3 ceiling exceeded/"
+                  "4 floor unreachable")
+CABLE_NUMBER = "cable: 1..m; 0 none"
+FILTER_STATUS = "code: 0 passed/1 modified/2 lost margins held/3 braking to a hold"
+FILTER_BINDING = ("bits: 1 pairs/2 box/4 kinetostatic/8 speed/16 acceleration")
+MODEL_STATUS = "code: 0 ok/1 slack cable/2 lengths misfit/3 hand unholdable"
 # Per-tick keys in docs/LOG_FORMAT.md's order: (unit, what the columns are).
 # "xyz": three components; "rpy": roll, pitch, yaw; "cables": one per cable; "pairs": one per
 # watched pair; None: one value per tick. The units "0/1" (flags) and TENSION_STATUS (codes)
@@ -52,6 +57,18 @@ COLUMNS = {
     "tension_command": ("N", "cables"),
     "t_star": ("N", None),
     "tension_status": (TENSION_STATUS, None),
+    "tension_cable": (CABLE_NUMBER, None),
+    # The safety filter, its kinetostatic limit, the model monitor (beyond the paper).
+    "velocity_limited": ("m/s", "xyz"),
+    "filter_status": (FILTER_STATUS, None),
+    "filter_binding": (FILTER_BINDING, None),
+    "pair_margin": ("m", None),
+    "F_kin": ("N", "xyz"),
+    "kappa": ("N", None),
+    "t_c": ("N", None),
+    "t_star_hand": ("N", None),
+    "model_status": (MODEL_STATUS, None),
+    "model_residual": ("m", "cables"),
     # The dynamic plant's ground truth.
     "tensions": ("N", "cables"),
     "slack": ("0/1", "cables"),
@@ -61,7 +78,8 @@ COLUMNS = {
     "crossed_true": ("0/1", "pairs"),
 }
 _PARTS = {"xyz": ("x", "y", "z"), "rpy": ("roll", "pitch", "yaw")}
-_INTEGERS = ("0/1", TENSION_STATUS)
+_INTEGERS = ("0/1", TENSION_STATUS, CABLE_NUMBER, FILTER_STATUS, FILTER_BINDING,
+             MODEL_STATUS)
 
 
 def csv_columns(log: Mapping) -> list[tuple[str, np.ndarray]]:

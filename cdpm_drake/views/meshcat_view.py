@@ -5,7 +5,7 @@ workspace box (wireframe), the platform (a box), one cylinder per cable from its
 attachment p + b_i coloured by the distance to its nearest cable (red at or below d_l, red to
 orange inside the band (d_l, d_u], grey above d_u: the interfering pair is red, as in the paper's
 Fig. 9), and the forces from the platform as arrows (blue measured F_H, black interference F_int,
-red resultant F_d, as in Fig. 12), FORCE_SCALE = 0.25 m long per N by default (1 N reaches out of
+red resultant F_d, as in Fig. 12; purple the safety filter's kinetostatic cue F_kin), FORCE_SCALE = 0.25 m long per N by default (1 N reaches out of
 the paper's 0.3 m platform); the scale is written in the scene. Each reel carries its cable's
 number (1..m) and a clock shows the simulated time (s). The text is flat geometry facing the
 default camera, which frames the whole robot (camera_pose).
@@ -39,7 +39,9 @@ GREY = (0.55, 0.55, 0.55)
 # A slack cable (dynamic plant): light, translucent grey, thinner, over any distance colour.
 SLACK_RGBA = (0.85, 0.85, 0.85, 0.35)
 FORCE_RGBA = {"F_H": (0.0, 0.2, 1.0, 1.0), "F_int": (0.05, 0.05, 0.05, 1.0),
-              "F_d": (0.9, 0.0, 0.0, 1.0)}
+              "F_d": (0.9, 0.0, 0.0, 1.0),
+              # The kinetostatic cue (the safety filter, beyond the paper): its own arrow.
+              "F_kin": (0.55, 0.1, 0.75, 1.0)}
 # Used when a log has no logistic parameters (interference disabled): the paper's experiment 1
 # band, so the colours still say how close the cables came.
 DEFAULT_D_L = 0.050  # m
@@ -477,13 +479,14 @@ class CdpmMeshcatView:
 
     def draw(self, p, F_H, F_int, F_d, pair_distances, *, d_l=None, d_u=None,
              sim_time: float | None = None, time: float | None = None, rpy=None,
-             slack=None) -> None:
+             slack=None, F_kin=None) -> None:
         """Draw the platform at p (m), the cables, and the forces F_H, F_int, F_d (N), base
         frame; pair_distances (m) in the order of `pairs`; the clock shows sim_time (s) when
         given. d_l, d_u (m) override the colour band. With `time` (s, from the start of the
         recording) the frame goes into the current Meshcat recording. A dynamic plant's log
         adds the platform's rotation `rpy` (rad; p is then its true position) and which
-        cables are `slack` (drawn light grey)."""
+        cables are `slack` (drawn light grey). F_kin (N): the kinetostatic cue of the safety
+        filter, in purple (hidden when None or zero)."""
         mc = self.meshcat
         if sim_time is not None:
             text = clock_text(sim_time).ljust(CLOCK_SLOTS)
@@ -510,7 +513,8 @@ class CdpmMeshcatView:
                 self._set_visible(self.cable_level_path(i, k),
                                   k == levels[i - 1] and not slack[i - 1], time)
             self._set_visible(self.cable_slack_path(i), slack[i - 1], time)
-        for name, force in (("F_H", F_H), ("F_int", F_int), ("F_d", F_d)):
+        for name, force in (("F_H", F_H), ("F_int", F_int), ("F_d", F_d),
+                            ("F_kin", np.zeros(3) if F_kin is None else F_kin)):
             path = self.force_path(name)
             magnitude = self._pose_along(path, p, _vector(force, name), time)
             shown = magnitude * self.force_scale > _TINY
@@ -526,7 +530,8 @@ class CdpmMeshcatView:
         self.draw(log["p_true"][k] if dynamic else log["p"][k], log["F_H"][k], log["F_int"][k],
                   log["F_d"][k], log["pair_distances"][k], sim_time=float(log["time"][k]),
                   time=time, rpy=log["rpy_true"][k] if dynamic else None,
-                  slack=log["slack"][k] if dynamic else None)
+                  slack=log["slack"][k] if dynamic else None,
+                  F_kin=log["F_kin"][k] if "F_kin" in log else None)
 
 
 # --- Live view and replay ---------------------------------------------------------------------
@@ -534,16 +539,14 @@ class CdpmMeshcatView:
 
 def live_view_callback(view: CdpmMeshcatView):
     """`on_chunk(diagram, context)` for `simulation.simulate` and `realtime.run`: draws the
-    latest tick, from the loggers (log_<key>, diagram.LOGGED) where the diagram has them and
-    from the blocks' output ports otherwise (a real-time run streams to disk instead);
-    signals the diagram lacks are drawn as zero."""
-    from ..diagram import LOGGED, block_output_port
-
-    sources = {key: (system, port) for key, system, port in LOGGED}
+    latest tick from a logger of its own (log_<key>) where the diagram has one, the block
+    output port that logs it (diagram.logged_source) otherwise, and the dynamic plant's ground
+    truth; signals the diagram lacks are drawn as zero."""
+    from ..diagram import logged_source
 
     def latest(diagram, context, key, width):
         name = f"log_{key}"
-        if diagram.HasSubsystemNamed(name):
+        if diagram.HasSubsystemNamed(name):  # a logger of its own
             data = diagram.GetSubsystemByName(name).FindLog(context).data()
             return data[:, -1] if data.shape[1] else np.zeros(width)
         if key in ("p_true", "rpy_true", "slack"):  # the dynamic plant's, logged inside it
@@ -551,9 +554,8 @@ def live_view_callback(view: CdpmMeshcatView):
 
             truth = latest_ground_truth(diagram, context)
             return None if truth is None else truth[key]
-        system_name, port_name = sources[key]
-        if diagram.HasSubsystemNamed(system_name):
-            port = block_output_port(diagram, system_name, port_name)
+        port = logged_source(diagram, key)
+        if port is not None:
             return port.Eval(port.get_system().GetMyContextFromRoot(context))
         return np.zeros(width)
 
@@ -561,11 +563,11 @@ def live_view_callback(view: CdpmMeshcatView):
         row = {key: latest(diagram, context, key, width)
                for key, width in (("p", 3), ("F_H", 3), ("F_int", 3), ("F_d", 3),
                                   ("pair_distances", len(view.pairs)), ("p_true", 3),
-                                  ("rpy_true", 3), ("slack", view.num_cables))}
+                                  ("rpy_true", 3), ("slack", view.num_cables), ("F_kin", 3))}
         dynamic = row["p_true"] is not None
         view.draw(row["p_true"] if dynamic else row["p"], row["F_H"], row["F_int"], row["F_d"],
                   row["pair_distances"], sim_time=context.get_time(), rpy=row["rpy_true"],
-                  slack=row["slack"])
+                  slack=row["slack"], F_kin=row["F_kin"])
 
     return on_chunk
 

@@ -36,30 +36,35 @@ _NEEDS = {
     # The dynamic plant's ground truth (plant: !DynamicReels).
     "tensions": ("time", "tensions", "slack"),
     "pose_error": ("time", "p", "p_true", "rpy_true"),
+    # The safety filter's work (safety_filter.enabled; beyond the paper).
+    "safety": ("time", "filter_status", "filter_binding", "velocity", "velocity_limited"),
 }
 # A figure drawn from other keys when the log lacks its _NEEDS: the tensions of a
 # tension-controlled run on the robot (no plant's truth there) are the controller's estimate.
 _OR_NEEDS = {"tensions": ("time", "tension_estimate")}
 # Keys a figure draws when the log holds them (a full-pose or tension-controlled run's).
-_MAY_USE = {"pose_error": ("rpy",), "tensions": ("tensions", "slack", "tension_estimate", "t_star")}
+_MAY_USE = {"pose_error": ("rpy",), "tensions": ("tensions", "slack", "tension_estimate", "t_star"),
+            "safety": ("kappa", "t_star_hand", "pair_margin")}
 # Figures drawn only for logs that hold their keys.
-OPTIONAL = ("timing", "tensions", "pose_error")
+OPTIONAL = ("timing", "tensions", "pose_error", "safety")
 # Keys with one row per tick.
 _PER_TICK = ("time", "p", "F_H", "F_int", "F_d", "pair_distances", "active", "crossed",
              "lengths", "reel_velocity", "wall", "tensions", "slack", "p_true", "rpy_true",
              "lengths_commanded", "pair_distances_true", "crossed_true", "rpy",
-             "tension_estimate", "tension_target", "t_star")
+             "tension_estimate", "tension_target", "t_star", "F_kin", "filter_status",
+             "filter_binding", "velocity_limited", "kappa", "t_star_hand", "pair_margin")
 LOG_KEYS = ("time", "p", "F_H", "F_int", "F_wall", "F_d", "velocity_admittance", "velocity",
             "reel_velocity", "lengths", "pair_distances", "active", "crossed", "pairs", "d_l",
             "d_u", "F_u", "eps", "F_max", "reels", "attachments", "workspace_lower",
             "workspace_upper", "robot_name", "scenario_name")
 
 # Fig. 12's colour code, used for the force plots too.
-FORCE_COLORS = {"F_H": "tab:blue", "F_int": "black", "F_d": "tab:red", "F_wall": "tab:green"}
+FORCE_COLORS = {"F_H": "tab:blue", "F_int": "black", "F_d": "tab:red", "F_wall": "tab:green",
+                "F_kin": "tab:purple"}
 FIGURE_FILES = {"distances": "distances.png", "forces": "forces.png",
                 "trajectory": "trajectory.png", "logistic": "logistic.png",
                 "cables": "cables.png", "timing": "timing.png", "tensions": "tensions.png",
-                "pose_error": "pose_error.png"}
+                "pose_error": "pose_error.png", "safety": "safety.png"}
 # Every force plot axis spans at least this much (N), so a component that is numerical noise
 # (1e-6 N) reads as the flat zero it is.
 MIN_FORCE_SPAN = 0.5
@@ -68,6 +73,7 @@ MIN_FORCE_SPAN = 0.5
 # the dashes let the one below show through.
 FORCE_STYLES = {"F_H": dict(linestyle="-", linewidth=3.4, zorder=2.0),
                 "F_wall": dict(linestyle="-.", linewidth=2.7, zorder=2.1),
+                "F_kin": dict(linestyle=":", linewidth=2.4, zorder=2.15),
                 "F_int": dict(linestyle="--", linewidth=2.1, zorder=2.2),
                 "F_d": dict(linestyle="-", linewidth=1.0, zorder=2.3)}
 FAULT_COLOR = "crimson"
@@ -368,6 +374,13 @@ def figure_distances(log: Mapping) -> Figure:
         for v in np.unique(np.asarray(values)[np.isfinite(values)]):
             ax.axhline(1000.0 * v, color="0.3", linestyle=style,
                        label=f"{key} = {1000.0 * v:g} mm")
+    if "d_min" in log and "filter_status" in log and shown.size:
+        # The safety filter's hard floor, where it differs from d_l (drawn there otherwise).
+        d_l = np.asarray(log["d_l"], dtype=float).reshape(-1)[shown]
+        d_min = np.asarray(log["d_min"], dtype=float).reshape(-1)[shown]
+        for v in np.unique(d_min[np.isfinite(d_min) & (d_min != d_l)]):
+            ax.axhline(1000.0 * v, color=FAULT_COLOR, linestyle="-", linewidth=0.8,
+                       label=f"d_min = {1000.0 * v:g} mm (the safety filter's floor)")
     if d.shape[1] == 0:
         ax.text(0.5, 0.5, "the robot has no watched cable pairs", ha="center",
                 transform=ax.transAxes)
@@ -401,7 +414,8 @@ def force_spans(log: Mapping, names) -> tuple[np.ndarray, float]:
 
 def figure_forces(log: Mapping) -> Figure:
     """x, y, z components (N) of F_H, F_int and F_d vs time (s), one axis per component
-    (Figs. 11, 13, 16); F_wall too when the virtual wall pushed at some tick. Every axis spans
+    (Figs. 11, 13, 16); F_wall too when the virtual wall pushed at some tick, and F_kin when
+    the kinetostatic cue did (beyond the paper: the safety filter). Every axis spans
     the same number of newtons (force_spans), and the series differ in style and width
     (FORCE_STYLES) so that coinciding ones stay visible."""
     _check(log, "forces")
@@ -409,6 +423,8 @@ def figure_forces(log: Mapping) -> Figure:
     names = ["F_H", "F_int", "F_d"]
     if "F_wall" in log and np.any(np.asarray(log["F_wall"]) != 0):
         names.insert(2, "F_wall")
+    if "F_kin" in log and np.any(np.asarray(log["F_kin"]) != 0):
+        names.insert(-1, "F_kin")  # the kinetostatic cue, beside F_int (safety filter)
     centre, span = force_spans(log, names)
     fig = Figure(figsize=(9, 7), layout="constrained")
     axes = fig.subplots(3, 1, sharex=True)
@@ -890,10 +906,77 @@ def figure_pose_error(log: Mapping) -> Figure:
     return fig
 
 
+# --- the safety filter (beyond the paper) -------------------------------------------------------
+
+# filter_status codes (safety_filter.STATUS_TEXT) and filter_binding bits (BIND_TEXT), for the
+# views; views read logs, never a block's insides.
+FILTER_STATUS = ("passed", "modified", "lost margins held", "braking to a hold")
+FILTER_BINDING = ((1, "cable pairs"), (2, "workspace box"), (4, "kinetostatic limit"),
+                  (8, "speed limit"), (16, "acceleration limit"))
+
+
+def figure_safety(log: Mapping) -> Figure:
+    """The safety filter over time: what it did to the command (which kinds of barrier bound,
+    as bands, and where it braked to a hold), the speeds asked for and commanded (m/s), the
+    kinetostatic margin kappa and t* with the measured hand (N), and the closest pair's
+    distance above its d_min (mm)."""
+    _check(log, "safety")
+    t = np.asarray(log["time"], dtype=float)
+    status = np.asarray(log["filter_status"], dtype=float).reshape(-1)
+    binding = np.asarray(log["filter_binding"], dtype=float).reshape(-1).astype(int)
+    fig = Figure(figsize=(9, 9), layout="constrained")
+    ax_b, ax_v, ax_k, ax_p = fig.subplots(4, 1, sharex=True,
+                                          height_ratios=(1.0, 1.0, 1.0, 1.0))
+    for row, (bit, name) in enumerate(FILTER_BINDING):
+        ax_b.fill_between(t, row - 0.4, row + 0.4, where=(binding & bit) != 0, step="mid",
+                          color=f"C{row}", linewidth=0)
+    held = status >= 3
+    if held.any():
+        ax_b.fill_between(t, -0.6, len(FILTER_BINDING) - 0.4, where=held, step="mid",
+                          color=FAULT_COLOR, alpha=0.25, linewidth=0,
+                          label="braking to a hold (no safe command)")
+        ax_b.legend(loc="upper left", bbox_to_anchor=(1.01, 1.0), fontsize="small")
+    ax_b.set_yticks(range(len(FILTER_BINDING)), [name for _, name in FILTER_BINDING],
+                    fontsize="small")
+    ax_b.set_ylim(-0.6, len(FILTER_BINDING) - 0.4)
+    shares = ", ".join(f"{name} {100 * np.mean(status == k):.1f} %"
+                       for k, name in enumerate(FILTER_STATUS) if np.any(status == k))
+    ax_b.set_title(f"What bound the command\n(ticks {shares})", fontsize="small")
+    asked = np.linalg.norm(np.asarray(log["velocity_limited"], dtype=float), axis=1)
+    given = np.linalg.norm(np.asarray(log["velocity"], dtype=float), axis=1)
+    ax_v.plot(t, asked, color="0.55", linewidth=2.2, label="asked (admittance, limits)")
+    ax_v.plot(t, given, color="black", linewidth=1.0, label="commanded (safety filter)")
+    ax_v.set_ylabel("speed (m/s)")
+    for key, label, color in (("kappa", "kinetostatic margin kappa", "tab:purple"),
+                              ("t_star_hand", "t* with the measured hand", "tab:brown")):
+        values = np.asarray(log.get(key, np.zeros(0)), dtype=float).reshape(-1)
+        if values.size == t.size and np.isfinite(values).any():
+            # (t* is +inf where an internal force raises every tension: not drawn there.)
+            ax_k.plot(t, np.where(np.isfinite(values), values, np.nan), color=color,
+                      label=label)
+    ax_k.axhline(0.0, color="0.3", linewidth=0.8)
+    ax_k.set_ylabel("tension (N)")
+    margin = np.asarray(log.get("pair_margin", np.zeros(0)), dtype=float).reshape(-1)
+    if margin.size == t.size and np.isfinite(margin).any():
+        ax_p.plot(t, 1000.0 * np.where(np.isfinite(margin), margin, np.nan),
+                  color="tab:orange", label="closest pair above its d_min")
+    ax_p.axhline(0.0, color="0.3", linewidth=0.8)
+    ax_p.set_ylabel("distance (mm)")
+    ax_p.set_xlabel("time (s)")
+    for ax in (ax_b, ax_v, ax_k, ax_p):
+        ax.grid(True, alpha=0.3)
+        _mark_fault_time(ax, log)
+        if ax is not ax_b and ax.get_legend_handles_labels()[0]:
+            ax.legend(loc="upper left", bbox_to_anchor=(1.01, 1.0), fontsize="small")
+    _suptitle(fig, log, f"{_title(log)}\nThe safety filter: what it changed and the margins "
+              "it kept")
+    return fig
+
+
 FIGURES = {"distances": figure_distances, "forces": figure_forces,
            "trajectory": figure_trajectory, "logistic": figure_logistic,
            "cables": figure_cables, "timing": figure_timing, "tensions": figure_tensions,
-           "pose_error": figure_pose_error}
+           "pose_error": figure_pose_error, "safety": figure_safety}
 
 
 def figures_of(log: Mapping) -> list[str]:
