@@ -453,7 +453,7 @@ def test_plot_html_keeps_the_figures_already_drawn_from_the_log(capsys, tmp_path
                      str(run), "--no-progress", "--plot"]) == 0
     log_time = (run / "log.npz").stat().st_mtime
     pngs = sorted(run.glob("*.png"))
-    assert len(pngs) == 5
+    assert len(pngs) == 6  # the paper's five and the safety filter's
     for png in pngs:  # drawn 100 s after the log: no file system's clock can tie that
         os.utime(png, (log_time + 100.0, log_time + 100.0))
     os.utime(run / "forces.png", (log_time - 100.0, log_time - 100.0))
@@ -462,12 +462,12 @@ def test_plot_html_keeps_the_figures_already_drawn_from_the_log(capsys, tmp_path
     assert cli.main(["plot", str(run), "--html", str(tmp_path / "replay.html")]) == 0
     out = capsys.readouterr().out
     assert (tmp_path / "replay.html").stat().st_size > 10_000
-    assert f"plot: 3 figure(s) already drawn from this log kept in {run}" in out
+    assert f"plot: 4 figure(s) already drawn from this log kept in {run}" in out
     assert sorted(re.findall(r"^plot: (\S+\.png)$", out, flags=re.M)) == [
         str(run / "cables.png"), str(run / "forces.png")]
-    for name in ("distances.png", "trajectory.png", "logistic.png"):
+    for name in ("distances.png", "trajectory.png", "logistic.png", "safety.png"):
         assert (run / name).stat().st_mtime == log_time + 100.0, name
     assert (run / "forces.png").stat().st_mtime > log_time
     # Without --html, `cdpm plot` draws them all, as before.
     assert cli.main(["plot", str(run)]) == 0
-    assert len(re.findall(r"^plot: ", capsys.readouterr().out, flags=re.M)) == 5
+    assert len(re.findall(r"^plot: ", capsys.readouterr().out, flags=re.M)) == 6
