@@ -323,7 +323,7 @@ def solver_rows():
                  ("Drake MathematicalProgram, OSQP, eps_abs = eps_rel = 1e-9",
                   drake_prepare(OsqpSolver, {"eps_abs": 1e-9, "eps_rel": 1e-9,
                                              "max_iter": 100000}), 1)]
-    for module, label, prepare in (("daqp", "DAQP (dual active set, C)", daqp_prepare),
+    for module, label, prepare in (("daqp", "DAQP (dual active set, C; its defaults)", daqp_prepare),
                                    ("quadprog", "quadprog (Goldfarb-Idnani, Fortran)",
                                     quadprog_prepare)):
         try:
@@ -593,10 +593,12 @@ def instruction_table(problems, runs, ticks, stride):
 
 def show(headers, rows, markdown):
     if markdown:
-        print("| " + " | ".join(headers) + " |")
+        def line(cells):  # a | inside a cell would end it
+            return "| " + " | ".join(str(c).replace("|", "\\|") for c in cells) + " |"
+        print(line(headers))
         print("|" + "|".join("---" if k == 0 else "---:" for k in range(len(headers))) + "|")
         for row in rows:
-            print("| " + " | ".join(str(c) for c in row) + " |")
+            print(line(row))
     else:
         from cdpm_drake.text import format_table
 
