@@ -374,7 +374,11 @@ def filter_tick(reels, attachments, pi, pj, d_min, bounds, params, x, out):
             speed = math.sqrt(z[0] * z[0] + z[1] * z[1] + z[2] * z[2])
             ex, ey, ez = z[0] - prev[0], z[1] - prev[1], z[2] - prev[2]
             step = math.sqrt(ex * ex + ey * ey + ez * ez)
-            over_speed = speed > speed_cap * (1.0 + BALL_TOL)
+            # Relative and absolute: the QP meets a cut to ~1e-12 m/s, and a cut again at
+            # the same point changes nothing (0.05 m/s exceeded by 6e-11 failed all 12 cuts,
+            # and the filter alternated between restoring a lost margin and not, a tick
+            # each: a 1.8 m/s^2 square wave, exp3 with a 40 N spring hand across 5-7).
+            over_speed = speed > speed_cap * (1.0 + BALL_TOL) + BALL_TOL
             over_step = step > a_max * T * (1.0 + BALL_TOL) + BALL_TOL
             if not (over_speed or over_step):
                 ok = True

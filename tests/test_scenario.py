@@ -435,7 +435,7 @@ _TENSION = "plant: !DynamicReels {{}}\ncontroller: {{pose: full, tension_control
     ("tension_floor: .inf", "controller.tension_floor must be a finite number > 0 N (the "
                             "tension no cable is commanded below), got inf"),
     ("min_tension: 2.5", "controller.min_tension must be a finite number >= "
-                         "controller.tension_floor = 5.0 N, got 2.5"),
+                         "controller.tension_floor = 4.0 N, got 2.5"),
     ("tension_floor: 12.0", "controller.min_tension must be a finite number >= "
                             "controller.tension_floor = 12.0 N, got 10.0"),
     ("max_tension: 10.0", "controller.max_tension must be a finite number above "
@@ -443,7 +443,7 @@ _TENSION = "plant: !DynamicReels {{}}\ncontroller: {{pose: full, tension_control
 ])
 def test_the_tension_floors_and_ceiling_are_checked_at_load(setting, message):
     """0 < tension_floor <= min_tension < max_tension, each message naming the field and the
-    value (defaults: 3, 10 and 100 N)."""
+    value (defaults: 4, 10 and 100 N)."""
     with pytest.raises(ScenarioError) as e:
         load_scenario("exp1_no_interaction", _TENSION.format(setting))
     assert str(e.value) == message
