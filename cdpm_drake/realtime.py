@@ -215,6 +215,7 @@ def run(*, scenario: Scenario | ResolvedScenario, out_dir, duration: float | Non
     pump = _StatusPump(status) if status is not None else None
     with _StopRequest() as stop, _collector_between_steps() as collect:
         try:
+            sink.open()  # before the enabling command: it maps ~20 MB (TickLogSink.open)
             start_realtime(simulator, 1.0)
             enabled = True  # initialisation enables the reels or raises
             t, next_status, next_view = 0.0, 0.0, 0.0

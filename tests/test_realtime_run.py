@@ -125,13 +125,24 @@ def test_sigint_stops_the_run_with_zero_velocity_first(tmp_path):
     scenario = load_scenario("exp2_interaction")
     for attempt in range(ATTEMPTS):
         server = _server(scenario)
-        timer = threading.Timer(1.0, os.kill, (os.getpid(), signal.SIGINT))
+        # The signal comes 1 s of wall time after the bridge's first enabling command (not
+        # after run() is called: building the diagram took 0.4-0.8 s on this host).
+        done = threading.Event()
+
+        def interrupt():
+            while server.first_enable_time is None and not done.wait(0.005):
+                pass
+            if not done.wait(1.0):
+                os.kill(os.getpid(), signal.SIGINT)
+
+        timer = threading.Thread(target=interrupt, daemon=True)
         try:
             timer.start()
             result = run(scenario=_hardware("exp2_interaction", server),
                          out_dir=tmp_path / f"run{attempt}", duration=20.0)
         finally:
-            timer.cancel()
+            done.set()
+            timer.join()
             server.stop()
         if not (result.ending == "fault" and _host_stalled(str(result.error))):
             break
