@@ -1369,6 +1369,10 @@ def test_d_min_is_the_floor_the_filter_keeps_each_pair_at():
         np.testing.assert_array_equal(log["d_min"], expected)
         d = log["pair_distances"][:, k]
         assert floor - 1e-6 < d.min() < floor + 2e-5, (floor, d.min())
+        # pair_margin: the smallest distance above its d_min over the pairs (none crossed),
+        # recomputed from the logged distances (docs/LOG_FORMAT.md).
+        np.testing.assert_allclose(log["pair_margin"][:, 0],
+                                   (log["pair_distances"] - expected).min(axis=1), atol=1e-12)
     off = sim(push(force, swaps=[[1, 3]], initial_position=list(P_EXP1),
                    interference=Interference(default=default),
                    safety_filter=SafetyFilter(enabled=False)), 1.5)
