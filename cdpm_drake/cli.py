@@ -405,6 +405,64 @@ def tension_control_summary(log) -> str:
     return text + (f"; estimated tensions {estimate.min():.2f} to {estimate.max():.1f} N")
 
 
+def safety_filter_summary(log) -> str:
+    """One line on the safety filter of a log (safety_filter.enabled): on how many ticks it
+    passed the command, changed it (and which constraints bound, safety_filter.BIND_TEXT),
+    held a lost margin, braked to a hold; the smallest pair margin above d_min, by the
+    controller's estimate and, with a true pose logged, the truth's; the smallest
+    kinetostatic margin kappa (N)."""
+    from .safety_filter import (BIND_TEXT, STATUS_HOLD, STATUS_MODIFIED, STATUS_NO_RETURN,
+                                STATUS_PASS)
+
+    status = np.asarray(log["filter_status"]).reshape(-1).astype(int)
+    binding = np.asarray(log["filter_binding"]).reshape(-1).astype(int)
+    T = status.size
+    bound = [f"{what} {int(np.sum((binding & bit) != 0))}" for bit, what in BIND_TEXT
+             if np.any((binding & bit) != 0)]
+    text = (f"safety filter: passed {int(np.sum(status == STATUS_PASS))} of {T} ticks, "
+            f"changed {int(np.sum(status == STATUS_MODIFIED))}"
+            + (f" (bound: {', '.join(bound)})" if bound else ""))
+    for code, what in ((STATUS_NO_RETURN, "held a lost margin"),
+                       (STATUS_HOLD, "braked to a hold")):
+        n = int(np.sum(status == code))
+        if n:
+            text += f", {what} on {n}"
+    margin = np.asarray(log["pair_margin"], dtype=float).reshape(-1)
+    if np.isfinite(margin).any():
+        text += f"; smallest pair margin above d_min {1000 * margin.min():.2f} mm"
+        if "pair_distances_true" in log and "d_min" in log:
+            true = (np.asarray(log["pair_distances_true"], dtype=float)
+                    - np.asarray(log["d_min"], dtype=float)).min(axis=1)
+            text += f" (true {1000 * true.min():.2f} mm)"
+    kappa = np.asarray(log["kappa"], dtype=float).reshape(-1)
+    if np.isfinite(kappa).any():
+        text += f"; smallest kinetostatic margin {kappa[np.isfinite(kappa)].min():.2f} N"
+    return text
+
+
+def model_monitor_summary(log) -> str:
+    """One line on the model monitor of a log (model_monitor.enabled): whether the model
+    fitted on every tick, else which verdict first (model_monitor.REASONS); the largest
+    length residual (mm) and its cable."""
+    from .model_monitor import REASONS
+
+    status = np.asarray(log["model_status"]).reshape(-1).astype(int)
+    residual = np.asarray(log["model_residual"], dtype=float)
+    bad = np.flatnonzero(status)
+    if bad.size:
+        k = int(bad[0])
+        text = (f"model monitor: {REASONS[status[k]]} at t = {log['time'][k]:.3f} s "
+                f"({bad.size} of {status.size} ticks)")
+    else:
+        text = f"model monitor: the model fitted on all {status.size} ticks"
+    if residual.size and np.isfinite(residual).any():
+        flat = np.nanargmax(np.abs(np.where(np.isfinite(residual), residual, 0.0)))
+        cable = int(flat % residual.shape[1]) + 1
+        text += (f"; largest length residual {1000 * residual.reshape(-1)[flat]:+.2f} mm "
+                 f"(cable {cable})")
+    return text
+
+
 def _print_dynamic_summary(log, out) -> None:
     from .rotation import rotation_angle, rotations_from_rpy
 
@@ -508,6 +566,10 @@ def simulate_main(*, scenario, duration=None, out_dir=None, progress=True, out=N
     _print_clipped(log, scenario, out)
     if T and "tension_status" in log:  # controller.tension_control
         print(tension_control_summary(log), file=out)
+    if T and "filter_status" in log:  # safety_filter.enabled
+        print(safety_filter_summary(log), file=out)
+    if T and "model_status" in log:  # model_monitor.enabled
+        print(model_monitor_summary(log), file=out)
     if T and "tensions" in log:  # the dynamic plant's ground truth
         _print_dynamic_summary(log, out)
     print(f"log: {path}", file=out)
@@ -738,6 +800,10 @@ def run_main(*, scenario, duration=None, out_dir=None, out=None, on_status=None,
         print(line, file=out)
     if result.log and len(result.log["time"]):  # what the cables did, as simulate says it
         print_pair_summary(result.log, out)
+        if "filter_status" in result.log:
+            print(safety_filter_summary(result.log), file=out)
+        if "model_status" in result.log:
+            print(model_monitor_summary(result.log), file=out)
     if result.ending == "fault":
         print(f"cdpm run: error: {result.error}", file=sys.stderr)
         if not result.enabled and any(why in str(result.error) for why in (

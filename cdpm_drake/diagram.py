@@ -289,7 +289,8 @@ def _kinetostatic_params(resolved):
         ceiling=float(c.max_tension),
         rows=wrench_rows(robot), barrier=True, t_l=f.t_l, t_u=f.t_u, F_u=f.F_u, eps=f.eps,
         force=f.enabled, a_brake=_filter_braking(resolved),
-        time_step=resolved.time_step, ripple=RIPPLE)
+        time_step=resolved.time_step, ripple=RIPPLE,
+        smoothing=float(scenario.safety_filter.position_smoothing))
 
 
 def _filter_braking(resolved) -> float:
@@ -314,7 +315,7 @@ def _add_safety_filter(builder, blocks, resolved, velocity_desired, omega_desire
         max_velocity=resolved.max_velocity,
         max_acceleration=resolved.max_acceleration,
         return_speed=f.return_speed, full_pose=full, kinetostatic=kinetostatic is not None,
-        box=scenario.limits.virtual_wall)
+        box=scenario.limits.virtual_wall, smoothing=float(f.position_smoothing))
     block = blocks["safety_filter"] = FlatBlock(
         builder, "safety_filter", SAFETY_MAIN, lambda b: build_safety_filter(
             b, robot, d_min=resolved.d_min, params=params, full_pose=full, time_step=T))
@@ -331,8 +332,8 @@ def _add_safety_filter(builder, blocks, resolved, velocity_desired, omega_desire
     if kinetostatic is not None:
         for name in ("kappa", "kappa_gradient", "kappa_ray"):
             block.connect_input(kinetostatic.GetOutputPort(name), name)
-        kinetostatic.connect_input(block.GetOutputPort("velocity_previous"),
-                                   "velocity_previous")
+        kinetostatic.connect_input(block.GetOutputPort("barrier_state_previous"),
+                                   "barrier_state_previous")
     else:  # the barrier is off (the filter's parameter says so): zeros fill its inputs
         for name, size in (("kappa", 1), ("kappa_gradient", 3), ("kappa_ray", 1)):
             none = builder.AddNamedSystem(f"safety_filter_no_{name}",

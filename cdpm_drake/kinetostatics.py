@@ -26,6 +26,7 @@ import numpy as np
 
 from .pose import posed_cables, wrench_columns
 from .pose_control import _wrench
+from .safety_filter import barrier_position
 from .tension import RANK_TOL, _null_vector, _particular, _pivoted_qr, max_min_lines
 
 _jit = numba.njit(cache=True, error_model="numpy")
@@ -92,22 +93,26 @@ def margin_scratch(m: int):
 
 # The kinetostatic block's parameters (a flat array, `kinetostatic_params`).
 P_MASS, P_HANDLE, P_FLOOR, P_CEILING, P_ROWS, P_BARRIER = 0, 1, 4, 5, 6, 7
-P_T_L, P_T_U, P_F_U, P_B, P_MID, P_FORCE, P_A_BRAKE, P_T, P_RIPPLE = range(8, 17)
+P_T_L, P_T_U, P_F_U, P_B, P_MID, P_FORCE, P_A_BRAKE, P_T, P_RIPPLE, P_SMOOTHING = range(8, 18)
+# kinetostatic_tick's input: the safety filter's memory [p_c (3), valid (1), v_prev (3)].
+FILTER_MEMORY = 7
 
 
 def kinetostatic_params(robot, *, floor, ceiling, rows, barrier, t_l, t_u, F_u, eps,
                         force: bool, a_brake: float, time_step: float,
-                        ripple: float = 0.0) -> np.ndarray:
+                        ripple: float = 0.0, smoothing: float = 0.0) -> np.ndarray:
     """The kinetostatic block's parameters: the platform's mass (kg) and handle (m, platform
     frame), the floor and ceiling (N), the wrench rows (3 or 6), whether the safety filter's
     barrier needs the gradient and the look ahead, the cue's logistic t_l, t_u (N), F_u (N),
     its steepness b (1/N, eq. 28 in tensions) and centre (N), whether the cue is on, the
-    deceleration the filter brakes with (m/s^2) and the time step (s)."""
+    deceleration the filter brakes with (m/s^2), the time step (s), the floor's rise per
+    newton of hand (N/N) and the filter's position_smoothing (s: the margin is evaluated
+    where the filter evaluates its barriers, safety_filter.barrier_position)."""
     b = 2.0 * math.log((F_u - eps) / eps) / (t_l - t_u)
     d = robot.dynamics
     return np.array([d.mass, *d.handle, floor, ceiling, rows, 1.0 if barrier else 0.0,
                      t_l, t_u, F_u, b, 0.5 * (t_l + t_u), 1.0 if force else 0.0, a_brake,
-                     time_step, ripple], dtype=float)
+                     time_step, ripple, smoothing], dtype=float)
 
 
 @_jit
@@ -136,9 +141,11 @@ def _margin_at(reels, attachments, params, scratch, p, R, w, floor):
 
 @_jit
 def kinetostatic_tick(reels, attachments, params, scratch, x, out):
-    """One tick of the kinetostatic block. x = [p (3) m, F_H (3) N, v (3) m/s: the velocity
-    commanded last, and for the full pose R (9, R_WB row-major: the orientation held);
-    else the platform is level]. Writes (KIN_OUT) the margin kappa at the pose under the
+    """One tick of the kinetostatic block. x = [p (3) m: the estimate, F_H (3) N, the
+    safety filter's memory (FILTER_MEMORY: p_c m, valid, v m/s the velocity commanded last),
+    and for the full pose R (9, R_WB row-major: the orientation held); else the platform is
+    level]. The pose is the filter's (safety_filter.barrier_position of p on that memory).
+    Writes (KIN_OUT) the margin kappa at the pose under the
     weight and the hand force F_H at the handle, t_c = kappa + floor, t* (no ceiling), and
     the cue F_kin = intensity(t_c) grad / |grad| (N, base frame) towards more margin; for the
     safety filter's barrier also kappa's gradient in the position (forward differences,
@@ -152,14 +159,15 @@ def kinetostatic_tick(reels, attachments, params, scratch, x, out):
     too late) and ended where kappa has a local maximum below zero, from which no gradient
     leads back (dynamic plant, 40 N along the 1-3 boundary). Sampling ahead along the
     velocity sees the drop before the platform is in it."""
-    p = x[0:3]
+    p = np.empty(3)
+    barrier_position(x[0:3], x[6:6 + FILTER_MEMORY], params[P_T], params[P_SMOOTHING], p)
     F = x[3:6]
-    v = x[6:9]
+    v = x[10:13]
     R = np.eye(3)
-    if x.shape[0] >= 18:
+    if x.shape[0] >= 13 + 9:
         for a in range(3):
             for b in range(3):
-                R[a, b] = x[9 + 3 * a + b]
+                R[a, b] = x[13 + 3 * a + b]
     floor = params[P_FLOOR] + params[P_RIPPLE] * math.sqrt(F[0] * F[0] + F[1] * F[1]
                                                          + F[2] * F[2])
     w = np.empty(6)

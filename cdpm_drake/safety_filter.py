@@ -74,7 +74,10 @@ BIND_TEXT = ((BIND_PAIR, "cable pairs"), (BIND_BOX, "workspace box"),
 
 # Parameters (a flat array, `filter_params`).
 (F_T, F_GAMMA, F_A_BRAKE, F_V_MAX, F_A_MAX, F_V_RETURN, F_DOF, F_KINETOSTATIC, F_BOX,
- F_SIZE) = range(10)
+ F_SMOOTHING, F_SIZE) = range(11)
+# Where `filter_tick`'s memory and its pass-through of v_d start in its output; the memory
+# is [p_c (3), p_c valid (1), v_prev (3), w_prev (3)].
+OUT_MEMORY, OUT_V_D, MEMORY = 11, 21, 10
 
 # At most this many cutting planes of the speed and acceleration balls per solve: each cuts
 # the violation of the last solution; 12 leave it below 1e-9 m/s in every case measured.
@@ -94,20 +97,39 @@ BALL_TOL = 1e-9
 
 
 def filter_params(*, time_step, gamma, a_brake, max_velocity, max_acceleration,
-                  return_speed, full_pose, kinetostatic, box: bool = True) -> np.ndarray:
+                  return_speed, full_pose, kinetostatic, box: bool = True,
+                  smoothing: float = 0.0) -> np.ndarray:
     """The filter's parameters: s, -, m/s^2, m/s, m/s^2, m/s; the full pose (a twist of 6)
     or not (3); the kinetostatic barrier on; the box's barriers on (off with the virtual
-    wall: limits.virtual_wall false lets the platform leave the box)."""
+    wall: limits.virtual_wall false lets the platform leave the box); the time constant (s)
+    of the position the barriers are evaluated at (`barrier_position`; 0: the estimate)."""
     return np.array([time_step, gamma, a_brake, max_velocity, max_acceleration,
                      return_speed, 6 if full_pose else 3, 1.0 if kinetostatic else 0.0,
-                     1.0 if box else 0.0], dtype=float)
+                     1.0 if box else 0.0, smoothing], dtype=float)
 
 
 def filter_sizes(P: int, full_pose: bool) -> dict:
     """Input (x) and output (out) sizes of `filter_tick` for P watched pairs, and the offset
     of its memory in x."""
     x = 11 + P + (12 if full_pose else 0)
-    return {"x": x + 6, "out": 20, "memory": 6, "memory_at": x}
+    return {"x": x + MEMORY, "out": OUT_V_D + 3, "memory": MEMORY, "memory_at": x}
+
+
+@_jit
+def barrier_position(p, memory, T, tau, out):
+    """The position the barriers are evaluated at, into out (3, m): the last one advanced by
+    the last command (p_c + T v_prev, where the commands put the platform) and drawn towards
+    the estimate p with the time constant tau (s; p itself when 0, or on the first tick:
+    memory[3] == 0). memory: the filter's [p_c (3), valid (1), v_prev (3), ...]. The
+    kinetostatic block calls it on the same memory, so its margin is at the same position."""
+    if tau <= 0.0 or memory[3] == 0.0:
+        for c in range(3):
+            out[c] = p[c]
+        return
+    k = min(1.0, T / tau)
+    for c in range(3):
+        ahead = memory[c] + T * memory[4 + c]
+        out[c] = ahead + k * (p[c] - ahead)
 
 
 @_jit
@@ -201,17 +223,21 @@ def filter_tick(reels, attachments, pi, pj, d_min, bounds, params, x, out):
     """One tick of the safety filter. pi, pj (P,): the watched pairs (0-based cables); d_min
     (P,) m; bounds (2, 3): the workspace box's lower and upper corners, m.
     x = [v_d (3), p (3), crossed (P), kappa (1), grad kappa (3), look ahead (1), (the full
-    pose only:) w_d (3), R (9), memory: v_prev (3), w_prev (3)] (m/s, m, 0/1, N, N/m, m,
-    rad/s, -); the translating controller's platform is level (R = I);
+    pose only:) w_d (3), R (9), memory: p_c (3), p_c valid (1), v_prev (3), w_prev (3)]
+    (m/s, m, 0/1, N, N/m, m, rad/s, -, m, -, m/s, rad/s); the translating controller's
+    platform is level (R = I); the barriers are evaluated at `barrier_position`;
     out = [v (3), w (3), status (1), binding (1), smallest pair margin h (1, m; +inf with
     no pair), kappa used (1, N; nan when the barrier is off or undefined), barriers (1: how
-    many could bind this tick and went into the QP), next memory (6: the twist), v_d (3: the
-    velocity asked for, passed through for the log)]. Returns the status."""
+    many could bind this tick and went into the QP), next memory (10, at OUT_MEMORY), v_d
+    (3: the velocity asked for, passed through for the log, at OUT_V_D)]. Returns the
+    status."""
     P = pi.shape[0]
     n = int(params[F_DOF])
     T = params[F_T]
     v_max, a_max = params[F_V_MAX], params[F_A_MAX]
-    p = x[3:6]
+    memory = x[x.shape[0] - MEMORY:]
+    p = np.empty(3)
+    barrier_position(x[3:6], memory, T, params[F_SMOOTHING], p)
     crossed = x[6:6 + P]
     kappa = x[6 + P]
     gk = x[7 + P:10 + P]
@@ -319,8 +345,12 @@ def filter_tick(reels, attachments, pi, pj, d_min, bounds, params, x, out):
     speed_cap = v_max
     for r in range(base):
         if deep[r]:
+            # Slowing by RAMP_SHARE of the acceleration limit a tick, not all of it: with all
+            # of it the speed and acceleration balls touch in a single point, which the
+            # cutting planes never reach (the solve failed and the filter reported a hold on
+            # 103 ticks of a 40 N push across exp3's pair 5-7, commanding that very point).
             prev_speed = math.sqrt(prev[0] * prev[0] + prev[1] * prev[1] + prev[2] * prev[2])
-            speed_cap = min(v_max, max(LOST_SPEED, prev_speed - a_max * T))
+            speed_cap = min(v_max, max(LOST_SPEED, prev_speed - RAMP_SHARE * a_max * T))
             break
     z = np.empty(n)
     u = np.empty(rows)
@@ -382,12 +412,15 @@ def filter_tick(reels, attachments, pi, pj, d_min, bounds, params, x, out):
                     status = STATUS_MODIFIED
     for c in range(6):
         out[c] = z[c] if c < n else 0.0
-        out[11 + c] = out[c]
+        out[OUT_MEMORY + 4 + c] = out[c]
+    for c in range(3):
+        out[OUT_MEMORY + c] = p[c]
+    out[OUT_MEMORY + 3] = 1.0
     out[6] = status
     out[7] = binding
     out[8] = smallest
     out[9] = kappa_used
     out[10] = base
     for c in range(3):
-        out[17 + c] = x[c]
+        out[OUT_V_D + c] = x[c]
     return status

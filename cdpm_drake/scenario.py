@@ -232,6 +232,14 @@ class SafetyFilter:
     # Where a margin is already lost (a start inside d_min, a hand force that changed), the
     # platform is brought back at most this fast, m/s.
     return_speed: float = 0.02
+    # The time constant, s, with which the position the barriers are evaluated at follows
+    # the estimated one; in between it advances by the filter's own commands (where they put
+    # the platform). The estimate rings with the platform (the dynamic plant: micrometres at
+    # ~15 Hz), and a pair's distance changes ~0.05 m per m of platform travel near exp2's
+    # boundary: barriers at the estimate turned that ringing into centimetres per second of
+    # command and rang the cables (exp2, full pose: one cable down to 0.04 N against 2.3 N
+    # without the filter). 0: the estimate itself.
+    position_smoothing: float = 0.1
     # The kinetostatic barrier (and its block): off leaves the pairs and the box.
     kinetostatic: bool = True
     # The floor of the kinetostatic barrier, N: the platform stays where a distribution with
@@ -804,6 +812,10 @@ def _check_safety(scenario: Scenario) -> None:
     if not 0 < float(f.gamma) <= 1:
         raise ScenarioError(f"safety_filter.gamma must lie in (0, 1] (the share of a "
                             f"barrier's margin one tick may use), got {f.gamma!r}")
+    _finite_number(f.position_smoothing, "safety_filter.position_smoothing")
+    if float(f.position_smoothing) < 0:
+        raise ScenarioError(f"safety_filter.position_smoothing must be >= 0 s (0: the "
+                            f"estimated position itself), got {f.position_smoothing!r}")
     _finite_number(f.return_speed, "safety_filter.return_speed")
     if float(f.return_speed) < 0:
         raise ScenarioError(f"safety_filter.return_speed must be >= 0 m/s, got "

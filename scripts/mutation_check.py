@@ -1470,7 +1470,7 @@ MUTANTS = [
       "a lost margin only held, not restored, is logged as an ordinary modification",
       ("tests/test_safety_filter.py",)),
     M("filter_lost_speed_not_braked", "cdpm_drake/safety_filter.py",
-      "speed_cap = min(v_max, max(LOST_SPEED, prev_speed - a_max * T))",
+      "speed_cap = min(v_max, max(LOST_SPEED, prev_speed - RAMP_SHARE * a_max * T))",
       "speed_cap = min(v_max, max(LOST_SPEED, prev_speed))",
       "while a margin is lost the speed is held, not braked towards LOST_SPEED",
       ("tests/test_safety_filter.py",)),

@@ -571,7 +571,8 @@ def test_plot_log_adds_tensions_and_pose_error_for_a_dynamic_log(dynamic_log, tm
     from cdpm_drake.views import plots
 
     names = [p.name for p in plots.plot_log(dynamic_log, tmp_path, dpi=40)]
-    assert names[-2:] == ["tensions.png", "pose_error.png"]
+    # The safety filter's figure last (the default scenario runs the filter).
+    assert names[-3:] == ["tensions.png", "pose_error.png", "safety.png"]
     fig = plots.figure_tensions(dynamic_log)
     lines = [line for line in fig.axes[0].get_lines() if line.get_label().startswith("cable")
              and "slack" not in line.get_label()]

@@ -109,8 +109,9 @@ def _tick(robot, p, F, v, floor=3.0, a_brake=1.0, T=0.002):
                                  t_l=4.0, t_u=8.0, F_u=2.0, eps=0.1, force=False,
                                  a_brake=a_brake, time_step=T)
     out = np.empty(KIN_OUT)
+    # x = [p, F, the filter's memory: p_c (3), valid 0 (the first tick: at p itself), v].
     kinetostatic_tick(robot.reels, robot.attachments, params,
-                      margin_scratch(robot.num_cables), np.r_[p, F, v], out)
+                      margin_scratch(robot.num_cables), np.r_[p, F, np.zeros(4), v], out)
     return out
 
 

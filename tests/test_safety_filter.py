@@ -13,10 +13,11 @@ from cdpm_drake.interference import segment_distance
 from cdpm_drake.limits import _face_cap
 from cdpm_drake.pose import rotation_exp
 from cdpm_drake.safety_filter import (BIND_ACCELERATION, BIND_BOX, BIND_KINETOSTATIC,
-                                      BIND_PAIR, CURVE_SHARE, LOST_DEPTH, LOST_SPEED,
-                                      RAMP_SHARE, STATUS_HOLD, STATUS_MODIFIED,
-                                      STATUS_NO_RETURN, STATUS_PASS,
-                                      filter_params, filter_sizes, filter_tick, pair_barrier)
+                                      BIND_PAIR, BIND_SPEED, CURVE_SHARE, LOST_DEPTH,
+                                      LOST_SPEED, OUT_MEMORY, OUT_V_D, RAMP_SHARE,
+                                      STATUS_HOLD, STATUS_MODIFIED, STATUS_NO_RETURN,
+                                      STATUS_PASS, barrier_position, filter_params,
+                                      filter_sizes, filter_tick, pair_barrier)
 
 T = 0.002
 V_MAX, A_MAX = 0.5, 2.0
@@ -102,8 +103,8 @@ def test_a_command_far_from_every_barrier_passes_unchanged():
     v, status, binding, out = _filter(robot, v_d=v_d, p=robot.workspace.center, v_prev=v_d)
     assert status == STATUS_PASS and binding == 0
     np.testing.assert_array_equal(v, v_d)
-    np.testing.assert_array_equal(out[17:20], v_d)  # the velocity asked for, for the log
-    np.testing.assert_array_equal(out[11:14], v)  # the next memory is the command
+    np.testing.assert_array_equal(out[OUT_V_D:OUT_V_D + 3], v_d)  # asked for, for the log
+    np.testing.assert_array_equal(out[OUT_MEMORY + 4:OUT_MEMORY + 7], v)  # the next memory
 
 
 @pytest.mark.parametrize("gap", [0.002, 0.01, 0.05, 0.2])
@@ -218,10 +219,10 @@ def test_a_pair_barrier_is_met_and_the_command_is_the_weighted_projection():
         prog.AddLinearConstraint(g[None, :], [rhs], [np.inf], z)
         cone = np.vstack([np.zeros((1, 3)), np.eye(3)])  # (a, z): |z| <= a
         # The speed limit; while the margin is lost (by more than LOST_DEPTH of travel),
-        # LOST_SPEED braked to at a_max.
+        # LOST_SPEED braked to at RAMP_SHARE of a_max.
         deep = h < -LOST_DEPTH * np.linalg.norm(grad[:3])
-        cap = (min(V_MAX, max(LOST_SPEED, np.linalg.norm(v_prev) - A_MAX * T)) if deep
-               else V_MAX)
+        cap = (min(V_MAX, max(LOST_SPEED, np.linalg.norm(v_prev) - RAMP_SHARE * A_MAX * T))
+               if deep else V_MAX)
         prog.AddLorentzConeConstraint(cone, np.r_[cap, np.zeros(3)], z)
         prog.AddLorentzConeConstraint(cone, np.r_[A_MAX * T, -v_prev], z)
         options = SolverOptions()
@@ -238,8 +239,8 @@ def test_a_pair_barrier_is_met_and_the_command_is_the_weighted_projection():
         assert np.linalg.norm(v - v_prev) <= A_MAX * T * (1 + 1e-8) + 1e-9
         assert np.sum((v - v_d) ** 2) <= np.sum((ref - v_d) ** 2) + 1e-10
         checked += 1
-        if status != STATUS_PASS:
-            assert binding & (BIND_PAIR | BIND_ACCELERATION)
+        if status != STATUS_PASS:  # the lost margin's speed cap binds too (deep)
+            assert binding & (BIND_PAIR | BIND_ACCELERATION | (BIND_SPEED if deep else 0))
     assert checked > 30
 
 
@@ -294,4 +295,37 @@ def test_with_no_safe_command_it_brakes_to_a_hold_at_the_acceleration_limit():
                                       d_min=np.zeros(robot.num_pairs), kinetostatic=False)
     assert status == STATUS_HOLD and binding == 0
     np.testing.assert_allclose(v, prev * (1 - A_MAX * T / np.linalg.norm(prev)), rtol=1e-12)
-    np.testing.assert_array_equal(out[11:14], v)  # the next tick brakes from here
+    np.testing.assert_array_equal(out[OUT_MEMORY + 4:OUT_MEMORY + 7], v)  # braked from here
+
+
+def test_the_barrier_position_advances_by_the_commands_and_follows_the_estimate_slowly():
+    """barrier_position: p_c + T v_prev drawn towards the estimate by T / tau a tick (closed
+    form: a constant offset e of the estimate decays as (1 - T / tau)^k, a ringing estimate is
+    damped by that factor). The first tick (valid flag 0) and tau 0 take the estimate."""
+    tau = 0.1
+    p = np.array([1.0, 2.0, 1.5])
+    out = np.empty(3)
+    memory = np.zeros(10)
+    barrier_position(p, memory, T, tau, out)
+    np.testing.assert_array_equal(out, p)  # the first tick
+    memory[:3], memory[3], memory[4:7] = [1.0, 2.0, 1.4], 1.0, [0.1, 0.0, 0.0]
+    barrier_position(p, memory, T, tau, out)
+    ahead = np.array([1.0 + T * 0.1, 2.0, 1.4])
+    np.testing.assert_allclose(out, ahead + (T / tau) * (p - ahead), rtol=0, atol=1e-15)
+    # At rest, an offset decays by (1 - T / tau) a tick: 1 mm -> 1 mm * 0.98^50 after 50.
+    memory[:3], memory[4:7] = p + [0.001, 0.0, 0.0], 0.0
+    for _ in range(50):
+        barrier_position(p, memory, T, tau, out)
+        memory[:3] = out
+    assert out[0] - p[0] == pytest.approx(0.001 * (1 - T / tau) ** 50, rel=1e-9)
+    barrier_position(p, memory, T, 0.0, out)  # tau 0: the estimate itself
+    np.testing.assert_array_equal(out, p)
+
+
+def test_the_filter_remembers_its_barrier_position_and_command():
+    """The memory out of a tick is [p_c, 1, v, w]: the next tick's barrier_position input."""
+    robot = _robot()
+    v_d = np.array([0.05, 0.0, 0.0])
+    v, status, _, out = _filter(robot, v_d=v_d, p=robot.workspace.center, v_prev=v_d)
+    np.testing.assert_array_equal(out[OUT_MEMORY:OUT_MEMORY + 3], robot.workspace.center)
+    assert out[OUT_MEMORY + 3] == 1.0

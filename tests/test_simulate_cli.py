@@ -453,7 +453,7 @@ def test_plot_html_keeps_the_figures_already_drawn_from_the_log(capsys, tmp_path
                      str(run), "--no-progress", "--plot"]) == 0
     log_time = (run / "log.npz").stat().st_mtime
     pngs = sorted(run.glob("*.png"))
-    assert len(pngs) == 5
+    assert len(pngs) == 6  # the paper's five and the safety filter's
     for png in pngs:  # drawn 100 s after the log: no file system's clock can tie that
         os.utime(png, (log_time + 100.0, log_time + 100.0))
     os.utime(run / "forces.png", (log_time - 100.0, log_time - 100.0))
@@ -462,12 +462,45 @@ def test_plot_html_keeps_the_figures_already_drawn_from_the_log(capsys, tmp_path
     assert cli.main(["plot", str(run), "--html", str(tmp_path / "replay.html")]) == 0
     out = capsys.readouterr().out
     assert (tmp_path / "replay.html").stat().st_size > 10_000
-    assert f"plot: 3 figure(s) already drawn from this log kept in {run}" in out
+    assert f"plot: 4 figure(s) already drawn from this log kept in {run}" in out
     assert sorted(re.findall(r"^plot: (\S+\.png)$", out, flags=re.M)) == [
         str(run / "cables.png"), str(run / "forces.png")]
-    for name in ("distances.png", "trajectory.png", "logistic.png"):
+    for name in ("distances.png", "trajectory.png", "logistic.png", "safety.png"):
         assert (run / name).stat().st_mtime == log_time + 100.0, name
     assert (run / "forces.png").stat().st_mtime > log_time
     # Without --html, `cdpm plot` draws them all, as before.
     assert cli.main(["plot", str(run)]) == 0
-    assert len(re.findall(r"^plot: ", capsys.readouterr().out, flags=re.M)) == 5
+    assert len(re.findall(r"^plot: ", capsys.readouterr().out, flags=re.M)) == 6
+
+
+def test_safety_filter_and_model_monitor_summaries_count_each_code():
+    """Synthetic log of 6 ticks: statuses 0, 1, 1, 2, 3, 0 with binding bits 0, 1|8, 4, 1,
+    0, 0 (safety_filter.BIND_*: pairs 1, kinetostatic 4, speed 8); pair margins down to
+    -0.5 mm; a true distance 1.25 mm below d_min on one tick; kappa down to -0.25 N. The
+    monitor: slack from tick 4 (t = 0.008 s), the largest residual -3 mm on cable 2."""
+    from cdpm_drake.cli import model_monitor_summary, safety_filter_summary
+
+    log = {"time": np.arange(6) * 0.002,
+           "filter_status": np.array([[0], [1], [1], [2], [3], [0]]),
+           "filter_binding": np.array([[0], [9], [4], [1], [0], [0]]),
+           "pair_margin": np.array([[0.01], [0.002], [-0.0005], [0.0], [0.001], [0.003]]),
+           "kappa": np.array([[5.0], [2.0], [-0.25], [np.nan], [1.0], [3.0]]),
+           "d_min": np.array([0.05, 0.06]),
+           "pair_distances_true": np.full((6, 2), 0.1)}
+    log["pair_distances_true"][2, 1] = 0.06 - 0.00125
+    assert safety_filter_summary(log) == (
+        "safety filter: passed 2 of 6 ticks, changed 2 (bound: cable pairs 2, kinetostatic "
+        "limit 1, speed limit 1), held a lost margin on 1, braked to a hold on 1; smallest "
+        "pair margin above d_min -0.50 mm (true -1.25 mm); smallest kinetostatic margin "
+        "-0.25 N")
+    residual = np.zeros((6, 3))
+    residual[3, 1] = -0.003
+    residual[1, 2] = 0.001
+    monitor = {"time": log["time"], "model_status": np.array([[0], [0], [0], [0], [1], [1]]),
+               "model_residual": residual}
+    assert model_monitor_summary(monitor) == (
+        "model monitor: slack cable at t = 0.008 s (2 of 6 ticks); largest length residual "
+        "-3.00 mm (cable 2)")
+    monitor["model_status"][:] = 0
+    assert model_monitor_summary(monitor).startswith(
+        "model monitor: the model fitted on all 6 ticks;")

@@ -10,9 +10,9 @@ C++ one-tick delay, its inputs stacked and its result split by one C++ Selector.
 import numpy as np
 
 from ..kernel_call import bind, owned
-from ..kinetostatics import KIN_OUT, kinetostatic_tick, margin_scratch
+from ..kinetostatics import FILTER_MEMORY, KIN_OUT, kinetostatic_tick, margin_scratch
 from ..model_monitor import ModelFault, OK, fault_message, monitor_sizes, monitor_tick
-from ..safety_filter import filter_sizes, filter_tick
+from ..safety_filter import OUT_MEMORY, OUT_V_D, filter_sizes, filter_tick
 from ._wiring import unit_delay
 from .pose_blocks import KernelSystem, build_kernel_block
 
@@ -39,8 +39,10 @@ def build_safety_filter(builder, robot, *, d_min, params, full_pose, time_step):
     ahead), and for the full pose omega_desired (3, rad/s) and R_WP (9: the orientation
     held); outputs velocity_command (3, m/s), omega_command (3, rad/s; the full pose),
     status (1), binding (1), pair_margin (1, m: the smallest watched pair's distance above its
-    d_min), barriers (1), velocity_desired (3, m/s: the input, for the log). Its memory: the
-    twist it commanded last (for the acceleration limit)."""
+    d_min), barriers (1), velocity_desired (3, m/s: the input, for the log),
+    barrier_state_previous (7: its memory's [p_c, valid, v_prev], for the kinetostatic
+    block). Its memory: the position its barriers were evaluated at and the twist it
+    commanded last (for the acceleration limit)."""
     P = robot.num_pairs
     s = filter_sizes(P, full_pose)
     reels, attachments = owned(robot.reels), owned(robot.attachments)
@@ -71,27 +73,28 @@ def build_safety_filter(builder, robot, *, d_min, params, full_pose, time_step):
         builder, SafetyFilterSolve(s["x"], s["out"], tick), inputs=inputs,
         memory=(s["memory"], None),
         outputs=outputs + [("status", 6, 1), ("binding", 7, 1), ("pair_margin", 8, 1),
-                           ("barriers", 10, 1), ("velocity_desired", 17, 3)],
-        memory_at=11, time_step=time_step,
-        memory_outputs=[("velocity_previous", 0, 3)])
+                           ("barriers", 10, 1), ("velocity_desired", OUT_V_D, 3)],
+        memory_at=OUT_MEMORY, time_step=time_step,
+        memory_outputs=[("barrier_state_previous", 0, 7)])
 
 
 def build_kinetostatic_force(builder, robot, *, params, full_pose, time_step):
     """kinetostatics.kinetostatic_tick as a block. Inputs p_WP (3, m), F_H (3, N: taken a
     tick old, as the tension distribution takes it: a plant may sample the hand in the step
-    that takes the reel command, which this block's result feeds), velocity_previous (3, m/s:
-    the safety filter's last command, for the look ahead), and for the full pose R_WP (9: the
+    that takes the reel command, which this block's result feeds), barrier_state_previous
+    (7: the safety filter's memory, its barrier position and last command, for the pose and
+    the look ahead), and for the full pose R_WP (9: the
     orientation held); outputs F_kin (3, N), kappa (1, N), kappa_gradient (3, N/m), t_c (1,
     N), t_star (1, N), status (1: 1 where no tension holds the pose at all), kappa_ray (1,
     m)."""
     reels, attachments = owned(robot.reels), owned(robot.attachments)
     par = owned(params)
     scratch = margin_scratch(robot.num_cables)
-    x_size = 18 if full_pose else 9
+    x_size = 6 + FILTER_MEMORY + (9 if full_pose else 0)
     example = np.zeros(x_size)
     example[:3] = robot.workspace.center
     if full_pose:
-        example[9:18] = np.eye(3).ravel()
+        example[13:22] = np.eye(3).ravel()
     solve = bind(kinetostatic_tick, reels, attachments, par, scratch, example,
                  np.empty(KIN_OUT))
 
@@ -99,7 +102,7 @@ def build_kinetostatic_force(builder, robot, *, params, full_pose, time_step):
         solve(reels, attachments, par, scratch, x, out)
 
     force = builder.AddNamedSystem("force_memory", unit_delay(3, time_step))
-    inputs = ([("p_WP", 3), ("F_H_previous", 3), ("velocity_previous", 3)]
+    inputs = ([("p_WP", 3), ("F_H_previous", 3), ("barrier_state_previous", FILTER_MEMORY)]
               + ([("R_WP", 9)] if full_pose else []))
     route = build_kernel_block(
         builder, KinetostaticSolve(x_size, KIN_OUT, tick), inputs=inputs, memory=None,

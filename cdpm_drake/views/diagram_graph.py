@@ -289,8 +289,11 @@ def overview_graphviz(diagram, title: str | None = None) -> str:
                      f'width={_port_node_width(name)}];')
         for j, i in sources:
             lines.append(f'  n{j}:o{i}:s -> out{p};')
+    # A block's memory output (`<signal>_previous`: last tick's value) feeds back by
+    # construction, whichever order the walk meets the blocks in.
+    memory = {e for e in connections if nodes[e[0]][3][e[1]].endswith("_previous")}
     feedback = feedback_edges(len(nodes), connections,
-                              [j for _, targets in exported_in for j, _ in targets])
+                              [j for _, targets in exported_in for j, _ in targets], memory)
     for s, sk, d, dk in connections:
         label = labels.get((d, dk))
         attributes = [] if label is None or label == nodes[d][2][dk] else [
@@ -299,11 +302,17 @@ def overview_graphviz(diagram, title: str | None = None) -> str:
             attributes.append("constraint=false")
         attributes = f" [{', '.join(attributes)}]" if attributes else ""
         lines.append(f"  n{s}:o{sk}:s -> n{d}:i{dk}:n{attributes};")
+    # A block no other block reads (a monitor: its outputs go to the log alone) at the
+    # bottom, beside the last blocks, not widening the rank of the blocks it watches.
+    feeds = {s for s, _, _, _ in connections}
+    sinks = [j for j in range(len(nodes)) if j not in feeds and nodes[j][2]]
+    if sinks:
+        lines.append("  {rank=max; " + " ".join(f"n{j};" for j in sinks) + "}")
     lines.append("}")
     return "\n".join(lines) + "\n"
 
 
-def feedback_edges(num_nodes: int, connections, roots=()) -> set:
+def feedback_edges(num_nodes: int, connections, roots=(), memory=()) -> set:
     """The connections (s, sk, d, dk) that carry a block's memory back to a block before it,
     to draw without a rank constraint. Found by a depth-first walk from the roots (the nodes
     the diagram's own inputs feed), then from node 0 on (the plant, added first), each
@@ -312,10 +321,14 @@ def feedback_edges(num_nodes: int, connections, roots=()) -> set:
     closes a loop. The loop through a walk's root (the reel command back to the plant) is
     left out: graphviz turns that one round itself and keeps it short. Without these hints
     graphviz breaks the loops in the order of its node ids and may rank a block's memory
-    above the block that feeds it (the full-pose overview: 24 edge crossings, 13 with)."""
+    above the block that feeds it (the full-pose overview: 24 edge crossings, 13 with).
+    `memory`: connections known to carry memory; feedback whatever the walk, and not walked
+    (else the walk may reach a block first through another's memory and rank it below)."""
     out = {}
+    memory = set(memory)
     for edge in sorted(connections, key=lambda e: (e[0], e[1], e[2], e[3])):
-        out.setdefault(edge[0], []).append(edge)
+        if edge not in memory:
+            out.setdefault(edge[0], []).append(edge)
     state = [0] * num_nodes  # 0 unseen, 1 on the walk, 2 done
     back = set()
     for root in list(dict.fromkeys(roots)) + list(range(num_nodes)):
@@ -336,7 +349,7 @@ def feedback_edges(num_nodes: int, connections, roots=()) -> set:
             elif state[target] == 0:
                 state[target] = 1
                 stack.append((target, iter(out.get(target, []))))
-    return back
+    return back | memory
 
 
 def _port_node_width(name: str) -> str:
