@@ -94,3 +94,68 @@ def test_margin_equals_the_linear_program(name):
         # t* (no ceiling) against the statics tests' HiGHS reference.
         assert t_star == pytest.approx(highs_t_star(W, w), abs=1e-6)
     assert finite > 100
+
+
+# --- the kinetostatic block's tick: gradient and look ahead ---------------------------------------
+
+
+def _tick(robot, p, F, v, floor=3.0, a_brake=1.0, T=0.002):
+    """kinetostatic_tick at p (level) with the hand force F and the last command v; returns
+    its output and the parameters (cue off: the gradient is still computed for the barrier)."""
+    from cdpm_drake.kinetostatics import (KIN_OUT, kinetostatic_params, kinetostatic_tick,
+                                          margin_scratch)
+
+    params = kinetostatic_params(robot, floor=floor, ceiling=100.0, rows=6, barrier=True,
+                                 t_l=4.0, t_u=8.0, F_u=2.0, eps=0.1, force=False,
+                                 a_brake=a_brake, time_step=T)
+    out = np.empty(KIN_OUT)
+    # x = [p, F, the filter's memory: p_c (3), valid 0 (the first tick: at p itself), v].
+    kinetostatic_tick(robot.reels, robot.attachments, params,
+                      margin_scratch(robot.num_cables), np.r_[p, F, np.zeros(4), v], out)
+    return out
+
+
+def _highs_kappa(robot, p, F, floor=3.0):
+    from cdpm_drake.tension import gravity_wrench, wrench_matrix
+
+    w = gravity_wrench(robot.dynamics.mass, F, robot.dynamics.handle)
+    return _highs_margin(wrench_matrix(robot, np.asarray(p, dtype=float)), w, floor, 100.0)
+
+
+def test_the_block_s_margin_gradient_is_the_linear_program_s_forward_difference():
+    # kappa's gradient (N/m) against the same forward difference (kinetostatics.FD_STEP_P) of
+    # HiGHS's margin: the LP's kappa is good to ~1e-8 N, so the two agree to ~1e-4 N/m; the
+    # gradients here are 1-100 N/m.
+    from cdpm_drake.kinetostatics import FD_STEP_P
+
+    robot = _robot("paper_7cable")
+    rng = np.random.default_rng(11)
+    for _ in range(12):
+        p = rng.uniform(robot.workspace.lower + 0.2, robot.workspace.upper - 0.2)
+        F = rng.normal(size=3) * 5.0
+        out = _tick(robot, p, F, np.zeros(3))
+        k0 = _highs_kappa(robot, p, F)
+        assert out[3] == pytest.approx(k0, abs=1e-6)
+        ref = [(_highs_kappa(robot, p + FD_STEP_P * e, F) - k0) / FD_STEP_P for e in np.eye(3)]
+        np.testing.assert_allclose(out[4:7], ref, atol=0.02)
+        assert np.linalg.norm(ref) > 0.5
+
+
+def test_the_look_ahead_ends_where_the_margin_is_lost_along_the_command():
+    """At (2.8, 2.4, 1.3) m with 5 N along +x, kappa is 7.6 N and falls to zero ~98 mm further
+    along +x (HiGHS). Moving +x at 0.5 m/s the look ahead covers the stopping distance at
+    a_brake 1 m/s^2 plus two ticks and 5 mm (132 mm): it reports the last point it found with
+    kappa >= 0, within its resolution (a quarter of that distance halved five times) below the
+    root of HiGHS's margin along the ray (scipy's brentq). Away from the loss, or at rest, it
+    sees none (inf)."""
+    from scipy.optimize import brentq
+
+    robot = _robot("paper_7cable")
+    p, F, speed = np.array([2.8, 2.4, 1.3]), np.array([5.0, 0.0, 0.0]), 0.5
+    reach = speed ** 2 / 2.0 + 2 * speed * 0.002 + 0.005
+    root = brentq(lambda s: _highs_kappa(robot, p + [s, 0, 0], F), 0.0, reach, xtol=1e-9)
+    assert 0.09 < root < 0.105
+    ray = _tick(robot, p, F, [speed, 0.0, 0.0])[10]
+    assert root - reach / 4 / 2 ** 5 - 1e-9 <= ray <= root + 1e-9
+    assert _tick(robot, p, F, [-speed, 0.0, 0.0])[10] == np.inf
+    assert _tick(robot, p, F, [0.0, 0.0, 0.0])[10] == np.inf

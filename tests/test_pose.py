@@ -130,8 +130,10 @@ def test_pose_fk_tick_reports_lengths_no_pose_fits():
 
 def _tension(p, R, F, r, L0, T_assumed, v=np.zeros(3), v_prev=np.zeros(3), ticks=0.0,
              floor=10.0, mass=2.5, handle=(0.0, 0.0, -0.15), slew=1e9, T_before=None,
-             ceiling=1e9, warmup=1.0, hard_floor=3.0):
-    params = np.array([mass, *handle, EA, floor, ceiling, 0.002, slew, warmup, hard_floor])
+             ceiling=1e9, warmup=1.0, hard_floor=3.0, fall=None):
+    # The fall rate (N/s) is params[11]; it defaults to the slew rate as the block's does.
+    params = np.array([mass, *handle, EA, floor, ceiling, 0.002, slew, warmup, hard_floor,
+                       slew if fall is None else fall])
     x = np.concatenate([p, np.asarray(R).ravel(), F, v, r, L0, T_assumed, np.zeros(M), v_prev,
                         [ticks], T_before if T_before is not None else np.zeros(M)])
     out = np.empty(S["tension_out"])
@@ -331,6 +333,40 @@ def test_the_tension_command_slews_from_the_estimate():
                                   ticks=1.0, floor=60.0, slew=50.0, T_before=memory[M + 4:])
     assert np.abs(T_next - T_cmd).max() == pytest.approx(0.1)
 
+
+
+def test_the_tension_command_rises_at_the_slew_rate_and_falls_at_the_fall_rate():
+    # docs/LOG_FORMAT.md: the command reaches the target at most 500 N/s up and 50 N/s down
+    # per cable (here 2 ms ticks: 1 N and 0.1 N a tick), from the last command once started.
+    p, R = random_poses(13, 1)[0]
+    L0 = pose_lengths(ROBOT, p, R)
+    args = (p, R, np.zeros(3), np.zeros(M), L0, np.full(M, 20.0))
+    # Unlimited rates: the command is the target.
+    _, target, _, _, _ = _tension(*args, ticks=1.0, slew=1e9, fall=1e9, T_before=np.zeros(M))
+    for offset, step in ((20.0, -0.1), (-20.0, 1.0), (0.05, -0.05), (-0.5, 0.5)):
+        _, T_cmd, _, _, _ = _tension(*args, ticks=1.0, slew=500.0, fall=50.0,
+                                     T_before=target + offset)
+        np.testing.assert_allclose(T_cmd, target + offset + step, rtol=0, atol=1e-9)
+
+
+def test_the_target_takes_in_a_ramp_s_acceleration_through_the_low_pass():
+    """The command ramps at a0 for 600 ticks (1.2 s), the low-passed command carried from
+    tick to tick: v_slow follows v_k = a0 T k with v - v_slow -> a0 tau (the discrete
+    first-order filter's steady lag, e = (1 - T / tau) e + a0 T), so the acceleration the
+    target takes in, (v - v_slow) / tau, is a0 within (1 - T / tau)^600 = 6e-6 of it: the
+    target balances the weight minus mass a0 (the wrench built independently, as above)."""
+    p = np.array([1.6, 2.2, 1.1])
+    R = rotation_from_rpy([0.02, -0.01, 0.03])
+    L0 = pose_lengths(ROBOT, p, R)
+    a0, T = np.array([0.5, -0.3, 0.2]), 0.002
+    memory = np.zeros(S["tension_out"] - 3 * M - 3)
+    for k in range(600):
+        v = a0 * T * k
+        _, T_cmd, _, _, memory = _tension(p, R, np.zeros(3), np.zeros(M), L0, np.full(M, 20.0),
+                                          v=v, v_prev=memory[M:M + 3], ticks=float(min(k, 1)))
+    w = gravity_wrench(2.5, np.zeros(3), R @ np.array([0.0, 0.0, -0.15]))
+    w[:3] -= 2.5 * a0
+    np.testing.assert_allclose(wrench_matrix(ROBOT, p, R) @ T_cmd + w, 0.0, atol=1e-4)
 
 def test_the_first_tick_fits_pose_and_pretension_together():
     """A platform at rest, level at p, pretensioned by an internal force of unknown size

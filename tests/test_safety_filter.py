@@ -244,6 +244,60 @@ def test_a_pair_barrier_is_met_and_the_command_is_the_weighted_projection():
     assert checked > 30
 
 
+def test_a_crossed_pair_counts_its_distance_negative_and_is_walked_back():
+    """A pair the interference block saw cross (crossed = 1) is a margin lost by its distance
+    plus d_min: from rest the filter asks the platform back along minus the distance's
+    gradient (central differences of the segment distance here), as fast as the ramp allows
+    in one tick, RAMP_SHARE a_max T (below return_speed and the gamma share of a margin of
+    centimetres); the same pair not crossed is far from its d_min and nothing moves. Exp2's
+    robot near its swapped pair 1-3's boundary, where that distance's closest points lie
+    inside both cables (the gradient is not zero)."""
+    from cdpm_drake.scenario import load_resolved_scenario
+
+    robot = load_resolved_scenario("exp2_interaction").robot
+    i_all, j_all = robot.pair_index
+    p = np.array([1.56, 3.24, 1.22])
+    q = robot.pair_position(1, 3)
+    i, j = int(i_all[q]), int(j_all[q])
+
+    def dist(x):
+        B = x + robot.attachments
+        return segment_distance(B[i], robot.reels[i], B[j], robot.reels[j]).distance
+
+    h = 1e-6
+    g = np.array([(dist(p + h * e) - dist(p - h * e)) / (2 * h) for e in np.eye(3)])
+    d_min = np.zeros(i_all.size)
+    crossed = np.zeros(i_all.size)
+    crossed[q] = 1.0
+    v, status, binding, out = _filter(robot, v_d=np.zeros(3), p=p, d_min=d_min,
+                                      crossed=crossed, kinetostatic=False)
+    assert np.linalg.norm(g) > 0.005
+    assert out[8] == pytest.approx(-dist(p), abs=1e-12)  # the smallest margin: -d - d_min
+    np.testing.assert_allclose(v, -RAMP_SHARE * A_MAX * T * g / np.linalg.norm(g), atol=1e-9)
+    assert status == STATUS_MODIFIED and binding == BIND_PAIR
+    v, status, _, out = _filter(robot, v_d=np.zeros(3), p=p, d_min=d_min, kinetostatic=False)
+    assert status == STATUS_PASS and out[8] > 0.03
+    np.testing.assert_array_equal(v, 0.0)
+
+
+def test_with_no_safe_command_it_brakes_to_a_hold_at_the_acceleration_limit():
+    """Moving at 0.3 m/s along -x and -y, 1 cm from the box's lower x and y faces: each face
+    asks its velocity component up by the ramp, RAMP_SHARE a_max T (the braking curve at 1 cm
+    allows less than 0.3 m/s), and the nearest command meeting both lies sqrt(2) RAMP_SHARE
+    a_max T > a_max T away: outside the acceleration limit. The filter holds: it brakes the
+    last command along itself by a_max T (v (1 - a_max T / |v|)), never steps to zero."""
+    robot = _robot()
+    p = robot.workspace.lower + np.array([0.01, 0.01, 1.0])
+    rate = min(GAMMA * 0.01 / T, _face_cap(0.01, CURVE_SHARE * A_BRAKE, T))
+    assert rate < 0.3 - RAMP_SHARE * A_MAX * T and math.sqrt(2) * RAMP_SHARE > 1.0
+    prev = np.array([-0.3, -0.3, 0.0])
+    v, status, binding, out = _filter(robot, v_d=prev, p=p, v_prev=prev,
+                                      d_min=np.zeros(robot.num_pairs), kinetostatic=False)
+    assert status == STATUS_HOLD and binding == 0
+    np.testing.assert_allclose(v, prev * (1 - A_MAX * T / np.linalg.norm(prev)), rtol=1e-12)
+    np.testing.assert_array_equal(out[OUT_MEMORY + 4:OUT_MEMORY + 7], v)  # braked from here
+
+
 def test_the_barrier_position_advances_by_the_commands_and_follows_the_estimate_slowly():
     """barrier_position: p_c + T v_prev drawn towards the estimate by T / tau a tick (closed
     form: a constant offset e of the estimate decays as (1 - T / tau)^k, a ringing estimate is

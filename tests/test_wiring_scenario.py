@@ -1375,6 +1375,36 @@ def test_d_min_is_the_floor_the_filter_keeps_each_pair_at():
     assert off["pair_distances"][:, k].min() < 0.05 and "filter_status" not in off
 
 
+@covers("Scenario.safety_filter.position_smoothing")
+def test_pair_margin_is_the_closest_pair_above_d_min_at_the_smoothed_position():
+    """docs/LOG_FORMAT.md: pair_margin is the smallest watched pair's distance above its d_min
+    (none crossed here) at the filter's barrier position: the last one advanced by the last
+    command and drawn towards the estimate by T / position_smoothing a tick
+    (safety_filter.barrier_position; the estimate itself with 0 and on the first tick).
+    Recomputed from the log (the estimate p, the command `velocity`) with the segment
+    distances of interference.pair_distances, for the 5 N push of the test above, which takes
+    pair 1-3 to its d_min."""
+    from cdpm_drake.interference import pair_distances
+
+    force, _, robot, k = _across_1_3(5.0)
+    default = Logistic(d_l=0.055, d_u=0.061, d_min=0.0535)
+    T = 0.002
+    for tau in (0.0, 0.05):
+        log = sim(push(force, swaps=[[1, 3]], initial_position=list(P_EXP1),
+                       interference=Interference(default=default),
+                       safety_filter=SafetyFilter(position_smoothing=tau)), 1.0)
+        p, v = log["p"], log["velocity"]
+        p_c = p.copy()
+        for row in range(1, len(p)):
+            ahead = p_c[row - 1] + T * v[row - 1]
+            p_c[row] = ahead + (T / tau) * (p[row] - ahead) if tau else p[row]
+        margin = np.array([(pair_distances(robot, q) - log["d_min"]).min() for q in p_c])
+        np.testing.assert_allclose(log["pair_margin"][:, 0], margin, rtol=0, atol=1e-12)
+        assert margin.min() < 0.001  # the push took a pair to its d_min
+        if tau:  # the smoothed position is not the estimate
+            assert np.abs(p_c - p).max() > 1e-8
+
+
 @covers("Scenario.safety_filter.gamma")
 def test_gamma_is_the_share_of_the_margin_a_tick_may_use():
     """Pushed down onto the lower z face (0.3 m; the cables hold 5 N there with margin): in
