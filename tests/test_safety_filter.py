@@ -329,3 +329,24 @@ def test_the_filter_remembers_its_barrier_position_and_command():
     v, status, _, out = _filter(robot, v_d=v_d, p=robot.workspace.center, v_prev=v_d)
     np.testing.assert_array_equal(out[OUT_MEMORY:OUT_MEMORY + 3], robot.workspace.center)
     assert out[OUT_MEMORY + 3] == 1.0
+
+
+def test_two_lost_margins_that_pull_apart_are_held_not_restored():
+    """At rest 2 mm below the box's lower x face (a lost margin: its return asks v_x > 0):
+    alone, the filter walks it back at the ramp, RAMP_SHARE a_max T in the first tick
+    (below return_speed and gamma's share), STATUS_MODIFIED. With the kinetostatic margin
+    lost too and its gradient along -x (its return asks v_x < 0), no twist restores both:
+    the second stage only keeps each from getting worse (grad h . v >= 0, so v_x = 0, the
+    rest asked for) and says so, STATUS_NO_RETURN."""
+    robot = _robot()
+    p = robot.workspace.center.copy()
+    p[0] = robot.workspace.lower[0] - 0.002
+    rest = np.zeros(3)
+    no_pairs = np.zeros(robot.num_pairs)
+    v, status, binding, _ = _filter(robot, v_d=rest, p=p, d_min=no_pairs)
+    assert status == STATUS_MODIFIED and binding == BIND_BOX
+    np.testing.assert_allclose(v, [RAMP_SHARE * A_MAX * T, 0.0, 0.0], rtol=1e-12, atol=1e-15)
+    v, status, _, _ = _filter(robot, v_d=rest, p=p, d_min=no_pairs, kappa=-0.5,
+                              grad_kappa=(-50.0, 0.0, 0.0))
+    assert status == STATUS_NO_RETURN
+    np.testing.assert_allclose(v, 0.0, atol=1e-12)
