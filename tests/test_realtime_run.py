@@ -292,8 +292,8 @@ def test_a_fault_log_is_plotted_and_a_killed_run_is_recovered(tmp_path, capsys):
     scenario = load_scenario("exp1_no_interaction")
     # The bridge goes silent 0.4 s after the first enabling command (injected into the running
     # server it went silent 0.4 s after its start, on CI before a slow build had enabled). On
-    # a loaded host the controller can stall before it ever enables (its watchdog or the bridge's command
-    # timeout ends the run then, as they should): such a run is repeated, up to ATTEMPTS.
+    # a loaded host the controller can stall before it ever enables (its watchdog or the
+    # bridge's command timeout ends the run then, as they should): such a run is repeated.
     for attempt in range(ATTEMPTS):
         server = _server(scenario, FaultPlan(stop=True, after=0.4))
         run_dir = tmp_path / f"run{attempt}"
