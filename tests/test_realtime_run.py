@@ -107,7 +107,11 @@ def test_a_run_against_the_emulator_matches_the_simulation(tmp_path):
         hw = result.log
         n = min(len(hw["time"]), len(sim["time"]))
         err = np.linalg.norm(hw["p"][:n] - sim["p"][:n], axis=1)
-        if err.max() < 1e-3 or result.timing["max"] < 0.010:
+        # A stall on either side: a tick of this process, or a gap the bridge saw between
+        # two commands (its thread or the socket held up), of 10 ms or more.
+        received = np.array([c.time for c in server.commands if c.enable])
+        gap = np.diff(received).max() if received.size > 1 else 0.0
+        if err.max() < 1e-3 or (result.timing["max"] < 0.010 and gap < 0.010):
             break  # matched, or failed without a stall to blame
     assert result.ending == "completed", result.error
     # Ticks 0..2500 of 5 s at 500 Hz, as `cdpm simulate` logs them (issue 10, point 9: 2500
@@ -117,7 +121,7 @@ def test_a_run_against_the_emulator_matches_the_simulation(tmp_path):
     np.testing.assert_allclose(hw["time"][:n], sim["time"][:n], atol=1e-12)
     moved = np.linalg.norm(sim["p"][n - 1] - sim["p"][0])
     assert moved > 0.01  # the comparison means something: the platform moved > 1 cm
-    assert err.max() < 1e-3, (err.max(), result.timing)
+    assert err.max() < 1e-3, (err.max(), gap, result.timing)
     # One row per tick, no gaps, in the stream and in log.npz.
     assert np.all(np.diff(hw["tick"]) == 1) and hw["tick"][0] == 0
     assert result.timing["missing_ticks"] == 0
