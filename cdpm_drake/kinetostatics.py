@@ -26,7 +26,7 @@ import numpy as np
 
 from .pose import posed_cables, wrench_columns
 from .pose_control import _wrench
-from .safety_filter import barrier_position
+from .safety_filter import BARRIER_STATE, barrier_position
 from .tension import RANK_TOL, _null_vector, _particular, _pivoted_qr, max_min_lines
 
 _jit = numba.njit(cache=True, error_model="numpy")
@@ -94,8 +94,10 @@ def margin_scratch(m: int):
 # The kinetostatic block's parameters (a flat array, `kinetostatic_params`).
 P_MASS, P_HANDLE, P_FLOOR, P_CEILING, P_ROWS, P_BARRIER = 0, 1, 4, 5, 6, 7
 P_T_L, P_T_U, P_F_U, P_B, P_MID, P_FORCE, P_A_BRAKE, P_T, P_RIPPLE, P_SMOOTHING = range(8, 18)
-# kinetostatic_tick's input: the safety filter's memory [p_c (3), valid (1), v_prev (3)].
-FILTER_MEMORY = 7
+# kinetostatic_tick's input x: [p (3), F_H (3), the safety filter's barrier state (BARRIER_STATE:
+# p_c (3), valid (1), v_prev (3)) at X_STATE, and for the full pose R (9) at X_R].
+X_STATE = 6
+X_R = X_STATE + BARRIER_STATE
 
 
 def kinetostatic_params(robot, *, floor, ceiling, rows, barrier, t_l, t_u, F_u, eps,
@@ -142,7 +144,7 @@ def _margin_at(reels, attachments, params, scratch, p, R, w, floor):
 @_jit
 def kinetostatic_tick(reels, attachments, params, scratch, x, out):
     """One tick of the kinetostatic block. x = [p (3) m: the estimate, F_H (3) N, the
-    safety filter's memory (FILTER_MEMORY: p_c m, valid, v m/s the velocity commanded last),
+    safety filter's memory (BARRIER_STATE: p_c m, valid, v m/s the velocity commanded last),
     and for the full pose R (9, R_WB row-major: the orientation held); else the platform is
     level]. The pose is the filter's (safety_filter.barrier_position of p on that memory).
     Writes (KIN_OUT) the margin kappa at the pose under the
@@ -160,14 +162,14 @@ def kinetostatic_tick(reels, attachments, params, scratch, x, out):
     leads back (dynamic plant, 40 N along the 1-3 boundary). Sampling ahead along the
     velocity sees the drop before the platform is in it."""
     p = np.empty(3)
-    barrier_position(x[0:3], x[6:6 + FILTER_MEMORY], params[P_T], params[P_SMOOTHING], p)
+    barrier_position(x[0:3], x[X_STATE:X_R], params[P_T], params[P_SMOOTHING], p)
     F = x[3:6]
-    v = x[10:13]
+    v = x[X_STATE + 4:X_STATE + 7]
     R = np.eye(3)
-    if x.shape[0] >= 13 + 9:
+    if x.shape[0] >= X_R + 9:
         for a in range(3):
             for b in range(3):
-                R[a, b] = x[13 + 3 * a + b]
+                R[a, b] = x[X_R + 3 * a + b]
     floor = params[P_FLOOR] + params[P_RIPPLE] * math.sqrt(F[0] * F[0] + F[1] * F[1]
                                                          + F[2] * F[2])
     w = np.empty(6)

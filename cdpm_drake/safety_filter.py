@@ -78,6 +78,9 @@ BIND_TEXT = ((BIND_PAIR, "cable pairs"), (BIND_BOX, "workspace box"),
 # Where `filter_tick`'s memory and its pass-through of v_d start in its output; the memory
 # is [p_c (3), p_c valid (1), v_prev (3), w_prev (3)].
 OUT_MEMORY, OUT_V_D, MEMORY = 11, 21, 10
+# The memory's first BARRIER_STATE values, [p_c, valid, v_prev]: what `barrier_position`
+# reads, and what the kinetostatic block takes (its input barrier_state_previous).
+BARRIER_STATE = 7
 
 # At most this many cutting planes of the speed and acceleration balls per solve: each cuts
 # the violation of the last solution; 12 leave it below 1e-9 m/s in every case measured.

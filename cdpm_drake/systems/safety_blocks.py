@@ -10,9 +10,9 @@ C++ one-tick delay, its inputs stacked and its result split by one C++ Selector.
 import numpy as np
 
 from ..kernel_call import bind, owned
-from ..kinetostatics import FILTER_MEMORY, KIN_OUT, kinetostatic_tick, margin_scratch
+from ..kinetostatics import KIN_OUT, X_R, kinetostatic_tick, margin_scratch
 from ..model_monitor import ModelFault, OK, fault_message, monitor_sizes, monitor_tick
-from ..safety_filter import OUT_MEMORY, OUT_V_D, filter_sizes, filter_tick
+from ..safety_filter import BARRIER_STATE, OUT_MEMORY, OUT_V_D, filter_sizes, filter_tick
 from ._wiring import unit_delay
 from .pose_blocks import KernelSystem, build_kernel_block
 
@@ -75,7 +75,7 @@ def build_safety_filter(builder, robot, *, d_min, params, full_pose, time_step):
         outputs=outputs + [("status", 6, 1), ("binding", 7, 1), ("pair_margin", 8, 1),
                            ("barriers", 10, 1), ("velocity_desired", OUT_V_D, 3)],
         memory_at=OUT_MEMORY, time_step=time_step,
-        memory_outputs=[("barrier_state_previous", 0, 7)])
+        memory_outputs=[("barrier_state_previous", 0, BARRIER_STATE)])
 
 
 def build_kinetostatic_force(builder, robot, *, params, full_pose, time_step):
@@ -90,11 +90,11 @@ def build_kinetostatic_force(builder, robot, *, params, full_pose, time_step):
     reels, attachments = owned(robot.reels), owned(robot.attachments)
     par = owned(params)
     scratch = margin_scratch(robot.num_cables)
-    x_size = 6 + FILTER_MEMORY + (9 if full_pose else 0)
+    x_size = X_R + (9 if full_pose else 0)
     example = np.zeros(x_size)
     example[:3] = robot.workspace.center
     if full_pose:
-        example[13:22] = np.eye(3).ravel()
+        example[X_R:X_R + 9] = np.eye(3).ravel()
     solve = bind(kinetostatic_tick, reels, attachments, par, scratch, example,
                  np.empty(KIN_OUT))
 
@@ -102,7 +102,7 @@ def build_kinetostatic_force(builder, robot, *, params, full_pose, time_step):
         solve(reels, attachments, par, scratch, x, out)
 
     force = builder.AddNamedSystem("force_memory", unit_delay(3, time_step))
-    inputs = ([("p_WP", 3), ("F_H_previous", 3), ("barrier_state_previous", FILTER_MEMORY)]
+    inputs = ([("p_WP", 3), ("F_H_previous", 3), ("barrier_state_previous", BARRIER_STATE)]
               + ([("R_WP", 9)] if full_pose else []))
     route = build_kernel_block(
         builder, KinetostaticSolve(x_size, KIN_OUT, tick), inputs=inputs, memory=None,
