@@ -17,7 +17,7 @@ reset to the start, as a homing between two runs would (its fault bits stay), an
 clock starts again at the session's first enabling command; the session's line says where the
 last one left the platform. With the dynamic plant, each session's close reports what the
 cables went through in it (tensions, when each went slack, the largest tilt and when, on the
-plant's clock).
+plant's clock), while the controller drove the reels and, apart, after they were stopped.
 
 Examples:
   cdpm-reel-emulator --robot paper_7cable --start 1.77 3.65 1.22
@@ -288,15 +288,13 @@ class DynamicBridge:
 
     def _clear_record(self) -> None:
         # What the cables went through, tick by tick, since the start or the last reset (the
-        # session's summary).
+        # session's summary): while the controller drove the reels, and apart from that, after
+        # the reels were stopped (disabled or faulted: the drives brake a moving platform and
+        # the operator pulls on, which can raise tensions the run itself never saw).
         m = self.robot.num_cables
-        self.ticks = 0
-        self.min_tension = math.inf
-        self.max_tension = 0.0
-        self.slack_ticks = np.zeros(m, dtype=int)
-        self.first_slack = np.full(m, np.nan)       # plant time of each cable's first slack, s
-        self.max_tilt = 0.0
-        self.max_tilt_time = 0.0
+        self.driven = _Record(m)
+        self.stopped = _Record(m)
+        self.stop_time = None                       # plant time the reels were stopped, s
         self._observe()
 
     def reset(self) -> None:
@@ -333,7 +331,10 @@ class DynamicBridge:
         velocity = np.asarray(velocity, dtype=float)
         if enable and np.max(np.abs(velocity)) > self.max_reel_speed * (1 + 1e-9):
             self.raise_fault(FAULT_OVERSPEED)
+        was = self.enabled
         self.enabled = bool(enable) and self.faults == 0
+        if was and not self.enabled:
+            self._stopped()
         self._apply(velocity if self.enabled else np.zeros_like(self.command))
         if self.enabled and self.operator_start is None:
             self.operator_start = self.time
@@ -342,8 +343,14 @@ class DynamicBridge:
         """Set fault bits; the drives are commanded to stop (they slow down with their own
         dynamics)."""
         self.faults |= int(bits)
+        if self.enabled:
+            self._stopped()
         self.enabled = False
         self._apply(np.zeros_like(self.command))
+
+    def _stopped(self) -> None:
+        if self.stop_time is None:  # the first stop ends what the controller drove
+            self.stop_time = self.plant_time
 
     def _apply(self, velocity) -> None:
         if not np.array_equal(velocity, self.command):
@@ -375,20 +382,14 @@ class DynamicBridge:
         # this runs every tick).
         step = self._step_port.Eval(self._cables_context)
         T = step[self._tensions]
-        self.ticks += 1
-        self.min_tension = min(self.min_tension, float(T.min()))
-        self.max_tension = max(self.max_tension, float(T.max()))
         slack = step[self._slack] > 0.5
-        self.slack_ticks += slack
-        now = self.plant_time
-        self.first_slack[slack & np.isnan(self.first_slack)] = now
         r, p, y = (float(a) for a in step[self._rpy])
         # The angle of R = Rz(y) Ry(p) Rx(r) from level: acos((trace R - 1) / 2).
         trace = (math.cos(y) * math.cos(p) + math.sin(y) * math.sin(p) * math.sin(r)
                  + math.cos(y) * math.cos(r) + math.cos(p) * math.cos(r))
         tilt = math.acos(max(-1.0, min(1.0, (trace - 1) / 2)))
-        if tilt > self.max_tilt:
-            self.max_tilt, self.max_tilt_time = tilt, now
+        record = self.driven if self.stop_time is None else self.stopped
+        record.observe(T, slack, tilt, self.plant_time)
 
     def force(self) -> np.ndarray:
         """The force sample, N: the operator's force on the true platform (the plant's
@@ -399,14 +400,44 @@ class DynamicBridge:
     def summary(self) -> str:
         """What the cables went through since the start or the last reset (a session): the
         tension range, each cable's slack ticks and when it first went slack, the largest
-        tilt and when; times on the plant's clock (0 at the session's first enabling
-        command, as the controller's log)."""
+        tilt and when, while the controller drove the reels; then the same after the reels
+        were stopped (disabled or faulted), if the plant ran on. Times on the plant's clock (0
+        at the session's first enabling command, as the controller's log)."""
+        text = f"dynamic plant over {self.driven.ticks} ticks: {self.driven.describe()}"
+        if self.stopped.ticks:
+            text += (f"; after the reels stopped at t = {self.stop_time:.3f} s, "
+                     f"{self.stopped.ticks} ticks: {self.stopped.describe()}")
+        return text + f" (plant time 0..{self.plant_time:.3f} s)"
+
+
+class _Record:
+    """What the cables went through over some ticks: tensions (N), slack ticks, tilt (rad);
+    times on the plant's clock, s."""
+
+    def __init__(self, m: int):
+        self.ticks = 0
+        self.min_tension = math.inf
+        self.max_tension = 0.0
+        self.slack_ticks = np.zeros(m, dtype=int)
+        self.first_slack = np.full(m, np.nan)       # plant time of each cable's first slack, s
+        self.max_tilt = 0.0
+        self.max_tilt_time = 0.0
+
+    def observe(self, T, slack, tilt: float, now: float) -> None:
+        self.ticks += 1
+        self.min_tension = min(self.min_tension, float(T.min()))
+        self.max_tension = max(self.max_tension, float(T.max()))
+        self.slack_ticks += slack
+        self.first_slack[slack & np.isnan(self.first_slack)] = now
+        if tilt > self.max_tilt:
+            self.max_tilt, self.max_tilt_time = tilt, now
+
+    def describe(self) -> str:
         slack = ", ".join(f"{i + 1}:{int(n)} (first at t = {self.first_slack[i]:.3f} s)"
                           for i, n in enumerate(self.slack_ticks) if n)
-        return (f"dynamic plant over {self.ticks} ticks: tensions {self.min_tension:.2f}.."
-                f"{self.max_tension:.2f} N, slack ticks per cable {slack or 'none'}, largest "
-                f"tilt {math.degrees(self.max_tilt):.2f} deg at t = {self.max_tilt_time:.3f} "
-                f"s (plant time 0..{self.plant_time:.3f} s)")
+        return (f"tensions {self.min_tension:.2f}..{self.max_tension:.2f} N, slack ticks per "
+                f"cable {slack or 'none'}, largest tilt {math.degrees(self.max_tilt):.2f} deg "
+                f"at t = {self.max_tilt_time:.3f} s")
 
 
 @dataclasses.dataclass(frozen=True)

@@ -182,10 +182,61 @@ def test_the_dynamic_bridge_is_the_dynamic_plant_on_the_bridges_clock():
     assert np.linalg.norm(force) > 4.0  # and the hand pushes
     # The summary's tension range and tilt come from the plant's own truth, tick by tick (its
     # logger samples at 2 ms too).
-    assert bridge.min_tension == pytest.approx(truth["tensions"].min(), abs=1e-9)
-    assert bridge.max_tension == pytest.approx(truth["tensions"].max(), abs=1e-9)
-    assert bridge.slack_ticks.tolist() == truth["slack"][1:].sum(axis=0).astype(int).tolist()
+    assert bridge.driven.min_tension == pytest.approx(truth["tensions"].min(), abs=1e-9)
+    assert bridge.driven.max_tension == pytest.approx(truth["tensions"].max(), abs=1e-9)
+    assert (bridge.driven.slack_ticks.tolist()
+            == truth["slack"][1:].sum(axis=0).astype(int).tolist())
     assert "tensions" in bridge.summary() and "slack ticks per cable" in bridge.summary()
+
+
+def test_the_dynamic_summary_keeps_what_happened_after_the_reels_stopped_apart():
+    # Driven for 0.2 s, then disabled while the platform moves and the operator pushes on:
+    # the drives brake and the tensions rise past anything seen while driven (a CI run's
+    # summary once reported 38.8 N after a 2 s run whose tensions stayed under 26 N). The
+    # summary keeps the driven ticks apart from the stopped ones; the reference is the same
+    # plant alone under its own Simulator with the command dropped to zero at 0.2 s.
+    from pydrake.systems.analysis import Simulator
+    from pydrake.systems.framework import DiagramBuilder
+    from pydrake.systems.primitives import TrajectorySource
+    from pydrake.trajectories import PiecewisePolynomial
+
+    from cdpm_drake.diagram import make_plant
+    from cdpm_drake.systems.dynamic_plant import ground_truth_log
+
+    resolved = _dynamic_resolved()
+    command = np.array([0.05, -0.05, 0.05, -0.05, 0.05, -0.05, 0.0])
+    bridge = E.DynamicBridge(resolved)
+    bridge.set_command(command, enable=True)
+    for _ in range(100):
+        bridge.step(0.002)
+    bridge.set_command(command, enable=False)
+    for _ in range(100):
+        bridge.step(0.002)
+    builder = DiagramBuilder()
+    plant = builder.AddNamedSystem("reels", make_plant(resolved))
+    steps = PiecewisePolynomial.ZeroOrderHold(
+        [0.0, 0.2, 1.0], np.column_stack([command, np.zeros(7), np.zeros(7)]))
+    source = builder.AddSystem(TrajectorySource(steps))
+    builder.Connect(source.get_output_port(), plant.GetInputPort("reel_velocity_command"))
+    diagram = builder.Build()
+    simulator = Simulator(diagram)
+    simulator.AdvanceTo(0.4)
+    truth = ground_truth_log(diagram, simulator.get_context())
+    T = truth["tensions"][:201]
+    driven, stopped = T[:101], T[101:]
+    assert stopped.max() > driven.max() + 1.0  # the stop is what raised them
+    assert bridge.stop_time == pytest.approx(0.2)
+    assert bridge.driven.ticks == 101 and bridge.stopped.ticks == 100
+    assert bridge.driven.max_tension == pytest.approx(driven.max(), abs=1e-9)
+    assert bridge.driven.min_tension == pytest.approx(driven.min(), abs=1e-9)
+    assert bridge.stopped.max_tension == pytest.approx(stopped.max(), abs=1e-9)
+    assert bridge.stopped.min_tension == pytest.approx(stopped.min(), abs=1e-9)
+    summary = bridge.summary()
+    assert summary.startswith(f"dynamic plant over 101 ticks: tensions {driven.min():.2f}.."
+                              f"{driven.max():.2f} N"), summary
+    assert (f"; after the reels stopped at t = 0.200 s, 100 ticks: tensions "
+            f"{stopped.min():.2f}..{stopped.max():.2f} N") in summary, summary
+    assert summary.endswith("(plant time 0..0.400 s)"), summary
 
 
 def test_a_faulted_dynamic_bridge_stops_its_drives_with_their_own_dynamics():
@@ -298,10 +349,10 @@ def test_a_reset_dynamic_bridge_replays_a_fresh_one_bit_for_bit():
     used = E.DynamicBridge(resolved)
     start = used.lengths.copy()
     drive(used, 150)
-    assert used.ticks == 151 and np.abs(used.lengths - start).max() > 1e-3
+    assert used.driven.ticks == 151 and np.abs(used.lengths - start).max() > 1e-3
     used.reset()
     np.testing.assert_array_equal(used.lengths, start)
-    assert used.plant_time == 0.0 and used.ticks == 1 and used.operator_start is None
+    assert used.plant_time == 0.0 and used.driven.ticks == 1 and used.operator_start is None
     lengths, force = drive(used)
     fresh_lengths, fresh_force = drive(E.DynamicBridge(resolved))
     np.testing.assert_array_equal(lengths, fresh_lengths)
@@ -327,13 +378,13 @@ def test_the_dynamic_summary_says_when_each_cable_went_slack_and_when_it_tilted_
     for i in range(7):
         if slack[:, i].any():
             first = t[np.argmax(slack[:, i])]
-            assert bridge.first_slack[i] == pytest.approx(first, abs=1e-9)
+            assert bridge.driven.first_slack[i] == pytest.approx(first, abs=1e-9)
             assert f"{i + 1}:{int(slack[1:, i].sum())} (first at t = {first:.3f} s)" \
                 in bridge.summary()
         else:
-            assert np.isnan(bridge.first_slack[i])
+            assert np.isnan(bridge.driven.first_slack[i])
     tilt = rotation_angle(rotations_from_rpy(truth["rpy_true"][:251]))
-    assert bridge.max_tilt_time == pytest.approx(t[np.argmax(tilt)], abs=1e-9)
+    assert bridge.driven.max_tilt_time == pytest.approx(t[np.argmax(tilt)], abs=1e-9)
     assert bridge.summary().endswith(f"largest tilt {np.degrees(tilt.max()):.2f} deg at t = "
                                      f"{t[np.argmax(tilt)]:.3f} s (plant time 0..0.500 s)")
 

@@ -520,8 +520,9 @@ def test_cdpm_run_against_the_emulated_dynamic_plant(tmp_path):
                       r"N, slack ticks per cable (.*), largest tilt ([\d.]+) deg", out)
     assert found, out
     ticks, t_min, t_max = int(found.group(1)), float(found.group(2)), float(found.group(3))
-    # (The emulator's world runs on until it is stopped, the reels held and the hand pulling:
-    # a few more ticks than the run's, maybe some slack then.)
+    # The summary's first part is what the controller drove; the emulator's world runs on
+    # until it is stopped, the drives braking the moving platform and the hand pulling (on CI
+    # 38.8 N in those ticks, 25.1 N simulated): those ticks are reported apart, unchecked.
     assert ticks >= 900 and 0.0 <= t_min < sim["tensions"].min() + 10.0
     assert abs(t_max - sim["tensions"].max()) < 10.0, (t_max, sim["tensions"].max())
     assert float(found.group(5)) < 5.0  # barely tilted (0.20 deg simulated)
