@@ -95,3 +95,13 @@ def highs_t_star(W, w):
         return -np.inf
     assert res.status == 0, res.message
     return -res.fun
+
+
+def default_signals():
+    """For a child process, before exec: SIGINT and SIGTERM at their defaults. A pytest
+    started in the background by a shell without job control has SIGINT ignored; its children
+    would inherit that and (as Unix programs do) keep ignoring Ctrl-C."""
+    import signal
+
+    signal.signal(signal.SIGINT, signal.SIG_DFL)
+    signal.signal(signal.SIGTERM, signal.SIG_DFL)

@@ -13,16 +13,9 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from conftest import default_signals
 
 BIN = Path(sys.executable).parent
-
-
-def _default_signals():
-    """In the child, before exec: SIGINT and SIGTERM at their defaults. A pytest started in
-    the background by a shell without job control has SIGINT ignored, the child would
-    inherit that, and (as Unix programs do, see interrupt.honoured) keep ignoring Ctrl-C."""
-    signal.signal(signal.SIGINT, signal.SIG_DFL)
-    signal.signal(signal.SIGTERM, signal.SIG_DFL)
 
 
 def _wait_for(proc, stream, needle: bytes, timeout: float = 60.0) -> bytes:
@@ -60,7 +53,7 @@ def test_a_signal_during_cdpm_simulate_keeps_the_log_and_the_plots(tmp_path, sig
     proc = subprocess.Popen([str(BIN / "cdpm"), "simulate", "exp1_no_interaction", "--duration",
                              str(LONG_RUN), "--realtime", "1", "--out", str(out_dir), "--plot"],
                             cwd=tmp_path, stdout=subprocess.PIPE, stderr=subprocess.PIPE,
-                            preexec_fn=_default_signals)
+                            preexec_fn=default_signals)
     try:
         _wait_for(proc, proc.stderr, f"/{LONG_RUN:.1f} s".encode(), timeout=300)
         proc.send_signal(sig)

@@ -17,6 +17,7 @@ import pytest
 from scipy.integrate import quad
 
 import sweep_hooks
+from conftest import default_signals
 from cdpm_drake import sweep as sw
 from cdpm_drake.cli import main
 from cdpm_drake.scenario import Interference, Logistic, PairLogistic, Scenario, load_scenario
@@ -483,7 +484,7 @@ def test_signal_mid_sweep_keeps_finished_rows_and_resume_completes(tmp_path, sig
         f"sys.exit(sweep_main(sweep={str(path)!r}, out_dir={str(out)!r}, workers=1, "
         "progress=False, before_run=hook))\n")
     proc = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True,
-                          timeout=120)
+                          timeout=120, preexec_fn=default_signals)
     assert proc.returncode == code, proc.stderr
     if signum != signal.SIGKILL:
         assert "rerun the same command to resume" in proc.stderr
