@@ -133,6 +133,14 @@ KIN_OUT = 11
 # The look ahead samples the stopping distance at this many points, then bisects this often.
 RAY_SAMPLES = 4
 RAY_BISECTIONS = 5
+# The look ahead looks for the margin falling below min(kappa, 0) by more than this (N): a
+# drop at a kink, not the slow fall of a curved limit that the gradient's row follows tick by
+# tick; it then ends where the margin first falls below min(kappa, 0). Looking for a fall
+# below 0 alone, a platform sliding along the limit (kappa = +-1e-6 N) saw a drop right ahead
+# on every tick with kappa >= 0 and none with kappa < 0: it braked and sped up in turn, a 5 Hz
+# cycle of 5-135 mm/s that rang the dynamic plant's yaw mode (a 20 N lift on exp2: 2082
+# slack ticks in 10 s).
+RAY_TOLERANCE = 0.5
 
 
 @_jit
@@ -151,8 +159,9 @@ def kinetostatic_tick(reels, attachments, params, scratch, x, out):
     weight and the hand force F_H at the handle, t_c = kappa + floor, t* (no ceiling), and
     the cue F_kin = intensity(t_c) grad / |grad| (N, base frame) towards more margin; for the
     safety filter's barrier also kappa's gradient in the position (forward differences,
-    0.1 mm) and the look ahead: how far along v the margin stays >= 0 within the distance
-    the filter needs to stop from |v| (inf: all of it).
+    0.1 mm) and the look ahead: where the margin drops (below min(kappa, 0) by more than
+    RAY_TOLERANCE) along v within the distance the filter needs to stop from |v|, how far it
+    stays >= min(kappa, 0) (inf: no drop).
 
     Why the look ahead: kappa is a max-min of lines, piecewise smooth with kinks where the
     binding cables change, and the ceiling gives it ridges; near a kink the gradient says
@@ -201,27 +210,34 @@ def kinetostatic_tick(reels, attachments, params, scratch, x, out):
             alpha = cue_intensity(kappa + params[P_FLOOR], params)
             out[0], out[1], out[2] = alpha * gx / g, alpha * gy / g, alpha * gz / g
     speed = math.sqrt(v[0] * v[0] + v[1] * v[1] + v[2] * v[2])
-    if params[P_BARRIER] == 0.0 or kappa < 0.0 or speed <= 1e-9:
+    if params[P_BARRIER] == 0.0 or speed <= 1e-9:
         return
+    # A drop is where the margin falls below `level` by more than RAY_TOLERANCE; the look
+    # ahead then ends where it first falls below `level` (RAY_TOLERANCE above).
+    level = min(kappa, 0.0)
     a, T = params[P_A_BRAKE], params[P_T]
     # The distance to stop from |v| at a (braking curve) plus two ticks and 5 mm.
     reach = speed * speed / (2.0 * a) + 2.0 * speed * T + 0.005
-    lo, hi = 0.0, -1.0
+    lo, hi, drop = 0.0, -1.0, False
     for k in range(1, RAY_SAMPLES + 1):
         s = reach * k / RAY_SAMPLES
         for c in range(3):
             q[c] = p[c] + s * v[c] / speed
-        if not _margin_at(reels, attachments, params, scratch, q, R, w, floor) >= 0.0:
+        m = _margin_at(reels, attachments, params, scratch, q, R, w, floor)
+        if hi < 0.0 and not m >= level:
             hi = s
+        if not m >= level - RAY_TOLERANCE:
+            drop = True
             break
-        lo = s
-    if hi < 0.0:
+        if hi < 0.0:
+            lo = s
+    if not drop:
         return
     for _ in range(RAY_BISECTIONS):
         s = 0.5 * (lo + hi)
         for c in range(3):
             q[c] = p[c] + s * v[c] / speed
-        if _margin_at(reels, attachments, params, scratch, q, R, w, floor) >= 0.0:
+        if _margin_at(reels, attachments, params, scratch, q, R, w, floor) >= level:
             lo = s
         else:
             hi = s

@@ -180,16 +180,22 @@ def record_run(scenario_name, pair, force, seconds):
 def capture_problems(rec):
     """Every QP the recorded filter ticks solve: the ticks replayed by filter_tick's Python
     code with its solve_qp calls recorded, each tick checked against the compiled output.
-    Returns [(w, z0, C, d)]."""
+    Returns ([(w, z0, C, d)] of those with a solution, how many had none): a QP without one
+    (the filter then gives up a return or holds) is no race between solvers."""
     from bench_diagram import Patch
 
     from cdpm_drake import safety_filter
 
-    problems = []
+    problems, infeasible = [], [0]
 
     def recording_solve(w, z0, C, d, count, z, u, max_iterations):
-        problems.append((w.copy(), z0.copy(), C[:count].copy(), d[:count].copy()))
-        return solve_qp(w, z0, C, d, count, z, u, max_iterations)
+        problem = (w.copy(), z0.copy(), C[:count].copy(), d[:count].copy())
+        result = solve_qp(w, z0, C, d, count, z, u, max_iterations)
+        if result[0] == QP_OPTIMAL:
+            problems.append(problem)
+        else:
+            infeasible[0] += 1
+        return result
 
     out = np.empty_like(rec.outs[0])
     with Patch([(safety_filter, "solve_qp", recording_solve)]):
@@ -201,7 +207,7 @@ def capture_problems(rec):
                 raise SystemExit("bench_safety_filter: error: filter_tick's Python code "
                                  "replayed a recorded tick differently from the compiled "
                                  "one; the captured QPs would not be the filter's")
-    return problems
+    return problems, infeasible[0]
 
 
 # --- the solvers -------------------------------------------------------------------------------
@@ -640,12 +646,14 @@ def main(argv=None) -> int:
         if fault:
             notes.append(f"{label}: ended at {reached:.3f} s by a fault: {fault}")
         runs.append((label, recordings))
-        pool = [p for p in capture_problems(recordings["filter_tick"]) if p[3].size > 0]
+        captured, unsolvable = capture_problems(recordings["filter_tick"])
+        pool = [p for p in captured if p[3].size > 0]
         take = args.problems // len(RUNS)
         chosen = rng.choice(len(pool), size=min(take, len(pool)), replace=False)
         problems += [pool[k] for k in sorted(chosen)]
         outs = np.array(recordings["filter_tick"].outs)
-        notes.append(f"{label}: {len(outs)} ticks, {len(pool)} QPs with rows; filter status "
+        notes.append(f"{label}: {len(outs)} ticks, {len(pool)} QPs with rows and a solution "
+                     f"({unsolvable} without one, left out); filter status "
                      f"passed/modified/no return/hold {np.bincount(outs[:, 6].astype(int), minlength=4).tolist()}")
 
     sizes = np.array([p[3].size for p in problems])

@@ -142,20 +142,59 @@ def test_the_block_s_margin_gradient_is_the_linear_program_s_forward_difference(
 
 
 def test_the_look_ahead_ends_where_the_margin_is_lost_along_the_command():
-    """At (2.8, 2.4, 1.3) m with 5 N along +x, kappa is 7.6 N and falls to zero ~98 mm further
-    along +x (HiGHS). Moving +x at 0.5 m/s the look ahead covers the stopping distance at
-    a_brake 1 m/s^2 plus two ticks and 5 mm (132 mm): it reports the last point it found with
-    kappa >= 0, within its resolution (a quarter of that distance halved five times) below the
-    root of HiGHS's margin along the ray (scipy's brentq). Away from the loss, or at rest, it
-    sees none (inf)."""
+    """At (2.8, 2.4, 1.3) m with 5 N along +x, kappa is 7.6 N and falls to zero ~95 mm further
+    along +x (HiGHS), and below -RAY_TOLERANCE (a drop) within the look ahead's reach. Moving
+    +x at 0.5 m/s the look ahead covers the stopping distance at a_brake 1 m/s^2 plus two
+    ticks and 5 mm (132 mm): it reports the last point it found with kappa >= 0, within its
+    resolution (a quarter of that distance halved five times) below the root of HiGHS's
+    margin along the ray (scipy's brentq). Away from the loss, or at rest, it sees none
+    (inf)."""
     from scipy.optimize import brentq
+
+    from cdpm_drake.kinetostatics import RAY_TOLERANCE
 
     robot = _robot("paper_7cable")
     p, F, speed = np.array([2.8, 2.4, 1.3]), np.array([5.0, 0.0, 0.0]), 0.5
     reach = speed ** 2 / 2.0 + 2 * speed * 0.002 + 0.005
     root = brentq(lambda s: _highs_kappa(robot, p + [s, 0, 0], F), 0.0, reach, xtol=1e-9)
-    assert 0.09 < root < 0.105
+    assert 0.09 < root < 0.1
+    assert _highs_kappa(robot, p + [reach, 0, 0], F) < -RAY_TOLERANCE
     ray = _tick(robot, p, F, [speed, 0.0, 0.0])[10]
     assert root - reach / 4 / 2 ** 5 - 1e-9 <= ray <= root + 1e-9
     assert _tick(robot, p, F, [-speed, 0.0, 0.0])[10] == np.inf
     assert _tick(robot, p, F, [0.0, 0.0, 0.0])[10] == np.inf
+
+
+def test_the_look_ahead_does_not_flip_with_the_sign_of_a_margin_at_the_limit():
+    """A platform sliding along the kinetostatic limit has kappa = +-1e-5 N from tick to
+    tick. Tangent to the limit (the curved limit falls 0.005 N in 50 mm here, HiGHS) the look
+    ahead must see the same on both sides of zero: no drop (inf). Looking for kappa < 0 only
+    where kappa >= 0 it saw a drop right ahead (the first sample already below 0) on the
+    ticks with kappa >= 0 and nothing on the others, so the filter braked and sped up in
+    turn: a 5 Hz cycle of 5-135 mm/s that rang the dynamic plant (a 20 N lift on exp2). A
+    real drop is still seen, and the look ahead still ends where the margin is lost."""
+    from scipy.optimize import brentq
+
+    from cdpm_drake.kinetostatics import RAY_TOLERANCE
+
+    robot = _robot("paper_7cable")
+    p, F, speed = np.array([2.8, 2.4, 1.3]), np.array([5.0, 0.0, 0.0]), 0.5
+    limit = p + [brentq(lambda s: _highs_kappa(robot, p + [s, 0, 0], F), 0.0, 0.2,
+                        xtol=1e-12), 0.0, 0.0]
+    g = _tick(robot, limit - [1e-3, 0, 0], F, np.zeros(3))[4:7]
+    normal = g / np.linalg.norm(g)
+    tangent = np.cross(normal, [0.0, 0.0, 1.0])
+    tangent /= np.linalg.norm(tangent)
+    for side in (+1e-7, -1e-7):
+        q = limit + side * normal
+        for v in (speed * tangent, -speed * tangent):
+            along = [_highs_kappa(robot, q + s * v / speed, F) for s in (0.01, 0.05, 0.13)]
+            assert min(along) > -RAY_TOLERANCE and along[-1] < -1e-3  # curved, not flat
+            out = _tick(robot, q, F, v)
+            assert abs(out[3]) < 2e-5 and np.sign(out[3]) == np.sign(side)
+            assert out[10] == np.inf, (side, v, out[10], along)
+    # Just inside the limit, straight down the gradient: a drop within millimetres, and the
+    # margin is lost right away: the look ahead ends before 1e-7 m.
+    inside = limit + 1e-7 * normal
+    assert _highs_kappa(robot, inside - 0.02 * normal, F) < -RAY_TOLERANCE
+    assert _tick(robot, inside, F, -speed * normal)[10] <= 1e-7 + 1e-9
