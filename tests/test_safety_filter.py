@@ -218,10 +218,13 @@ def test_a_pair_barrier_is_met_and_the_command_is_the_weighted_projection():
         prog.AddQuadraticCost(np.eye(3), -v_d, z, is_convex=True)
         prog.AddLinearConstraint(g[None, :], [rhs], [np.inf], z)
         cone = np.vstack([np.zeros((1, 3)), np.eye(3)])  # (a, z): |z| <= a
-        # The speed limit; while the margin is lost (by more than LOST_DEPTH of travel),
-        # LOST_SPEED braked to at RAMP_SHARE of a_max.
-        deep = h < -LOST_DEPTH * np.linalg.norm(grad[:3])
-        cap = (min(V_MAX, max(LOST_SPEED, np.linalg.norm(v_prev) - RAMP_SHARE * A_MAX * T))
+        # The speed limit; while the margin is lost (by more than LOST_DEPTH of travel), a
+        # speed falling from V_MAX to LOST_SPEED at twice that depth, braked to at
+        # RAMP_SHARE of a_max.
+        depth = -h / np.linalg.norm(grad[:3])
+        deep = depth > LOST_DEPTH
+        slow_to = V_MAX + min(1.0, depth / LOST_DEPTH - 1.0) * (LOST_SPEED - V_MAX)
+        cap = (min(V_MAX, max(slow_to, np.linalg.norm(v_prev) - RAMP_SHARE * A_MAX * T))
                if deep else V_MAX)
         prog.AddLorentzConeConstraint(cone, np.r_[cap, np.zeros(3)], z)
         prog.AddLorentzConeConstraint(cone, np.r_[A_MAX * T, -v_prev], z)
@@ -242,6 +245,30 @@ def test_a_pair_barrier_is_met_and_the_command_is_the_weighted_projection():
         if status != STATUS_PASS:  # the lost margin's speed cap binds too (deep)
             assert binding & (BIND_PAIR | BIND_ACCELERATION | (BIND_SPEED if deep else 0))
     assert checked > 30
+
+
+@pytest.mark.parametrize("depth, share", [(0.0005, 0.0), (0.0015, 0.5), (0.003, 1.0)])
+def test_a_lost_margin_caps_the_speed_by_how_deep_it_is_lost(depth, share):
+    """The platform `depth` m beyond the upper x face of the box (h = -depth, |grad h| = 1),
+    moving along the face (+y) a little faster than the cap and asked to go on: the speed is
+    capped at V_MAX + share (LOST_SPEED - V_MAX), share = (depth - LOST_DEPTH) / LOST_DEPTH
+    clipped to [0, 1] (the module's LOST_* comment), while the return pulls back along -x. A
+    step from V_MAX to LOST_SPEED at LOST_DEPTH switched on and off as the kinetostatic
+    margin hovered about it on a sliding platform, and rang the dynamic plant."""
+    robot = _robot()
+    p = np.array(robot.workspace.center, dtype=float)
+    p[0] = robot.workspace.upper[0] + depth
+    expected = V_MAX + share * (LOST_SPEED - V_MAX)
+    assert depth <= LOST_DEPTH or abs(share - min(1.0, depth / LOST_DEPTH - 1.0)) < 1e-12
+    speed = min(V_MAX, expected + 0.001)  # above the cap; braking (3.6 mm/s a tick) not binding
+    v_prev = np.array([0.0, speed, 0.0])
+    v, status, binding, _ = _filter(robot, v_d=v_prev, p=p, v_prev=v_prev,
+                                    kinetostatic=False)
+    assert status in (STATUS_MODIFIED, STATUS_NO_RETURN)
+    assert v[0] < 0.0  # back towards the box
+    assert np.linalg.norm(v) == pytest.approx(min(expected, speed), abs=1e-7)
+    if share > 0.0:
+        assert binding & BIND_SPEED
 
 
 def test_a_crossed_pair_counts_its_distance_negative_and_is_walked_back():
