@@ -200,7 +200,7 @@ def _add_row(C, d, kind, count, grad, n, rhs, k):
 
 
 @_jit
-def _add_barrier(C, d, kind, lost, deep, count, grad, n, rhs, h, h_next, k, prev, ramp, T):
+def _add_barrier(C, d, kind, lost, lost_by, count, grad, n, rhs, h, h_next, k, prev, ramp, T):
     """A barrier's row on the translation, grad_v . v >= rhs, asking at most `ramp` more
     than the previous command gave it (module docstring), but never letting a margin h >= 0
     go in one tick (h_next: the margin after a tick at the previous command; as the virtual
@@ -213,11 +213,11 @@ def _add_barrier(C, d, kind, lost, deep, count, grad, n, rhs, h, h_next, k, prev
     # How far the margin is lost in the platform's travel (-h / |grad_v h|, m; 0 where it is
     # not): beyond LOST_DEPTH not a tick's round-off at the barrier but a margin really gone.
     if h >= 0.0:
-        deep[count] = 0.0
+        lost_by[count] = 0.0
     elif g2 > 0.0:
-        deep[count] = -h / math.sqrt(g2)
+        lost_by[count] = -h / math.sqrt(g2)
     else:
-        deep[count] = math.inf
+        lost_by[count] = math.inf
     for c in range(3, 6):
         grad[c] = 0.0
     rhs = min(rhs, trans + ramp)
@@ -267,7 +267,7 @@ def filter_tick(reels, attachments, pi, pj, d_min, bounds, params, x, out):
     d = np.empty(rows)
     kind = np.empty(rows, dtype=np.int64)
     lost = np.zeros(rows, dtype=np.bool_)  # a barrier whose margin is already lost (h < 0)
-    deep = np.zeros(rows)  # ... how far in the platform's travel, m
+    lost_by = np.zeros(rows)  # ... by how much of the platform's travel, m
     grad = np.empty(6)
     count = 0
     # A barrier may ask its rate to change by at most RAMP_SHARE a_max T a tick (per unit of
@@ -308,7 +308,7 @@ def filter_tick(reels, attachments, pi, pj, d_min, bounds, params, x, out):
         for c in range(3):
             grad[c] *= sign
             trans += grad[c] * prev[c]
-        count = _add_barrier(C, d, kind, lost, deep, count, grad, n,
+        count = _add_barrier(C, d, kind, lost, lost_by, count, grad, n,
                              trans - rate + (h - h1) / T, h, h1, BIND_PAIR, prev, gv * ramp, T)
     for axis in range(3 if params[F_BOX] != 0.0 else 0):
         for side in range(2):
@@ -319,7 +319,7 @@ def filter_tick(reels, attachments, pi, pj, d_min, bounds, params, x, out):
             for c in range(6):
                 grad[c] = 0.0
             grad[axis] = 1.0 if side == 0 else -1.0
-            count = _add_barrier(C, d, kind, lost, deep, count, grad, n, -rate, h,
+            count = _add_barrier(C, d, kind, lost, lost_by, count, grad, n, -rate, h,
                                  h + T * grad[axis] * prev[axis], BIND_BOX, prev, ramp, T)
     kappa_used = math.nan
     if params[F_KINETOSTATIC] != 0.0 and math.isfinite(kappa):
@@ -328,7 +328,7 @@ def filter_tick(reels, attachments, pi, pj, d_min, bounds, params, x, out):
         for c in range(3):
             grad[c] = gk[c]
         k_next = kappa + T * (gk[0] * prev[0] + gk[1] * prev[1] + gk[2] * prev[2])
-        count = _add_barrier(C, d, kind, lost, deep, count, grad, n,
+        count = _add_barrier(C, d, kind, lost, lost_by, count, grad, n,
                              -barrier_rate(kappa, gv, params), kappa, k_next,
                              BIND_KINETOSTATIC, prev, gv * ramp, T)
         speed = math.sqrt(prev[0] * prev[0] + prev[1] * prev[1] + prev[2] * prev[2])
@@ -341,7 +341,7 @@ def filter_tick(reels, attachments, pi, pj, d_min, bounds, params, x, out):
                 grad[c] = -prev[c] / speed
                 along += prev[c] / speed * prev[c]
             cap = _face_cap(ray, params[F_A_BRAKE], T)
-            count = _add_barrier(C, d, kind, lost, deep, count, grad, n,
+            count = _add_barrier(C, d, kind, lost, lost_by, count, grad, n,
                                  -max(cap, along - ramp), ray, ray - T * along,
                                  BIND_KINETOSTATIC, prev, 1e300, T)
     base = count
@@ -353,7 +353,7 @@ def filter_tick(reels, attachments, pi, pj, d_min, bounds, params, x, out):
     speed_cap = v_max
     depth = 0.0
     for r in range(base):
-        depth = max(depth, deep[r])
+        depth = max(depth, lost_by[r])
     if depth > LOST_DEPTH:
         # The cap falls with the depth, not at once: a margin hovering about LOST_DEPTH (a
         # platform sliding along the curved kinetostatic limit loses ~0.05 N there, about a

@@ -6,6 +6,7 @@ by several ms at times, and these tests are about the run, not the watchdog (the
 tests are in test_hardware_reels.py).
 """
 
+import contextlib
 import os
 import signal
 import threading
@@ -15,7 +16,7 @@ import pytest
 from conftest import default_signals
 
 from cdpm_drake.cli import main
-from cdpm_drake.emulator import ReelBridge, ReelBridgeServer
+from cdpm_drake.emulator import FaultPlan, ReelBridge, ReelBridgeServer
 from cdpm_drake.kinematics import cable_lengths
 from cdpm_drake.realtime import run
 from cdpm_drake.scenario import ScenarioError, load_scenario, scenario_operator, scenario_robot
@@ -29,13 +30,33 @@ def _server(scenario, faults=None):
     default), the scenario's operator; `faults` (a FaultPlan) from its `after` s after the
     first enabling command (ReelBridgeServer.inject on a running server would count from
     the injection instead: before the controller has even built its diagram)."""
-    from cdpm_drake.emulator import FaultPlan
-
     robot = scenario_robot(scenario)
     bridge = ReelBridge(robot, cable_lengths(robot, np.array(scenario.initial_position)),
                         force=scenario_operator(scenario).force, time_constant=0.0)
     return ReelBridgeServer(bridge, address=("127.0.0.1", 0), record=100_000,
                             faults=faults or FaultPlan()).start()
+
+
+@contextlib.contextmanager
+def _after_first_enable(server, seconds, action):
+    """Within the block, action() is called `seconds` s of wall time after the bridge's first
+    enabling command (not after run() is called: building the diagram took 0.4-0.8 s on this
+    host), unless the block has ended first."""
+    done = threading.Event()
+
+    def wait():
+        while server.first_enable_time is None and not done.wait(0.005):
+            pass
+        if not done.wait(seconds):
+            action()
+
+    thread = threading.Thread(target=wait, daemon=True)
+    thread.start()
+    try:
+        yield
+    finally:
+        done.set()
+        thread.join()
 
 
 def _hardware(scenario_name, server, extra=""):
@@ -135,27 +156,15 @@ def test_sigint_stops_the_run_with_zero_velocity_first(tmp_path):
     scenario = load_scenario("exp2_interaction")
     for attempt in range(ATTEMPTS):
         server = _server(scenario)
-        # The signal comes 1 s of wall time after the bridge's first enabling command (not
-        # after run() is called: building the diagram took 0.4-0.8 s on this host).
-        done = threading.Event()
-
-        def interrupt():
-            while server.first_enable_time is None and not done.wait(0.005):
-                pass
-            if not done.wait(1.0):
-                os.kill(os.getpid(), signal.SIGINT)
-
-        timer = threading.Thread(target=interrupt, daemon=True)
         # The run's handler is installed only for a signal that is not ignored: a pytest
         # started with SIGINT ignored (in the background, no job control) must not skip this.
         previous = signal.signal(signal.SIGINT, signal.default_int_handler)
         try:
-            timer.start()
-            result = run(scenario=_hardware("exp2_interaction", server),
-                         out_dir=tmp_path / f"run{attempt}", duration=20.0)
+            # The signal comes 1 s after the bridge's first enabling command.
+            with _after_first_enable(server, 1.0, lambda: os.kill(os.getpid(), signal.SIGINT)):
+                result = run(scenario=_hardware("exp2_interaction", server),
+                             out_dir=tmp_path / f"run{attempt}", duration=20.0)
         finally:
-            done.set()
-            timer.join()
             server.stop()
             signal.signal(signal.SIGINT, previous)
         if not (result.ending == "fault" and _host_stalled(str(result.error))):
@@ -174,22 +183,11 @@ def test_sigint_stops_the_run_with_zero_velocity_first(tmp_path):
 def test_a_bridge_that_goes_silent_ends_the_run_with_a_fault_and_keeps_the_log(tmp_path):
     scenario = load_scenario("exp1_no_interaction")
     server = _server(scenario)
-    done = threading.Event()
-
-    def silence():  # 1 s of wall time after the bridge's first enabling command
-        while server.first_enable_time is None and not done.wait(0.005):
-            pass
-        if not done.wait(1.0):
-            server.stop()
-
-    stopper = threading.Thread(target=silence, daemon=True)
     try:
-        stopper.start()
-        result = run(scenario=_hardware("exp1_no_interaction", server), out_dir=tmp_path,
-                     duration=10.0)
+        with _after_first_enable(server, 1.0, server.stop):  # the bridge goes silent
+            result = run(scenario=_hardware("exp1_no_interaction", server), out_dir=tmp_path,
+                         duration=10.0)
     finally:
-        done.set()
-        stopper.join()
         server.stop()
     assert result.ending == "fault"
     assert "no valid status" in str(result.error) and "zero reel velocity sent" in str(
@@ -306,8 +304,6 @@ def test_a_bridge_fault_at_startup_hints_at_a_reset(tmp_path, capsys):
 
 
 def test_a_fault_log_is_plotted_and_a_killed_run_is_recovered(tmp_path, capsys):
-    from cdpm_drake.emulator import FaultPlan
-
     scenario = load_scenario("exp1_no_interaction")
     # The bridge goes silent 0.4 s after the first enabling command (injected into the running
     # server it went silent 0.4 s after its start, on CI before a slow build had enabled). On
