@@ -1,9 +1,10 @@
 """cdpm_drake: interference-aware admittance control of cable-driven parallel mechanisms.
 
-Layout (imports point down only):
-  cli.py -> diagram.py / scenario.py -> systems/, hardware/ -> robot.py, kinematics.py,
-  interference.py, limits.py, sensor.py, operators.py (numpy and numba, no Drake; the per-tick
-  kernels are compiled once and cached by numba).
+Layout (imports point down only; tests/test_layering.py holds the rules):
+  cli/ -> runs/ (simulate, realtime, sweep/), emulator/ -> diagram.py (the one builder),
+  config/ -> systems/, hardware/ -> robot/ -> kernels/ (numpy and numba, no Drake; the
+  per-tick math, compiled once and cached by numba). views/ read logs through runs/;
+  data/ holds the shipped robots, scenarios and sweeps.
 """
 
 import hashlib
@@ -18,15 +19,16 @@ def numba_cache_dir(package: Path = Path(__file__).parent) -> Path:
     """Where the package's compiled kernels are cached: a folder named by a hash of the
     source of every module that defines numba kernels. numba invalidates a cached kernel only
     when the file that defines it changes; a kernel that calls another file's kernel
-    (pose_control calls kinematics, interference, pose and tension) would otherwise keep
+    (full_pose calls kinematics, interference, pose and tension) would otherwise keep
     running the callee's old code after an edit of the callee's file. Keyed by all the kernel
-    modules, an edit of any of them starts a fresh cache; an edit elsewhere (cli.py) keeps
-    it."""
+    modules in any folder, an edit of any of them starts a fresh cache; an edit elsewhere
+    (cli/) keeps it."""
     digest = hashlib.sha256()
-    for path in sorted(package.glob("*.py")):
+    for path in sorted(package.rglob("*.py")):
         source = path.read_bytes()
         if b"numba.njit" in source:  # kernels, and the constants they compile in
-            digest.update(path.name.encode() + b"\0" + source + b"\0")
+            name = path.relative_to(package).as_posix()
+            digest.update(name.encode() + b"\0" + source + b"\0")
     base = package / "__pycache__"
     if not os.access(package, os.W_OK) or (base.exists() and not os.access(base, os.W_OK)):
         # An installed, read-only package: the user's cache folder.

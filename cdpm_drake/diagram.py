@@ -11,22 +11,22 @@ import numpy as np
 from pydrake.systems.framework import Diagram, DiagramBuilder
 from pydrake.systems.primitives import Adder, ConstantVectorSource, VectorLogSink
 
-from .scenario import (DynamicReels as DynamicReelsConfig, ResolvedScenario, Scenario,
+from cdpm_drake.config import (DynamicReels as DynamicReelsConfig, ResolvedScenario, Scenario,
                        SimulatedReels as SimulatedReelsConfig, check_dynamic_reels,
                        resolve_scenario)
-from .systems import WorkspaceWallForce, add_simulated_world
-from .systems.simulated_reels import add_measured_force
-from .systems._wiring import (FUSED_DELAY, FUSED_WIRING, FlatBlock, fuse_delays, fuse_wiring,
+from cdpm_drake.systems import WorkspaceWallForce, add_simulated_world
+from cdpm_drake.systems.plants.simulated_reels import add_measured_force
+from cdpm_drake.systems.wiring import (FUSED_DELAY, FUSED_WIRING, FlatBlock, fuse_delays, fuse_wiring,
                              wiring)
-from .systems.admittance import ADMITTANCE_MAIN, build_admittance
-from .systems.force_sensor import FORCE_SENSOR_MAIN, build_force_sensor
-from .systems.forward_kinematics import FORWARD_KINEMATICS_MAIN, build_forward_kinematics
-from .systems.interference_force import INTERFERENCE_FORCE_MAIN, build_interference_force
-from .systems.jacobian_mapping import JACOBIAN_MAPPING_MAIN, build_jacobian_mapping
-from .systems.safety_limits import SAFETY_LIMITS_MAIN, build_safety_limits
-from .systems.safety_blocks import (MAIN as SAFETY_MAIN, build_kinetostatic_force,
+from cdpm_drake.systems.admittance import ADMITTANCE_MAIN, build_admittance
+from cdpm_drake.systems.force_sensor import FORCE_SENSOR_MAIN, build_force_sensor
+from cdpm_drake.systems.forward_kinematics import FORWARD_KINEMATICS_MAIN, build_forward_kinematics
+from cdpm_drake.systems.interference_force import INTERFERENCE_FORCE_MAIN, build_interference_force
+from cdpm_drake.systems.jacobian_mapping import JACOBIAN_MAPPING_MAIN, build_jacobian_mapping
+from cdpm_drake.systems.safety_limits import SAFETY_LIMITS_MAIN, build_safety_limits
+from cdpm_drake.systems.safety_blocks import (MAIN as SAFETY_MAIN, build_kinetostatic_force,
                                     build_model_monitor, build_safety_filter)
-from .systems.pose_blocks import (MAIN as POSE_MAIN, build_orientation_hold,
+from cdpm_drake.systems.pose_blocks import (MAIN as POSE_MAIN, build_orientation_hold,
                                   build_pose_forward_kinematics, build_pose_jacobian_mapping,
                                   build_posed_interference_force, build_tension_distribution)
 
@@ -280,7 +280,7 @@ def _kinetostatic_params(resolved):
     """The kinetostatic block's parameters (kinetostatics.kinetostatic_params) for the
     scenario: the barrier's floor, the controller's ceiling, the robot's wrench rows, the
     cue's logistic."""
-    from .kinetostatics import kinetostatic_params, wrench_rows
+    from cdpm_drake.kernels.kinetostatics import kinetostatic_params, wrench_rows
 
     scenario, robot = resolved.scenario, resolved.robot
     c, f = scenario.controller, scenario.safety_filter.kinetostatic_force
@@ -305,7 +305,7 @@ def _add_safety_filter(builder, blocks, resolved, velocity_desired, omega_desire
     """The safety filter between the limits and the Jacobian mapping, its barriers at the
     commanded pose (p_WP and, for the full pose, the held orientation R_WP); returns its
     velocity and angular velocity commands (None without a full pose)."""
-    from .safety_filter import filter_params
+    from cdpm_drake.kernels.safety_filter import filter_params
 
     scenario, robot = resolved.scenario, resolved.robot
     f = scenario.safety_filter
@@ -348,8 +348,8 @@ def _add_safety_filter(builder, blocks, resolved, velocity_desired, omega_desire
 
 def _add_model_monitor(builder, blocks, resolved, lengths, p_WP, R_WP, F_H, T):
     """The model monitor (model_monitor.py) on the measurements and the estimates."""
-    from .kinetostatics import wrench_rows
-    from .model_monitor import monitor_params
+    from cdpm_drake.kernels.kinetostatics import wrench_rows
+    from cdpm_drake.kernels.model_monitor import monitor_params
 
     scenario, robot = resolved.scenario, resolved.robot
     mon = scenario.model_monitor
@@ -380,7 +380,7 @@ def _add_pose_blocks(builder, blocks, resolved, fk, force_sensor, lengths, veloc
     Jacobian mapping of the pose, fed the orientation hold's reference and the (filtered)
     angular velocity command; returns the mapping (its p_WP and velocity_command inputs still
     to connect)."""
-    from .tension import gravity_wrench, tension_distribution, wrench_matrix
+    from cdpm_drake.kernels.tension import gravity_wrench, tension_distribution, wrench_matrix
 
     scenario, robot = resolved.scenario, resolved.robot
     controller = scenario.controller
@@ -478,11 +478,11 @@ def make_plant(scenario: Scenario | ResolvedScenario, robot=None):
     if isinstance(cfg, SimulatedReelsConfig):
         return build_simulated_plant(resolved)
     if isinstance(cfg, DynamicReelsConfig):
-        from .systems.dynamic_plant import build_dynamic_plant
+        from cdpm_drake.systems.plants.dynamic_plant import build_dynamic_plant
         return build_dynamic_plant(resolved.scenario, resolved.robot, resolved.operator,
                                    check_dynamic_reels(resolved.scenario, resolved.robot).tensions)
-    from .hardware.config import HardwareReels
-    from .hardware.reels import HardwareReelsSystem
+    from cdpm_drake.hardware.config import HardwareReels
+    from cdpm_drake.hardware.reels import HardwareReelsSystem
 
     if isinstance(cfg, HardwareReels):
         return HardwareReelsSystem(resolved.robot, cfg, time_step=resolved.time_step)
@@ -537,7 +537,7 @@ def reserve_log(diagram, context, ticks: int) -> None:
     120 s run of exp2)."""
     if diagram.HasSubsystemNamed(LOG_SINK):
         diagram.GetSubsystemByName(LOG_SINK).FindMutableLog(context).Reserve(int(ticks))
-    from .systems.dynamic_plant import reserve_ground_truth
+    from cdpm_drake.systems.plants.dynamic_plant import reserve_ground_truth
     reserve_ground_truth(diagram, context, ticks)
 
 
@@ -573,7 +573,7 @@ def _has_output(block, port_name: str) -> bool:
 
 
 def _add_tick_log(builder, blocks, T, path, robot, scenario):
-    from .hardware.tick_log_sink import TickLogSink
+    from cdpm_drake.hardware.tick_log_sink import TickLogSink
 
     ports = {key: port for key, _, _, port in _logged_ports(blocks)}
     sink = builder.AddNamedSystem("tick_log", TickLogSink(

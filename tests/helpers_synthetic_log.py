@@ -8,7 +8,7 @@ of cables 1 and 3 swapped, as in the paper's experiments.
 
 import numpy as np
 
-from cdpm_drake.kinematics import cable_lengths
+from cdpm_drake.kernels.kinematics import cable_lengths
 from cdpm_drake.robot import load_robot
 
 TICK = 0.002  # s, the controller period of the paper (500 Hz)

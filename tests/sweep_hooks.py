@@ -1,4 +1,4 @@
-"""Test-only `before_run` hooks for cdpm_drake.sweep, passed as parameters (never switched on
+"""Test-only `before_run` hooks for cdpm_drake.runs.sweep, passed as parameters (never switched on
 by the environment). Module-level, so a spawned worker or a Ray worker can unpickle them."""
 
 import os

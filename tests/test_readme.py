@@ -42,7 +42,7 @@ def test_the_readme_defines_the_run_reports_figures():
 
 
 def test_script_docstrings_speak_of_the_project_only():
-    for path in sorted((REPO / "scripts").glob("*.py")):
+    for path in sorted((REPO / "scripts").rglob("*.py")):
         tree = ast.parse(path.read_text())
         texts = [ast.get_docstring(tree) or ""]
         texts += [n.value.value for n in ast.walk(tree) if isinstance(n, ast.Expr)

@@ -62,8 +62,10 @@ def installed(tmp_path_factory):
 def test_the_wheel_ships_the_built_in_robots_and_scenarios(installed):
     _, wheel = installed
     names = zipfile.ZipFile(wheel).namelist()
-    for shipped in ("cdpm_drake/robots/paper_7cable.yaml", "cdpm_drake/robots/cube_8cable.yaml",
-                    "cdpm_drake/scenarios/exp2_interaction.yaml"):
+    for shipped in ("cdpm_drake/data/robots/paper_7cable.yaml",
+                    "cdpm_drake/data/robots/cube_8cable.yaml",
+                    "cdpm_drake/data/scenarios/exp2_interaction.yaml",
+                    "cdpm_drake/data/sweeps/exp2_du_Fu.yaml"):
         assert shipped in names, names
 
 

@@ -7,7 +7,7 @@ annotations as types, not strings.
 import dataclasses
 import math
 
-from .link import resolve_ipv4
+from cdpm_drake.hardware.link import resolve_ipv4
 
 # The bridge's UDP port when nothing else is configured (unassigned by IANA).
 DEFAULT_BRIDGE_PORT = 47100
@@ -36,7 +36,7 @@ class HardwareReels:
     # began, re-enables the reels (ramping from rest, as at start-up) and the run goes on;
     # otherwise the fault latches and the run ends. It rides out a bridge that was paused
     # rather than broken, e.g. a host that holds a virtual CPU for ~10 ms (see
-    # scripts/soak_realtime.py). 0: latch at once.
+    # scripts/bench/soak_realtime.py). 0: latch at once.
     resume_within: float = 0.015
     # Longest wait for the bridge's first status at startup, s (wall clock).
     startup_timeout: float = 2.0

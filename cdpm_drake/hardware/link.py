@@ -14,7 +14,7 @@ import socket
 
 import numpy as np
 
-from .protocol import (REASONS, Command, ProtocolError, Status, check_sequence, decode_status,
+from cdpm_drake.hardware.protocol import (REASONS, Command, ProtocolError, Status, check_sequence, decode_status,
                        encode_command, next_sequence)
 
 # A status burst larger than this in one tick means the loop stalled for a long time; the

@@ -27,7 +27,7 @@ echoes the stop, with no status lost since the silence began, proves the link wh
 reels are re-enabled, ramping from rest, and the run goes on. Anything else (the time runs out,
 a status lost, a fault bit) latches the fault as above. Why: a bridge that is paused, not
 broken, e.g. an emulator on a virtual machine whose host holds a virtual CPU for 5-15 ms
-(measured on the shared VM this was developed on: scripts/soak_realtime.py), would otherwise
+(measured on the shared VM this was developed on: scripts/bench/soak_realtime.py), would otherwise
 end a person's interaction; the reels stop within the same `watchdog_ticks` either way.
 
 The socket is a resource, not state: it is held as an attribute because it cannot be copied
@@ -42,10 +42,10 @@ import time
 import numpy as np
 from pydrake.systems.framework import LeafSystem
 
-from ..kinematics import KinematicsError, cable_lengths, forward_kinematics
-from .config import HardwareReels, check_hardware_reels
-from .link import ReelLink
-from .protocol import fault_names, next_sequence, sequence_delta
+from cdpm_drake.kernels.kinematics import KinematicsError, cable_lengths, forward_kinematics
+from cdpm_drake.hardware.config import HardwareReels, check_hardware_reels
+from cdpm_drake.hardware.link import ReelLink
+from cdpm_drake.hardware.protocol import fault_names, next_sequence, sequence_delta
 
 # Book-keeping state vector (float64; 32-bit sequence numbers are exact in a double).
 STATUS_SEQ = 0        # sequence of the last accepted status
@@ -383,8 +383,8 @@ def start_pose_problem(robot, p) -> str:
     words naming the pose and the box; "" when they may. A robot whose cables cannot balance
     moments (wrench-matrix rank < 6 at the workspace centre: it is modelled as translating)
     is judged by the forces alone (the platform as a point)."""
-    from ..robot import robot_statics
-    from ..tension import gravity_wrench, holding_tension, max_min_tension
+    from cdpm_drake.robot import robot_statics
+    from cdpm_drake.kernels.tension import gravity_wrench, holding_tension, max_min_tension
 
     p = np.asarray(p, dtype=float)
     box = robot.workspace

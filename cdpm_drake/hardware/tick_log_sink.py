@@ -5,7 +5,7 @@ import time
 import numpy as np
 from pydrake.systems.framework import LeafSystem
 
-from .tick_log import TickLogWriter, row_dtype
+from cdpm_drake.hardware.tick_log import TickLogWriter, row_dtype
 
 
 # The sink's own column: wall time of the tick's work, s (docs/LOG_FORMAT.md `compute`).

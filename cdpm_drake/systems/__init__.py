@@ -9,14 +9,14 @@ fused into one (_wiring.fuse_wiring). Contexts clone and simulations repeat exac
 that changes lives in Python.
 """
 
-from .admittance import Admittance, make_admittance
-from .force_sensor import ForceSensorSource
-from .forward_kinematics import ForwardKinematicsEstimator
-from .interference_force import InterferenceForce
-from .jacobian_mapping import JacobianVelocityMapping
-from .safety_limits import SafetyLimits
-from .simulated_reels import SensorNoise, SimulatedReels, add_simulated_world
-from .wall_force import WorkspaceWallForce
+from cdpm_drake.systems.admittance import Admittance, make_admittance
+from cdpm_drake.systems.force_sensor import ForceSensorSource
+from cdpm_drake.systems.forward_kinematics import ForwardKinematicsEstimator
+from cdpm_drake.systems.interference_force import InterferenceForce
+from cdpm_drake.systems.jacobian_mapping import JacobianVelocityMapping
+from cdpm_drake.systems.safety_limits import SafetyLimits
+from cdpm_drake.systems.plants.simulated_reels import SensorNoise, SimulatedReels, add_simulated_world
+from cdpm_drake.systems.wall_force import WorkspaceWallForce
 
 __all__ = [
     "Admittance", "ForceSensorSource", "ForwardKinematicsEstimator", "InterferenceForce",

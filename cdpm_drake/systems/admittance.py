@@ -5,7 +5,7 @@ from pydrake.systems.analysis import DiscreteTimeApproximation
 from pydrake.systems.framework import Diagram
 from pydrake.systems.primitives import LinearSystem
 
-from ._wiring import stack, sub_diagram
+from cdpm_drake.systems.wiring import stack, sub_diagram
 
 
 def make_admittance(mass: float, damping: float, time_step: float):

@@ -4,9 +4,9 @@ import numpy as np
 from pydrake.systems.framework import Diagram, LeafSystem
 from pydrake.systems.primitives import LinearSystem
 
-from ..kernel_call import bind, owned
-from ..sensor import clip_into, clip_to_sensor_range
-from ._wiring import sub_diagram
+from cdpm_drake.kernels.call import bind, owned
+from cdpm_drake.kernels.force_sensor import clip_into, clip_to_sensor_range
+from cdpm_drake.systems.wiring import sub_diagram
 
 __all__ = ["ForceSensorSource", "SensorRange", "clip_to_sensor_range", "sliding_average"]
 
@@ -34,7 +34,7 @@ class SensorRange(LeafSystem):
         clip = bind(clip_into, np.zeros(3), self._axis, self._axial_range,
                     self._transverse_range, np.empty(3))
         # The tick's callback is a closure over locals, not a method reading self: attribute
-        # lookups on a pybind LeafSystem cost ~0.2 us each (scripts/count_instructions.py).
+        # lookups on a pybind LeafSystem cost ~0.2 us each (scripts/bench/count_instructions.py).
         axis, axial, transverse = self._axis, self._axial_range, self._transverse_range
         measured = self._measured.Eval
 

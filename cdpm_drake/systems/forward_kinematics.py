@@ -3,9 +3,9 @@
 import numpy as np
 from pydrake.systems.framework import Diagram, LeafSystem
 
-from ..kernel_call import bind, owned
-from ..kinematics import forward_kinematics, gauss_newton_warm_stacked
-from ._wiring import stack, sub_diagram, unit_delay
+from cdpm_drake.kernels.call import bind, owned
+from cdpm_drake.kernels.kinematics import forward_kinematics, gauss_newton_warm_stacked
+from cdpm_drake.systems.wiring import stack, sub_diagram, unit_delay
 
 
 class ForwardKinematicsSolve(LeafSystem):
@@ -32,7 +32,7 @@ class ForwardKinematicsSolve(LeafSystem):
         solve = bind(gauss_newton_warm_stacked, self._offsets, np.ones(m + 3), 1e-10,
                      self._max_residual, 8, np.empty(3))
         # The tick's callback is a closure over locals, not a method reading self: attribute
-        # lookups on a pybind LeafSystem cost ~0.2 us each (scripts/count_instructions.py).
+        # lookups on a pybind LeafSystem cost ~0.2 us each (scripts/bench/count_instructions.py).
         offsets, residual, inputs = self._offsets, self._max_residual, self._inputs.Eval
 
         def calc_p_WP(context, output):

@@ -3,9 +3,9 @@
 import numpy as np
 from pydrake.systems.framework import Diagram, LeafSystem
 
-from ..interference import interference_tick_stacked, pair_geometry, result_layout
-from ..kernel_call import bind, owned
-from ._wiring import note_piece, sub_diagram, unit_delay, wiring
+from cdpm_drake.kernels.interference import interference_tick_stacked, pair_geometry, result_layout
+from cdpm_drake.kernels.call import bind, owned
+from cdpm_drake.systems.wiring import note_piece, sub_diagram, unit_delay, wiring
 
 # The ports of the block, in the order of the flat result (interference.result_layout).
 OUTPUTS = ("F_int", "pair_distances", "active", "crossed", "side")
@@ -39,7 +39,7 @@ class InterferencePairs(LeafSystem):
         tick = bind(interference_tick_stacked, self._geo, self._par, self._floor, self._F_max,
                     np.zeros(3 + P), np.empty(3 + 13 * P))
         # The tick's callback is a closure over locals, not a method reading self: attribute
-        # lookups on a pybind LeafSystem cost ~0.2 us each (scripts/count_instructions.py).
+        # lookups on a pybind LeafSystem cost ~0.2 us each (scripts/bench/count_instructions.py).
         geo, par, floor, F_max, inputs = (self._geo, self._par, self._floor, self._F_max,
                                           self._inputs.Eval)
 

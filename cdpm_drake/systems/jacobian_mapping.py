@@ -3,9 +3,9 @@
 import numpy as np
 from pydrake.systems.framework import Diagram, LeafSystem
 
-from ..kernel_call import bind, owned
-from ..kinematics import length_loop_sizes, length_loop_tick
-from ._wiring import note_piece, sub_diagram, unit_delay, wiring
+from cdpm_drake.kernels.call import bind, owned
+from cdpm_drake.kernels.kinematics import length_loop_sizes, length_loop_tick
+from cdpm_drake.systems.wiring import note_piece, sub_diagram, unit_delay, wiring
 
 # The cable-length loop's gain when a caller gives none, 1/s (scenario.Controller).
 DEFAULT_LENGTH_GAIN = 40.0
@@ -39,7 +39,7 @@ class ReelRates(LeafSystem):
         tick = bind(length_loop_tick, self._offsets, gain, step, band, example,
                     np.empty(sizes["out"]))
         # The tick's callback is a closure over locals, not a method reading self: attribute
-        # lookups on a pybind LeafSystem cost ~0.2 us each (scripts/count_instructions.py).
+        # lookups on a pybind LeafSystem cost ~0.2 us each (scripts/bench/count_instructions.py).
         offsets, inputs = self._offsets, self._inputs.Eval
 
         def calc_result(context, output):

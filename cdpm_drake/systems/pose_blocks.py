@@ -11,14 +11,14 @@ its memory a C++ one-tick delay, its inputs stacked and its result split by one 
 import numpy as np
 from pydrake.systems.framework import LeafSystem
 
-from ..interference import result_layout
-from ..kernel_call import bind, owned
-from ..kinematics import KinematicsError
-from ..pose_control import (FK_INCONSISTENT, FK_NOT_SETTLED, START_ITERATIONS, WARMUP_TICKS,
+from cdpm_drake.kernels.interference import result_layout
+from cdpm_drake.kernels.call import bind, owned
+from cdpm_drake.kernels.kinematics import KinematicsError
+from cdpm_drake.kernels.full_pose import (FK_INCONSISTENT, FK_NOT_SETTLED, START_ITERATIONS, WARMUP_TICKS,
                             interference_posed_tick,
                             orientation_tick, pose_fk_tick, pose_rates_tick, sizes,
                             tension_tick)
-from ._wiring import note_piece, unit_delay, wiring
+from cdpm_drake.systems.wiring import note_piece, unit_delay, wiring
 
 
 class KernelSystem(LeafSystem):
@@ -296,7 +296,7 @@ def build_pose_jacobian_mapping(builder, robot, *, length_gain, integral_gain, t
 def build_posed_interference_force(builder, robot, params, *, time_step):
     """The interference block (systems.interference_force) on the cables of the estimated
     pose: inputs p_WP and R_WP; the same outputs."""
-    from .interference_force import OUTPUTS
+    from cdpm_drake.systems.interference_force import OUTPUTS
 
     P = robot.num_pairs
     layout = result_layout(P)

@@ -9,12 +9,12 @@ C++ one-tick delay, its inputs stacked and its result split by one C++ Selector.
 
 import numpy as np
 
-from ..kernel_call import bind, owned
-from ..kinetostatics import KIN_OUT, X_R, kinetostatic_tick, margin_scratch
-from ..model_monitor import ModelFault, OK, fault_message, monitor_sizes, monitor_tick
-from ..safety_filter import BARRIER_STATE, OUT_MEMORY, OUT_V_D, filter_sizes, filter_tick
-from ._wiring import unit_delay
-from .pose_blocks import KernelSystem, build_kernel_block
+from cdpm_drake.kernels.call import bind, owned
+from cdpm_drake.kernels.kinetostatics import KIN_OUT, X_R, kinetostatic_tick, margin_scratch
+from cdpm_drake.kernels.model_monitor import ModelFault, OK, fault_message, monitor_sizes, monitor_tick
+from cdpm_drake.kernels.safety_filter import BARRIER_STATE, OUT_MEMORY, OUT_V_D, filter_sizes, filter_tick
+from cdpm_drake.systems.wiring import unit_delay
+from cdpm_drake.systems.pose_blocks import KernelSystem, build_kernel_block
 
 # The system a flat build (FlatBlock) names after the block, for every block here.
 MAIN = "solve"

@@ -3,9 +3,9 @@
 import numpy as np
 from pydrake.systems.framework import Diagram, LeafSystem
 
-from ..kernel_call import bind, owned
-from ..limits import limit_velocity_stacked
-from ._wiring import stack, sub_diagram, unit_delay
+from cdpm_drake.kernels.call import bind, owned
+from cdpm_drake.kernels.safety_limits import limit_velocity_stacked
+from cdpm_drake.systems.wiring import stack, sub_diagram, unit_delay
 
 
 class VelocityLimit(LeafSystem):
@@ -32,7 +32,7 @@ class VelocityLimit(LeafSystem):
         limit = bind(limit_velocity_stacked, np.zeros(9), self._bounds, *self._args,
                      np.empty(3))
         # The tick's callback is a closure over locals, not a method reading self: attribute
-        # lookups on a pybind LeafSystem cost ~0.2 us each (scripts/count_instructions.py).
+        # lookups on a pybind LeafSystem cost ~0.2 us each (scripts/bench/count_instructions.py).
         bounds, inputs = self._bounds, self._inputs.Eval
         v_max, a_max, T, wall = self._args
 

@@ -3,8 +3,8 @@
 import numpy as np
 from pydrake.systems.framework import LeafSystem
 
-from ..kernel_call import bind, owned
-from ..limits import wall_force_into
+from cdpm_drake.kernels.call import bind, owned
+from cdpm_drake.kernels.safety_limits import wall_force_into
 
 
 class WorkspaceWallForce(LeafSystem):
@@ -29,7 +29,7 @@ class WorkspaceWallForce(LeafSystem):
         wall = bind(wall_force_into, np.zeros(3), self._bounds, self._margin, self._max_force,
                     np.empty(3))
         # The tick's callback is a closure over locals, not a method reading self: attribute
-        # lookups on a pybind LeafSystem cost ~0.2 us each (scripts/count_instructions.py).
+        # lookups on a pybind LeafSystem cost ~0.2 us each (scripts/bench/count_instructions.py).
         bounds, margin, max_force, p = self._bounds, self._margin, self._max_force, self._p.Eval
 
         def calc_F_wall(context, output):

@@ -542,7 +542,7 @@ def live_view_callback(view: CdpmMeshcatView):
     latest tick from a logger of its own (log_<key>) where the diagram has one, the block
     output port that logs it (diagram.logged_source) otherwise, and the dynamic plant's ground
     truth; signals the diagram lacks are drawn as zero."""
-    from ..diagram import logged_source
+    from cdpm_drake.diagram import logged_source
 
     def latest(diagram, context, key, width):
         name = f"log_{key}"
@@ -550,7 +550,7 @@ def live_view_callback(view: CdpmMeshcatView):
             data = diagram.GetSubsystemByName(name).FindLog(context).data()
             return data[:, -1] if data.shape[1] else np.zeros(width)
         if key in ("p_true", "rpy_true", "slack"):  # the dynamic plant's, logged inside it
-            from ..systems.dynamic_plant import latest_ground_truth
+            from cdpm_drake.systems.plants.dynamic_plant import latest_ground_truth
 
             truth = latest_ground_truth(diagram, context)
             return None if truth is None else truth[key]

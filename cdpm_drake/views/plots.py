@@ -23,7 +23,7 @@ import numpy as np
 from matplotlib.figure import Figure
 from matplotlib.lines import Line2D
 
-from ..interference import logistic_intensity
+from cdpm_drake.kernels.interference import logistic_intensity
 
 # What each figure reads from the log (docs/LOG_FORMAT.md).
 _NEEDS = {

@@ -16,7 +16,7 @@ from pathlib import Path
 import numpy as np
 from matplotlib.figure import Figure
 
-from ..sweep import METRICS, UNIT_SCALE, field_axis, metric_value, swept_fields
+from cdpm_drake.runs.sweep import METRICS, UNIT_SCALE, field_axis, metric_value, swept_fields
 
 # What each metric is, for its axis (METRICS has the unit).
 METRIC_NAMES = {

@@ -20,8 +20,8 @@ from pathlib import Path
 import numpy as np
 from matplotlib.figure import Figure
 
-from ..interference import pair_distances
-from ..tension import holding_tension
+from cdpm_drake.kernels.interference import pair_distances
+from cdpm_drake.kernels.tension import holding_tension
 
 AXES = "xyz"
 # Each slice: (the axis held fixed, the two axes drawn).

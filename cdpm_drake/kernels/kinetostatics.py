@@ -1,0 +1,244 @@
+"""The kinetostatic limit (beyond the paper, which names it as future work in sections 2.3 and
+6): at a pose, with the measured hand force at the handle and the platform's weight, can the
+cables hold the platform with every tension between a floor and a ceiling? Its margin, the
+margin's gradient, and the logistic cue the hand feels near it. numpy and numba, no Drake.
+
+Base frame A, SI units; a pose is (p, R), R = R_WB. The margin at a pose is
+
+    kappa = max over tensions T with W T + w = 0 of  min( min_i T_i - floor, ceiling - max_i T_i )
+
+(N): kappa >= 0 exactly when a distribution with floor <= T_i <= ceiling balances the wrench
+w (the weight and the hand force at the handle, moments about the centre). In the nullspace
+form T = T_p + N lam it is the max-min of 2m lines (`tension.max_min_lines`). t_c = kappa +
+floor is the largest minimum tension the cables can have under the ceiling; it is t* (the
+statics' one measure, tension.py) wherever the ceiling does not bind.
+
+A robot whose wrench matrix has rank 6 (six cables or more, attachment points that give
+moments) is judged on the full wrench (`rows` 6); one with fewer or coplanar attachments can
+only translate its platform (robot.py's validation says so) and is judged on the forces alone
+(`rows` 3), the moments being the platform's own business.
+"""
+
+import math
+
+import numba
+import numpy as np
+
+from cdpm_drake.kernels.pose import posed_cables, wrench_columns
+from cdpm_drake.kernels.full_pose import held_wrench
+from cdpm_drake.kernels.safety_filter import BARRIER_STATE, barrier_position
+from cdpm_drake.kernels.tension import RANK_TOL, null_vector, particular_solution, pivoted_qr, max_min_lines
+
+_jit = numba.njit(cache=True, error_model="numpy")
+
+# Finite-difference step of the margin's gradient, m: the margin is piecewise smooth (the
+# lines that bind change), and round-off of the margin (1e-8 relative, the QP form of
+# max_min_lines) stays below 1e-3 of a gradient of ~10 N/m.
+FD_STEP_P = 1e-4
+
+
+def wrench_rows(robot) -> int:
+    """6 when the robot's wrench matrix at its workspace centre (level platform) has rank 6,
+    else 3 (a platform the cables can only translate: its statics on the forces alone)."""
+    from cdpm_drake.kernels.tension import wrench_matrix
+
+    W = wrench_matrix(robot, robot.workspace.center)
+    s = np.linalg.svd(W, compute_uv=False)
+    return 6 if s.size >= 6 and s[5] > RANK_TOL * s[0] else 3
+
+
+@_jit
+def margin(reels, attachments, rows, p, R, w, floor, ceiling, scratch):
+    """(kappa, t*) at the pose (p, R) under the wrench w (6,) (module docstring): kappa the
+    margin of the floor and ceiling (N), t* the largest achievable minimum tension without a
+    ceiling (+inf where an internal force raises every tension). -inf for both where the
+    wrench matrix's first `rows` rows are rank-deficient (a pose where the cables cannot
+    produce some wrench: nothing holds there). scratch: `margin_scratch(m)`."""
+    u, Rb, L, W6, W, A, V, beta, perm, T_p, n, N, a, C, lam, lam2, C1 = scratch
+    m = reels.shape[0]
+    posed_cables(reels, attachments, p, R, u, Rb, L)
+    wrench_columns(u, Rb, W6)
+    if m < rows:
+        return -math.inf, -math.inf
+    Wr, Vr, br, pr = W[:rows], V[:rows], beta[:rows], perm[:rows]
+    for r in range(rows):
+        for i in range(m):
+            Wr[r, i] = W6[r, i]
+    if pivoted_qr(Wr, A, Vr, br, pr) < RANK_TOL:
+        return -math.inf, -math.inf
+    particular_solution(A, Vr, br, pr, w[:rows], T_p)
+    k = m - rows
+    for c in range(k):
+        null_vector(Vr, br, n, c)
+        for i in range(m):
+            N[i, c] = n[i]
+    for i in range(m):
+        a[i] = T_p[i] - floor
+        a[m + i] = ceiling - T_p[i]
+        for c in range(k):
+            C[i, c] = N[i, c]
+            C[m + i, c] = -N[i, c]
+    kappa = max_min_lines(a, C[:, :k], lam[:k])
+    t_star = max_min_lines(T_p, N[:, :k], lam2[:k])
+    return kappa, t_star
+
+
+def margin_scratch(m: int):
+    """The work arrays of `margin` for m cables (allocated once per block)."""
+    return (np.empty((m, 3)), np.empty((m, 3)), np.empty(m), np.empty((6, m)),
+            np.empty((6, m)), np.empty((m, 6)), np.empty((6, m)), np.empty(6),
+            np.empty(6, dtype=np.int64), np.empty(m), np.empty(m), np.empty((m, m)),
+            np.empty(2 * m), np.empty((2 * m, m)), np.empty(m), np.empty(m), np.empty(m))
+
+
+# The kinetostatic block's parameters (a flat array, `kinetostatic_params`).
+P_MASS, P_HANDLE, P_FLOOR, P_CEILING, P_ROWS, P_BARRIER = 0, 1, 4, 5, 6, 7
+P_T_L, P_T_U, P_F_U, P_B, P_MID, P_FORCE, P_A_BRAKE, P_T, P_RIPPLE, P_SMOOTHING = range(8, 18)
+# kinetostatic_tick's input x: [p (3), F_H (3), the safety filter's barrier state (BARRIER_STATE:
+# p_c (3), valid (1), v_prev (3)) at X_STATE, and for the full pose R (9) at X_R].
+X_STATE = 6
+X_R = X_STATE + BARRIER_STATE
+
+
+def kinetostatic_params(robot, *, floor, ceiling, rows, barrier, t_l, t_u, F_u, eps,
+                        force: bool, a_brake: float, time_step: float,
+                        ripple: float = 0.0, smoothing: float = 0.0) -> np.ndarray:
+    """The kinetostatic block's parameters: the platform's mass (kg) and handle (m, platform
+    frame), the floor and ceiling (N), the wrench rows (3 or 6), whether the safety filter's
+    barrier needs the gradient and the look ahead, the cue's logistic t_l, t_u (N), F_u (N),
+    its steepness b (1/N, eq. 28 in tensions) and centre (N), whether the cue is on, the
+    deceleration the filter brakes with (m/s^2), the time step (s), the floor's rise per
+    newton of hand (N/N) and the filter's position_smoothing (s: the margin is evaluated
+    where the filter evaluates its barriers, safety_filter.barrier_position)."""
+    b = 2.0 * math.log((F_u - eps) / eps) / (t_l - t_u)
+    d = robot.dynamics
+    return np.array([d.mass, *d.handle, floor, ceiling, rows, 1.0 if barrier else 0.0,
+                     t_l, t_u, F_u, b, 0.5 * (t_l + t_u), 1.0 if force else 0.0, a_brake,
+                     time_step, ripple, smoothing], dtype=float)
+
+
+@_jit
+def cue_intensity(t_c, params):
+    """The cue's intensity (N) at t_c = kappa + floor (N): the paper's logistic (eqs. 26-28)
+    in tensions, F_u - eps at t_l, eps at t_u, and zero above t_u (as the paper's force is
+    zero above d_u)."""
+    if not t_c <= params[P_T_U]:
+        return 0.0
+    return params[P_F_U] / (1.0 + math.exp(min(params[P_B] * (params[P_MID] - t_c), 700.0)))
+
+
+# kinetostatic_tick's output layout: F_kin (3, N), kappa (N), its gradient (3, N/m), t_c (N),
+# t* (N), status (0: finite; 1: a pose the cables cannot hold at all), the look ahead (m).
+KIN_OUT = 11
+# The look ahead samples the stopping distance at this many points, then bisects this often.
+RAY_SAMPLES = 4
+RAY_BISECTIONS = 5
+# The look ahead looks for the margin falling below min(kappa, 0) by more than this (N): a
+# drop at a kink, not the slow fall of a curved limit that the gradient's row follows tick by
+# tick; it then ends where the margin first falls below min(kappa, 0). Looking for a fall
+# below 0 alone, a platform sliding along the limit (kappa = +-1e-6 N) saw a drop right ahead
+# on every tick with kappa >= 0 and none with kappa < 0: it braked and sped up in turn, a 5 Hz
+# cycle of 5-135 mm/s that rang the dynamic plant's yaw mode (a 20 N lift on exp2: 2082
+# slack ticks in 10 s).
+RAY_TOLERANCE = 0.5
+
+
+@_jit
+def _margin_at(reels, attachments, params, scratch, p, R, w, floor):
+    return margin(reels, attachments, int(params[P_ROWS]), p, R, w, floor,
+                  params[P_CEILING], scratch)[0]
+
+
+@_jit
+def kinetostatic_tick(reels, attachments, params, scratch, x, out):
+    """One tick of the kinetostatic block. x = [p (3) m: the estimate, F_H (3) N, the
+    safety filter's memory (BARRIER_STATE: p_c m, valid, v m/s the velocity commanded last),
+    and for the full pose R (9, R_WB row-major: the orientation held); else the platform is
+    level]. The pose is the filter's (safety_filter.barrier_position of p on that memory).
+    Writes (KIN_OUT) the margin kappa at the pose under the
+    weight and the hand force F_H at the handle, t_c = kappa + floor, t* (no ceiling), and
+    the cue F_kin = intensity(t_c) grad / |grad| (N, base frame) towards more margin; for the
+    safety filter's barrier also kappa's gradient in the position (forward differences,
+    0.1 mm) and the look ahead: where the margin drops (below min(kappa, 0) by more than
+    RAY_TOLERANCE) along v within the distance the filter needs to stop from |v|, how far it
+    stays >= min(kappa, 0) (inf: no drop).
+
+    Why the look ahead: kappa is a max-min of lines, piecewise smooth with kinks where the
+    binding cables change, and the ceiling gives it ridges; near a kink the gradient says
+    nothing of the drop beyond it. A platform pushed along another barrier at 0.47 m/s met
+    such a drop (kappa from +3.5 to -1.4 N in 0.2 s, the braking curve on the gradient being
+    too late) and ended where kappa has a local maximum below zero, from which no gradient
+    leads back (dynamic plant, 40 N along the 1-3 boundary). Sampling ahead along the
+    velocity sees the drop before the platform is in it."""
+    p = np.empty(3)
+    barrier_position(x[0:3], x[X_STATE:X_R], params[P_T], params[P_SMOOTHING], p)
+    F = x[3:6]
+    v = x[X_STATE + 4:X_STATE + 7]
+    R = np.eye(3)
+    if x.shape[0] >= X_R + 9:
+        for a in range(3):
+            for b in range(3):
+                R[a, b] = x[X_R + 3 * a + b]
+    floor = params[P_FLOOR] + params[P_RIPPLE] * math.sqrt(F[0] * F[0] + F[1] * F[1]
+                                                         + F[2] * F[2])
+    w = np.empty(6)
+    zero = np.zeros(3)
+    held_wrench(R, params[P_MASS:P_MASS + 4], F, zero, w)
+    kappa, t_star = margin(reels, attachments, int(params[P_ROWS]), p, R, w, floor,
+                           params[P_CEILING], scratch)
+    for k in range(KIN_OUT):
+        out[k] = 0.0
+    out[3] = kappa
+    out[7] = kappa + floor
+    out[8] = t_star
+    out[10] = math.inf
+    if not math.isfinite(kappa):
+        out[9] = 1.0
+        return
+    q = np.empty(3)
+    if params[P_BARRIER] != 0.0 or params[P_FORCE] != 0.0:
+        for k in range(3):
+            for c in range(3):
+                q[c] = p[c]
+            q[k] += FD_STEP_P
+            kq = _margin_at(reels, attachments, params, scratch, q, R, w, floor)
+            out[4 + k] = (kq - kappa) / FD_STEP_P if math.isfinite(kq) else 0.0
+    if params[P_FORCE] != 0.0:
+        gx, gy, gz = out[4], out[5], out[6]
+        g = math.sqrt(gx * gx + gy * gy + gz * gz)
+        if g > 0.0:
+            alpha = cue_intensity(kappa + params[P_FLOOR], params)
+            out[0], out[1], out[2] = alpha * gx / g, alpha * gy / g, alpha * gz / g
+    speed = math.sqrt(v[0] * v[0] + v[1] * v[1] + v[2] * v[2])
+    if params[P_BARRIER] == 0.0 or speed <= 1e-9:
+        return
+    # A drop is where the margin falls below `level` by more than RAY_TOLERANCE; the look
+    # ahead then ends where it first falls below `level` (RAY_TOLERANCE above).
+    level = min(kappa, 0.0)
+    a, T = params[P_A_BRAKE], params[P_T]
+    # The distance to stop from |v| at a (braking curve) plus two ticks and 5 mm.
+    reach = speed * speed / (2.0 * a) + 2.0 * speed * T + 0.005
+    lo, hi, drop = 0.0, -1.0, False
+    for k in range(1, RAY_SAMPLES + 1):
+        s = reach * k / RAY_SAMPLES
+        for c in range(3):
+            q[c] = p[c] + s * v[c] / speed
+        m = _margin_at(reels, attachments, params, scratch, q, R, w, floor)
+        if hi < 0.0 and not m >= level:
+            hi = s
+        if not m >= level - RAY_TOLERANCE:
+            drop = True
+            break
+        if hi < 0.0:
+            lo = s
+    if not drop:
+        return
+    for _ in range(RAY_BISECTIONS):
+        s = 0.5 * (lo + hi)
+        for c in range(3):
+            q[c] = p[c] + s * v[c] / speed
+        if _margin_at(reels, attachments, params, scratch, q, R, w, floor) >= level:
+            lo = s
+        else:
+            hi = s
+    out[10] = lo

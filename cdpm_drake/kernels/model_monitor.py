@@ -1,0 +1,159 @@
+"""Knowing when the controller's model of the robot breaks (beyond the paper): from the
+measurements alone, a slack cable, lengths the estimated pose no longer explains, or a hand
+force the cables cannot hold. numpy and numba, no Drake.
+
+Every controller here assumes taut, straight cables. When one goes slack (a hand lifts the
+platform, the cables cannot hold the force it applies) the lengths the reels pay out stop
+describing the platform, and everything computed from them (the pose, the distances between
+cables, the tensions) becomes fiction. The monitor watches, each tick, with what the
+controller already has:
+
+- the tension estimate (full pose with tension control: the pose fit's residual along the
+  wrench matrix's nullspace, pose_control.py): a cable whose estimate is below
+  -slack_tension is slack;
+- without one, the length residual r_i = |a_i - B_i| - l_i of the estimated pose: a slack
+  cable is longer than the geometry, r_i < -slack_length (a taut one is stretched, r_i > 0);
+- every cable's residual (after the modelled stretch, where there is one) within
+  fit_tolerance: beyond it the pose estimate no longer fits the lengths;
+- t*, the largest minimum tension with which the cables could hold the weight and the
+  measured hand force at the estimated pose (kinetostatics.margin): below -unholdable no
+  tension holds the platform against that hand.
+
+A condition that lasts `ticks` consecutive ticks is a fault (ModelFault, naming the cable, the
+reason and the numbers); a slack cable where t* says the cables can hold the hand (t* >=
+holdable) must last `slack_ticks` (a knock slackens a cable for a few milliseconds
+whatever the controller does, and it takes the slack up again). The diagram's block raises
+it, which stops a simulation and, on the robot, sends zero reel velocity (realtime.py), as
+every fault does.
+"""
+
+import math
+
+import numba
+import numpy as np
+
+from cdpm_drake.kernels.kinetostatics import margin
+from cdpm_drake.kernels.pose import posed_cables
+from cdpm_drake.kernels.full_pose import held_wrench
+
+_jit = numba.njit(cache=True, error_model="numpy")
+
+# monitor_tick's status / reason codes (the cable is reported beside them).
+OK, SLACK, MISFIT, UNHOLDABLE = 0, 1, 2, 3
+REASONS = ("ok", "slack cable", "lengths no longer fit the pose", "hand force cannot be held")
+
+# Parameters (a flat array, `monitor_params`).
+(M_EA, M_SLACK_TENSION, M_SLACK_LENGTH, M_FIT, M_UNHOLDABLE, M_TICKS, M_ESTIMATE, M_FULL,
+ M_MASS, M_HANDLE, M_ROWS, M_HOLDABLE, M_SLACK_TICKS) = (0, 1, 2, 3, 4, 5, 6, 7, 8, 9, 12, 13, 14)
+
+
+class ModelFault(RuntimeError):
+    """The controller's model no longer describes the robot (a slack cable, lengths that do
+    not fit, a hand force no tension holds): the run stops with zero reel velocity."""
+
+
+def monitor_params(robot, *, EA, slack_tension, slack_length, fit_tolerance, unholdable,
+                   ticks, estimate: bool, full_pose: bool, rows: int, holdable: float,
+                   slack_ticks: int) -> np.ndarray:
+    """The monitor's parameters: EA (N; 0: no modelled stretch), the thresholds (N, m, m, N),
+    the ticks a condition must last, whether there is a tension estimate and a full pose,
+    the platform's mass (kg) and handle (m, platform frame), the wrench rows (3 or 6), the t*
+    (N) from which the cables hold the hand and the ticks a slack cable must last there."""
+    d = robot.dynamics
+    return np.array([EA, slack_tension, slack_length, fit_tolerance, unholdable, ticks,
+                     1.0 if estimate else 0.0, 1.0 if full_pose else 0.0, d.mass, *d.handle,
+                     rows, holdable, slack_ticks], dtype=float)
+
+
+def monitor_sizes(m: int, full_pose: bool, estimate: bool) -> dict:
+    """x: lengths (m), p (3), F_H (3), and R (9) for the full pose, the tension estimate (m)
+    with one, then the memory: counters (3); out: status (1), cable (1, 1-based, 0 none),
+    value (1: the number behind it, N or m), t* (1, N), residual (m, m), next memory (3)."""
+    x = m + 6 + (9 if full_pose else 0) + (m if estimate else 0)
+    return {"x": x + 3, "out": m + 7, "memory": 3, "memory_at": m + 4}
+
+
+@_jit
+def monitor_tick(reels, attachments, params, scratch, x, out):
+    """One tick (module docstring). x = [l (m) m, p (3) m, F_H (3) N, (full pose:) R (9),
+    (with a tension estimate:) T_est (m) N, memory: ticks of slack, misfit, unholdable (3)];
+    out = [status, cable (1-based), value, t* (N), residual (m) m, next memory (3)];
+    scratch: kinetostatics.margin_scratch(m). The status is the condition that has lasted
+    its ticks (a fault), OK otherwise; where several have, the first of SLACK, MISFIT,
+    UNHOLDABLE. A slack cable counts after params[M_TICKS] ticks where the statics at the
+    estimated pose hold the measured hand force with less than params[M_HOLDABLE] in every
+    cable (t* below it: the slack is the hand's doing and lasts), after params[M_SLACK_TICKS]
+    where they hold it with more (the controller takes the slack of a knock up again: a hand
+    that hits the platform with 40 N at once slackens a cable for a few milliseconds whatever
+    the controller does). Returns the status."""
+    m = reels.shape[0]
+    l = x[0:m]
+    p = x[m:m + 3]
+    F = x[m + 3:m + 6]
+    k = m + 6
+    R = np.eye(3)
+    if params[M_FULL] != 0.0:
+        for a in range(3):
+            for b in range(3):
+                R[a, b] = x[k + 3 * a + b]
+        k += 9
+    estimate = params[M_ESTIMATE] != 0.0
+    T = x[k:k + m] if estimate else x[0:m]
+    mem = x[x.shape[0] - 3:]
+    EA = params[M_EA]
+    w = np.empty(6)
+    held_wrench(R, params[M_MASS:M_MASS + 4], F, np.zeros(3), w)
+    t_star = margin(reels, attachments, int(params[M_ROWS]), p, R, w, 0.0, math.inf,
+                    scratch)[1]
+    u, Rb, L = np.empty((m, 3)), np.empty((m, 3)), np.empty(m)
+    posed_cables(reels, attachments, p, R, u, Rb, L)
+    r = out[4:4 + m]
+    slack_cable, slack_value = -1, 0.0
+    misfit_cable, misfit_value = -1, 0.0
+    for i in range(m):
+        stretched = l[i] * (1.0 + T[i] / EA) if (estimate and EA > 0.0) else l[i]
+        r[i] = L[i] - stretched
+        if estimate:
+            if T[i] < -params[M_SLACK_TENSION] and (slack_cable < 0 or T[i] < slack_value):
+                slack_cable, slack_value = i, T[i]
+        elif r[i] < -params[M_SLACK_LENGTH] and (slack_cable < 0 or r[i] < slack_value):
+            slack_cable, slack_value = i, r[i]
+        if abs(r[i]) > params[M_FIT] and abs(r[i]) > abs(misfit_value):
+            misfit_cable, misfit_value = i, r[i]
+    unholdable = t_star < -params[M_UNHOLDABLE]
+    counts = (mem[0] + 1.0 if slack_cable >= 0 else 0.0,
+              mem[1] + 1.0 if misfit_cable >= 0 else 0.0,
+              mem[2] + 1.0 if unholdable else 0.0)
+    out[4 + m], out[5 + m], out[6 + m] = counts
+    status, cable, value = OK, 0, 0.0
+    n = params[M_TICKS]
+    slack_n = n if t_star < params[M_HOLDABLE] else params[M_SLACK_TICKS]
+    if counts[0] >= slack_n:
+        status, cable, value = SLACK, slack_cable + 1, slack_value
+    elif counts[1] >= n:
+        status, cable, value = MISFIT, misfit_cable + 1, misfit_value
+    elif counts[2] >= n:
+        status, value = UNHOLDABLE, t_star
+    out[0], out[1], out[2], out[3] = status, cable, value, t_star
+    return status
+
+
+def fault_message(status: int, cable: int, value: float, *, ticks: int, time_step: float,
+                  estimate: bool, p, F_H=None) -> str:
+    """The words of a monitor fault: the cable (1-based), the reason, the number and for how
+    many ticks (of time_step s) it lasted."""
+    lasting = f"for {ticks} ticks ({1000 * ticks * time_step:.3g} ms)"
+    where = f"at p = {np.round(np.asarray(p, dtype=float), 4).tolist()} m"
+    if status == SLACK:
+        what = (f"its tension estimate is {value:.2f} N" if estimate else
+                f"it is {1000 * -value:.2f} mm longer than the estimated pose explains")
+        return f"cable {cable} is slack: {what} {lasting}, {where}"
+    if status == MISFIT:
+        return (f"the cable lengths no longer fit the estimated pose: cable {cable} is "
+                f"{1000 * value:+.2f} mm off it {lasting}, {where}")
+    if status == UNHOLDABLE:
+        force = "" if F_H is None else (
+            f" {np.round(np.asarray(F_H, dtype=float), 2).tolist()} N")
+        return (f"the hand force{force} cannot be held {where}: the best distribution of "
+                f"the cables' tensions leaves one at {value:.2f} N {lasting}")
+    return "ok"

@@ -1,0 +1,446 @@
+"""The safety filter (beyond the paper): every tick, the twist closest to the one the
+admittance and the limits command, subject to discrete-time control barrier functions that
+keep every watched cable pair apart, the platform in its workspace box and the cables able to
+hold it with the measured hand force. numpy and numba, no Drake.
+
+The paper's interference force is soft: a hand that pushes harder than F_u drags the cables
+across each other (its section 5.4). On an admittance-controlled robot the controller decides
+every motion, so it can refuse the ones that break the promise. Base frame A, SI units. The
+unknown is the twist u = (v, w) (m/s, rad/s; the translating controller: v alone):
+
+    minimise  |v - v_d|^2 + |w - w_d|^2
+    subject to, for each barrier h (h >= 0 is safe),
+        grad_v h . v >= -rate(h)        (h(x + T u) >= h(x) - T rate(h), linearised)
+        |v| <= v_max,  |v - v_prev| <= a_max T   (cutting planes, exact to 1e-9)
+
+with rate(h) = min(gamma h / T, g cap(h / g)): at most the fraction gamma of the margin per
+tick (the discrete-time CBF h(x + T u) >= (1 - gamma) h(x)), and no faster than a braking at
+a_brake would stop the platform at the barrier (cap: limits.face_cap, the virtual wall's
+braking curve, on the platform distance h / g to the barrier, g = |grad_v h|), so that a
+barrier never asks for more than the acceleration limit. Where h < 0 (a margin already lost:
+a start inside d_min, a hand force that changed) the barrier asks for a slow return instead,
+grad h . u >= min(gamma |h| / T, g v_return). A barrier that jumps (an estimate that moves
+with the platform's ringing, a hand force that changes the kinetostatic margin) would ask for
+a step of the command: each row asks at most 0.9 g a_max T more than the previous command
+gave it, so that a jump is met by braking near the acceleration limit, not by a jerk.
+
+The barriers: every watched pair's distance above its d_min (signed: a pair the interference
+block has seen cross counts negative; the gradient by the envelope theorem,
+`pair_barrier`); each face of the workspace box; the kinetostatic margin kappa >= 0
+(kinetostatics.py: a tension distribution between the floor and the ceiling holds the
+platform's weight and the measured hand force), with its gradient from the kinetostatic
+block.
+
+When no twist meets them all, the filter gives up in this order, and says which in its
+status: the returns of lost margins (each then only must not get worse, grad h . u >= 0:
+STATUS_NO_RETURN), and then it holds the platform (STATUS_HOLD), braking to zero twist at the
+acceleration limit. The acceleration limit is never given up: a step of the command is a
+jerk of the platform, which on a robot with mass slackens cables (measured: a barrier met by
+a 0.2 m/s step in one tick slackened four cables of the dynamic plant).
+
+The barriers are evaluated at the commanded pose: the estimated position and, for the full
+pose, the orientation the orientation hold keeps (R_ref), not the estimated one. The estimate
+of the orientation moves with the platform's ringing (its yaw mode rings at ~4 Hz, lightly
+damped, and a pair's distance moves ~0.1 m per rad of tilt against ~0.01 m per m of
+translation near the paper's boundary): barriers at the estimated orientation fed that ringing
+back into the velocity command and rang it up until cables went slack (dynamic plant, an 8 N
+push along the boundary: 275-326 slack ticks, against none at R_ref). At the commanded
+orientation the barriers depend on the translation alone: the full pose's twist (6 unknowns)
+keeps the orientation hold's angular velocity, which corrects towards R_ref and never moves
+it.
+"""
+
+import math
+
+import numba
+import numpy as np
+
+from cdpm_drake.kernels.interference import closest_points
+from cdpm_drake.kernels.safety_limits import face_cap
+from cdpm_drake.kernels.qp import QP_OPTIMAL, solve_qp
+
+_jit = numba.njit(cache=True, error_model="numpy")
+
+# status output of `filter_tick`.
+STATUS_PASS, STATUS_MODIFIED, STATUS_NO_RETURN, STATUS_HOLD = 0, 1, 2, 3
+STATUS_TEXT = ("passed", "modified", "lost margins held, not restored",
+               "braking to a hold (no safe twist)")
+# Which kinds of barrier bind (have a positive multiplier) at the filter's solution: bits of
+# the `binding` output.
+BIND_PAIR, BIND_BOX, BIND_KINETOSTATIC, BIND_SPEED, BIND_ACCELERATION = 1, 2, 4, 8, 16
+BIND_TEXT = ((BIND_PAIR, "cable pairs"), (BIND_BOX, "workspace box"),
+             (BIND_KINETOSTATIC, "kinetostatic limit"), (BIND_SPEED, "speed limit"),
+             (BIND_ACCELERATION, "acceleration limit"))
+
+# Parameters (a flat array, `filter_params`).
+(F_T, F_GAMMA, F_A_BRAKE, F_V_MAX, F_A_MAX, F_V_RETURN, F_DOF, F_KINETOSTATIC, F_BOX,
+ F_SMOOTHING, F_SIZE) = range(11)
+# Where `filter_tick`'s memory and its pass-through of v_d start in its output; the memory
+# is [p_c (3), p_c valid (1), v_prev (3), w_prev (3)].
+OUT_MEMORY, OUT_V_D, MEMORY = 11, 21, 10
+# The memory's first BARRIER_STATE values, [p_c, valid, v_prev]: what `barrier_position`
+# reads, and what the kinetostatic block takes (its input barrier_state_previous).
+BARRIER_STATE = 7
+
+# At most this many cutting planes of the speed and acceleration balls per solve: each cuts
+# the violation of the last solution; 12 leave it below 1e-9 m/s in every case measured.
+MAX_CUTS = 12
+# The share of the acceleration limit a barrier's demand may grow by in a tick.
+RAMP_SHARE = 0.9
+# While a margin is lost by more than LOST_DEPTH of the platform's travel (m), the speed
+# (m/s) is capped: from max_velocity at LOST_DEPTH down to LOST_SPEED at twice that depth.
+LOST_SPEED = 0.05
+LOST_DEPTH = 0.001
+# The braking curve of a barrier assumes this share of a_brake, the ramp allows all of it:
+# the curve is exact only for a barrier whose gradient does not change, and a pair's does as
+# the closest points slide along the cables (a 5 N push on crossing_4cable overshot its d_min
+# by 0.125 mm on the full curve).
+CURVE_SHARE = 0.5
+BALL_TOL = 1e-9
+
+
+def filter_params(*, time_step, gamma, a_brake, max_velocity, max_acceleration,
+                  return_speed, full_pose, kinetostatic, box: bool = True,
+                  smoothing: float = 0.0) -> np.ndarray:
+    """The filter's parameters: s, -, m/s^2, m/s, m/s^2, m/s; the full pose (a twist of 6)
+    or not (3); the kinetostatic barrier on; the box's barriers on (off with the virtual
+    wall: limits.virtual_wall false lets the platform leave the box); the time constant (s)
+    of the position the barriers are evaluated at (`barrier_position`; 0: the estimate)."""
+    return np.array([time_step, gamma, a_brake, max_velocity, max_acceleration,
+                     return_speed, 6 if full_pose else 3, 1.0 if kinetostatic else 0.0,
+                     1.0 if box else 0.0, smoothing], dtype=float)
+
+
+def filter_sizes(P: int, full_pose: bool) -> dict:
+    """Input (x) and output (out) sizes of `filter_tick` for P watched pairs, and the offset
+    of its memory in x."""
+    x = 11 + P + (12 if full_pose else 0)
+    return {"x": x + MEMORY, "out": OUT_V_D + 3, "memory": MEMORY, "memory_at": x}
+
+
+@_jit
+def barrier_position(p, memory, T, tau, out):
+    """The position the barriers are evaluated at, into out (3, m): the last one advanced by
+    the last command (p_c + T v_prev, where the commands put the platform) and drawn towards
+    the estimate p with the time constant tau (s; p itself when 0, or on the first tick:
+    memory[3] == 0). memory: the filter's [p_c (3), valid (1), v_prev (3), ...]. The
+    kinetostatic block calls it on the same memory, so its margin is at the same position."""
+    if tau <= 0.0 or memory[3] == 0.0:
+        for c in range(3):
+            out[c] = p[c]
+        return
+    k = min(1.0, T / tau)
+    for c in range(3):
+        ahead = memory[c] + T * memory[4 + c]
+        out[c] = ahead + k * (p[c] - ahead)
+
+
+@_jit
+def pair_barrier(reels, attachments, i, j, p, R, grad):
+    """The distance (m) between cables i and j of the pose (p, R) and its gradient with
+    respect to the twist (v, w) into grad (6,): by the envelope theorem only the attachment
+    points move, dB = v + w x R b, and d d = (1 - s) n . dB_i - (1 - t) n . dB_j with n the
+    unit vector between the closest points (interference.py's module docstring; (t - s) n for
+    the translation). Zero gradient where the cables touch (d == 0)."""
+    Bi = np.empty(3)
+    Bj = np.empty(3)
+    for r in range(3):
+        Rbi = Rbj = 0.0
+        for c in range(3):
+            Rbi += R[r, c] * attachments[i, c]
+            Rbj += R[r, c] * attachments[j, c]
+        grad[r] = Rbi  # R b_i, R b_j kept in grad's slots until the end
+        grad[3 + r] = Rbj
+        Bi[r] = p[r] + Rbi
+        Bj[r] = p[r] + Rbj
+    dist, s, t, dx, dy, dz, _, _, _, _, _, _ = closest_points(
+        reels[i, 0] - Bi[0], reels[i, 1] - Bi[1], reels[i, 2] - Bi[2],
+        reels[j, 0] - Bj[0], reels[j, 1] - Bj[1], reels[j, 2] - Bj[2],
+        Bi[0] - Bj[0], Bi[1] - Bj[1], Bi[2] - Bj[2])
+    if dist == 0.0:
+        for k in range(6):
+            grad[k] = 0.0
+        return dist
+    nx, ny, nz = dx / dist, dy / dist, dz / dist
+    ai, aj = 1.0 - s, 1.0 - t
+    rix, riy, riz = grad[0], grad[1], grad[2]
+    rjx, rjy, rjz = grad[3], grad[4], grad[5]
+    k = ai - aj
+    grad[0], grad[1], grad[2] = k * nx, k * ny, k * nz
+    # w . (R b_i x (1 - s) n) - w . (R b_j x (1 - t) n)
+    grad[3] = ai * (riy * nz - riz * ny) - aj * (rjy * nz - rjz * ny)
+    grad[4] = ai * (riz * nx - rix * nz) - aj * (rjz * nx - rjx * nz)
+    grad[5] = ai * (rix * ny - riy * nx) - aj * (rjx * ny - rjy * nx)
+    return dist
+
+
+@_jit
+def barrier_rate(h, g, params):
+    """rate(h) (units of h per s; module docstring): the largest decrease of a barrier at
+    margin h >= 0 with |grad_v h| = g, or minus the return asked where h < 0."""
+    T, gamma = params[F_T], params[F_GAMMA]
+    if h < 0.0:
+        back = gamma * (-h) / T
+        if g > 0.0:
+            back = min(back, g * params[F_V_RETURN])
+        return -back
+    rate = gamma * h / T
+    if g > 0.0:
+        rate = min(rate, g * face_cap(h / g, CURVE_SHARE * params[F_A_BRAKE], T))
+    return rate
+
+
+@_jit
+def _add_row(C, d, kind, count, grad, n, rhs, k):
+    for c in range(n):
+        C[count, c] = grad[c]
+    d[count] = rhs
+    kind[count] = k
+    return count + 1
+
+
+@_jit
+def _add_barrier(C, d, kind, lost, lost_by, count, grad, n, rhs, h, h_next, k, prev, ramp, T):
+    """A barrier's row on the translation, grad_v . v >= rhs, asking at most `ramp` more
+    than the previous command gave it (module docstring), but never letting a margin h >= 0
+    go in one tick (h_next: the margin after a tick at the previous command; as the virtual
+    wall's cap wins over the acceleration limit)."""
+    lost[count] = h < 0.0
+    trans = g2 = 0.0
+    for c in range(3):
+        trans += grad[c] * prev[c]
+        g2 += grad[c] * grad[c]
+    # How far the margin is lost in the platform's travel (-h / |grad_v h|, m; 0 where it is
+    # not): beyond LOST_DEPTH not a tick's round-off at the barrier but a margin really gone.
+    if h >= 0.0:
+        lost_by[count] = 0.0
+    elif g2 > 0.0:
+        lost_by[count] = -h / math.sqrt(g2)
+    else:
+        lost_by[count] = math.inf
+    for c in range(3, 6):
+        grad[c] = 0.0
+    rhs = min(rhs, trans + ramp)
+    if h >= 0.0 and h_next >= 0.0:
+        rhs = max(rhs, trans - h_next / T)
+    return _add_row(C, d, kind, count, grad, n, rhs, k)
+
+
+@_jit
+def filter_tick(reels, attachments, pi, pj, d_min, bounds, params, x, out):
+    """One tick of the safety filter. pi, pj (P,): the watched pairs (0-based cables); d_min
+    (P,) m; bounds (2, 3): the workspace box's lower and upper corners, m.
+    x = [v_d (3), p (3), crossed (P), kappa (1), grad kappa (3), look ahead (1), (the full
+    pose only:) w_d (3), R (9), memory: p_c (3), p_c valid (1), v_prev (3), w_prev (3)]
+    (m/s, m, 0/1, N, N/m, m, rad/s, -, m, -, m/s, rad/s); the translating controller's
+    platform is level (R = I); the barriers are evaluated at `barrier_position`;
+    out = [v (3), w (3), status (1), binding (1), smallest pair margin h (1, m; +inf with
+    no pair), kappa used (1, N; nan when the barrier is off or undefined), barriers (1: how
+    many could bind this tick and went into the QP), next memory (10, at OUT_MEMORY), v_d
+    (3: the velocity asked for, passed through for the log, at OUT_V_D)]. Returns the
+    status."""
+    P = pi.shape[0]
+    n = int(params[F_DOF])
+    T = params[F_T]
+    v_max, a_max = params[F_V_MAX], params[F_A_MAX]
+    memory = x[x.shape[0] - MEMORY:]
+    p = np.empty(3)
+    barrier_position(x[3:6], memory, T, params[F_SMOOTHING], p)
+    crossed = x[6:6 + P]
+    kappa = x[6 + P]
+    gk = x[7 + P:10 + P]
+    ray = x[10 + P]
+    R = np.eye(3)
+    target = np.empty(n)
+    w = np.ones(n)
+    for c in range(3):
+        target[c] = x[c]
+    if n == 6:
+        for c in range(3):
+            target[3 + c] = x[11 + P + c]
+        for a in range(3):
+            for b in range(3):
+                R[a, b] = x[14 + P + 3 * a + b]
+    prev = x[x.shape[0] - 6:]
+    rows = P + 6 + 2 + 2 * MAX_CUTS
+    C = np.zeros((rows, n))
+    d = np.empty(rows)
+    kind = np.empty(rows, dtype=np.int64)
+    lost = np.zeros(rows, dtype=np.bool_)  # a barrier whose margin is already lost (h < 0)
+    lost_by = np.zeros(rows)  # ... by how much of the platform's travel, m
+    grad = np.empty(6)
+    count = 0
+    # A barrier may ask its rate to change by at most RAMP_SHARE a_max T a tick (per unit of
+    # its translation gradient): feasible within the acceleration limit (all of it would make
+    # the row tangent to the acceleration ball, a single point the cutting planes miss), and
+    # about as much as the command asked for may change in a tick (the admittance's command
+    # is limited to a_max T too). A smaller ramp (a_brake) let a hand that pushes into a
+    # barrier accelerate the approach faster than the filter could take it back, and the
+    # command cycled between braking and re-accelerating at ~15 Hz (10 N across exp3's pair
+    # 1-3 on the dynamic plant: the platform rang, 716 slack ticks).
+    ramp = RAMP_SHARE * params[F_A_MAX] * T
+    smallest = math.inf
+    # Only barriers that could bind this tick: the most a velocity within the speed limit can
+    # take off a margin is g v_max.
+    v_bound = v_max
+    ahead = np.empty(3)
+    for c in range(3):
+        ahead[c] = p[c] + T * prev[c]
+    for q in range(P):
+        dist = pair_barrier(reels, attachments, pi[q], pj[q], p, R, grad)
+        sign = 1.0
+        if crossed[q] > 0.5:
+            sign = -1.0
+        h = sign * dist - d_min[q]
+        smallest = min(smallest, h)
+        gv = math.sqrt(grad[0] * grad[0] + grad[1] * grad[1] + grad[2] * grad[2])
+        rate = barrier_rate(h, gv, params)
+        if rate >= gv * v_bound:
+            continue
+        # Linearised about the position a tick at the previous command reaches, not about
+        # p: a pair's distance is curved, and a platform sliding along its barrier (the
+        # command tangent to the gradient at p) loses margin to the curvature every tick,
+        # which a linearisation at p never sees; it then braked, re-accelerated and braked
+        # again at 20 Hz (a 20 N push along exp2's boundary) and rang the platform.
+        # h(x + T v) ~ h1 + g1 . T (v - v_prev) >= h - T rate(h).
+        h1 = sign * pair_barrier(reels, attachments, pi[q], pj[q], ahead, R, grad) - d_min[q]
+        trans = 0.0
+        for c in range(3):
+            grad[c] *= sign
+            trans += grad[c] * prev[c]
+        count = _add_barrier(C, d, kind, lost, lost_by, count, grad, n,
+                             trans - rate + (h - h1) / T, h, h1, BIND_PAIR, prev, gv * ramp, T)
+    for axis in range(3 if params[F_BOX] != 0.0 else 0):
+        for side in range(2):
+            h = p[axis] - bounds[0, axis] if side == 0 else bounds[1, axis] - p[axis]
+            rate = barrier_rate(h, 1.0, params)
+            if rate >= v_bound:
+                continue
+            for c in range(6):
+                grad[c] = 0.0
+            grad[axis] = 1.0 if side == 0 else -1.0
+            count = _add_barrier(C, d, kind, lost, lost_by, count, grad, n, -rate, h,
+                                 h + T * grad[axis] * prev[axis], BIND_BOX, prev, ramp, T)
+    kappa_used = math.nan
+    if params[F_KINETOSTATIC] != 0.0 and math.isfinite(kappa):
+        gv = math.sqrt(gk[0] * gk[0] + gk[1] * gk[1] + gk[2] * gk[2])
+        kappa_used = kappa
+        for c in range(3):
+            grad[c] = gk[c]
+        k_next = kappa + T * (gk[0] * prev[0] + gk[1] * prev[1] + gk[2] * prev[2])
+        count = _add_barrier(C, d, kind, lost, lost_by, count, grad, n,
+                             -barrier_rate(kappa, gv, params), kappa, k_next,
+                             BIND_KINETOSTATIC, prev, gv * ramp, T)
+        speed = math.sqrt(prev[0] * prev[0] + prev[1] * prev[1] + prev[2] * prev[2])
+        if ray < math.inf and speed > 0.0:
+            # The look ahead (kinetostatics.kinetostatic_tick): the margin is lost `ray` m
+            # along the last command; the speed along it brakes to stop there (the braking
+            # curve), at most a_brake T a tick.
+            along = 0.0
+            for c in range(3):
+                grad[c] = -prev[c] / speed
+                along += prev[c] / speed * prev[c]
+            cap = face_cap(ray, params[F_A_BRAKE], T)
+            count = _add_barrier(C, d, kind, lost, lost_by, count, grad, n,
+                                 -max(cap, along - ramp), ray, ray - T * along,
+                                 BIND_KINETOSTATIC, prev, 1e300, T)
+    base = count
+    # While a margin is lost (by more than a tick's round-off) the platform is at a limit its
+    # model says it should not be at (a hand force that changed, a kink of the kinetostatic
+    # margin): it slows towards LOST_SPEED there (braking at the acceleration limit), where a
+    # gradient that turns from one tick to the next cannot swing the command about (40 N
+    # across exp3's pair 5-7: 2885 slack ticks in 10 s before, 58 with).
+    speed_cap = v_max
+    depth = 0.0
+    for r in range(base):
+        depth = max(depth, lost_by[r])
+    if depth > LOST_DEPTH:
+        # The cap falls with the depth, not at once: a margin hovering about LOST_DEPTH (a
+        # platform sliding along the curved kinetostatic limit loses ~0.05 N there, about a
+        # millimetre) switched a step cap on and off, braking and speeding the platform up in
+        # turn (50-120 mm/s at ~5 Hz), which rang the dynamic plant (a 20 N lift on exp2:
+        # 1853 slack ticks in 10 s, 654 with the cap graded).
+        share = min(1.0, (depth - LOST_DEPTH) / LOST_DEPTH)
+        slow_to = v_max + share * (LOST_SPEED - v_max)
+        # Slowing by RAMP_SHARE of the acceleration limit a tick, not all of it: with all of
+        # it the speed and acceleration balls touch in a single point, which the cutting
+        # planes never reach (the solve failed and the filter reported a hold on 103 ticks of
+        # a 40 N push across exp3's pair 5-7, commanding that very point).
+        prev_speed = math.sqrt(prev[0] * prev[0] + prev[1] * prev[1] + prev[2] * prev[2])
+        speed_cap = min(v_max, max(slow_to, prev_speed - RAMP_SHARE * a_max * T))
+    z = np.empty(n)
+    u = np.empty(rows)
+    status = STATUS_HOLD
+    for stage in range(2):
+        # Stage 0: everything; 1: lost margins only kept, not restored.
+        if stage == 1:
+            relaxed = False
+            for r in range(base):
+                if lost[r] and d[r] > 0.0:
+                    d[r] = 0.0
+                    relaxed = True
+            if not relaxed:
+                break
+        count = base
+        ok = False
+        for _ in range(MAX_CUTS + 1):
+            qp_status, _ = solve_qp(w, target, C, d, count, z, u, 200)
+            if qp_status != QP_OPTIMAL:
+                break
+            speed = math.sqrt(z[0] * z[0] + z[1] * z[1] + z[2] * z[2])
+            ex, ey, ez = z[0] - prev[0], z[1] - prev[1], z[2] - prev[2]
+            step = math.sqrt(ex * ex + ey * ey + ez * ez)
+            # Relative and absolute: the QP meets a cut to ~1e-12 m/s, and a cut again at
+            # the same point changes nothing (0.05 m/s exceeded by 6e-11 failed all 12 cuts,
+            # and the filter alternated between restoring a lost margin and not, a tick
+            # each: a 1.8 m/s^2 square wave, exp3 with a 40 N spring hand across 5-7).
+            over_speed = speed > speed_cap * (1.0 + BALL_TOL) + BALL_TOL
+            over_step = step > a_max * T * (1.0 + BALL_TOL) + BALL_TOL
+            if not (over_speed or over_step):
+                ok = True
+                break
+            if count + 2 > rows:
+                break
+            for c in range(6):
+                grad[c] = 0.0
+            if over_speed:  # -(z / |z|) . v >= -speed cap
+                grad[0], grad[1], grad[2] = -z[0] / speed, -z[1] / speed, -z[2] / speed
+                count = _add_row(C, d, kind, count, grad, n, -speed_cap, BIND_SPEED)
+            if over_step:  # -(e / |e|) . (v - v_prev) >= -a_max T
+                grad[0], grad[1], grad[2] = -ex / step, -ey / step, -ez / step
+                count = _add_row(C, d, kind, count, grad, n,
+                                 -a_max * T + grad[0] * prev[0] + grad[1] * prev[1]
+                                 + grad[2] * prev[2], BIND_ACCELERATION)
+        if ok:
+            status = (STATUS_PASS, STATUS_NO_RETURN)[stage]
+            break
+    binding = 0
+    if status == STATUS_HOLD:
+        # Brake to a hold at the acceleration limit: a step to zero from speed would jerk
+        # the platform (on a robot with mass, hard enough to slacken cables).
+        speed = math.sqrt(prev[0] * prev[0] + prev[1] * prev[1] + prev[2] * prev[2])
+        k = max(0.0, 1.0 - a_max * T / speed) if speed > 0.0 else 0.0
+        for c in range(n):
+            z[c] = prev[c] * k if c < 3 else 0.0
+    else:
+        for r in range(count):
+            if u[r] > 0.0:
+                binding |= kind[r]
+        if status == STATUS_PASS:
+            for c in range(n):
+                if z[c] != target[c]:
+                    status = STATUS_MODIFIED
+    for c in range(6):
+        out[c] = z[c] if c < n else 0.0
+        out[OUT_MEMORY + 4 + c] = out[c]
+    for c in range(3):
+        out[OUT_MEMORY + c] = p[c]
+    out[OUT_MEMORY + 3] = 1.0
+    out[6] = status
+    out[7] = binding
+    out[8] = smallest
+    out[9] = kappa_used
+    out[10] = base
+    for c in range(3):
+        out[OUT_V_D + c] = x[c]
+    return status

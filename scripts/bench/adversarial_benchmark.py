@@ -1,0 +1,268 @@
+"""The adversarial benchmark: hands the paper's interference force cannot hold, on the robots
+and plants the controller is meant for, with the truth recomputed from each log.
+
+Every case is a scenario (a base in scripts/bench/adversarial/ or a shipped one, with an overlay
+this script writes) run through `cdpm_drake.runs.simulate.simulate`, twice: with the paper's
+method (the safety filter and the model monitor off) and with the default controller. The
+hands:
+
+- push F: a steady push of F N (5, 10, 20, 40) across a swapped pair's plane (along minus the
+  gradient of the pair's distance at the start), ramped in over 0.1 s as a hand does;
+- step 40: the same 40 N at once, at t = 0 (no hand does that: it shows what no controller
+  can prevent, the platform's first 50 ms on its elastic cables);
+- spring F: a spring hand (60 N/m) pulling towards a point 1 m beyond the plane, capped at F;
+- lift F: a steady upward F N; corner: 20 N towards the box's top corner nearest the start;
+- noisy: a hand of 2 N rms (a sum of slow sines) with 0.5 N of sensor noise.
+
+On the dynamic plant (mass, elastic tension-only cables, drive friction) with the full pose and
+tension control; the pushes also on the kinematic plant with the default (translating)
+controller. Per run, from the log: the closest approach of a watched pair against its d_l
+(true distances from the plant's true pose, recomputed here with the posed segment distance;
+the kinematic plant's estimate is exact), whether a pair truly crossed, the slack ticks while
+the statics could hold the measured hand force (t* >= 2 N at the true pose, recomputed here),
+the smallest true tension, the largest tilt, the fault and its delay after the first tick the
+statics could not hold the hand (t* < 0), and how often the filter modified or held the
+command.
+
+    python scripts/bench/adversarial_benchmark.py              # the whole table (~2 min, 2 cores)
+    python scripts/bench/adversarial_benchmark.py --quick      # a subset (~30 s)
+    python scripts/bench/adversarial_benchmark.py --json out.json --jobs 2
+"""
+
+import argparse
+import dataclasses
+import json
+import logging
+import math
+import multiprocessing
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+
+HERE = Path(__file__).resolve().parent
+SCENARIOS = HERE / "adversarial"
+
+# (label, scenario (shipped name or file under scripts/adversarial), the swapped pairs to push
+# across). The bases name the robot, the swaps, the start and the logistic.
+ROBOTS = (
+    ("exp2 (paper_7cable, 1-3 swapped)", "exp2_interaction", [(1, 3)]),
+    ("exp3 (paper_7cable, 1-3 and 5-7 swapped)", "exp3_two_pairs", [(1, 3), (5, 7)]),
+    ("cube_8cable, 5-7 swapped", str(SCENARIOS / "cube_5_7.yaml"), [(5, 7)]),
+    ("own_7cable, 5-7 swapped", str(SCENARIOS / "own_5_7.yaml"), [(5, 7)]),
+)
+FULL = "controller: {pose: full, tension_control: true}, plant: !DynamicReels {}, "
+PAPER = "safety_filter: {enabled: false}, model_monitor: {enabled: false}, "
+DURATION = 10.0
+HOLDABLE = 2.0  # N: t* at the true pose with the measured hand, above which no slack is allowed
+
+
+@dataclasses.dataclass
+class Case:
+    robot: str
+    scenario: str
+    hand: str
+    plant: str       # "dynamic" (full pose, tension control) or "kinematic" (default)
+    method: str      # "paper" or "default"
+    overlay: str
+
+
+def _direction(resolved, pair):
+    """Minus the gradient of the pair's distance at the start (unit): across its plane."""
+    from cdpm_drake.kernels.interference import pair_distances
+
+    robot, p0 = resolved.robot, np.asarray(resolved.scenario.initial_position, dtype=float)
+    k = robot.pair_position(*pair)
+    h = 1e-6
+    g = np.array([(pair_distances(robot, p0 + h * e)[k] - pair_distances(robot, p0 - h * e)[k])
+                  / (2 * h) for e in np.eye(3)])
+    return -g / np.linalg.norm(g)
+
+
+def _scripted(force, ramp=0.1):
+    f = [round(float(x), 6) for x in force]
+    if ramp <= 0:
+        return "operator: !ScriptedOperator {times: [0, %g], forces: [%s, %s]}, " % (
+            DURATION, f, f)
+    return ("operator: !ScriptedOperator {times: [0, %g, %g], forces: [[0, 0, 0], %s, %s]}, "
+            % (ramp, DURATION, f, f))
+
+
+def _noisy(seed):
+    """A hand of ~2 N rms: three slow sines per axis (0.3-2 Hz), scripted at 50 Hz."""
+    rng = np.random.default_rng(seed)
+    t = np.arange(0.0, DURATION + 1e-9, 0.02)
+    F = np.zeros((t.size, 3))
+    for axis in range(3):
+        for _ in range(3):
+            F[:, axis] += rng.normal(scale=0.95) * np.sin(
+                2 * np.pi * rng.uniform(0.3, 2.0) * t + rng.uniform(0, 2 * np.pi))
+    return ("operator: !ScriptedOperator {times: %s, forces: %s}, sensor: {noise_std: 0.5}, "
+            % (np.round(t, 4).tolist(), np.round(F, 4).tolist()))
+
+
+def cases(quick: bool = False) -> list:
+    from cdpm_drake.config import load_resolved_scenario
+
+    out = []
+    for label, scenario, pairs in ROBOTS:
+        resolved = load_resolved_scenario(scenario)
+        robot = resolved.robot
+        p0 = np.asarray(resolved.scenario.initial_position, dtype=float)
+        hands = {}
+        for pair in pairs:
+            u = _direction(resolved, pair)
+            name = f"{pair[0]}-{pair[1]}"
+            for F in ((10, 40) if quick else (5, 10, 20, 40)):
+                hands[f"push {F} N across {name}"] = (_scripted(F * u), True)
+            hands[f"step 40 N across {name}"] = (_scripted(40 * u, ramp=0), False)
+            for F in ((40,) if quick else (10, 40)):
+                target = (p0 + 1.0 * u).round(4).tolist()
+                hands[f"spring {F} N across {name}"] = (
+                    "operator: !SpringHandOperator {waypoints: [%s, %s], times: [0, 1], "
+                    "stiffness: 60, damping: 6, max_force: %g}, "
+                    % (p0.round(4).tolist(), target, F), False)
+        if not quick:
+            for F in (20, 40):
+                hands[f"lift {F} N"] = (_scripted([0, 0, F]), False)
+            corner = np.where(p0 - robot.workspace.lower < robot.workspace.upper - p0,
+                              robot.workspace.lower, robot.workspace.upper)
+            corner[2] = robot.workspace.upper[2]
+            c = corner - p0
+            hands["corner 20 N"] = (_scripted(20 * c / np.linalg.norm(c)), False)
+            hands["noisy 2 N rms"] = (_noisy(7), False)
+        for hand, (overlay, kinematic_too) in hands.items():
+            plants = ("dynamic", "kinematic") if kinematic_too else ("dynamic",)
+            for plant in plants:
+                for method in ("paper", "default"):
+                    text = "{duration: %g, %s%s%s}" % (
+                        DURATION, FULL if plant == "dynamic" else "",
+                        PAPER if method == "paper" else "", overlay)
+                    out.append(Case(label, scenario, hand, plant, method, text))
+    return out
+
+
+def _t_star_true(robot, log) -> np.ndarray:
+    """t* at the plant's true pose with the measured (filtered) hand force at the handle,
+    per tick (kinetostatics.margin, the statics' one measure)."""
+    from cdpm_drake.kernels.kinetostatics import margin, margin_scratch, wrench_rows
+    from cdpm_drake.kernels.rotation import rotations_from_rpy
+    from cdpm_drake.kernels.tension import gravity_wrench
+
+    rows = wrench_rows(robot)
+    scratch = margin_scratch(robot.num_cables)
+    Rs = rotations_from_rpy(log["rpy_true"])
+    out = np.empty(len(log["time"]))
+    for k in range(out.size):
+        R = np.ascontiguousarray(Rs[k])
+        w = gravity_wrench(robot.dynamics.mass, log["F_H"][k], R @ robot.dynamics.handle)
+        out[k] = margin(robot.reels, robot.attachments, rows,
+                        np.ascontiguousarray(log["p_true"][k]), R, w, 0.0, math.inf,
+                        scratch)[1]
+    return out
+
+
+def measure(case: Case) -> dict:
+    """Run one case and measure it (module docstring)."""
+    logging.disable(logging.WARNING)
+    from cdpm_drake.kernels.interference import posed_pair_distances
+    from cdpm_drake.kernels.rotation import rotations_from_rpy
+    from cdpm_drake.config import load_resolved_scenario
+    from cdpm_drake.runs.simulate import simulate
+
+    resolved = load_resolved_scenario(case.scenario, case.overlay)
+    robot = resolved.robot
+    start = time.perf_counter()
+    result = simulate(scenario=resolved)
+    wall = time.perf_counter() - start
+    log = result.log
+    d_l = np.asarray(log["d_l"], dtype=float)
+    row = dataclasses.asdict(case) | {"wall": wall, "rtf": result.realtime_factor}
+    if "p_true" in log:
+        d, crossed = posed_pair_distances(robot, log["p_true"],
+                                          rotations_from_rpy(log["rpy_true"]),
+                                          np.asarray(log["d_u"], dtype=float))
+        t_star = _t_star_true(robot, log)
+        slack = log["slack"].any(axis=1)
+        row |= {"slack_holdable": int(np.sum(slack & (t_star >= HOLDABLE))),
+                "slack_ticks": int(slack.sum()),
+                "min_tension": float(log["tensions"].min()),
+                "max_tilt_deg": float(np.degrees(np.abs(log["rpy_true"])).max())}
+        unholdable = np.flatnonzero(t_star < 0.0)
+        row["first_unholdable"] = (float(log["time"][unholdable[0]]) if unholdable.size
+                                   else None)
+    else:
+        d, crossed = log["pair_distances"], log["crossed"]
+        row |= {"slack_holdable": None, "slack_ticks": None, "min_tension": None,
+                "max_tilt_deg": None, "first_unholdable": None}
+    margin_mm = 1000 * (d - d_l[None, :])
+    k = int(np.unravel_index(np.argmin(margin_mm), margin_mm.shape)[1])
+    row |= {"closest_vs_d_l_mm": float(margin_mm.min()),
+            "closest_pair": "%d-%d" % tuple(robot.pairs[k]),
+            "crossed": bool(np.any(crossed)),
+            "fault": "" if result.error is None else str(result.error),
+            "fault_time": None if result.error is None else float(log["time"][-1])}
+    status = log.get("filter_status")
+    row["modified_share"] = None if status is None else float(np.mean(status[:, 0] > 0))
+    row["held_share"] = None if status is None else float(np.mean(status[:, 0] >= 3))
+    return row
+
+
+def _run_all(todo, jobs):
+    if jobs <= 1:
+        return [measure(c) for c in todo]
+    with multiprocessing.get_context("spawn").Pool(jobs) as pool:
+        return pool.map(measure, todo, chunksize=1)
+
+
+def table(rows) -> str:
+    """The markdown table of the benchmark's rows."""
+    head = ("| robot | hand | plant | method | closest vs d_l (mm) | crossed | slack ticks "
+            "(holdable) | min tension (N) | max tilt (deg) | fault | modified / held (%) |")
+    lines = [head, "|" + " --- |" * 11]
+    for r in rows:
+        fault = "-"
+        if r["fault"]:
+            late = ""
+            if r["first_unholdable"] is not None:
+                late = f", {1000 * (r['fault_time'] - r['first_unholdable']):.0f} ms after t*<0"
+            fault = f"{r['fault'].split(':')[0][:40]} at {r['fault_time']:.3f} s{late}"
+        slack = ("-" if r["slack_ticks"] is None
+                 else f"{r['slack_ticks']} ({r['slack_holdable']})")
+        held = ("-" if r["modified_share"] is None
+                else f"{100 * r['modified_share']:.0f} / {100 * r['held_share']:.1f}")
+        lines.append("| {} | {} | {} | {} | {:+.2f} ({}) | {} | {} | {} | {} | {} | {} |".format(
+            r["robot"], r["hand"], r["plant"], r["method"], r["closest_vs_d_l_mm"],
+            r["closest_pair"], "yes" if r["crossed"] else "no", slack,
+            "-" if r["min_tension"] is None else f"{r['min_tension']:.2f}",
+            "-" if r["max_tilt_deg"] is None else f"{r['max_tilt_deg']:.2f}", fault, held))
+    return "\n".join(lines)
+
+
+def main(argv=None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__,
+                                      formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser.add_argument("--quick", action="store_true", help="a subset of the hands")
+    parser.add_argument("--jobs", type=int, default=max(1, multiprocessing.cpu_count()),
+                        help="parallel runs (default: every core)")
+    parser.add_argument("--json", metavar="PATH", help="also write every row as JSON")
+    parser.add_argument("--only", metavar="TEXT", help="only the cases whose robot or hand "
+                        "contains TEXT")
+    args = parser.parse_args(argv)
+    logging.disable(logging.WARNING)
+    todo = cases(args.quick)
+    if args.only:
+        todo = [c for c in todo if args.only in c.robot or args.only in c.hand]
+    print(f"{len(todo)} runs of {DURATION:g} s on {args.jobs} processes ...", file=sys.stderr)
+    start = time.perf_counter()
+    rows = _run_all(todo, args.jobs)
+    print(table(rows))
+    print(f"\n{len(rows)} runs in {time.perf_counter() - start:.0f} s", file=sys.stderr)
+    if args.json:
+        Path(args.json).write_text(json.dumps(rows, indent=1))
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

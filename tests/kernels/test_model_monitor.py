@@ -1,0 +1,145 @@
+"""The model monitor (cdpm_drake.kernels.model_monitor): each condition named after exactly its number
+of ticks, on lengths made from the geometry (pose.pose_lengths) with a known change, and
+hand forces whose t* comes from scipy's HiGHS (conftest.highs_t_star)."""
+
+import numpy as np
+import pytest
+
+from cdpm_drake.kernels.kinetostatics import margin_scratch
+from cdpm_drake.kernels.model_monitor import (MISFIT, OK, SLACK, UNHOLDABLE, fault_message,
+                                      monitor_params, monitor_sizes, monitor_tick)
+from cdpm_drake.kernels.pose import pose_lengths
+from cdpm_drake.kernels.tension import gravity_wrench, wrench_matrix
+from conftest import highs_t_star
+
+TICKS, SLACK_TICKS, HOLDABLE = 5, 25, 2.0
+
+
+def _robot():
+    from cdpm_drake.robot import load_robot, resolve_robot_path
+
+    return load_robot(resolve_robot_path("paper_7cable"))
+
+
+def _run(robot, frames, *, estimate=False, EA=70000.0, F=(0.0, 0.0, 0.0)):
+    """Feed frames [(lengths, p, T_est)] through the monitor tick by tick (its memory carried
+    as the block's delay does), the hand force F (N) at every tick; returns (status, cable,
+    value, t*) of each tick."""
+    m = robot.num_cables
+    s = monitor_sizes(m, False, estimate)
+    params = monitor_params(robot, EA=EA, slack_tension=2.0, slack_length=0.003,
+                            fit_tolerance=0.01, unholdable=1.0, ticks=TICKS,
+                            estimate=estimate, full_pose=False, rows=6, holdable=HOLDABLE,
+                            slack_ticks=SLACK_TICKS)
+    scratch = margin_scratch(m)
+    memory = np.zeros(3)
+    out = np.empty(s["out"])
+    seen = []
+    for lengths, p, T_est in frames:
+        x = np.concatenate([lengths, p, F] + ([T_est] if estimate else []) + [memory])
+        status = monitor_tick(robot.reels, robot.attachments, params, scratch, x, out)
+        memory = out[s["memory_at"]:s["memory_at"] + 3].copy()
+        seen.append((int(status), int(out[1]), float(out[2]), float(out[3])))
+        expected = pose_lengths(robot, p, np.eye(3)) - (
+            lengths * (1 + T_est / EA) if estimate else lengths)
+        np.testing.assert_allclose(out[4:4 + m], expected, atol=1e-12)
+    return seen
+
+
+def _t_star(robot, p, F):
+    """t* of the level platform at p with its weight and the hand force F at the handle,
+    by HiGHS."""
+    w = gravity_wrench(robot.dynamics.mass, F, robot.dynamics.handle)
+    return highs_t_star(wrench_matrix(robot, p), w)
+
+
+def _force_with_t_star(robot, p, low, high):
+    """A lift (+z) whose t* (HiGHS) lies in (low, high), found by bisection on its size (at
+    P the weight alone leaves t* = 16.5 N and 30 N of lift -5.1 N)."""
+    a, b = 0.0, 200.0
+    for _ in range(60):
+        mid = 0.5 * (a + b)
+        t = _t_star(robot, p, [0.0, 0.0, mid])
+        if low < t < high:
+            return np.array([0.0, 0.0, mid]), t
+        a, b = (mid, b) if t > high else (a, mid)
+    raise AssertionError("no such force")
+
+
+P = np.array([1.77, 2.4, 1.3])  # inside paper_7cable's box, where the weight is held
+
+
+def test_a_slack_cable_where_the_statics_hold_is_a_fault_after_slack_ticks():
+    robot = _robot()
+    assert _t_star(robot, P, [0, 0, 0]) > HOLDABLE  # the weight alone: held with margin
+    L = pose_lengths(robot, P, np.eye(3))
+    slack = L.copy()
+    slack[3] += 0.004  # cable 4 paid out 4 mm more than the pose needs: it sags
+    seen = _run(robot, [(L, P, None)] * 3 + [(slack, P, None)] * SLACK_TICKS)
+    assert [s for s, *_ in seen[:-1]] == [OK] * (3 + SLACK_TICKS - 1)
+    assert seen[-1][:3] == (SLACK, 4, pytest.approx(-0.004, abs=1e-12))
+    # A stretched cable (shorter on the reel than the geometry) is no slack, and 2 mm is
+    # within slack_length.
+    taut, half = L.copy(), L.copy()
+    taut[3] -= 0.004
+    half[3] += 0.002
+    assert all(s == OK for s, *_ in _run(robot, [(taut, P, None)] * 30 + [(half, P, None)] * 30))
+
+
+def test_a_slack_cable_the_hand_keeps_slack_is_a_fault_after_ticks():
+    # A hand force that leaves t* between 0 and `holdable`: the slack is the hand's doing.
+    robot = _robot()
+    F, t = _force_with_t_star(robot, P, 0.3, HOLDABLE - 0.3)
+    L = pose_lengths(robot, P, np.eye(3))
+    slack = L.copy()
+    slack[0] += 0.005
+    seen = _run(robot, [(slack, P, None)] * TICKS, F=F)
+    assert seen[-1][:2] == (SLACK, 1) and all(s == OK for s, *_ in seen[:-1])
+    assert seen[-1][3] == pytest.approx(t, abs=1e-6)  # the t* it judged by, HiGHS's
+
+
+def test_an_interruption_restarts_the_count():
+    robot = _robot()
+    L = pose_lengths(robot, P, np.eye(3))
+    slack = L.copy()
+    slack[0] += 0.005
+    frames = [(slack, P, None)] * (SLACK_TICKS - 1) + [(L, P, None)] + [
+        (slack, P, None)] * (SLACK_TICKS - 1)
+    assert all(s == OK for s, *_ in _run(robot, frames))
+
+
+def test_the_tension_estimate_names_the_slack_cable():
+    robot = _robot()
+    EA = 70000.0
+    T = np.full(7, 20.0)
+    L0 = pose_lengths(robot, P, np.eye(3)) / (1 + T / EA)  # unstretched: residual 0
+    T_bad = T.copy()
+    T_bad[6] = -2.5  # below -slack_tension
+    bad = (L0 * (1 + T / EA) / (1 + T_bad / EA), P, T_bad)
+    seen = _run(robot, [(L0, P, T)] * 2 + [bad] * SLACK_TICKS, estimate=True)
+    assert seen[-1][:2] == (SLACK, 7) and seen[-1][2] == pytest.approx(-2.5)
+    assert all(s == OK for s, *_ in seen[:-1])
+
+
+def test_lengths_far_from_the_pose_are_a_misfit_and_an_unholdable_hand_is_named():
+    robot = _robot()
+    L = pose_lengths(robot, P, np.eye(3))
+    off = L.copy()
+    off[2] -= 0.012  # 12 mm shorter: beyond fit_tolerance, and not slack
+    seen = _run(robot, [(off, P, None)] * TICKS)
+    assert seen[-1][:3] == (MISFIT, 3, pytest.approx(0.012, abs=1e-12))
+    F, t = _force_with_t_star(robot, P, -3.0, -1.5)  # beyond unholdable = 1 N
+    seen = _run(robot, [(L, P, None)] * TICKS, F=F)
+    assert seen[-1][0] == UNHOLDABLE and seen[-1][2] == pytest.approx(t, abs=1e-6)
+    assert all(s == OK for s, *_ in seen[:-1])
+    F, t = _force_with_t_star(robot, P, -0.9, -0.1)  # within 1 N of holding it
+    assert all(s == OK for s, *_ in _run(robot, [(L, P, None)] * (2 * TICKS), F=F))
+
+
+def test_fault_messages_name_the_cable_the_reason_and_the_duration():
+    text = fault_message(SLACK, 4, -0.004, ticks=5, time_step=0.002, estimate=False,
+                         p=[1.0, 2.0, 3.0])
+    assert text.startswith("cable 4 is slack") and "4.00 mm longer" in text and "10 ms" in text
+    text = fault_message(UNHOLDABLE, 0, -3.2, ticks=5, time_step=0.002, estimate=True,
+                         p=[1.0, 2.0, 3.0], F_H=[0.0, 0.0, 40.0])
+    assert "cannot be held" in text and "[0.0, 0.0, 40.0] N" in text and "-3.20 N" in text

@@ -1,0 +1,46 @@
+"""Smoke runs of the dynamic plant's scripts (issue 21): the benchmark prints its table with
+every row, and the time-step report says what a coarser step costs."""
+
+import re
+import subprocess
+import sys
+from pathlib import Path
+
+SCRIPTS = Path(__file__).resolve().parents[2] / "scripts"
+
+
+def run(script, *args):
+    return subprocess.run([sys.executable, str(SCRIPTS / script), *args], capture_output=True,
+                          text=True, timeout=600)
+
+
+def test_benchmark_prints_every_row_beside_the_kinematic_plant():
+    out = run("bench/bench_dynamic_plant.py", "--duration", "0.1", "--repeats", "1")
+    assert out.returncode == 0, out.stderr
+    rows = {}
+    for line in out.stdout.splitlines():
+        cells = re.split(r"\s{2,}", line.strip())
+        if len(cells) == 5 and cells[1].endswith("x"):
+            rows[cells[0]] = cells
+    assert set(rows) == {"kinematic plant (reference)", "dynamic plant, 1 ms step (product)",
+                         "dynamic plant, 2 ms step", "dynamic plant, 0.5 ms step",
+                         "floor: dynamic, Python math as no-ops",
+                         "floor: MultibodyPlant alone, 1 ms"}
+    # The reference's ratio is 1 by definition; per plant step = per tick / steps per tick.
+    assert rows["kinematic plant (reference)"][4] == "1.00"
+    product = rows["dynamic plant, 1 ms step (product)"]
+    assert abs(float(product[3]) - float(product[2]) / 2) <= 0.06
+    assert "goal >= 25x real time for the product" in out.stdout
+
+
+def test_time_step_report_orders_the_errors_by_step():
+    out = run("tools/dynamic_time_step.py", "--steps", "0.0005", "0.002")
+    assert out.returncode == 0, out.stderr
+    energy = dict(re.findall(r"^(0\.5|2)\s+([\d.]+) %", out.stdout, flags=re.M))
+    # Symplectic Euler: the energy error grows with the step (first order).
+    assert 0.0 < float(energy["0.5"]) < float(energy["2"]) < 50.0
+    # Against the finer step, the 2 ms step's tensions and positions differ, the fine one's
+    # own row is zero.
+    tables = re.findall(r"^2\s+([\d.]+)\s+([\d.]+)\s+([\d.]+)", out.stdout, flags=re.M)
+    assert len(tables) >= 3 and all(float(dT) > 0 for dT, _, _ in tables)
+    assert re.search(r"^0\.5\s+0\.000\s+0\.0000\s+0\.0000", out.stdout, flags=re.M)
