@@ -7,8 +7,8 @@ import re
 # Quantities in m are shown in mm (tables, pictures) (the paper's distances are in mm).
 UNIT_SCALE = {"m": (1000.0, "mm")}
 
-# A swept field's last name -> (what it is, unit in SI), by the section it is in
-# (scenario.py's comments). "" for the section: a top-level field.
+# A swept field's last name -> (what it is, unit in SI), by the section it is in (the
+# comments of the Scenario's fields, cdpm_drake.config). "" for the section: a top-level field.
 FIELDS = {
     ("interference", "d_l"): ("d_l", "m"), ("interference", "d_u"): ("d_u", "m"),
     ("interference", "F_u"): ("F_u", "N"), ("interference", "eps"): ("eps", "N"),
