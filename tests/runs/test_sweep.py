@@ -652,14 +652,14 @@ def test_the_lock_says_who_holds_it_and_is_gone_after_the_sweep(tmp_path):
     s = sw.load_sweep(write(tmp_path, SMALL))
     out = tmp_path / "out"
     out.mkdir()
-    held = sw._lock(out)  # as a running cdpm sweep holds it
+    held = sw.acquire_lock(out)  # as a running cdpm sweep holds it
     try:
         assert (out / ".sweep.lock").read_text().startswith(f"pid {os.getpid()}, since ")
         with pytest.raises(sw.SweepError, match=rf"is in use by another cdpm sweep \(pid "
                                                 rf"{os.getpid()}, since "):
             sw.run_sweep(s, out, workers=1, progress=False)
     finally:
-        sw._unlock(held, out)
+        sw.release_lock(held, out)
     assert not (out / ".sweep.lock").exists()
     sw.run_sweep(s, out, workers=1, progress=False)
     assert (out / "results.csv").exists() and not (out / ".sweep.lock").exists()
