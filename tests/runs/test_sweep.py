@@ -531,9 +531,9 @@ def test_cli_errors(tmp_path, capsys):
 
 
 def test_the_readme_sweep_example_loads(tmp_path):
-    """The README's sweep block, verbatim: 3 x 3 x 2 grid points x 2 seeds, the pair (1,3)
-    override created on a base that has none."""
-    readme = (REPO / "README.md").read_text()
+    """The guide's sweep block (docs/sweeps.md), verbatim: 3 x 3 x 2 grid points x 2 seeds, the
+    pair (1,3) override created on a base that has none."""
+    readme = (REPO / "docs" / "sweeps.md").read_text()
     block = next(b for b in re.findall(r"```yaml\n(.*?)```", readme, re.DOTALL)
                  if b.startswith("name: my_sweep"))
     s = sw.load_sweep(write(tmp_path, block))

@@ -47,12 +47,13 @@ def test_a_robot_described_by_someone_else_simulates_plots_and_replays(name, tmp
 
 
 def test_the_readme_examples_load_and_simulate(tmp_path):
-    # The README's "Describe your own robot" and "Write a scenario" blocks, verbatim: a new
-    # user copies them first.
+    # The README's "Describe your own robot" and docs/scenarios.md's "Write a scenario" blocks,
+    # verbatim: a new user copies them first.
     import re
-    from pathlib import Path
 
-    readme = (Path(__file__).resolve().parents[2] / "README.md").read_text()
+    from helpers_docs import guide_text
+
+    readme = guide_text()
     blocks = re.findall(r"```yaml\n(.*?)```", readme, re.DOTALL)
     robot = next(b for b in blocks if b.startswith("name: my_robot"))
     scenario = next(b for b in blocks if b.startswith("name: my_push"))

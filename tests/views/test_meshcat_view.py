@@ -8,6 +8,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from helpers_docs import page
 from helpers_synthetic_log import synthetic_log
 
 from cdpm_drake.views import meshcat_view as mv
@@ -218,10 +219,11 @@ def test_default_arrows_reach_out_of_the_platform_at_the_documented_scale(meshca
 
     view = mv.CdpmMeshcatView(meshcat, REELS, ATTACH, [1.0, 0.5, 0.5], [3.0, 2.5, 2.5], PAIRS)
     view.draw(P, [0, 0, 0], [1.0, 0, 0], [1.0, 0, 0], [0.2, 0.2, 0.2])
-    # 1 N is drawn FORCE_SCALE m long; the README and the scene state that scale.
+    # 1 N is drawn FORCE_SCALE m long; the guide (docs/viewing.md) and the scene state that
+    # scale.
     length = prop(meshcat, f"{view.force_path('F_int')}/scaled", "scale")[2]
     assert length == mv.FORCE_SCALE == 0.25
-    readme = (Path(__file__).resolve().parents[2] / "README.md").read_text()
+    readme = page("viewing")
     assert "0.25 m per N" in readme
     assert meshcat.HasPath("/cdpm/clock/force_scale")
     # On every built-in robot an arrow of 1 N (less than the F_u and hand forces of the shipped
