@@ -485,7 +485,7 @@ def print_pair_summary(log, out) -> None:
     """The cable pairs of a log (`cdpm simulate`'s and `cdpm run`'s): each pair's closest
     approach beside its d_l and d_u, the ticks it was within d_u and whether it crossed; the
     peak forces; how many pairs crossed."""
-    from cdpm_drake.runs.simulate import summary_header, summary_rows
+    from cdpm_drake.runs.log import summary_header, summary_rows
 
     T = len(log["time"])
     rows = summary_rows(log)
@@ -539,7 +539,8 @@ def simulate_main(*, scenario, duration=None, out_dir=None, progress=True, out=N
     same, and the plots and replay asked for)."""
     from cdpm_drake.runs.run_folder import RUNS_DIR, RunFolder
     from cdpm_drake.config import resolve_scenario
-    from cdpm_drake.runs.simulate import run_variant, save_log, simulate
+    from cdpm_drake.runs.log import save_log
+    from cdpm_drake.runs.simulate import run_variant, simulate
 
     out = sys.stdout if out is None else out
     resolved = resolve_scenario(scenario)
@@ -577,7 +578,8 @@ def simulate_main(*, scenario, duration=None, out_dir=None, progress=True, out=N
     # one already decided the exit code.
     with _signals_ignored(result.error is not None):
         if plots:
-            from cdpm_drake.views.plots import LogError, plot_log
+            from cdpm_drake.runs.log import LogError
+            from cdpm_drake.views.plots import plot_log
             try:
                 for png in plot_log(log, out_dir):
                     print(f"plot: {png}", file=out)
@@ -718,7 +720,7 @@ class _duration_flag:
         return self
 
     def __exit__(self, kind, e, tb):
-        from cdpm_drake.runs.simulate import LogTooLarge
+        from cdpm_drake.runs.log import LogTooLarge
 
         if self._flag and isinstance(e, LogTooLarge):
             raise CliError(f"--{e}") from None
@@ -739,6 +741,7 @@ def _check_duration_tick(duration, resolved) -> None:
 def _live_meshcat(scenario):
     """A Meshcat window that follows the simulation (views hang off the CLI, not the blocks)."""
     from cdpm_drake.config import resolve_scenario
+    from cdpm_drake.runs.latest_signals import latest_signals
     from cdpm_drake.views.meshcat_view import CdpmMeshcatView, live_view_callback, make_meshcat
 
     resolved = resolve_scenario(scenario)
@@ -748,7 +751,7 @@ def _live_meshcat(scenario):
     view = CdpmMeshcatView(meshcat, robot.reels, robot.attachments, robot.workspace.lower,
                            robot.workspace.upper, robot.pairs, **kwargs)
     print(f"Meshcat: open {meshcat.web_url()} in a browser", file=sys.stderr)
-    return live_view_callback(view)
+    return live_view_callback(view, latest_signals)
 
 
 # --- run -------------------------------------------------------------------------------------
@@ -848,7 +851,7 @@ def _find_log(path: Path, command: str):
     log.npz, its run folder, runs/<name> (its latest run); a folder with only ticks.bin is
     recovered first."""
     from cdpm_drake.runs.run_folder import resolve_latest
-    from cdpm_drake.views.plots import LogError, load_log
+    from cdpm_drake.runs.log import LogError, load_log
 
     target = resolve_latest(path)
     if target.is_dir() and not (target / "log.npz").exists() and (target / "ticks.bin").exists():

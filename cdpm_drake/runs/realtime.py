@@ -47,10 +47,11 @@ from pathlib import Path
 import numpy as np
 from pydrake.systems.analysis import Simulator
 
-from cdpm_drake.diagram import LOGGED, BuildOptions, build_diagram
+from cdpm_drake.diagram import BuildOptions, build_diagram
 from cdpm_drake.config import (DynamicReels, ResolvedScenario, Scenario, ScenarioError, SimulatedReels,
                        resolve_scenario, write_run_scenario)
-from cdpm_drake.runs.simulate import assemble_log, check_log_fits, mark_ending, tick_targets
+from cdpm_drake.runs.log import check_log_fits, log_from_tick_log, mark_ending, write_log
+from cdpm_drake.runs.simulate import tick_targets
 
 
 @dataclasses.dataclass
@@ -266,8 +267,7 @@ def run(*, scenario: Scenario | ResolvedScenario, out_dir, duration: float | Non
                          log_path=None, tick_log_path=None, signal=stop.signal, enabled=False)
     log, timing, _ = log_from_tick_log(tick_path, resolved, robot)
     mark_ending(log, ending, error)
-    log_path = out / "log.npz"
-    np.savez_compressed(log_path, **log)
+    log_path = write_log(log, out)
     return RunResult(log=log, timing=timing, link=link, error=error, ending=ending,
                      log_path=log_path, tick_log_path=tick_path, signal=stop.signal)
 
@@ -277,31 +277,6 @@ def tick_row_bytes(sink) -> int:
     each input port, plus its tick (int64), time, wall time and compute time."""
     values = sum(sink.get_input_port(k).size() for k in range(sink.num_input_ports()))
     return 8 * (values + 4)
-
-
-def log_from_tick_log(tick_path, scenario: Scenario | ResolvedScenario,
-                      robot) -> tuple[dict, dict, dict]:
-    """docs/LOG_FORMAT.md from a run's ticks.bin: (log without the ending keys, timing,
-    {"ticks": whole rows read, "cut_bytes": bytes of a partial last row left out})."""
-    from cdpm_drake.hardware.tick_log import read_tick_log, realtime_stats, tick_log_tail
-
-    resolved = resolve_scenario(scenario)
-    scenario = resolved.scenario
-
-    tick_path = Path(tick_path)
-    raw = read_tick_log(tick_path) if tick_path.exists() else {}
-    tail = tick_log_tail(tick_path) if tick_path.exists() else {"ticks": 0, "cut_bytes": 0}
-    T = scenario.time_step
-    timing = realtime_stats(raw, T) if raw else {}
-    signals = {key: raw[key] for key, _, _ in LOGGED if key in raw}
-    log = assemble_log(raw.get("time", np.zeros(0)), signals, resolved, robot)
-    log["tick"] = raw.get("tick", np.zeros(0, dtype=int))
-    log["wall"] = raw.get("wall", np.zeros(0))
-    compute = raw.get("compute", np.full((len(log["time"]), 1), np.nan))
-    log["compute"] = np.asarray(compute, dtype=float).reshape(-1)
-    plant = scenario.plant
-    log["watchdog_limit"] = np.array(getattr(plant, "watchdog_ticks", np.nan) * T)
-    return log, timing, tail
 
 
 def recover(run_dir) -> tuple[Path, dict]:
@@ -329,8 +304,7 @@ def recover(run_dir) -> tuple[Path, dict]:
     expected = int(np.floor(scenario.duration / scenario.time_step + 1e-9)) + 1
     ending = "completed" if len(log["time"]) >= expected else "interrupted"
     mark_ending(log, ending, None)
-    log_path = run_dir / "log.npz"
-    np.savez_compressed(log_path, **log)
+    log_path = write_log(log, run_dir)
     return log_path, dict(tail, ending=ending, expected=expected)
 
 

@@ -537,37 +537,26 @@ class CdpmMeshcatView:
 # --- Live view and replay ---------------------------------------------------------------------
 
 
-def live_view_callback(view: CdpmMeshcatView):
+def live_view_callback(view: CdpmMeshcatView, read_latest):
     """`on_chunk(diagram, context)` for `simulation.simulate` and `realtime.run`: draws the
-    latest tick from a logger of its own (log_<key>) where the diagram has one, the block
-    output port that logs it (diagram.logged_source) otherwise, and the dynamic plant's ground
-    truth; signals the diagram lacks are drawn as zero."""
-    from cdpm_drake.diagram import logged_source
-
-    def latest(diagram, context, key, width):
-        name = f"log_{key}"
-        if diagram.HasSubsystemNamed(name):  # a logger of its own
-            data = diagram.GetSubsystemByName(name).FindLog(context).data()
-            return data[:, -1] if data.shape[1] else np.zeros(width)
-        if key in ("p_true", "rpy_true", "slack"):  # the dynamic plant's, logged inside it
-            from cdpm_drake.systems.plants.dynamic_plant import latest_ground_truth
-
-            truth = latest_ground_truth(diagram, context)
-            return None if truth is None else truth[key]
-        port = logged_source(diagram, key)
-        if port is not None:
-            return port.Eval(port.get_system().GetMyContextFromRoot(context))
-        return np.zeros(width)
+    latest tick, as `read_latest(diagram, context, keys)` gives it ({key: value} of the keys
+    the diagram logs: runs/latest_signals.py's latest_signals, which the caller hands in, so
+    that the view reads no block or plant itself); a dynamic plant's ground truth (p_true,
+    rpy_true, slack) when there is one; signals the diagram lacks are drawn as zero."""
+    widths = {"p": 3, "F_H": 3, "F_int": 3, "F_d": 3, "pair_distances": len(view.pairs),
+              "p_true": 3, "rpy_true": 3, "slack": view.num_cables, "F_kin": 3}
 
     def on_chunk(diagram, context) -> None:
-        row = {key: latest(diagram, context, key, width)
-               for key, width in (("p", 3), ("F_H", 3), ("F_int", 3), ("F_d", 3),
-                                  ("pair_distances", len(view.pairs)), ("p_true", 3),
-                                  ("rpy_true", 3), ("slack", view.num_cables), ("F_kin", 3))}
-        dynamic = row["p_true"] is not None
-        view.draw(row["p_true"] if dynamic else row["p"], row["F_H"], row["F_int"], row["F_d"],
-                  row["pair_distances"], sim_time=context.get_time(), rpy=row["rpy_true"],
-                  slack=row["slack"], F_kin=row["F_kin"])
+        row = read_latest(diagram, context, tuple(widths))
+
+        def value(key):
+            found = row.get(key)
+            return np.zeros(widths[key]) if found is None else found
+
+        dynamic = row.get("p_true") is not None
+        view.draw(row["p_true"] if dynamic else value("p"), value("F_H"), value("F_int"),
+                  value("F_d"), value("pair_distances"), sim_time=context.get_time(),
+                  rpy=row.get("rpy_true"), slack=row.get("slack"), F_kin=value("F_kin"))
 
     return on_chunk
 

@@ -22,6 +22,7 @@ from cdpm_drake.config import load_scenario
 from cdpm_drake.runs.simulate import simulate
 from cdpm_drake.text import format_table
 from cdpm_drake.views import meshcat_view, plots
+from cdpm_drake.views.figure_keys import OPTIONAL, has_keys
 
 
 def fastest(repeat: int, work) -> float:
@@ -59,7 +60,7 @@ def main() -> None:
     with tempfile.TemporaryDirectory() as tmp:
         out = Path(tmp)
         for name, make in plots.FIGURES.items():
-            if name in plots.OPTIONAL and not plots.has_keys(log, name):
+            if name in OPTIONAL and not has_keys(log, name):
                 continue
             seconds = fastest(args.repeat, lambda: make(log).savefig(out / f"{name}.png",
                                                                      dpi=120))

@@ -215,8 +215,8 @@ class _CountingView:
         self.calls = 0
         real = meshcat_view.live_view_callback
 
-        def wrapped(view):
-            inner = real(view)
+        def wrapped(view, read_latest):
+            inner = real(view, read_latest)
 
             def on_chunk(diagram, context):
                 self.calls += 1
@@ -612,7 +612,7 @@ def test_export_out_is_where_the_csv_goes(tmp_path, logged):
 def test_plot_logistic_curve_spans_the_band_and_never_negative_distances(logged):
     """Fig. 8 is drawn over [max(0, d_l - w), d_u + w] with w = d_u - d_l: for d_l = 10 mm,
     d_u = 30 mm that is 0..50 mm (d_l - w would be -10 mm)."""
-    from cdpm_drake.views.plots import figure_logistic
+    from cdpm_drake.views.figures_interference import figure_logistic
 
     log = run_log(logged)
     for key, value in (("d_l", 0.010), ("d_u", 0.030)):

@@ -35,7 +35,8 @@ from cdpm_drake.robot import RobotSchema, load_robot
 from cdpm_drake.config import (Admittance, Interference, Limits, Logistic, ModelMonitor,
                                  PairLogistic, SafetyFilter, Scenario, ScenarioError, Sensor,
                                  SimulatedReels, WallForce, load_scenario, scenario_robot)
-from cdpm_drake.runs.simulate import save_log, simulate
+from cdpm_drake.runs.log import save_log
+from cdpm_drake.runs.simulate import simulate
 from cdpm_drake.systems.plants.dynamic_plant import ground_truth_now, plant_state_now, reel_step
 
 from conftest import case_registry, to_yaml

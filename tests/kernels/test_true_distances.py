@@ -19,7 +19,8 @@ from cdpm_drake.kernels.interference import (InterferenceParams, interference_fo
 from cdpm_drake.robot import load_robot
 from cdpm_drake.kernels.rotation import rotation_from_rpy, rotations_from_rpy
 from cdpm_drake.config import load_resolved_scenario
-from cdpm_drake.runs.simulate import TRUE_CROSSING_NEAR, plant_fault_causes, true_pair_distances
+from cdpm_drake.runs.log import TRUE_CROSSING_NEAR, true_pair_distances
+from cdpm_drake.runs.simulate import plant_fault_causes
 
 ROBOT = load_robot("paper_7cable").with_swapped_attachments(1, 3)
 
@@ -214,7 +215,7 @@ def scenario_robot_of(log):
 
 
 def test_the_distances_figure_draws_the_truth_and_the_estimate():
-    from cdpm_drake.views.plots import figure_distances
+    from cdpm_drake.views.figures_interference import figure_distances
 
     T = 50
     t = 0.002 * np.arange(T)

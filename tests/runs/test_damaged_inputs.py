@@ -12,7 +12,7 @@ import numpy as np
 import pytest
 
 from cdpm_drake import cli
-from cdpm_drake.runs.simulate import LogTooLarge, check_log_fits
+from cdpm_drake.runs.log import LogTooLarge, check_log_fits
 
 
 def run_cli(capsys, *args):

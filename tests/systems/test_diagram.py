@@ -17,7 +17,8 @@ from cdpm_drake.diagram import (PLANT_PORTS, BuildOptions, block_output_port, bu
                                 logged_ports)
 from cdpm_drake.kernels.kinematics import forward_kinematics
 from cdpm_drake.config import load_scenario, scenario_robot
-from cdpm_drake.runs.simulate import collect_log, simulate
+from cdpm_drake.runs.log import collect_log
+from cdpm_drake.runs.simulate import simulate
 
 T = 0.002
 M = C = 6.25  # the paper's virtual mass (kg) and damping (N s/m)

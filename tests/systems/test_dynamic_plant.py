@@ -23,7 +23,8 @@ from cdpm_drake.robot import ROBOTS_DIR, RobotError, load_robot
 from cdpm_drake.kernels.rotation import rotation_from_rpy
 from cdpm_drake.config import (DynamicReels, ScenarioError, check_dynamic_reels,
                                  load_scenario, scenario_robot)
-from cdpm_drake.runs.simulate import collect_log, simulate
+from cdpm_drake.runs.log import collect_log
+from cdpm_drake.runs.simulate import simulate
 from cdpm_drake.systems.plants.dynamic_plant import cable_tensions, ground_truth_log, reel_step
 from cdpm_drake.kernels.tension import GRAVITY, gravity_wrench, stable_time_step, wrench_matrix
 
@@ -568,12 +569,13 @@ def dynamic_log():
 
 
 def test_plot_log_adds_tensions_and_pose_error_for_a_dynamic_log(dynamic_log, tmp_path):
-    from cdpm_drake.views import plots
+    from cdpm_drake.views.figures_plant import figure_pose_error, figure_tensions
+    from cdpm_drake.views.plots import plot_log
 
-    names = [p.name for p in plots.plot_log(dynamic_log, tmp_path, dpi=40)]
+    names = [p.name for p in plot_log(dynamic_log, tmp_path, dpi=40)]
     # The safety filter's figure last (the default scenario runs the filter).
     assert names[-3:] == ["tensions.png", "pose_error.png", "safety.png"]
-    fig = plots.figure_tensions(dynamic_log)
+    fig = figure_tensions(dynamic_log)
     lines = [line for line in fig.axes[0].get_lines() if line.get_label().startswith("cable")
              and "slack" not in line.get_label()]
     assert len(lines) == 7
@@ -582,7 +584,7 @@ def test_plot_log_adds_tensions_and_pose_error_for_a_dynamic_log(dynamic_log, tm
     slack_marks = [line for line in fig.axes[1].get_lines() if "slack" in line.get_label()]
     assert [line.get_label() for line in slack_marks] == ["cable 3 slack (1 ticks)"]
     assert list(slack_marks[0].get_ydata()) == [3]
-    fig = plots.figure_pose_error(dynamic_log)
+    fig = figure_pose_error(dynamic_log)
     norm = [line for line in fig.axes[0].get_lines() if line.get_label() == "|p - p_true|"][0]
     np.testing.assert_allclose(norm.get_ydata(), 1000 * np.linalg.norm(
         dynamic_log["p"] - dynamic_log["p_true"], axis=1))
@@ -593,11 +595,11 @@ def test_plot_log_adds_tensions_and_pose_error_for_a_dynamic_log(dynamic_log, tm
 def test_the_dynamic_figures_mark_a_fault_like_the_others(dynamic_log):
     # A dynamic run can end on a fault (the controller's forward kinematics refusing lengths
     # a rotated platform gives): its time is marked on every time axis, its message titled.
-    from cdpm_drake.views import plots
+    from cdpm_drake.views.figures_plant import figure_pose_error, figure_tensions
 
     log = dict(dynamic_log, ending=np.array("fault"), fault_time=np.array(0.1),
                fault_message=np.array("cable lengths are inconsistent"))
-    for make in (plots.figure_tensions, plots.figure_pose_error):
+    for make in (figure_tensions, figure_pose_error):
         fig = make(log)
         assert "fault at t = 0.100 s: cable lengths are inconsistent" in fig.get_suptitle()
         for ax in fig.axes:
@@ -678,13 +680,14 @@ def test_the_live_view_follows_the_true_platform_of_a_dynamic_run(dynamic_log):
     # The ground truth sits in loggers inside the plant: the live view finds them there.
     from test_meshcat_view import transform
 
+    from cdpm_drake.runs.latest_signals import latest_signals
     from cdpm_drake.views import meshcat_view as mv
 
     meshcat = mv.make_meshcat(port=0)
     view = mv.CdpmMeshcatView.from_log(meshcat, dynamic_log)
     scenario = load_scenario("exp2_interaction", "plant: !DynamicReels {}")
     result = simulate(scenario=scenario, duration=0.1, chunk=0.1,
-                      on_chunk=mv.live_view_callback(view))
+                      on_chunk=mv.live_view_callback(view, latest_signals))
     X = transform(meshcat, "/cdpm/platform")
     np.testing.assert_allclose(X[:3, 3], result.log["p_true"][-1], atol=1e-9)
     np.testing.assert_allclose(X[:3, :3], rotation_from_rpy(result.log["rpy_true"][-1]),

@@ -11,6 +11,7 @@ import pytest
 from helpers_docs import page
 from helpers_synthetic_log import synthetic_log
 
+from cdpm_drake.runs.latest_signals import latest_signals
 from cdpm_drake.views import meshcat_view as mv
 
 # A 4-cable robot small enough to reason about by hand (tests/conftest.py's valid robot).
@@ -403,7 +404,7 @@ def test_live_view_callback_draws_the_latest_logged_tick(meshcat):
     diagram = builder.Build()
     simulator = Simulator(diagram)
     simulator.AdvanceTo(0.01)
-    mv.live_view_callback(view)(diagram, simulator.get_context())
+    mv.live_view_callback(view, latest_signals)(diagram, simulator.get_context())
     np.testing.assert_allclose(transform(meshcat, "/cdpm/platform")[:3, 3], log["p"][7])
     assert prop(meshcat, view.force_path("F_int"), "visible") is False
     # |F_H| = 4 N at the default FORCE_SCALE of 0.25 m/N: 1 m.
@@ -429,7 +430,7 @@ def test_live_view_callback_reads_the_blocks_when_there_are_no_loggers(meshcat):
     simulator.AdvanceTo(0.01)
     view = mv.CdpmMeshcatView(meshcat, robot.reels, robot.attachments, robot.workspace.lower,
                               robot.workspace.upper, robot.pairs, d_l=0.050, d_u=0.061)
-    mv.live_view_callback(view)(diagram, simulator.get_context())
+    mv.live_view_callback(view, latest_signals)(diagram, simulator.get_context())
     fk = diagram.GetSubsystemByName("forward_kinematics")
     p = fk.GetOutputPort("p_WP").Eval(fk.GetMyContextFromRoot(simulator.get_context()))
     np.testing.assert_allclose(transform(meshcat, "/cdpm/platform")[:3, 3], p)

@@ -5,7 +5,15 @@ import numpy as np
 import pytest
 from helpers_synthetic_log import EXP1, EXP3, logistic, synthetic_log
 
-from cdpm_drake.views import plots
+from cdpm_drake.runs.log import LogError, load_log
+from cdpm_drake.views.figure_keys import OPTIONAL, has_keys
+from cdpm_drake.views.figure_layout import INTERRUPT_COLOR, mark_fault_time, wrap_to_width
+from cdpm_drake.views.figures_interference import figure_distances, figure_logistic
+from cdpm_drake.views.figures_motion import (EVENT_ALPHA, MIN_FORCE_SPAN, figure_forces,
+                                             figure_trajectory)
+from cdpm_drake.views.figures_plant import figure_cables, figure_pose_error, figure_tensions
+from cdpm_drake.views.figures_timing import figure_timing
+from cdpm_drake.views.plots import FIGURES, plot_log
 
 
 @pytest.fixture(scope="module")
@@ -22,7 +30,7 @@ def test_plot_log_writes_the_pngs(log, tmp_path):
     import matplotlib.pyplot as plt  # only to see that plot_log left no pyplot figure open
 
     before = plt.get_fignums()
-    paths = plots.plot_log(log, tmp_path / "out", dpi=50)
+    paths = plot_log(log, tmp_path / "out", dpi=50)
     # A simulation's log has no tick clock: no timing figure.
     assert [p.name for p in paths] == ["distances.png", "forces.png", "trajectory.png",
                                        "logistic.png", "cables.png"]
@@ -36,12 +44,12 @@ def test_plot_log_writes_the_pngs(log, tmp_path):
     head = paths[0].read_bytes()[:24]
     assert (int.from_bytes(head[16:20], "big"), int.from_bytes(head[20:24], "big")) == (400, 225)
     assert plt.get_fignums() == before
-    realtime = plots.plot_log(synthetic_log(0.1, realtime=True), tmp_path / "rt", dpi=20)
+    realtime = plot_log(synthetic_log(0.1, realtime=True), tmp_path / "rt", dpi=20)
     assert realtime[-1].name == "timing.png" and len(realtime) == 6
 
 
 def test_distances_show_the_active_pairs_in_mm_with_their_bands(log):
-    fig = plots.figure_distances(log)
+    fig = figure_distances(log)
     ax = fig.axes[0]
     curves = _lines(ax, "cables ")
     # The synthetic log brings pairs (1,3) and (5,7) within d_u, no other.
@@ -60,7 +68,7 @@ def test_distances_show_the_active_pairs_in_mm_with_their_bands(log):
 
 def test_distances_without_interference_show_the_closest_pair():
     log = synthetic_log(duration=0.2, interference=False)
-    ax = plots.figure_distances(log).axes[0]
+    ax = figure_distances(log).axes[0]
     # Pair (1,3) starts at 45 mm, the smallest distance of the log; NaN bands draw no line.
     assert sorted(_lines(ax, "cables ")) == ["cables 1-3"]
     assert _lines(ax, "d_") == {}
@@ -68,7 +76,7 @@ def test_distances_without_interference_show_the_closest_pair():
 
 
 def test_forces_plot_every_component_of_F_H_F_int_F_d(log):
-    fig = plots.figure_forces(log)
+    fig = figure_forces(log)
     assert len(fig.axes) == 3
     for c, (ax, axis) in enumerate(zip(fig.axes, "xyz")):
         lines = {line.get_label(): line for line in ax.get_lines()}
@@ -91,7 +99,7 @@ def test_force_axes_share_one_span_so_noise_reads_as_zero(log):
     for name in ("F_H", "F_int", "F_d"):
         noisy[name] = log[name].copy()
         noisy[name][:, 1] = 1e-6 * rng.standard_normal(len(log["time"]))
-    fig = plots.figure_forces(noisy)
+    fig = figure_forces(noisy)
     spans = [np.diff(ax.get_ylim())[0] for ax in fig.axes]
     # The largest component range over the series, from the data: F_x spans ~16 N (+-8 N sine
     # plus F_int); each axis is 1.1 times that high (5 % margin on each side).
@@ -104,8 +112,8 @@ def test_force_axes_share_one_span_so_noise_reads_as_zero(log):
     assert np.ptp(y) / spans[1] < 1e-6
     # A log where nothing pushes at all still gets the minimum span, not a zoom on zero.
     still = dict(log, **{n: np.zeros_like(log[n]) for n in ("F_H", "F_int", "F_d")})
-    for ax in plots.figure_forces(still).axes:
-        assert np.diff(ax.get_ylim())[0] == pytest.approx(1.1 * plots.MIN_FORCE_SPAN)
+    for ax in figure_forces(still).axes:
+        assert np.diff(ax.get_ylim())[0] == pytest.approx(1.1 * MIN_FORCE_SPAN)
 
 
 def _pixels(fig, ax, inset=4):
@@ -123,7 +131,7 @@ def _pixels(fig, ax, inset=4):
 def test_coinciding_force_lines_all_stay_visible(log):
     # Nobody pushes: F_H = 0 and F_d = F_int, the case where the red line hid the black one.
     alone = dict(log, F_H=np.zeros_like(log["F_H"]), F_d=log["F_int"].copy())
-    fig = plots.figure_forces(alone)
+    fig = figure_forces(alone)
     styles = {(line.get_linestyle(), line.get_linewidth())
               for line in fig.axes[0].get_lines()}
     assert len(styles) == 3  # every series its own style or width
@@ -146,13 +154,13 @@ def test_coinciding_force_lines_all_stay_visible(log):
 
 def test_forces_add_F_wall_when_the_wall_pushed(log):
     pushed = dict(log, F_wall=np.tile([0.0, 0.0, 1.5], (len(log["time"]), 1)))
-    ax = plots.figure_forces(pushed).axes[2]
+    ax = figure_forces(pushed).axes[2]
     wall = [line for line in ax.get_lines() if line.get_label() == "F_wall,z"]
     assert len(wall) == 1 and np.all(wall[0].get_ydata() == 1.5)
 
 
 def test_trajectory_marks_events_crossings_reels_and_cables(log):
-    fig = plots.figure_trajectory(log)
+    fig = figure_trajectory(log)
     zoom, robot = fig.axes[:2]
     lines = {line.get_label(): line for line in zoom.get_lines()}
 
@@ -182,7 +190,7 @@ def test_trajectory_marks_events_crossings_reels_and_cables(log):
 
 
 def test_trajectory_zooms_to_the_motion_with_the_robot_as_context(log):
-    fig = plots.figure_trajectory(log)
+    fig = figure_trajectory(log)
     zoom, robot = fig.axes[:2]
     p = log["p"]
     # The synthetic path spans 0.13, 0.10, 0.17 m (p0 -> p1 of the helper): the zoomed axes are
@@ -207,7 +215,7 @@ def test_trajectory_zooms_to_the_motion_with_the_robot_as_context(log):
 
 
 def test_trajectory_path_above_the_event_dots_and_legend_off_the_data(log):
-    fig = plots.figure_trajectory(log)
+    fig = figure_trajectory(log)
     zoom = fig.axes[0]
     lines = {line.get_label(): line for line in zoom.get_lines()}
     # Depth sorting off in the zoomed panel, so zorder decides: the path above the dots.
@@ -223,7 +231,7 @@ def test_trajectory_path_above_the_event_dots_and_legend_off_the_data(log):
     # Only what is present: this log has crossings; one without lists none.
     labels = [t.get_text() for t in fig.legends[0].get_texts()]
     assert "a pair crossed" in labels and len(labels) == len(set(labels))
-    quiet = plots.figure_trajectory(synthetic_log(0.2, crossed_ticks=0, interference=False))
+    quiet = figure_trajectory(synthetic_log(0.2, crossed_ticks=0, interference=False))
     labels = [t.get_text() for t in quiet.legends[0].get_texts()]
     assert "a pair crossed" not in labels and "a pair within d_u" not in labels
     assert "cables of the active pairs" not in labels and "platform path p" in labels
@@ -231,7 +239,7 @@ def test_trajectory_path_above_the_event_dots_and_legend_off_the_data(log):
 
 
 def test_logistic_curves_follow_eqs_26_28_for_each_parameter_set(log):
-    fig = plots.figure_logistic(log)
+    fig = figure_logistic(log)
     # Two sets: EXP1 for 20 pairs, EXP3 for pair (5,7).
     assert len(fig.axes) == 2
     assert [ax.get_title() for ax in fig.axes] == ["20 cable pairs", "cables 5-7"]
@@ -264,7 +272,7 @@ def test_logistic_curves_follow_eqs_26_28_for_each_parameter_set(log):
 
 
 def test_logistic_without_parameters_says_so():
-    fig = plots.figure_logistic(synthetic_log(duration=0.2, interference=False))
+    fig = figure_logistic(synthetic_log(duration=0.2, interference=False))
     ax = fig.axes[0]
     assert ax.get_lines() == []
     assert any("interference disabled" in t.get_text() for t in ax.texts)
@@ -272,7 +280,7 @@ def test_logistic_without_parameters_says_so():
 
 def test_load_log_roundtrip_and_errors(log, tmp_path):
     np.savez_compressed(tmp_path / "log.npz", **log)
-    loaded = plots.load_log(tmp_path)  # a run directory
+    loaded = load_log(tmp_path)  # a run directory
     assert sorted(loaded) == sorted(log)
     for key in log:
         np.testing.assert_array_equal(loaded[key], log[key])
@@ -280,20 +288,20 @@ def test_load_log_roundtrip_and_errors(log, tmp_path):
 
     partial = {k: v for k, v in log.items() if k != "F_int"}
     np.savez(tmp_path / "partial.npz", **partial)
-    with pytest.raises(plots.LogError, match=r"lacks the key\(s\) \['F_int'\]"):
-        plots.load_log(tmp_path / "partial.npz")
-    with pytest.raises(plots.LogError, match="does not exist"):
-        plots.load_log(tmp_path / "nowhere")
+    with pytest.raises(LogError, match=r"lacks the key\(s\) \['F_int'\]"):
+        load_log(tmp_path / "partial.npz")
+    with pytest.raises(LogError, match="does not exist"):
+        load_log(tmp_path / "nowhere")
     (tmp_path / "junk.npz").write_text("not a zip")
-    with pytest.raises(plots.LogError, match="is not a log written by cdpm simulate or cdpm run"):
-        plots.load_log(tmp_path / "junk.npz")
+    with pytest.raises(LogError, match="is not a log written by cdpm simulate or cdpm run"):
+        load_log(tmp_path / "junk.npz")
 
 
 def test_figures_name_missing_or_misshapen_keys(log):
-    with pytest.raises(plots.LogError, match=r"needs log key\(s\) \['F_d'\]"):
-        plots.figure_forces({k: v for k, v in log.items() if k != "F_d"})
-    with pytest.raises(plots.LogError, match="'F_H' has shape"):
-        plots.figure_forces(dict(log, F_H=log["F_H"][:-1]))
+    with pytest.raises(LogError, match=r"needs log key\(s\) \['F_d'\]"):
+        figure_forces({k: v for k, v in log.items() if k != "F_d"})
+    with pytest.raises(LogError, match="'F_H' has shape"):
+        figure_forces(dict(log, F_H=log["F_H"][:-1]))
 
 
 def test_a_fault_is_marked_in_every_figure(tmp_path):
@@ -301,8 +309,8 @@ def test_a_fault_is_marked_in_every_figure(tmp_path):
     log = synthetic_log(0.5, fault_time=0.3, realtime=True)
     note = "fault at t = 0.300 s: bridge silent for 3 ticks"
     time_axes = 0
-    for name, make in plots.FIGURES.items():
-        if name in plots.OPTIONAL and not plots.has_keys(log, name):
+    for name, make in FIGURES.items():
+        if name in OPTIONAL and not has_keys(log, name):
             continue  # the dynamic plant's figures: tests/systems/test_dynamic_plant.py
         fig = make(log)
         assert note in fig.get_suptitle().replace("\n", " "), name
@@ -327,7 +335,7 @@ def test_a_fault_is_marked_in_every_figure(tmp_path):
     for quiet in (synthetic_log(0.2), dict(synthetic_log(0.2), ending=np.array("completed"),
                                             fault_time=np.array(np.nan),
                                             fault_message=np.array(""))):
-        fig = plots.figure_forces(quiet)
+        fig = figure_forces(quiet)
         assert "fault" not in fig.get_suptitle()
         assert not any(line.get_gid() == "fault" for ax in fig.axes for line in ax.get_lines())
     # A long message (a ReelFault's names the bridge, the watchdog and the link counts) is
@@ -335,14 +343,14 @@ def test_a_fault_is_marked_in_every_figure(tmp_path):
     long = dict(log, fault_message=np.array(
         "ReelFault: reel fault at t = 0.300 s: no valid status from the reel bridge at "
         "127.0.0.1:47100 for 3 ticks (6 ms; watchdog_ticks = 3); zero reel velocity sent."))
-    title = plots.figure_cables(long).get_suptitle()
+    title = figure_cables(long).get_suptitle()
     assert "zero reel velocity sent." in title
     assert len(title.split("\n")) >= 4  # wrapped to the figure's width (issue 22, below)
 
 
 def test_timing_figure_shows_tick_period_compute_and_the_limits():
     log = synthetic_log(0.5, realtime=True)
-    fig = plots.figure_timing(log)
+    fig = figure_timing(log)
     period_ax, compute_ax = fig.axes
     period = _lines(period_ax, "tick period")["tick period"]
     # diff(wall) in ms against the time of the later tick: 2 ms, 5 ms at the late tick (0.2 s,
@@ -358,11 +366,11 @@ def test_timing_figure_shows_tick_period_compute_and_the_limits():
         # The 2 ms period of the log's time column, the 3-tick (6 ms) watchdog limit.
         assert marks == pytest.approx({"period": 2.0, "watchdog": 6.0})
     assert "p50 2.00 ms" in fig.get_suptitle() and "max 5.00 ms" in fig.get_suptitle()
-    with pytest.raises(plots.LogError, match=r"needs log key\(s\) \['wall'\]"):
-        plots.figure_timing(synthetic_log(0.1))
+    with pytest.raises(LogError, match=r"needs log key\(s\) \['wall'\]"):
+        figure_timing(synthetic_log(0.1))
     # A log of an older cdpm run (tick and wall only): the period, and a note for compute.
     older = {k: v for k, v in log.items() if k not in ("compute", "watchdog_limit")}
-    fig = plots.figure_timing(older)
+    fig = figure_timing(older)
     assert _lines(fig.axes[0], "tick period")
     assert not _lines(fig.axes[1], "compute")
     assert any("not recorded" in t.get_text() for t in fig.axes[1].texts)
@@ -370,7 +378,7 @@ def test_timing_figure_shows_tick_period_compute_and_the_limits():
 
 
 def test_cables_figure_shows_lengths_and_reel_speeds_numbered_from_1(log):
-    fig = plots.figure_cables(log)
+    fig = figure_cables(log)
     top, bottom = fig.axes
     for ax, key in ((top, "lengths"), (bottom, "reel_velocity")):
         lines = _lines(ax, "cable ")
@@ -432,7 +440,7 @@ def test_every_title_lies_inside_the_figure_for_a_long_message(dpi):
                         fault_message=np.array(message),
                         scenario_name=np.array("an_operator_s_very_long_scenario_name_for_"
                                                "the_calibration_day_of_december_2026")))
-    for name, make in plots.FIGURES.items():
+    for name, make in FIGURES.items():
         fig = make(log)
         fig.set_dpi(dpi)
         FigureCanvasAgg(fig).draw()
@@ -453,7 +461,7 @@ def test_wrapping_keeps_every_word_and_fits_each_line():
     def measure(text):  # one unit per character
         return float(len(text))
 
-    lines = plots.wrap_to_width("a bb ccc dddd\nx " + "y" * 25, measure, 10)
+    lines = wrap_to_width("a bb ccc dddd\nx " + "y" * 25, measure, 10)
     assert lines == ["a bb ccc", "dddd", "x", "yyyyyyyyyy", "yyyyyyyyyy", "yyyyy"]
     assert all(len(line) <= 10 for line in lines)
 
@@ -464,7 +472,7 @@ def test_an_interrupted_run_is_marked_like_a_fault():
     log = _dynamic(dict(synthetic_log(0.5, realtime=True), ending=np.array("interrupted"),
                         fault_time=np.array(np.nan), fault_message=np.array("")))
     time_axes = 0
-    for name, make in plots.FIGURES.items():
+    for name, make in FIGURES.items():
         fig = make(log)
         assert "interrupted at t = 0.500 s (Ctrl-C or SIGTERM)" in \
             fig.get_suptitle().replace("\n", " "), name
@@ -477,7 +485,7 @@ def test_an_interrupted_run_is_marked_like_a_fault():
                 assert marks == []
                 continue
             assert len(marks) == 1 and list(marks[0].get_xdata()) == [0.5, 0.5], name
-            assert marks[0].get_color() == plots.INTERRUPT_COLOR
+            assert marks[0].get_color() == INTERRUPT_COLOR
             time_axes += 1
         if name == "trajectory":
             star = [line for line in fig.axes[0].get_lines()
@@ -492,7 +500,7 @@ def test_cables_slack_at_the_same_time_each_have_their_row():
     # at heights 4, 6 and 7 of an axis labelled 1..7; none hides another.
     log = _dynamic(synthetic_log(0.1))
     log["slack"][10:20, [3, 5, 6]] = True
-    fig = plots.figure_tensions(log)
+    fig = figure_tensions(log)
     rows = fig.axes[1]
     assert [t.get_text() for t in rows.get_yticklabels()] == [str(i) for i in range(1, 8)]
     marks = {line.get_gid(): line for line in rows.get_lines()
@@ -503,7 +511,7 @@ def test_cables_slack_at_the_same_time_each_have_their_row():
         np.testing.assert_array_equal(marks[f"slack cable {i}"].get_xdata(),
                                       log["time"][10:20])
         assert marks[f"slack cable {i}"].get_label() == f"cable {i} slack (10 ticks)"
-    quiet = plots.figure_tensions(_dynamic(synthetic_log(0.1)))
+    quiet = figure_tensions(_dynamic(synthetic_log(0.1)))
     assert "no cable went slack" in [t.get_text() for t in quiet.axes[1].texts]
 
 
@@ -512,9 +520,9 @@ def test_the_legend_shows_the_within_d_u_dots_as_they_look(log):
     # legend's marker is that orange, not one pale dot.
     from matplotlib.colors import to_rgba
 
-    fig = plots.figure_trajectory(log)
+    fig = figure_trajectory(log)
     dots = [line for line in fig.axes[0].get_lines() if line.get_gid() == "within d_u"][0]
-    assert dots.get_alpha() == plots.EVENT_ALPHA < 1
+    assert dots.get_alpha() == EVENT_ALPHA < 1
     legend = fig.legends[0]
     handle = legend.legend_handles[[t.get_text() for t in legend.get_texts()].index(
         "a pair within d_u")]
@@ -549,11 +557,11 @@ def test_pose_error_is_titled_by_the_run_s_controller_and_draws_its_orientation_
              "full pose, rigid cables": _full_pose(base, tension_control=False),
              "full pose, cables stretched under the estimated tensions": _full_pose(base)}
     for model, log in cases.items():
-        title = plots.figure_pose_error(log).get_suptitle().replace("\n", " ")
+        title = figure_pose_error(log).get_suptitle().replace("\n", " ")
         assert f"pose estimate ({model})" in title
         assert sum(m in title for m in cases) == 1
     log = cases["full pose, cables stretched under the estimated tensions"]
-    rotation = plots.figure_pose_error(log).axes[1]
+    rotation = figure_pose_error(log).axes[1]
     lines = {line.get_label(): line for line in rotation.get_lines()}
     # Each component, true and estimated, is the log's in degrees (180 / pi per rad), in
     # the order roll, pitch, yaw of docs/LOG_FORMAT.md.
@@ -565,12 +573,12 @@ def test_pose_error_is_titled_by_the_run_s_controller_and_draws_its_orientation_
         assert lines[f"{name} (true)"].get_color() == lines[
             f"{name} (controller's estimate)"].get_color()
     # The translating controller has no estimate of its own: the truth alone.
-    labels = [line.get_label() for line in plots.figure_pose_error(
+    labels = [line.get_label() for line in figure_pose_error(
         cases["translating platform, rigid cables"]).axes[1].get_lines()]
     assert not any("estimate" in label for label in labels)
     # A misshapen estimate is named, as the figure's other keys are.
-    with pytest.raises(plots.LogError, match="'rpy' has shape"):
-        plots.figure_pose_error(dict(log, rpy=log["rpy"][:5]))
+    with pytest.raises(LogError, match="'rpy' has shape"):
+        figure_pose_error(dict(log, rpy=log["rpy"][:5]))
 
 
 def test_tensions_of_a_tension_controlled_run_draw_the_estimate_floor_ceiling_and_t_star():
@@ -583,7 +591,7 @@ def test_tensions_of_a_tension_controlled_run_draw_the_estimate_floor_ceiling_an
     log["t_star"][:4] = np.inf  # an internal force raises every tension: nothing to draw
     log["controller_min_tension"] = np.array(7.5)
     log["controller_max_tension"] = np.array(80.0)
-    ax = plots.figure_tensions(log).axes[0]
+    ax = figure_tensions(log).axes[0]
     by_gid = {line.get_gid(): line for line in ax.get_lines() if line.get_gid()}
     truth = {line.get_label(): line for line in ax.get_lines()}
     for i in range(1, 8):
@@ -602,12 +610,12 @@ def test_tensions_of_a_tension_controlled_run_draw_the_estimate_floor_ceiling_an
     # On the robot (no plant's truth) the estimate is the figure, and plot_log writes it.
     robot = {k: v for k, v in log.items() if k not in ("tensions", "slack", "p_true",
                                                        "rpy_true")}
-    fig = plots.figure_tensions(robot)
+    fig = figure_tensions(robot)
     assert len(fig.axes) == 1
     lines = {line.get_label(): line for line in fig.axes[0].get_lines()}
     np.testing.assert_array_equal(lines["cable 3 (estimate)"].get_ydata(),
                                   log["tension_estimate"][:, 2])
-    assert plots.has_keys(robot, "tensions") and not plots.has_keys(robot, "pose_error")
+    assert has_keys(robot, "tensions") and not has_keys(robot, "pose_error")
 
 
 def test_a_tension_controlled_log_holds_the_target_s_floor_and_ceiling(tmp_path, capsys):
@@ -618,13 +626,13 @@ def test_a_tension_controlled_log_holds_the_target_s_floor_and_ceiling(tmp_path,
                  "--no-progress", "--scenario-text",
                  "{controller: {pose: full, tension_control: true, min_tension: 7.5, "
                  "max_tension: 80.0}, plant: !DynamicReels {}}"]) == 0
-    log = plots.load_log(run)
+    log = load_log(run)
     assert float(log["controller_min_tension"]) == 7.5
     assert float(log["controller_max_tension"]) == 80.0
     # Without tension control there is no target, so no floor or ceiling either.
     assert main(["simulate", "exp2_interaction", "--duration", "0.01", "--out",
                  str(tmp_path / "plain"), "--no-progress"]) == 0
-    assert "controller_min_tension" not in plots.load_log(tmp_path / "plain")
+    assert "controller_min_tension" not in load_log(tmp_path / "plain")
 
 
 def _crossing_lines(fig, ax, label):
@@ -660,7 +668,7 @@ def test_the_interrupted_label_is_not_written_over_a_line(d13, d57):
     # Its box, as drawn, crosses no curve and no level line of its axis.
     log = dict(synthetic_log(0.5, d13=d13, d57=d57), ending=np.array("interrupted"),
                fault_time=np.array(np.nan), fault_message=np.array(""))
-    for make in (plots.figure_distances, plots.figure_forces):
+    for make in (figure_distances, figure_forces):
         fig = make(log)
         for ax in fig.axes:
             label = [t for t in ax.texts if t.get_gid() == "interrupted label"][0]
@@ -672,5 +680,5 @@ def test_the_interrupted_label_is_not_written_over_a_line(d13, d57):
     ax = fig.add_subplot()
     ax.plot(log["time"], np.zeros(len(log["time"])))
     ax.set_ylim(-0.1, 1.0)
-    plots._mark_fault_time(ax, log)
+    mark_fault_time(ax, log)
     assert ax.texts[0].get_position()[1] == pytest.approx(0.97)
