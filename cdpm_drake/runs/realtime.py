@@ -49,7 +49,8 @@ from pydrake.systems.analysis import Simulator
 
 from cdpm_drake.diagram import LOGGED, BuildOptions, build_diagram
 from cdpm_drake.config import (DynamicReels, ResolvedScenario, Scenario, ScenarioError, SimulatedReels,
-                       resolve_scenario, write_run_scenario)
+                       resolve_scenario)
+from cdpm_drake.runs.run_scenario import write_run_scenario
 from cdpm_drake.runs.simulate import assemble_log, check_log_fits, mark_ending, tick_targets
 
 

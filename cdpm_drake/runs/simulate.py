@@ -14,7 +14,8 @@ from pydrake.systems.analysis import Simulator
 
 from cdpm_drake.diagram import build_diagram, logged_signals, reserve_log
 from cdpm_drake.config import (DynamicReels, ResolvedScenario, Scenario, ScenarioError, SimulatedReels,
-                       check_duration, resolve_scenario, write_run_scenario)
+                       check_duration, resolve_scenario)
+from cdpm_drake.runs.run_scenario import write_run_scenario
 
 
 @dataclasses.dataclass
@@ -385,7 +386,7 @@ def true_pair_distances(robot, p_true, rpy_true, d_u=None) -> dict:
 
 def save_log(log: dict, out_dir, scenario: Scenario | ResolvedScenario) -> Path:
     """Write DIR/log.npz and the resolved scenario DIR/scenario.yaml, with copies of the
-    robot file and force CSV it reads (scenario.write_run_scenario: the folder reruns alone);
+    robot file and force CSV it reads (run_scenario.write_run_scenario: the folder reruns alone);
     returns the npz path. The scenario's duration is set to what the log covers, so the file
     reproduces the run."""
     changes = {"duration": float(log["time"][-1])} if len(log["time"]) else {}
