@@ -15,8 +15,8 @@ from pathlib import Path
 
 import numpy as np
 
-from cdpm_drake.config import (ResolvedScenario, Scenario, ScenarioError, resolve_scenario,
-                               write_run_scenario)
+from cdpm_drake.config import ResolvedScenario, Scenario, ScenarioError, resolve_scenario
+from cdpm_drake.runs.run_scenario import write_run_scenario
 
 # Keys every log holds (load_log checks them).
 LOG_KEYS = ("time", "p", "F_H", "F_int", "F_wall", "F_d", "velocity_admittance", "velocity",
@@ -250,7 +250,7 @@ def run_interrupted(log: Mapping) -> float | None:
 
 def save_log(log: dict, out_dir, scenario: Scenario | ResolvedScenario) -> Path:
     """Write DIR/log.npz and the resolved scenario DIR/scenario.yaml, with copies of the
-    robot file and force CSV it reads (scenario.write_run_scenario: the folder reruns alone);
+    robot file and force CSV it reads (run_scenario.write_run_scenario: the folder reruns alone);
     returns the npz path. The scenario's duration is set to what the log covers, so the file
     reproduces the run."""
     changes = {"duration": float(log["time"][-1])} if len(log["time"]) else {}

@@ -49,8 +49,9 @@ from pydrake.systems.analysis import Simulator
 
 from cdpm_drake.diagram import BuildOptions, build_diagram
 from cdpm_drake.config import (DynamicReels, ResolvedScenario, Scenario, ScenarioError, SimulatedReels,
-                       resolve_scenario, write_run_scenario)
+                       resolve_scenario)
 from cdpm_drake.runs.log import check_log_fits, log_from_tick_log, mark_ending, write_log
+from cdpm_drake.runs.run_scenario import write_run_scenario
 from cdpm_drake.runs.simulate import tick_targets
 
 

@@ -7,7 +7,7 @@ the run writes nothing). `--out DIR` chooses the folder exactly; an existing, no
 refused unless `--force`, which empties it first (only when it holds a run: log.npz, ticks.bin
 or scenario.yaml, so a mistyped --out cannot wipe an unrelated folder). The folder is created
 only when the run starts and removed again if the run writes nothing. What a run writes there
-(log.npz, scenario.yaml with copies of its robot file and force CSV: scenario.write_run_scenario)
+(log.npz, scenario.yaml with copies of its robot file and force CSV: run_scenario.py)
 makes the folder self-contained. No Drake import.
 """
 

@@ -384,7 +384,7 @@ def test_a_left_out_start_is_the_workspace_centre_of_the_scenario_s_robot(tmp_pa
 def test_every_shipped_scenario_writes_its_start(name):
     # A shipped scenario never relies on the default, so its paper reproduction (and the
     # reference logs, tests/runs/test_reference_logs.py) cannot move with it.
-    from cdpm_drake.config import SCENARIOS_DIR
+    from cdpm_drake.data import SCENARIOS_DIR
     from pydrake.common.yaml import yaml_load
     assert len(yaml_load(filename=str(SCENARIOS_DIR / f"{name}.yaml"))["initial_position"]) == 3
 

@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 
 from cdpm_drake.kernels.kinematics import cable_lengths, cable_vectors
-from cdpm_drake.robot import Limits, Robot, RobotError, Workspace, load_robot, robot_names
+from cdpm_drake.robot import Robot, RobotError, RobotLimits, Workspace, load_robot, robot_names
 
 from conftest import HAND_ROBOT, SHIPPED_ROBOTS, to_yaml
 
@@ -51,7 +51,7 @@ def test_hand_written_robot_lengths_match_hand_calculation():
 def test_hand_written_robot_gets_documented_defaults():
     robot = load_robot(str(HAND_ROBOT))  # str and Path both work
     # Defaults of LimitsSchema / RobotSchema: the file sets neither limits nor diameter.
-    assert robot.limits == Limits(max_velocity=0.5, max_acceleration=2.0, max_reel_speed=1.0)
+    assert robot.limits == RobotLimits(max_velocity=0.5, max_acceleration=2.0, max_reel_speed=1.0)
     assert robot.cable_diameter == 0.0
     assert robot.source == str(HAND_ROBOT)
     # No shared reels or attachment points: all C(4, 2) = 6 pairs watched, in 1-based order.
@@ -381,7 +381,7 @@ def test_robot_constructible_in_code():
     robot = _code_robot(reels=reels)
     assert robot.num_cables == 3
     assert robot.source == "<code>"
-    assert robot.limits == Limits()
+    assert robot.limits == RobotLimits()
     np.testing.assert_array_equal(robot.workspace.center, [1.0, 1.0, 1.0])
     # The robot keeps its own copy: changing the caller's array does not move a reel.
     reels[0, 0] = 99.0

@@ -11,7 +11,7 @@ from pydrake.trajectories import PiecewisePolynomial
 from cdpm_drake.kernels.kinematics import KinematicsError, cable_lengths, jacobian
 from cdpm_drake.kernels.safety_limits import limit_velocity, wall_force
 from cdpm_drake.kernels.plant.operators import ForceProfile
-from cdpm_drake.robot import Limits, Robot, Workspace, load_robot
+from cdpm_drake.robot import Robot, RobotLimits, Workspace, load_robot
 from cdpm_drake.systems import (ForceSensorSource, ForwardKinematicsEstimator,
                                 JacobianVelocityMapping, SafetyLimits, SensorNoise,
                                 SimulatedReels, WorkspaceWallForce, make_admittance)
@@ -174,7 +174,7 @@ def test_jacobian_mapping_matches_finite_differences_of_the_lengths():
 TRIPOD = Robot(name="tripod", reels=[[0.0, 0.0, 3.0], [4.0, 0.0, 3.0], [2.0, 3.0, 3.0]],
                attachments=np.zeros((3, 3)),
                workspace=Workspace(np.array([0.5, 0.5, 0.2]), np.array([3.5, 2.5, 2.5])),
-               limits=Limits(max_velocity=0.5, max_acceleration=2.0, max_reel_speed=1.0))
+               limits=RobotLimits(max_velocity=0.5, max_acceleration=2.0, max_reel_speed=1.0))
 P0 = np.array([2.0, 1.2, 1.0])
 
 

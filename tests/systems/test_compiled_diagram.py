@@ -20,7 +20,7 @@ from cdpm_drake.kernels import interference
 from cdpm_drake.kernels import kinematics
 from cdpm_drake.kernels import safety_limits as limits
 from cdpm_drake.kernels.plant import operators
-from cdpm_drake import config as scenario
+from cdpm_drake.config import resolve as resolve_module
 from cdpm_drake.kernels import force_sensor as sensor
 from cdpm_drake.diagram import build_diagram
 from cdpm_drake.config import ResolvedScenario, load_scenario, resolve_scenario
@@ -93,13 +93,13 @@ def test_each_python_block_is_evaluated_once_per_tick(monkeypatch):
 def test_a_simulation_resolves_its_scenario_once(monkeypatch):
     loaded = load_scenario("exp2_interaction")
     count = {"robot": 0}
-    real = scenario.scenario_robot
+    real = resolve_module.scenario_robot
 
     def counting(s):
         count["robot"] += 1
         return real(s)
 
-    monkeypatch.setattr(scenario, "scenario_robot", counting)
+    monkeypatch.setattr(resolve_module, "scenario_robot", counting)
     result = simulate(scenario=loaded, duration=0.01)
     assert result.error is None
     assert count["robot"] == 1  # before issue 11: three times (simulate, build, log)

@@ -1,0 +1,301 @@
+"""A scenario checked and resolved once (ResolvedScenario): its robot loaded with the cable
+swaps, the logistic parameters per pair, the operator, the limits with the robot file's
+defaults. What the builder, the runners and the views take."""
+
+import dataclasses
+import math
+import typing
+from pathlib import Path
+
+import numpy as np
+
+from cdpm_drake.config.checks import (check_controller, check_duration, check_dynamic_reels,
+                                      check_finite, check_logistic_set, check_positive,
+                                      check_safety, default_start)
+from cdpm_drake.config.plants import DynamicReels, SimulatedReels
+from cdpm_drake.config.scenario import PairLogistic, Scenario, ScenarioError
+from cdpm_drake.config.yaml_io import is_number
+from cdpm_drake.kernels.plant.operators import CsvOperator, OperatorError, make_operator
+from cdpm_drake.robot import Robot, RobotError, load_robot
+
+
+@dataclasses.dataclass(frozen=True, eq=False)
+class ResolvedScenario:
+    """A scenario checked and resolved once (`resolve_scenario`): what the builder, the runners
+    and the views take, so that none of them goes back to the scenario's fields to derive
+    these again. The scenario is kept as given but for the robot's defaults (initial_position)
+    filled in."""
+
+    # The scenario with what depends on its robot filled in: a left-out initial_position is
+    # the robot's workspace centre.
+    scenario: Scenario
+    # The robot with the scenario's cable swaps applied.
+    robot: Robot
+    # Per-pair logistic parameters (interference.InterferenceParams); None when the block is
+    # off (interference.enabled false, or a robot without watched pairs).
+    interference: typing.Any
+    # The person at the handle (an operators model: force(t, p, v) in N).
+    operator: typing.Any
+    # Safety limits with the robot file's defaults applied: m/s, m/s^2.
+    max_velocity: float
+    max_acceleration: float
+    # Simulated reels' speed limit, m/s of cable (the plant's or the robot file's).
+    max_reel_speed: float
+    # How far measured lengths may disagree with the geometry, m: the simulated plant keeps
+    # them consistent to round-off; real encoders and cable stretch do not.
+    fk_max_residual: float
+    # The reel drives' dead band the length loop makes up, m/s of cable (robot file
+    # reel_drives; 0 without controller.friction_compensation, without the loop, or on the
+    # kinematic plant).
+    dead_band: float = 0.0
+    # Each watched pair's hard floor d_min, m (pair_d_min), robot.pairs order.
+    d_min: typing.Any = None
+    # The fields the scenario left out whose value came from the robot (for messages).
+    defaulted: tuple = ()
+    # The contents of the files the scenario reads, as loaded ({"robot": bytes,
+    # "operator.path": bytes}, scenario_files): what a run folder keeps a copy of.
+    files: dict = dataclasses.field(default_factory=dict)
+
+    @property
+    def time_step(self) -> float:
+        return self.scenario.time_step
+
+
+def resolve_scenario(scenario, source: str = "<scenario>") -> ResolvedScenario:
+    """Check the scenario (as `check_scenario`) and resolve it: robot loaded and swapped,
+    parameters per pair, operator, limits with the robot's defaults. A ResolvedScenario is
+    returned as it is."""
+    if isinstance(scenario, ResolvedScenario):
+        return scenario
+    return _resolve(scenario, source)
+
+
+def check_scenario(scenario: Scenario, source: str = "<scenario>") -> Robot:
+    """Check every field a run depends on; returns the robot (swaps applied)."""
+    return resolve_scenario(scenario, source).robot
+
+
+def _resolve(scenario: Scenario, source: str) -> ResolvedScenario:
+    robot = scenario_robot(scenario)
+    check_positive(scenario.duration, "duration")
+    check_positive(scenario.time_step, "time_step")
+    check_duration(scenario.duration, scenario.time_step, "duration")
+    check_positive(scenario.admittance.mass, "admittance.mass")
+    check_positive(scenario.admittance.damping, "admittance.damping")
+    p0 = scenario.initial_position
+    defaulted = ()
+    if p0 is None:  # the robot's workspace centre, whichever robot the scenario names
+        scenario = dataclasses.replace(scenario, initial_position=default_start(robot))
+        p0, defaulted = scenario.initial_position, ("initial_position",)
+    if len(p0) != 3 or not all(math.isfinite(x) for x in p0):
+        raise ScenarioError(f"initial_position must be [x, y, z] in m, got {p0!r}")
+    if not robot.workspace.contains(p0):
+        raise ScenarioError(
+            f"initial_position {p0!r} m is outside the workspace box of robot {robot.name!r} "
+            f"(lower {robot.workspace.lower.tolist()}, upper {robot.workspace.upper.tolist()})")
+    for name in ("max_velocity", "max_acceleration"):
+        v = getattr(scenario.limits, name)
+        if v is not None:
+            check_positive(v, f"limits.{name}")
+    if not (isinstance(scenario.random_seed, int) and scenario.random_seed >= 0):
+        raise ScenarioError(f"random_seed must be an integer >= 0, got "
+                            f"{scenario.random_seed!r}")
+    s = scenario.sensor
+    check_positive(s.axial_range, "sensor.axial_range")
+    check_positive(s.transverse_range, "sensor.transverse_range")
+    if not (isinstance(s.filter_window, int) and s.filter_window >= 1):
+        raise ScenarioError(f"sensor.filter_window must be an integer >= 1 sample, got "
+                            f"{s.filter_window!r}")
+    if len(s.axial_axis) != 3 or not np.linalg.norm(s.axial_axis) > 0:
+        raise ScenarioError(f"sensor.axial_axis must be a non-zero [x, y, z], got "
+                            f"{s.axial_axis!r}")
+    if not (math.isfinite(s.noise_std) and s.noise_std >= 0):
+        raise ScenarioError(f"sensor.noise_std must be >= 0 N, got {s.noise_std!r}")
+    gain = scenario.controller.length_gain
+    if not (is_number(gain) and math.isfinite(float(gain)) and 0 <= float(gain)
+            and float(gain) * scenario.time_step < 1.0):
+        raise ScenarioError(
+            f"controller.length_gain must be a number >= 0 1/s and below 1 / time_step = "
+            f"{1.0 / scenario.time_step:g} 1/s (0: the paper's open loop), got {gain!r}")
+    check_controller(scenario.controller, robot, scenario.plant)
+    if scenario.wall_force.enabled:
+        check_positive(scenario.wall_force.margin, "wall_force.margin")
+        check_positive(scenario.wall_force.max_force, "wall_force.max_force")
+    if isinstance(scenario.plant, DynamicReels):
+        check_dynamic_reels(scenario, robot, defaulted=defaulted)
+    elif not isinstance(scenario.plant, SimulatedReels):
+        from cdpm_drake.hardware.config import check_hardware_reels
+        try:
+            check_hardware_reels(scenario.plant)
+        except ValueError as e:
+            raise ScenarioError(str(e)) from None
+    else:
+        if not (math.isfinite(scenario.plant.time_constant) and scenario.plant.time_constant >= 0):
+            raise ScenarioError(f"plant.time_constant must be >= 0 s, got "
+                                f"{scenario.plant.time_constant!r}")
+        if scenario.plant.max_reel_speed is not None:
+            check_positive(scenario.plant.max_reel_speed, "plant.max_reel_speed")
+    operator = scenario_operator(scenario)
+    params = None
+    if scenario.interference.enabled and robot.num_pairs:
+        params = interference_params(scenario, robot)
+    check_safety(scenario)
+    d_min = pair_d_min(scenario, robot)
+    limits = scenario.limits
+    plant = scenario.plant
+    simulated = isinstance(plant, SimulatedReels)
+    return ResolvedScenario(
+        scenario=scenario, robot=robot, interference=params, operator=operator,
+        max_velocity=float(_or(limits.max_velocity, robot.limits.max_velocity)),
+        max_acceleration=float(_or(limits.max_acceleration, robot.limits.max_acceleration)),
+        max_reel_speed=float(_or(getattr(plant, "max_reel_speed", None),
+                                 robot.limits.max_reel_speed)),
+        fk_max_residual=1e-6 if simulated else float(getattr(plant, "max_length_residual",
+                                                             0.005)),
+        # The kinematic plant's reels have no friction: nothing to make up there.
+        dead_band=(robot.dynamics.dead_band if scenario.controller.friction_compensation
+                   and float(scenario.controller.length_gain) > 0 and not simulated
+                   else 0.0),
+        d_min=d_min,
+        defaulted=defaulted,
+        # Read right after the robot and the operator were loaded from them.
+        files={field: path.read_bytes() for field, path in scenario_files(scenario).items()})
+
+
+def _or(value, default):
+    return default if value is None else value
+
+
+def scenario_robot(scenario: Scenario) -> Robot:
+    """The scenario's robot with its cable swaps applied."""
+    from cdpm_drake.robot import ROBOTS_DIR, is_path_like
+
+    ref = scenario.robot
+    if is_path_like(ref):
+        # Loaded scenarios hold absolute paths; one built in code resolves against base_dir.
+        if scenario.base_dir and not Path(ref).is_absolute():
+            ref = str(Path(scenario.base_dir) / ref)
+    elif (ROBOTS_DIR / f"{ref}.yaml").is_file():
+        ref = str(ROBOTS_DIR / f"{ref}.yaml")  # a name is a built-in robot, wherever we are
+    try:
+        robot = load_robot(ref)
+    except RobotError as e:
+        raise ScenarioError(f"robot: {e}") from None
+    for k, swap in enumerate(scenario.swaps):
+        if len(swap) != 2:
+            raise ScenarioError(f"swaps[{k}] must be two cable numbers [i, j], got {swap!r}")
+        try:
+            robot = robot.with_swapped_attachments(int(swap[0]), int(swap[1]))
+        except RobotError as e:
+            raise ScenarioError(f"swaps[{k}] = {swap!r}: {e}") from None
+    return robot
+
+
+def scenario_operator(scenario: Scenario):
+    try:
+        return make_operator(scenario.operator,
+                             Path(scenario.base_dir) if scenario.base_dir else None)
+    except OperatorError as e:
+        raise ScenarioError(str(e)) from None
+
+
+def interference_params(scenario: Scenario, robot: Robot):
+    """Per-pair logistic parameters in the robot's pair order (InterferenceParams)."""
+    from cdpm_drake.kernels.interference import InterferenceParams
+
+    P = robot.num_pairs
+    cfg = scenario.interference
+    arrays = {k: np.full(P, float(getattr(cfg.default, k))) for k in ("d_l", "d_u", "F_u", "eps")}
+    for n, override in enumerate(cfg.pairs):
+        k = _override_position(n, override, robot)
+        for key in arrays:
+            value = getattr(override, key)
+            if value is not None:
+                arrays[key][k] = float(value)
+    F_max = float(cfg.F_max) if cfg.F_max is not None else (float(arrays["F_u"].max()) if P else 0.0)
+    # Checked here, field by field, so a message names what the user wrote (the default set,
+    # or a pair's override) rather than the first pair the default reaches.
+    default = {k: f"interference.default.{k}" for k in arrays}
+    check_logistic_set({k: getattr(cfg.default, k) for k in arrays}, default, "")
+    for n, override in enumerate(cfg.pairs):
+        k = robot.pair_position(int(override.pair[0]), int(override.pair[1]))
+        names = {key: (f"interference.pairs[{n}].{key}" if getattr(override, key) is not None
+                       else default[key]) for key in arrays}
+        check_logistic_set({key: arrays[key][k] for key in arrays}, names,
+                            f" (pair ({override.pair[0]},{override.pair[1]}))")
+    try:
+        extra = {} if cfg.gradient_floor is None else {"gradient_floor": cfg.gradient_floor}
+        return InterferenceParams(F_max=F_max, pairs=tuple(robot.pairs), **arrays, **extra)
+    except ValueError as e:
+        raise ScenarioError(f"interference: {e}") from None
+
+
+def _override_position(n: int, override: PairLogistic, robot: Robot) -> int:
+    """The position in robot.pairs of interference.pairs[n]'s pair; ScenarioError naming the
+    entry where it is not a watched pair of the robot."""
+    if len(override.pair) != 2:
+        raise ScenarioError(f"interference.pairs[{n}].pair must be two cable numbers "
+                            f"[i, j], got {override.pair!r}")
+    i, j = override.pair
+    try:
+        return robot.pair_position(int(i), int(j))
+    except (RobotError, TypeError, ValueError):
+        raise ScenarioError(
+            f"interference.pairs[{n}].pair = {override.pair!r} is not a cable pair of "
+            f"robot {robot.name!r}; valid pairs: {robot.pairs}") from None
+
+
+# d_min where the scenario leaves it out: this far under d_l, m (Logistic.d_min).
+D_MIN_BELOW_D_L = 0.0
+
+
+def pair_d_min(scenario: Scenario, robot: Robot) -> np.ndarray:
+    """Each watched pair's hard floor d_min (m, robot.pairs order): the pair's override, else
+    the default's, else its d_l - D_MIN_BELOW_D_L (at least 0). Whether or not the
+    interference force is on: the safety filter keeps the pairs apart either way.
+    ScenarioError naming the field unless 0 <= d_min <= d_l."""
+    P = robot.num_pairs
+    cfg = scenario.interference
+    d_l = np.full(P, float(cfg.default.d_l))
+    d_min = np.full(P, math.nan)
+    field = ["interference.default.d_min"] * P
+    if cfg.default.d_min is not None:
+        check_finite(cfg.default.d_min, "interference.default.d_min")
+        d_min[:] = float(cfg.default.d_min)
+    for n, override in enumerate(cfg.pairs):
+        k = _override_position(n, override, robot)
+        if override.d_l is not None:
+            d_l[k] = float(override.d_l)
+        if override.d_min is not None:
+            check_finite(override.d_min, f"interference.pairs[{n}].d_min")
+            d_min[k] = float(override.d_min)
+            field[k] = f"interference.pairs[{n}].d_min"
+    given = ~np.isnan(d_min)
+    for k in np.flatnonzero(given):
+        i, j = robot.pairs[k]
+        if not 0.0 <= d_min[k] <= d_l[k]:
+            raise ScenarioError(
+                f"{field[k]} = {d_min[k]!r} m (pair ({i},{j})) must lie in [0, d_l] = "
+                f"[0, {d_l[k]!r}] m: the hard floor the safety filter keeps, under the "
+                "interference force's d_l")
+    d_min[~given] = np.maximum(d_l[~given] - D_MIN_BELOW_D_L, 0.0)
+    return d_min
+
+
+def scenario_files(scenario: Scenario) -> dict:
+    """{field: Path} of the files the scenario reads, "robot" (a robot file, not a built-in
+    robot's name) and "operator.path" (a CSV operator's), as it resolves them."""
+    from cdpm_drake.robot import is_path_like
+
+    base = Path(scenario.base_dir) if scenario.base_dir else None
+    files = {}
+    if is_path_like(scenario.robot):
+        files["robot"] = _under(scenario.robot, base)
+    if isinstance(scenario.operator, CsvOperator) and scenario.operator.path:
+        files["operator.path"] = _under(scenario.operator.path, base)
+    return files
+
+
+def _under(ref: str, base) -> Path:
+    path = Path(ref)
+    return path if path.is_absolute() or base is None else base / path
