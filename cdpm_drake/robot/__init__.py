@@ -583,7 +583,7 @@ def frame_warnings(robot: "Robot") -> list[str]:
 # Statics checked on load: the level platform (platform.mass at its centre) held with every
 # cable >= STATICS_FLOOR N on an STATICS_GRID^3 grid of the workspace box. A robot whose box is
 # held on less than STATICS_WARN_SHARE of it gets a warning naming the share and its likely
-# cause. About 5 ms for 7 or 8 cables (tension.py's compiled closed forms), once per robot
+# cause. About 5 ms for 7 or 8 cables (kernels/tension.py's compiled closed forms), once per robot
 # geometry and process.
 STATICS_FLOOR = 5.0
 STATICS_GRID = 11
@@ -600,8 +600,8 @@ _AXES = ("force along x", "force along y", "force along z", "moment about x",
 
 
 def _statics_entry(robot: "Robot"):
-    """(tension.Statics, warnings) of a robot, computed once per geometry and mass."""
-    from cdpm_drake.kernels.tension import workspace_statics
+    """(statics.Statics, warnings) of a robot, computed once per geometry and mass."""
+    from cdpm_drake.robot.statics import workspace_statics
 
     key = (robot.reels.tobytes(), robot.attachments.tobytes(), robot.workspace.lower.tobytes(),
            robot.workspace.upper.tobytes(), robot.dynamics.mass, robot.name)
@@ -612,7 +612,7 @@ def _statics_entry(robot: "Robot"):
 
 
 def robot_statics(robot: "Robot"):
-    """tension.Statics of the robot's level platform (cached per geometry and mass)."""
+    """statics.Statics of the robot's level platform (cached per geometry and mass)."""
     return _statics_entry(robot)[0]
 
 
@@ -650,7 +650,7 @@ def statics_warnings(robot: "Robot", statics, *, grid: str | None = None, base=N
                    + ", so the platform cannot resist one: the cables' lines of action leave "
                    "it free to turn or slide")
     if statics.share < STATICS_WARN_SHARE:
-        from cdpm_drake.kernels.tension import point_platform_share
+        from cdpm_drake.robot.statics import point_platform_share
 
         if base is not None and base_share is not None and base_share >= STATICS_WARN_SHARE:
             # The paper swaps cables to provoke interference; the swapped attachment points
