@@ -57,5 +57,6 @@ class FaultPlan:
             if f.name == "after" or value == f.default:
                 continue
             parts.append(f.name if value is True else
-                         f"{f.name} {value:#06x}" if f.name == "fault_bits" else f"{f.name} {value:g}")
+                         f"{f.name} {value:#06x}" if f.name == "fault_bits" else
+                         f"{f.name} {value:g}")
         return ", ".join(parts) or "none"

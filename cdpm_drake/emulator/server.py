@@ -293,11 +293,14 @@ class ReelBridgeServer:
             self.bridge.reset()
             start = self.bridge.platform()
             self._say(f"session {self.session}: the platform is back at its start "
-                      f"{vector_text(start)} m (reset, as a homing would; the last session left it "
-                      f"at {vector_text(left)} m, {np.linalg.norm(left - start):.3f} m away), the "
-                      f"operator's clock at 0")
+                      f"{vector_text(start)} m (reset, as a homing would; the last session left "
+                      f"it at {vector_text(left)} m, {np.linalg.norm(left - start):.3f} m away), "
+                      f"the operator's clock at 0")
 
     def close_session(self, now: float, why: str) -> None:
+        """Close the session open at bridge time `now` (s), saying `why` and what it saw: the
+        commands accepted and rejected, the reels' state and, with a plant that keeps one,
+        what the cables went through."""
         self.session_open = False
         rejected = count_by_reason(self._session_rejected)
         self._say(f"session {self.session} closed at {now:.3f} s ({why}): "

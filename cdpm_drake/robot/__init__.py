@@ -6,6 +6,10 @@ math stays testable alone. All positions are in metres. The base frame is the pa
 only translates, so B is parallel to A.
 
 Cables are numbered 1..m in everything a user sees (files, messages); arrays are 0-based.
+
+Beside it: statics.py, a robot's statics over its workspace (t*, the holding tension, wrench
+feasibility), and tension_program.py, t* and tension distributions of any nullspace (Drake's
+Clarabel beyond the compiled kernels).
 """
 
 

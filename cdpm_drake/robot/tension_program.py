@@ -96,7 +96,7 @@ def _slack(T, t_star, scale) -> tuple[int, ...]:
 
 
 def max_min_tension(W, wrench) -> float:
-    """t* (N): max t with W T + wrench = 0, T_i >= t (module docstring); +inf with an
+    """t* (N): max t with W T + wrench = 0, T_i >= t (kernels/tension.py's docstring); +inf with an
     internal force that raises every tension, -inf when no T balances the wrench."""
     W = np.ascontiguousarray(W, dtype=float)
     w = np.ascontiguousarray(wrench, dtype=float)
