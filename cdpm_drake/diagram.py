@@ -380,7 +380,8 @@ def _add_pose_blocks(builder, blocks, resolved, fk, force_sensor, lengths, veloc
     Jacobian mapping of the pose, fed the orientation hold's reference and the (filtered)
     angular velocity command; returns the mapping (its p_WP and velocity_command inputs still
     to connect)."""
-    from cdpm_drake.kernels.tension import gravity_wrench, tension_distribution, wrench_matrix
+    from cdpm_drake.kernels.tension import gravity_wrench, wrench_matrix
+    from cdpm_drake.robot.tension_program import tension_distribution
 
     scenario, robot = resolved.scenario, resolved.robot
     controller = scenario.controller

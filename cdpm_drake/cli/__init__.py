@@ -188,7 +188,8 @@ def _print_statics(r, scenario, step, out, base=None):
     scenario's simulated path (None without one). `base`: the robot before the swaps (None
     without swaps), which the warnings compare with."""
     from cdpm_drake.robot import robot_statics, statics_warnings
-    from cdpm_drake.kernels.tension import holding_tension, step_grid
+    from cdpm_drake.kernels.tension import step_grid
+    from cdpm_drake.robot.statics import holding_tension
 
     statics = robot_statics(r)
     mass = r.dynamics.mass
@@ -240,7 +241,8 @@ def _t_star_text(r, p, t) -> str:
     needs an internal force that raises every tension: where the wrench matrix is
     rank-deficient (the cables' lines of action meet) it holds for the weight alone, at that
     exact pose, and the platform still cannot resist the wrench the rank lacks."""
-    from cdpm_drake.kernels.tension import RANK_TOL, wrench_matrix
+    from cdpm_drake.kernels.nullspace import RANK_TOL
+    from cdpm_drake.kernels.tension import wrench_matrix
 
     if t == -np.inf:
         return "-inf (no tensions balance the weight)"
@@ -288,7 +290,7 @@ def feasibility_shares(r, points, t_weight) -> list[list[float]]:
     point that fails a force fails every larger one (t*, the minimum over a symmetric set of
     directions, is concave in the wrench, so it does not rise with the force), so each force
     is only solved where the one before held: the same shares, about half the work."""
-    from cdpm_drake.kernels.tension import wrench_feasibility
+    from cdpm_drake.robot.statics import wrench_feasibility
 
     d = r.dynamics
     t = np.asarray(t_weight, dtype=float)
@@ -305,7 +307,8 @@ def feasibility_shares(r, points, t_weight) -> list[list[float]]:
 
 
 def _print_wrench_feasibility(r, points, t_weight, grid_text, out) -> None:
-    from cdpm_drake.kernels.tension import grid_points, holding_tension
+    from cdpm_drake.kernels.tension import grid_points
+    from cdpm_drake.robot.statics import holding_tension
 
     d = r.dynamics
     if r.num_cables in (7, 8):  # compiled closed forms: the whole grid in about a second

@@ -185,11 +185,12 @@ def _default_note(config, field: str) -> str:
 
 def check_dynamic_reels(scenario: Scenario, robot: Robot, defaulted=()):
     """Check a !DynamicReels plant and its start; returns the start tension distribution
-    (tension.Distribution). A start pose no positive tension distribution holds is refused,
+    (tension_program.Distribution). A start pose no positive tension distribution holds is refused,
     naming the pose (and whether it is the default) and the cables that would go slack."""
     from cdpm_drake.kernels.rotation import rotation_from_rpy
-    from cdpm_drake.kernels.tension import (balancing_rotation, gravity_wrench, stable_time_step,
-                          tension_distribution, wrench_matrix)
+    from cdpm_drake.kernels.tension import gravity_wrench, stable_time_step, wrench_matrix
+    from cdpm_drake.robot.statics import balancing_rotation
+    from cdpm_drake.robot.tension_program import tension_distribution
 
     cfg = scenario.plant
     check_positive(cfg.time_step, "plant.time_step")

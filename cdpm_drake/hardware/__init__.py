@@ -8,7 +8,7 @@
   priority.py       SCHED_FIFO for the control loop and the emulator (`--rt-priority`)
 
 Only reels.py and tick_log_sink.py import Drake; the rest runs in the emulator process and
-in plain tests. The emulator (`cdpm_drake/emulator/__init__.py`, cdpm-reel-emulator) is a rehearsal
+in plain tests. The emulator (`cdpm_drake/emulator/`, cdpm-reel-emulator) is a rehearsal
 tool, not part of the driver: it uses this package's protocol, never the other way round, and
 nothing here imports the scenario, the builder or the CLI.
 """

@@ -367,7 +367,7 @@ class HardwareReelsSystem(LeafSystem):
 # the robot's workspace box, give or take START_BOX_TOLERANCE (m: an encoder offset well below
 # a millimetre must not refuse a platform resting on a face, which the virtual wall keeps
 # inside from the first tick; a platform centimetres out is outside), and held by its
-# cables: t* of the level platform there (tension.holding_tension) >= START_MIN_T_STAR (N).
+# cables: t* of the level platform there (statics.holding_tension) >= START_MIN_T_STAR (N).
 # Zero is where holding stops being possible at all: below it no set of tensions >= 0
 # balances the platform's weight (a cable would have to push), so the platform is not at rest
 # where the lengths put it (it hangs tilted, a cable is slack, or the lengths are wrong), and
@@ -384,7 +384,9 @@ def start_pose_problem(robot, p) -> str:
     moments (wrench-matrix rank < 6 at the workspace centre: it is modelled as translating)
     is judged by the forces alone (the platform as a point)."""
     from cdpm_drake.robot import robot_statics
-    from cdpm_drake.kernels.tension import gravity_wrench, holding_tension, max_min_tension
+    from cdpm_drake.kernels.tension import gravity_wrench
+    from cdpm_drake.robot.statics import holding_tension
+    from cdpm_drake.robot.tension_program import max_min_tension
 
     p = np.asarray(p, dtype=float)
     box = robot.workspace

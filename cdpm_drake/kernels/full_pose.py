@@ -40,9 +40,10 @@ from cdpm_drake.kernels.interference import interference_tick
 from cdpm_drake.kernels.kinematics import add_scaled_corrections, dead_band_compensation
 from cdpm_drake.kernels.pose import pose_fk, posed_cables, rotation_log, solve_spd, wrench_columns
 from cdpm_drake.kernels.qp import QP_OPTIMAL, solve_qp
-from cdpm_drake.kernels.tension import (BELOW_FLOOR, FEASIBLE, GENERAL, GRAVITY, RANK_TOL, lam_interval,
-                      null_vector, particular_solution, pivoted_qr, max_min_1d, max_min_lines,
-                      max_min_lines_subject_to)
+from cdpm_drake.kernels.nullspace import (RANK_TOL, lam_interval, null_vector,
+                                          particular_solution, pivoted_qr)
+from cdpm_drake.kernels.tension import (BELOW_FLOOR, FEASIBLE, GENERAL, GRAVITY, max_min_1d,
+                                        max_min_lines, max_min_lines_subject_to)
 
 _jit = numba.njit(cache=True, error_model="numpy")
 

@@ -1,7 +1,9 @@
 """Loop-closure kinematics of a translating CDPM (paper eqs. 1-3). numpy and numba, no Drake.
 
 Every function takes one platform position p (3,) or a batch (N, 3), base frame, m, and
-returns arrays with the same leading batch shape.
+returns arrays with the same leading batch shape. `robot` is any object with the fields read
+here (a robot.Robot): `reels` and `attachments` (m, 3) m, `num_cables`, `workspace` (its
+`center`, m) and `name`.
 """
 
 from __future__ import annotations
@@ -11,8 +13,6 @@ import math
 import numba
 import numpy as np
 
-from cdpm_drake.robot import Robot
-
 # Compiled once (cached); error_model="numpy": x / 0 is inf or nan, never an exception.
 _jit = numba.njit(cache=True, error_model="numpy")
 
@@ -21,18 +21,18 @@ class KinematicsError(RuntimeError):
     """Forward kinematics failed: lengths inconsistent with the robot, or no convergence."""
 
 
-def cable_vectors(robot: Robot, p) -> np.ndarray:
+def cable_vectors(robot, p) -> np.ndarray:
     """rho_i = p + b_i - a_i (eq. 1), from reel exit A_i to attachment B_i; (..., m, 3), m."""
     p = np.asarray(p, dtype=float)
     return p[..., None, :] + robot.attachments - robot.reels
 
 
-def cable_lengths(robot: Robot, p) -> np.ndarray:
+def cable_lengths(robot, p) -> np.ndarray:
     """||rho_i|| (eq. 2); (..., m), m."""
     return _batch(robot, p, 1)
 
 
-def jacobian(robot: Robot, p) -> np.ndarray:
+def jacobian(robot, p) -> np.ndarray:
     """J with l_dot = J @ p_dot (eq. 3): row i is rho_i^T / ||rho_i||; (..., m, 3)."""
     return _batch(robot, p, 3)
 
@@ -73,7 +73,7 @@ def reel_rates(offsets, p, v, out):
         out[i] = (x * v[0] + y * v[1] + z * v[2]) / n
 
 
-def forward_kinematics(robot: Robot, lengths, p_guess=None, tol: float = 1e-10,
+def forward_kinematics(robot, lengths, p_guess=None, tol: float = 1e-10,
                        max_iterations: int = 50, max_residual: float = 1e-6) -> np.ndarray:
     """Platform position p (base frame, m) whose cable lengths match `lengths` (m).
 
@@ -213,7 +213,7 @@ def _mm(metres: float) -> str:
     return f"{1000.0 * float(metres):.4g} mm" if metres < 1e-3 else f"{1000.0 * float(metres):.3f} mm"
 
 
-def condition_number(robot: Robot, p) -> float:
+def condition_number(robot, p) -> float:
     """2-norm condition number of J at p (how evenly cable speeds map to platform speeds)."""
     return float(np.linalg.cond(jacobian(robot, p)))
 

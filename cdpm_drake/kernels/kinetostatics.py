@@ -27,7 +27,8 @@ import numpy as np
 from cdpm_drake.kernels.pose import posed_cables, wrench_columns
 from cdpm_drake.kernels.full_pose import held_wrench
 from cdpm_drake.kernels.safety_filter import BARRIER_STATE, barrier_position
-from cdpm_drake.kernels.tension import RANK_TOL, null_vector, particular_solution, pivoted_qr, max_min_lines
+from cdpm_drake.kernels.nullspace import RANK_TOL, null_vector, particular_solution, pivoted_qr
+from cdpm_drake.kernels.tension import max_min_lines
 
 _jit = numba.njit(cache=True, error_model="numpy")
 

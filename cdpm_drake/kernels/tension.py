@@ -1,7 +1,8 @@
-"""Cable tensions of a platform in static equilibrium: the wrench matrix, the tension
-distribution with a floor tension, and wrench feasibility over the workspace. numpy and numba;
-Drake's MathematicalProgram (Clarabel) only inside the solver of nullspaces of two or more
-dimensions, imported there.
+"""Cable tensions of a platform in static equilibrium, compiled: the wrench matrix, t* and the
+tension distribution with a floor tension where W's nullspace has one or two dimensions, and
+the max-min of any number of lines. numpy and numba, no Drake: larger nullspaces go to
+robot/tension_program.py (Clarabel), wrench feasibility over a robot's workspace is
+robot/statics.py.
 
 The platform translates (frame B parallel to the base frame A) unless a rotation R_WB is
 given; moments are taken about the platform centre (B's origin). Cable i pulls the platform
@@ -20,8 +21,8 @@ the workspace plots): t*, the largest achievable minimum cable tension,
 +inf when an internal force (a positive nullspace vector of W) raises every tension at once,
 -inf when no tension vector balances w (a wrench outside W's range). A tension distribution
 with every cable >= a floor exists exactly when t* >= floor. For the platform hanging level
-(`holding_tension`: the robot file's platform mass, its weight at the centre) t* says by how
-much its cables can all stay taut.
+(robot/statics.py's `holding_tension`: the robot file's platform mass, its weight at the
+centre) t* says by how much its cables can all stay taut.
 
 How t* is computed. Every T with W T = -w is T = T_p + N lam (T_p the minimum-norm solution,
 N an orthonormal basis of W's nullspace, k columns). For 7 cables and 6 DoF (k = 1) the
@@ -35,36 +36,27 @@ a pivoted Householder QR, both compiled (`distribution_kernel`, ~1 us). For 8 ca
 7-cable ones (robot validation on load, `cdpm info`, the plots). The rest, the tension
 distributions of k >= 2 and t* of k >= 3 (a rank-deficient W, more cables), go to Drake's
 MathematicalProgram with Clarabel (an LP for t*, a QP for the least-norm distribution), in
-the same nullspace coordinates.
+the same nullspace coordinates (robot/tension_program.py: `max_min_tension`,
+`tension_distribution`). The QR and the nullspace vectors are kernels/nullspace.py.
 """
 
 from __future__ import annotations
 
-import dataclasses
 import math
 
 import numba
 import numpy as np
 
+from cdpm_drake.kernels.nullspace import (RANK_TOL, lam_interval, null_vector,
+                                          particular_solution, pivoted_qr)
 from cdpm_drake.kernels.qp import QP_INFEASIBLE, solve_qp
 
 GRAVITY = 9.81  # m/s^2, along -z of the base frame
-
-# W (r x m) counts as rank-deficient when the last pivot of its pivoted QR (or its smallest
-# singular value) is below this fraction of the first: the nullspace is then treated as having
-# more than m - r dimensions and the general solver decides. Far above round-off of unit
-# vectors and moments of a few tenths of a metre, far below any pose a robot is used at.
-RANK_TOL = 1e-9
 # distribution_kernel's status codes.
 FEASIBLE, BELOW_FLOOR, GENERAL = 0, 1, 2
 
 # Compiled once (cached); error_model="numpy": x / 0 is inf or nan, never an exception.
 _jit = numba.njit(cache=True, error_model="numpy")
-
-
-class TensionError(ValueError):
-    """The solver of a nullspace of two or more dimensions failed (neither an optimum nor
-    a proof of unboundedness)."""
 
 
 def wrench_matrix(robot, p, R_WB=None) -> np.ndarray:
@@ -84,112 +76,7 @@ def gravity_wrench(mass: float, force=(0.0, 0.0, 0.0), handle=(0.0, 0.0, 0.0)) -
     return np.concatenate([f + [0.0, 0.0, -mass * GRAVITY], np.cross(handle, f)])
 
 
-@dataclasses.dataclass(frozen=True)
-class Distribution:
-    """The outcome of `tension_distribution`: `tensions` (m,) N, the least-norm distribution
-    with every cable >= the floor when `feasible`; otherwise a distribution that keeps the
-    smallest tension largest (its minimum `best_min` N) and the 0-based cables at that
-    minimum (`slack`: the ones that would go slack, or stay below the floor, first).
-    `t_star` is the largest achievable minimum tension (N; +inf with an internal force that
-    raises every tension, -inf when no tension balances the wrench)."""
-
-    feasible: bool
-    tensions: np.ndarray
-    best_min: float
-    slack: tuple[int, ...] = ()
-    # Largest |W T + w| the solution leaves, N or N m (round-off when the wrench is reachable).
-    residual: float = 0.0
-    t_star: float = math.nan
-
-
-# --- the compiled one-dimensional case ---------------------------------------------------------
-
-
-@_jit
-def pivoted_qr(W, A, V, beta, perm):
-    """Householder QR with column pivoting of W^T (m x r, r = W's rows): A[:r] holds R
-    (upper triangular), V[k] and beta[k] the reflections H_k = I - beta_k v_k v_k^T, perm the
-    pivot order of W's rows. Returns |R_rr| / |R_11| (0 for a zero W)."""
-    r, m = W.shape
-    for i in range(m):
-        for j in range(r):
-            A[i, j] = W[j, i]
-    for j in range(r):
-        perm[j] = j
-    for k in range(r):
-        best, best_norm = k, -1.0
-        for j in range(k, r):
-            s = 0.0
-            for i in range(k, m):
-                s += A[i, j] * A[i, j]
-            if s > best_norm:
-                best, best_norm = j, s
-        if best != k:
-            for i in range(m):
-                A[i, k], A[i, best] = A[i, best], A[i, k]
-            perm[k], perm[best] = perm[best], perm[k]
-        for i in range(m):
-            V[k, i] = 0.0
-        norm = math.sqrt(best_norm)
-        if norm == 0.0:
-            beta[k] = 0.0
-            continue
-        alpha = -norm if A[k, k] >= 0.0 else norm
-        vv = 0.0
-        for i in range(k, m):
-            V[k, i] = A[i, k]
-        V[k, k] -= alpha
-        for i in range(k, m):
-            vv += V[k, i] * V[k, i]
-        beta[k] = 2.0 / vv
-        for j in range(k, r):
-            s = 0.0
-            for i in range(k, m):
-                s += V[k, i] * A[i, j]
-            s *= beta[k]
-            for i in range(k, m):
-                A[i, j] -= s * V[k, i]
-    first = abs(A[0, 0])
-    return abs(A[r - 1, r - 1]) / first if first > 0.0 else 0.0
-
-
-@_jit
-def _apply_q(V, beta, z):
-    """z <- Q z, Q = H_0 H_1 ... H_{r-1}."""
-    r, m = V.shape
-    for k in range(r - 1, -1, -1):
-        s = 0.0
-        for i in range(k, m):
-            s += V[k, i] * z[i]
-        s *= beta[k]
-        for i in range(k, m):
-            z[i] -= s * V[k, i]
-
-
-@_jit
-def particular_solution(A, V, beta, perm, w, T_p):
-    """T_p, the minimum-norm T with W T = -w, from the QR of W^T: R^T y = -w[perm],
-    T_p = Q [y; 0]."""
-    r, m = V.shape
-    for j in range(r):
-        s = -w[perm[j]]
-        for i in range(j):
-            s -= A[i, j] * T_p[i]
-        T_p[j] = s / A[j, j]
-    for i in range(r, m):
-        T_p[i] = 0.0
-    _apply_q(V, beta, T_p)
-
-
-@_jit
-def null_vector(V, beta, n, k=0):
-    """The unit vector n = Q e_(r+k), Q's column r + k: W's nullspace is spanned by columns
-    r..m-1 of Q (m = r + 1: n spans it)."""
-    r = V.shape[0]
-    for i in range(n.size):
-        n[i] = 0.0
-    n[r + k] = 1.0
-    _apply_q(V, beta, n)
+# --- the compiled one- and two-dimensional cases -----------------------------------------------
 
 
 @_jit
@@ -218,18 +105,6 @@ def max_min_1d(T_p, n):
     if hi == math.inf:
         return t, lo
     return t, 0.5 * (lo + hi)
-
-
-@_jit
-def lam_interval(T_p, n, floor):
-    """[lo, hi]: the lam with T_p[i] + n[i] lam >= floor for every cable with n[i] != 0."""
-    lo, hi = -math.inf, math.inf
-    for i in range(T_p.size):
-        if n[i] > 0.0:
-            lo = max(lo, (floor - T_p[i]) / n[i])
-        elif n[i] < 0.0:
-            hi = min(hi, (floor - T_p[i]) / n[i])
-    return lo, hi
 
 
 @_jit
@@ -322,7 +197,7 @@ def level_wrench_matrix(reels, attachments, p, W):
 
 
 @_jit
-def _grid_kernel(reels, attachments, points, wrenches, out):
+def max_min_grid(reels, attachments, points, wrenches, out):
     """out[k, j] = t* of the level platform at points[k] under wrenches[j] (the one
     definition: W from the translated attachments), exact for 7 and 8 cables; nan where W is
     rank-deficient or the nullspace has more dimensions (the caller solves those)."""
@@ -346,162 +221,7 @@ def _grid_kernel(reels, attachments, points, wrenches, out):
             out[k, j] = max_min_1d(T_p, n)[0] if m == 7 else max_min_2d(T_p, N)
 
 
-# --- any nullspace -----------------------------------------------------------------------------
-
-
-def nullspace_form(W, w):
-    """(T_p, N, residual): the minimum-norm T with W T = -w, an orthonormal nullspace basis
-    (m, k), and the largest |W T_p + w| (above round-off: w is outside W's range)."""
-    U, s, Vt = np.linalg.svd(W)
-    rank = int(np.sum(s > RANK_TOL * s[0])) if s.size and s[0] > 0 else 0
-    T_p = Vt[:rank].T @ ((U[:, :rank].T @ -w) / s[:rank])
-    return T_p, Vt[rank:].T, float(np.max(np.abs(W @ T_p + w), initial=0.0))
-
-
-def _out_of_range(residual, w) -> bool:
-    return residual > 1e-9 * max(1.0, float(np.max(np.abs(w), initial=0.0)))
-
-
-def _clarabel(prog):
-    from pydrake.solvers import ClarabelSolver, SolverOptions
-
-    options = SolverOptions()
-    # Tighter than Clarabel's defaults (1e-8): t* is asked to 1e-6 N of an exact LP (it
-    # comes within 1e-9 N of HiGHS, tests/kernels/test_tension.py).
-    for name in ("tol_gap_abs", "tol_gap_rel", "tol_feas"):
-        options.SetOption(ClarabelSolver.id(), name, 1e-10)
-    return ClarabelSolver().Solve(prog, None, options)
-
-
-def max_min_general(T_p, N):
-    """(t*, lam*) of max over lam of min_i (T_p + N lam)_i for k = N.shape[1] >= 2, an LP in
-    (lam, t) solved by Clarabel through Drake's MathematicalProgram; t* = +inf (lam* of
-    nans) when the LP is unbounded."""
-    from pydrake.solvers import MathematicalProgram, SolutionResult
-
-    m, k = N.shape
-    prog = MathematicalProgram()
-    x = prog.NewContinuousVariables(k + 1, "x")  # lam, t
-    prog.AddLinearConstraint(np.hstack([N, -np.ones((m, 1))]), -T_p, np.full(m, np.inf), x)
-    prog.AddLinearCost(np.r_[np.zeros(k), -1.0], 0.0, x)
-    result = _clarabel(prog)
-    status = result.get_solution_result()
-    if status == SolutionResult.kDualInfeasible:
-        return math.inf, np.full(k, np.nan)
-    if not result.is_success():
-        raise TensionError(f"Clarabel found no largest minimum tension ({status}) for a "
-                           f"{k}-dimensional nullspace")
-    lam = result.GetSolution(x)[:k]
-    return float(np.min(T_p + N @ lam)), lam
-
-
-def _least_norm_general(T_p, N, floor):
-    """lam of least norm with T_p + N lam >= floor (|T|^2 = |T_p|^2 + |lam|^2): a QP solved
-    by Clarabel; None when Clarabel finds none."""
-    from pydrake.solvers import MathematicalProgram
-
-    m, k = N.shape
-    prog = MathematicalProgram()
-    lam = prog.NewContinuousVariables(k, "lam")
-    prog.AddLinearConstraint(N, floor - T_p, np.full(m, np.inf), lam)
-    prog.AddQuadraticCost(np.eye(k), np.zeros(k), lam, is_convex=True)
-    result = _clarabel(prog)
-    return result.GetSolution(lam) if result.is_success() else None
-
-
-def _slack(T, t_star, scale) -> tuple[int, ...]:
-    """The cables at the minimum of a max-min distribution."""
-    return tuple(int(i) for i in np.flatnonzero(T <= t_star + 1e-6 * scale))
-
-
-def max_min_tension(W, wrench) -> float:
-    """t* (N): max t with W T + wrench = 0, T_i >= t (module docstring); +inf with an
-    internal force that raises every tension, -inf when no T balances the wrench."""
-    W = np.ascontiguousarray(W, dtype=float)
-    w = np.ascontiguousarray(wrench, dtype=float)
-    status, t = distribution_kernel(W, w, 0.0, np.empty(W.shape[1]))
-    if status != GENERAL:
-        return float(t)
-    T_p, N, residual = nullspace_form(W, w)
-    if _out_of_range(residual, w):
-        return -math.inf
-    if N.shape[1] == 0:
-        return float(np.min(T_p))
-    if N.shape[1] == 1:
-        return float(max_min_1d(T_p, np.ascontiguousarray(N[:, 0]))[0])
-    if N.shape[1] == 2:
-        return float(max_min_2d(T_p, np.ascontiguousarray(N)))
-    return max_min_general(T_p, N)[0]
-
-
-def tension_distribution(W, wrench, min_tension: float = 0.0) -> Distribution:
-    """Tensions T (m,) N with W T + wrench = 0 and every T_i >= min_tension, of least norm
-    (`Distribution`). When t* < min_tension it is not feasible and the distribution returned
-    keeps the smallest tension largest. A one-dimensional nullspace (7 cables, 6 DoF) is
-    solved exactly by `distribution_kernel`; larger ones by Clarabel (an LP and a QP)."""
-    W = np.ascontiguousarray(W, dtype=float)
-    w = np.ascontiguousarray(wrench, dtype=float)
-    floor = float(min_tension)
-    m = W.shape[1]
-    T = np.empty(m)
-    status, t = distribution_kernel(W, w, floor, T)
-    if status == GENERAL:
-        T_p, N, residual = nullspace_form(W, w)
-        if _out_of_range(residual, w):
-            return Distribution(False, T_p, float(np.min(T_p)), tuple(range(m)), residual,
-                                -math.inf)
-        k = N.shape[1]
-        if k == 1:
-            n = np.ascontiguousarray(N[:, 0])
-            status, t = distribution_1d(T_p, n, floor, T)
-        else:
-            if k == 0:
-                t, lam = float(np.min(T_p)), np.zeros(0)
-            else:
-                t, lam = max_min_general(T_p, N)
-            status = FEASIBLE if t >= floor - 1e-9 * max(1.0, abs(floor)) else BELOW_FLOOR
-            if status == FEASIBLE:
-                lam = np.zeros(0) if k == 0 else _least_norm_general(T_p, N, floor)
-                if lam is None:  # Clarabel's QP failed where its LP succeeded: keep the LP's
-                    lam = max_min_general(T_p, N)[1]
-                T = np.maximum(T_p + N @ lam, floor)  # the max only removes round-off
-            else:
-                T = T_p + N @ lam
-    t = float(t)
-    residual = float(np.max(np.abs(W @ T + w)))
-    if status == FEASIBLE:
-        return Distribution(True, T, float(T.min()), (), residual, t)
-    scale = max(1.0, float(np.max(np.abs(w))))
-    return Distribution(False, T, t, _slack(T, t, scale), residual, t)
-
-
-# --- over the workspace ------------------------------------------------------------------------
-
-
-def max_min_tensions(robot, points, wrenches) -> np.ndarray:
-    """t* (N, K) N of the level platform (translated, not rotated) at each of points (N, 3) m
-    under each of wrenches (K, 6) N, N m: compiled for 7 and 8 cables (one- and
-    two-dimensional nullspaces), `max_min_tension` point by point where that does not
-    apply."""
-    points = np.ascontiguousarray(np.reshape(points, (-1, 3)), dtype=float)
-    wrenches = np.ascontiguousarray(np.reshape(wrenches, (-1, 6)), dtype=float)
-    out = np.empty((len(points), len(wrenches)))
-    _grid_kernel(np.ascontiguousarray(robot.reels), np.ascontiguousarray(robot.attachments),
-                 points, wrenches, out)
-    for k in np.flatnonzero(np.isnan(out).any(axis=1)):
-        W = wrench_matrix(robot, points[k])
-        out[k] = [max_min_tension(W, w) for w in wrenches]
-    return out
-
-
-def holding_tension(robot, points, mass: float | None = None) -> np.ndarray:
-    """t* (N) of the level platform at points (..., 3) m holding its own weight: mass (kg,
-    default the robot file's platform mass) at its centre, moments about the centre, no other
-    force. The one measure of "the cables can hold the platform here" in this package."""
-    points = np.asarray(points, dtype=float)
-    mass = robot.dynamics.mass if mass is None else float(mass)
-    t = max_min_tensions(robot, points, gravity_wrench(mass)[None, :])[:, 0]
-    return t.reshape(points.shape[:-1])
+# --- grids of points, the cables' stretch and the plant's time step -------------------------
 
 
 def hand_force_directions() -> np.ndarray:
@@ -525,40 +245,6 @@ def step_grid(lower, upper, step: float) -> np.ndarray:
     x 43 points for paper_7cable)."""
     axes = [np.arange(lo, hi + 1e-9, step) for lo, hi in zip(lower, upper)]
     return np.stack(np.meshgrid(*axes, indexing="ij"), axis=-1).reshape(-1, 3)
-
-
-@dataclasses.dataclass(frozen=True)
-class Feasibility:
-    """Wrench feasibility over a grid: `points` (N, 3) m and `feasible` (N,) bool, and the
-    smallest t* (N,) over the hand-force directions at each point."""
-
-    points: np.ndarray
-    feasible: np.ndarray
-    t_star: np.ndarray | None = None
-
-    @property
-    def share(self) -> float:
-        return float(np.mean(self.feasible)) if self.feasible.size else 0.0
-
-
-def wrench_feasibility(robot, *, mass: float, hand_force: float = 0.0, handle=(0.0, 0.0, 0.0),
-                       min_tension: float = 0.0, n: int = 5, directions=None,
-                       points=None) -> Feasibility:
-    """Where, on an n^3 grid of the robot's workspace box (or at `points` (N, 3) m), a
-    tension distribution with every cable >= min_tension (N) balances the platform's weight
-    (mass, kg) plus a hand force of size hand_force (N) at the handle point (m, platform
-    frame) in every one of `directions` (default: hand_force_directions(); none when
-    hand_force is 0)."""
-    pts = (grid_points(robot.workspace.lower, robot.workspace.upper, n) if points is None
-           else np.reshape(np.asarray(points, dtype=float), (-1, 3)))
-    if hand_force > 0:
-        dirs = hand_force_directions() if directions is None else np.asarray(directions, float)
-        forces = hand_force * dirs
-    else:
-        forces = np.zeros((1, 3))
-    wrenches = np.array([gravity_wrench(mass, f, handle) for f in forces])
-    t = max_min_tensions(robot, pts, wrenches).min(axis=1)
-    return Feasibility(pts, t >= min_tension, t)
 
 
 def unstretched_lengths(lengths, tensions, EA):
@@ -587,76 +273,6 @@ def stable_time_step(robot, p, R_WB, tensions, locked: bool = False) -> float:
     L_inv = np.linalg.inv(np.linalg.cholesky(M))
     omega2 = float(np.linalg.eigvalsh(L_inv @ K @ L_inv.T).max())
     return 2.0 / math.sqrt(max(omega2, 1e-300))
-
-
-def balancing_rotation(robot, p, *, mass: float, min_tension: float = 0.0,
-                       max_angle: float = 0.4, step: float = 0.05, handle=(0.0, 0.0, 0.0)):
-    """The smallest platform tilt (roll, pitch, yaw, rad; on a grid of `step` rad within
-    +-max_angle per angle) at which a tension distribution with every cable >= min_tension
-    (N) holds the platform's weight at p (m); None when no grid point does. A platform whose
-    cables cannot hold it level hangs tilted: this says how much."""
-    from cdpm_drake.kernels.rotation import rotation_from_rpy
-
-    k = int(round(max_angle / step))
-    g = step * np.arange(-k, k + 1)  # exact zeros: a grid from arange(-max, max, step) has -1e-16
-    rpys = np.stack(np.meshgrid(g, g, g, indexing="ij"), axis=-1).reshape(-1, 3)
-    rpys = rpys[np.argsort(np.linalg.norm(rpys, axis=1), kind="stable")]
-    wrench = gravity_wrench(mass)
-    for rpy in rpys:
-        R = rotation_from_rpy(rpy)
-        W = wrench_matrix(robot, p, R)
-        if max_min_tension(W, wrench) >= min_tension:
-            return rpy
-    return None
-
-
-# --- a robot's statics in one look (validation on load, `cdpm info`) --------------------------
-
-
-@dataclasses.dataclass(frozen=True)
-class Statics:
-    """How well a robot's cables hold its level platform (`holding_tension`): the wrench
-    matrix rank at the workspace centre and, if below 6, the wrench direction (unit, [force;
-    moment] about the centre) no tension can produce; t* at the centre (N); the share of an
-    n x n x n grid of the workspace box (corners included) held with every cable >= floor (N);
-    the platform mass (kg) it was computed for."""
-
-    rank: int
-    unreachable: np.ndarray | None
-    centre_t_star: float
-    share: float
-    floor: float
-    n: int
-    mass: float
-
-
-def workspace_statics(robot, floor: float = 5.0, n: int = 11,
-                      mass: float | None = None) -> Statics:
-    """The `Statics` of a robot: a few milliseconds for 7 and 8 cables (compiled closed
-    forms), Clarabel point by point otherwise."""
-    mass = robot.dynamics.mass if mass is None else float(mass)
-    c = robot.workspace.center
-    W = wrench_matrix(robot, c)
-    U, s, _ = np.linalg.svd(W)
-    rank = int(np.sum(s > RANK_TOL * max(s[0], 1e-300)))
-    unreachable = U[:, rank].copy() if rank < W.shape[0] else None
-    t = holding_tension(robot, grid_points(robot.workspace.lower, robot.workspace.upper, n),
-                        mass)
-    return Statics(rank, unreachable, float(holding_tension(robot, c, mass)),
-                   float(np.mean(t >= floor)), float(floor), int(n), mass)
-
-
-def point_platform_share(robot, floor: float = 5.0, n: int = 5,
-                         mass: float | None = None) -> float:
-    """The share `workspace_statics` would find if the platform were a point (forces only,
-    the attachment points ignored): where it is much larger than the real share, the moment
-    balance (the attachment points) is what fails. Clarabel per point (~0.5 ms)."""
-    mass = robot.dynamics.mass if mass is None else float(mass)
-    w = gravity_wrench(mass)[:3]
-    pts = grid_points(robot.workspace.lower, robot.workspace.upper, n)
-    rho = robot.reels[None, :, :] - pts[:, None, :]  # every cable to the centre
-    U = rho / np.linalg.norm(rho, axis=-1, keepdims=True)
-    return float(np.mean([max_min_tension(u.T, w) >= floor for u in U]))
 
 
 # --- the max-min of any number of lines, compiled (the safety filter's kinetostatic margin,

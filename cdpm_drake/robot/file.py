@@ -16,7 +16,7 @@ from cdpm_drake.robot.model import (Dynamics, Robot, RobotError, RobotLimits, Wo
 from cdpm_drake.robot.schema import (REQUIRED_FIELDS, CablesSchema, LimitsSchema,
                                      PlatformSchema, ReelDrivesSchema, RobotSchema,
                                      WorkspaceSchema)
-from cdpm_drake.robot.statics import frame_warnings, report_statics
+from cdpm_drake.robot.statics_checks import frame_warnings, report_statics
 
 # The package's logger, not this module's: `cdpm info` filters it (a filter on a logger
 # does not see its children's records) and tests capture it by that name.

@@ -1,160 +1,146 @@
-"""What a robot's cables can hold, said when it is loaded: the wrench matrix's rank, the
-share of the workspace box where the level platform is held with every cable taut, and the
-box's faces beyond the reels' frame. Messages name the robot and the cause."""
+"""A robot's statics over its workspace: t* (kernels/tension.py's module docstring) of the
+level platform on grids of points and wrenches, the holding tension, wrench feasibility, the
+tilt at which the cables hold the platform, and `Statics`, the one look at a robot the
+validation on load and `cdpm info` print. Positions m in the base frame, forces N, masses kg;
+compiled for 7 and 8 cables, Clarabel point by point otherwise (robot/tension_program.py)."""
 
-import logging
+from __future__ import annotations
+
+import dataclasses
 
 import numpy as np
 
-from cdpm_drake.robot.model import SAME_POINT_TOL, Robot, plain
+from cdpm_drake.kernels.nullspace import RANK_TOL
+from cdpm_drake.kernels.tension import (grid_points, gravity_wrench, hand_force_directions,
+                                        max_min_grid, wrench_matrix)
+from cdpm_drake.robot.tension_program import max_min_tension
 
-# The package's logger, not this module's: `cdpm info` filters it (a filter on a logger
-# does not see its children's records) and tests capture it by that name.
-_log = logging.getLogger("cdpm_drake.robot")
 
-
-def frame_warnings(robot: "Robot") -> list[str]:
-    """The faces of the workspace box that reach beyond the reels' frame, in words: past the
-    last reel exit along x or y, or above the highest one, every cable pulls the platform
-    back (or down), so nothing holds it there. Below the lowest exit is where a suspended
-    robot's platform hangs (gravity pulls it down, the cables up): not a warning."""
-    lo, hi = robot.workspace.lower, robot.workspace.upper
-    a_lo, a_hi = robot.reels.min(axis=0), robot.reels.max(axis=0)
-    out = []
-    for axis, name in enumerate("xyz"):
-        if axis < 2 and lo[axis] < a_lo[axis] - SAME_POINT_TOL:
-            out.append(f"{robot.name}: the workspace box's lower {name} face, workspace.lower"
-                       f"[{axis}] = {plain(lo[axis])!r} m, lies beyond the reels' frame: no "
-                       f"reel exit is at {name} <= {plain(lo[axis])!r} m (the lowest at "
-                       f"{plain(a_lo[axis])!r} m), so there every cable pulls the platform "
-                       f"back along +{name} and nothing holds it")
-        if hi[axis] > a_hi[axis] + SAME_POINT_TOL:
-            pull = "down (with its weight)" if axis == 2 else f"back along -{name}"
-            out.append(f"{robot.name}: the workspace box's upper {name} face, workspace.upper"
-                       f"[{axis}] = {plain(hi[axis])!r} m, lies beyond the reels' frame: no "
-                       f"reel exit is at {name} >= {plain(hi[axis])!r} m (the highest at "
-                       f"{plain(a_hi[axis])!r} m), so there every cable pulls the platform "
-                       f"{pull} and nothing holds it")
+def max_min_tensions(robot, points, wrenches) -> np.ndarray:
+    """t* (N, K) N of the level platform (translated, not rotated) at each of points (N, 3) m
+    under each of wrenches (K, 6) N, N m: compiled for 7 and 8 cables (one- and
+    two-dimensional nullspaces), `max_min_tension` point by point where that does not
+    apply."""
+    points = np.ascontiguousarray(np.reshape(points, (-1, 3)), dtype=float)
+    wrenches = np.ascontiguousarray(np.reshape(wrenches, (-1, 6)), dtype=float)
+    out = np.empty((len(points), len(wrenches)))
+    max_min_grid(np.ascontiguousarray(robot.reels), np.ascontiguousarray(robot.attachments),
+                 points, wrenches, out)
+    for k in np.flatnonzero(np.isnan(out).any(axis=1)):
+        W = wrench_matrix(robot, points[k])
+        out[k] = [max_min_tension(W, w) for w in wrenches]
     return out
 
 
-# Statics checked on load: the level platform (platform.mass at its centre) held with every
-# cable >= STATICS_FLOOR N on an STATICS_GRID^3 grid of the workspace box. A robot whose box is
-# held on less than STATICS_WARN_SHARE of it gets a warning naming the share and its likely
-# cause. About 5 ms for 7 or 8 cables (tension.py's compiled closed forms), once per robot
-# geometry and process.
-STATICS_FLOOR = 5.0
-STATICS_GRID = 11
-STATICS_WARN_SHARE = 0.5
-# A point platform held on this much more of the box than the real one: the moment balance
-# (the attachment points) is what fails.
-_MOMENT_BLAME = 0.25
-# Points per axis of the point platform's grid (Clarabel per point, ~0.5 ms: only computed
-# for a robot that gets the warning).
-_POINT_GRID = 5
-_STATICS: dict = {}
-_AXES = ("force along x", "force along y", "force along z", "moment about x",
-         "moment about y", "moment about z")
+def holding_tension(robot, points, mass: float | None = None) -> np.ndarray:
+    """t* (N) of the level platform at points (..., 3) m holding its own weight: mass (kg,
+    default the robot file's platform mass) at its centre, moments about the centre, no other
+    force. The one measure of "the cables can hold the platform here" in this package."""
+    points = np.asarray(points, dtype=float)
+    mass = robot.dynamics.mass if mass is None else float(mass)
+    t = max_min_tensions(robot, points, gravity_wrench(mass)[None, :])[:, 0]
+    return t.reshape(points.shape[:-1])
 
 
-def _statics_entry(robot: "Robot"):
-    """(tension.Statics, warnings) of a robot, computed once per geometry and mass."""
-    from cdpm_drake.kernels.tension import workspace_statics
+@dataclasses.dataclass(frozen=True)
+class Feasibility:
+    """Wrench feasibility over a grid: `points` (N, 3) m and `feasible` (N,) bool, and the
+    smallest t* (N,) over the hand-force directions at each point."""
 
-    key = (robot.reels.tobytes(), robot.attachments.tobytes(), robot.workspace.lower.tobytes(),
-           robot.workspace.upper.tobytes(), robot.dynamics.mass, robot.name)
-    if key not in _STATICS:
-        statics = workspace_statics(robot, STATICS_FLOOR, STATICS_GRID)
-        _STATICS[key] = (statics, tuple(statics_warnings(robot, statics)))
-    return _STATICS[key]
+    points: np.ndarray
+    feasible: np.ndarray
+    t_star: np.ndarray | None = None
 
-
-def robot_statics(robot: "Robot"):
-    """tension.Statics of the robot's level platform (cached per geometry and mass)."""
-    return _statics_entry(robot)[0]
+    @property
+    def share(self) -> float:
+        return float(np.mean(self.feasible)) if self.feasible.size else 0.0
 
 
-def describe_wrench(direction) -> str:
-    """The largest components of a unit wrench direction [force; moment], in words."""
-    d = np.asarray(direction, dtype=float)
-    order = np.argsort(-np.abs(d))
-    parts = [_AXES[k] for k in order if abs(d[k]) >= 0.3 * abs(d[order[0]])]
-    return " and ".join(parts[:2])
+def wrench_feasibility(robot, *, mass: float, hand_force: float = 0.0, handle=(0.0, 0.0, 0.0),
+                       min_tension: float = 0.0, n: int = 5, directions=None,
+                       points=None) -> Feasibility:
+    """Where, on an n^3 grid of the robot's workspace box (or at `points` (N, 3) m), a
+    tension distribution with every cable >= min_tension (N) balances the platform's weight
+    (mass, kg) plus a hand force of size hand_force (N) at the handle point (m, platform
+    frame) in every one of `directions` (default: hand_force_directions(); none when
+    hand_force is 0)."""
+    pts = (grid_points(robot.workspace.lower, robot.workspace.upper, n) if points is None
+           else np.reshape(np.asarray(points, dtype=float), (-1, 3)))
+    if hand_force > 0:
+        dirs = hand_force_directions() if directions is None else np.asarray(directions, float)
+        forces = hand_force * dirs
+    else:
+        forces = np.zeros((1, 3))
+    wrenches = np.array([gravity_wrench(mass, f, handle) for f in forces])
+    t = max_min_tensions(robot, pts, wrenches).min(axis=1)
+    return Feasibility(pts, t >= min_tension, t)
 
 
-def statics_warnings(robot: "Robot", statics, *, grid: str | None = None, base=None,
-                     base_share: float | None = None) -> list[str]:
-    """What is wrong with a robot's statics, in words (empty when its box is mostly held).
-    `grid` names the grid of `statics.share` (default: its n x n x n grid). `base` is the
-    robot before its cable swaps (a scenario's, or `cdpm info --swaps`) and `base_share` its
-    share on the same grid: when it alone is held on most of the box, the swaps are the
-    cause, not the robot file."""
-    out = []
-    n = statics.n
-    grid = f"{n}x{n}x{n} grid" if grid is None else grid
-    m = robot.num_cables
-    if m < 6:
-        # Too few cables for six equations: the rank and the share only restate that.
-        return [f"{robot.name}: {m} cables cannot hold the platform against all six force and "
-                f"moment components (wrench matrix rank {statics.rank} at the workspace "
-                "centre): a free platform would turn; the kinematic plant, and plant: "
-                "!DynamicReels {lock_rotation: true}, model one that only translates"]
-    if statics.unreachable is not None:
-        more = 6 - statics.rank - 1
-        out.append(f"{robot.name}: the wrench matrix has rank {statics.rank} < 6 at the "
-                   f"workspace centre {robot.workspace.center.tolist()!r} m: no cable tensions "
-                   f"produce a {describe_wrench(statics.unreachable)} there"
-                   + (f" (nor {more} more wrench direction(s))" if more else "")
-                   + ", so the platform cannot resist one: the cables' lines of action leave "
-                   "it free to turn or slide")
-    if statics.share < STATICS_WARN_SHARE:
-        from cdpm_drake.kernels.tension import point_platform_share
+def balancing_rotation(robot, p, *, mass: float, min_tension: float = 0.0,
+                       max_angle: float = 0.4, step: float = 0.05, handle=(0.0, 0.0, 0.0)):
+    """The smallest platform tilt (roll, pitch, yaw, rad; on a grid of `step` rad within
+    +-max_angle per angle) at which a tension distribution with every cable >= min_tension
+    (N) holds the platform's weight at p (m); None when no grid point does. A platform whose
+    cables cannot hold it level hangs tilted: this says how much."""
+    from cdpm_drake.kernels.rotation import rotation_from_rpy
 
-        if base is not None and base_share is not None and base_share >= STATICS_WARN_SHARE:
-            # The paper swaps cables to provoke interference; the swapped attachment points
-            # balance the moments worse. The robot file is not at fault.
-            swapped = [f"{i + 1}-{j + 1}" for i, j in _swapped_cables(base, robot)]
-            cause = (f"the swapped cables ({', '.join(swapped)}) are the cause: robot "
-                     f"{base.name!r} without the swaps is held on {100 * base_share:.0f} % of "
-                     "it")
-        else:
-            point = point_platform_share(robot, statics.floor, n=_POINT_GRID,
-                                         mass=statics.mass)
-            where = (f"{100 * point:.0f} % of the box (a coarser {_POINT_GRID}x{_POINT_GRID}"
-                     f"x{_POINT_GRID} grid)")
-            cause = ("the moment balance fails: a point platform (forces only) would be "
-                     f"held on {where}, so the attachment points are the likely cause"
-                     if point - statics.share >= _MOMENT_BLAME else
-                     f"a point platform (forces only) would be held on {where} too, so the "
-                     "reels cannot hold the platform there: the box reaches beyond "
-                     "what the reels' layout supports")
-        out.append(f"{robot.name}: the cables hold the level platform ({statics.mass:g} kg at "
-                   f"its centre) with every cable >= {statics.floor:g} N on only "
-                   f"{100 * statics.share:.0f} % of the workspace box ({grid}); {cause}")
-    return out
+    k = int(round(max_angle / step))
+    g = step * np.arange(-k, k + 1)  # exact zeros: a grid from arange(-max, max, step) has -1e-16
+    rpys = np.stack(np.meshgrid(g, g, g, indexing="ij"), axis=-1).reshape(-1, 3)
+    rpys = rpys[np.argsort(np.linalg.norm(rpys, axis=1), kind="stable")]
+    wrench = gravity_wrench(mass)
+    for rpy in rpys:
+        R = rotation_from_rpy(rpy)
+        W = wrench_matrix(robot, p, R)
+        if max_min_tension(W, wrench) >= min_tension:
+            return rpy
+    return None
 
 
-def _swapped_cables(base: "Robot", robot: "Robot") -> list[tuple[int, int]]:
-    """The 0-based cable pairs whose attachment points trade places from `base` to `robot`
-    (each cable once, in order); a cable that moved otherwise is left out."""
-    moved = [i for i in range(base.num_cables)
-             if not np.array_equal(base.attachments[i], robot.attachments[i])]
-    pairs = []
-    for i in moved:
-        for j in moved:
-            if i < j and np.array_equal(base.attachments[i], robot.attachments[j]) \
-                    and np.array_equal(base.attachments[j], robot.attachments[i]):
-                pairs.append((i, j))
-    return pairs
+# --- a robot's statics in one look (validation on load, `cdpm info`) --------------------------
 
 
-def report_statics(robot: "Robot") -> None:
-    """Loading a robot says its statics: at INFO level always, as warnings when bad."""
-    statics, warnings = _statics_entry(robot)
-    n = statics.n
-    _log.info("%s: wrench matrix rank %d at the workspace centre; level platform (%g kg) held "
-              "with every cable >= %g N on %.1f %% of the workspace box (%dx%dx%d grid)",
-              robot.name, statics.rank, statics.mass, statics.floor, 100 * statics.share,
-              n, n, n)
-    for message in warnings:
-        _log.warning("%s", message)
+@dataclasses.dataclass(frozen=True)
+class Statics:
+    """How well a robot's cables hold its level platform (`holding_tension`): the wrench
+    matrix rank at the workspace centre and, if below 6, the wrench direction (unit, [force;
+    moment] about the centre) no tension can produce; t* at the centre (N); the share of an
+    n x n x n grid of the workspace box (corners included) held with every cable >= floor (N);
+    the platform mass (kg) it was computed for."""
+
+    rank: int
+    unreachable: np.ndarray | None
+    centre_t_star: float
+    share: float
+    floor: float
+    n: int
+    mass: float
+
+
+def workspace_statics(robot, floor: float = 5.0, n: int = 11,
+                      mass: float | None = None) -> Statics:
+    """The `Statics` of a robot: a few milliseconds for 7 and 8 cables (compiled closed
+    forms), Clarabel point by point otherwise."""
+    mass = robot.dynamics.mass if mass is None else float(mass)
+    c = robot.workspace.center
+    W = wrench_matrix(robot, c)
+    U, s, _ = np.linalg.svd(W)
+    rank = int(np.sum(s > RANK_TOL * max(s[0], 1e-300)))
+    unreachable = U[:, rank].copy() if rank < W.shape[0] else None
+    t = holding_tension(robot, grid_points(robot.workspace.lower, robot.workspace.upper, n),
+                        mass)
+    return Statics(rank, unreachable, float(holding_tension(robot, c, mass)),
+                   float(np.mean(t >= floor)), float(floor), int(n), mass)
+
+
+def point_platform_share(robot, floor: float = 5.0, n: int = 5,
+                         mass: float | None = None) -> float:
+    """The share `workspace_statics` would find if the platform were a point (forces only,
+    the attachment points ignored): where it is much larger than the real share, the moment
+    balance (the attachment points) is what fails. Clarabel per point (~0.5 ms)."""
+    mass = robot.dynamics.mass if mass is None else float(mass)
+    w = gravity_wrench(mass)[:3]
+    pts = grid_points(robot.workspace.lower, robot.workspace.upper, n)
+    rho = robot.reels[None, :, :] - pts[:, None, :]  # every cable to the centre
+    U = rho / np.linalg.norm(rho, axis=-1, keepdims=True)
+    return float(np.mean([max_min_tension(u.T, w) >= floor for u in U]))

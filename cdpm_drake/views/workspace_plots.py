@@ -3,7 +3,7 @@ platform (the wrench-feasible workspace) and where the cables keep clear of each
 interference-free workspace), as three orthogonal slices of the workspace box.
 
 - `figure_wrench_workspace`: each slice coloured by t*, the largest achievable minimum cable
-  tension of the level platform (tension.holding_tension: the robot file's platform mass at
+  tension of the level platform (statics.holding_tension: the robot file's platform mass at
   its centre, moments about the centre), the floor drawn as a contour; where an internal force
   raises every tension (t* = +inf) the colour is the scale's top.
 - `figure_interference_workspace`: each slice coloured by how far the closest watched pair
@@ -21,7 +21,7 @@ import numpy as np
 from matplotlib.figure import Figure
 
 from cdpm_drake.kernels.interference import pair_distances
-from cdpm_drake.kernels.tension import holding_tension
+from cdpm_drake.robot.statics import holding_tension
 
 AXES = "xyz"
 # Each slice: (the axis held fixed, the two axes drawn).

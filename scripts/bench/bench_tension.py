@@ -40,9 +40,12 @@ from cdpm_drake.kernels.call import bind
 from cdpm_drake.kernels.pose import pose_lengths
 from cdpm_drake.robot import Robot, load_robot
 from cdpm_drake.kernels.rotation import rotation_from_rpy
-from cdpm_drake.kernels.tension import (max_min_general, nullspace_form, distribution_kernel,
-                                gravity_wrench, holding_tension, max_min_tension, step_grid,
-                                tension_distribution, wrench_matrix)
+from cdpm_drake.kernels.nullspace import nullspace_form
+from cdpm_drake.kernels.tension import (distribution_kernel, gravity_wrench, step_grid,
+                                        wrench_matrix)
+from cdpm_drake.robot.statics import holding_tension
+from cdpm_drake.robot.tension_program import (max_min_general, max_min_tension,
+                                              tension_distribution)
 from cdpm_drake.text import format_table
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -87,7 +90,7 @@ def per_call(fn, cases, calls, repeats) -> float:
 
 
 def clarabel_t_star(W, w):
-    """t* by the Clarabel LP that tension.py uses for nullspaces of 3+ dimensions."""
+    """t* by the Clarabel LP that robot/tension_program.py uses for nullspaces of 3+ dimensions."""
     T_p, N, _ = nullspace_form(W, w)
     return max_min_general(T_p, N)[0]
 

@@ -12,7 +12,7 @@ the points to 0.1 mm):
 - let the swapped pairs separate by translation beyond the experiments' d_u = 62 mm:
   translation bound g >= 64 mm (interference.translation_distance_bound);
 - hold the level platform at every reported pose with its swaps: t* >= 5 N, t* being the
-  largest achievable minimum cable tension of the platform's weight (tension.holding_tension:
+  largest achievable minimum cable tension of the platform's weight (statics.holding_tension:
   the robot file's 2.5 kg at the centre, moments about the centre);
 - keep the unswapped cables >= 80 mm apart everywhere in the workspace box;
 - keep every point in the 0.3 m cube, |b_i| <= 0.15 m per coordinate;
@@ -63,9 +63,9 @@ from scipy.optimize import least_squares, minimize
 
 from cdpm_drake.kernels.interference import pairs_kernel, pair_distances, translation_distance_bound
 from cdpm_drake.robot import ROBOTS_DIR, load_robot
-from cdpm_drake.kernels.tension import (RANK_TOL, null_vector, particular_solution, pivoted_qr,
-                                gravity_wrench, holding_tension, level_wrench_matrix,
-                                max_min_tensions, step_grid)
+from cdpm_drake.kernels.nullspace import RANK_TOL, null_vector, particular_solution, pivoted_qr
+from cdpm_drake.kernels.tension import gravity_wrench, level_wrench_matrix, step_grid
+from cdpm_drake.robot.statics import holding_tension, max_min_tensions
 
 # (swaps, p in m, {pair: reported distance in m}); swaps are 1-based cable pairs.
 EXPERIMENTS = (
@@ -385,7 +385,7 @@ def box_share(robot, step: float = CHECK_STEP, point: bool = False) -> float:
     would have there."""
     grid = step_grid(robot.workspace.lower, robot.workspace.upper, step)
     if point:
-        from cdpm_drake.kernels.tension import max_min_tension
+        from cdpm_drake.robot.tension_program import max_min_tension
         from cdpm_drake.kernels.kinematics import jacobian
 
         w = gravity_wrench(robot.dynamics.mass)[:3]

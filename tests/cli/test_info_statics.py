@@ -15,7 +15,8 @@ from cdpm_drake import cli
 from cdpm_drake.kernels.interference import pair_distances
 from cdpm_drake.robot import load_robot
 from cdpm_drake.config import load_scenario, scenario_robot
-from cdpm_drake.kernels.tension import gravity_wrench, holding_tension, step_grid, wrench_matrix
+from cdpm_drake.kernels.tension import gravity_wrench, step_grid, wrench_matrix
+from cdpm_drake.robot.statics import holding_tension
 from cdpm_drake.views import workspace_plots as wp
 
 

@@ -11,6 +11,7 @@ adapted in one place.
 
 import argparse
 import builtins
+import importlib
 import socket
 import sys
 import time
@@ -103,7 +104,7 @@ def all_cli_options():
     sub = next(a for a in parser._actions if isinstance(a, argparse._SubParsersAction))
     for command, p in sub.choices.items():
         if command == "emulate":
-            keys += _options(E._parser(), "emulate")
+            keys += _options(E.build_parser(), "emulate")
         else:
             keys += _options(p, command)
     return keys
@@ -367,9 +368,15 @@ def test_run_meshcat_draws_while_it_runs(tmp_path, monkeypatch, bridge):
 # --- emulate -------------------------------------------------------------------------------------
 
 
+def _emulator_main():
+    """The module emulator/main.py, where build_server and main look their names up (the
+    package's attribute `main` is the function it re-exports)."""
+    return importlib.import_module("cdpm_drake.emulator.main")
+
+
 def _server_from(*args) -> ReelBridgeServer:
     """The bridge `cdpm emulate ARGS` serves (its own parser and builder), not yet started."""
-    return E.build_server(E._parser().parse_args([str(a) for a in args]))
+    return E.build_server(E.build_parser().parse_args([str(a) for a in args]))
 
 
 def _free_port():
@@ -535,7 +542,7 @@ def test_emulate_seed_reaches_the_server(monkeypatch):
         seen.append(kwargs.get("seed"))
         return real(*args, **kwargs)
 
-    monkeypatch.setattr(E, "ReelBridgeServer", recording)
+    monkeypatch.setattr(_emulator_main(), "ReelBridgeServer", recording)
     _server_from("--port", 0, "--seed", 913).stop()
     assert seen == [913]
 
@@ -549,7 +556,7 @@ def test_emulate_duration_bounds_the_serving_time():
 @covers("emulate --rt-priority")
 def test_emulate_rt_priority_reaches_the_scheduler_call(monkeypatch):
     asked = []
-    monkeypatch.setattr(E, "set_realtime_priority", asked.append)
+    monkeypatch.setattr(_emulator_main(), "set_realtime_priority", asked.append)
     assert cdpm("emulate", "--port", 0, "--duration", 0.01, "--rt-priority", 41) == 0
     assert asked == [41]
 

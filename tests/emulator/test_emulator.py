@@ -13,6 +13,7 @@ import pytest
 
 from cdpm_drake import emulator as E
 from cdpm_drake.emulator import FaultPlan, ReelBridge, ReelBridgeServer
+from cdpm_drake.emulator.server import count_by_reason, vector_text
 from cdpm_drake.hardware.protocol import (FAULT_COMMAND_TIMEOUT, FAULT_DRIVE, FAULT_OVERSPEED,
                                           Command, ProtocolError, decode_status,
                                           encode_command)
@@ -276,7 +277,7 @@ def test_emulate_plant_dynamic_honours_the_scenarios_own_dynamic_reels(tmp_path)
         "operator: !NoOperator {}\n"
         "plant: !DynamicReels {time_step: 0.0005, max_reel_speed: 0.5, "
         "initial_rpy: [0.02, -0.01, 0.03], lock_rotation: true}\n")
-    args = E._parser().parse_args(["--scenario", str(scenario), "--plant", "dynamic",
+    args = E.build_parser().parse_args(["--scenario", str(scenario), "--plant", "dynamic",
                                    "--port", "0"])
     server = E.build_server(args)
     try:
@@ -595,7 +596,7 @@ def test_a_fixed_controller_address_ignores_other_commanders(serve, robot):
 
 
 def test_cli_builds_the_bridge_from_its_flags(robot):
-    args = E._parser().parse_args(["--robot", "paper_7cable", "--start", "1.5", "3.0", "1.0",
+    args = E.build_parser().parse_args(["--robot", "paper_7cable", "--start", "1.5", "3.0", "1.0",
                                    "--length-offset", "2", "0.25", "--port", "0",
                                    "--drop", "0.1", "--fault-after", "2", "--seed", "7"])
     server = E.build_server(args)
@@ -612,7 +613,7 @@ def test_cli_builds_the_bridge_from_its_flags(robot):
 def test_cli_takes_robot_start_and_operator_from_a_scenario():
     from cdpm_drake.config import load_scenario, scenario_robot
 
-    args = E._parser().parse_args(["--scenario", "exp2_interaction", "--port", "0"])
+    args = E.build_parser().parse_args(["--scenario", "exp2_interaction", "--port", "0"])
     server = E.build_server(args)
     try:
         scenario = load_scenario("exp2_interaction")
@@ -643,7 +644,7 @@ def test_cli_refuses_a_start_outside_the_robots_box(capsys):
             "box of robot 'paper_7cable_swap13' (lower [0.5, 0.8, 0.3], upper [3.0, 4.0, 2.4] "
             "m)") in err, err
     # Just inside the upper corner: accepted.
-    args = E._parser().parse_args(["--robot", "paper_7cable", "--start", "3.0", "4.0", "2.4",
+    args = E.build_parser().parse_args(["--robot", "paper_7cable", "--start", "3.0", "4.0", "2.4",
                                    "--port", "0"])
     E.build_server(args).stop()
 
@@ -778,8 +779,8 @@ def test_a_new_session_starts_at_the_scenarios_start_and_says_so(robot, p0):
     line = next(s for s in said if s.startswith("session 2: the platform is back"))
     away = np.linalg.norm(left - p0)
     assert away > 0.005
-    assert line == (f"session 2: the platform is back at its start {E._vector(p0)} m (reset, "
-                    f"as a homing would; the last session left it at {E._vector(left)} m, "
+    assert line == (f"session 2: the platform is back at its start {vector_text(p0)} m (reset, "
+                    f"as a homing would; the last session left it at {vector_text(left)} m, "
                     f"{away:.3f} m away), the operator's clock at 0"), line
 
 
@@ -802,7 +803,7 @@ def test_rejected_commands_are_reported_by_reason(capsys):
     assert rejected[reason] == 5
     lines = [s for s in said if s.startswith("rejected a command")]
     assert len(lines) == 1 and f"({reason})" in lines[0], said
-    assert E._count_by_reason(rejected) == f"5 ({reason} 5)"
+    assert count_by_reason(rejected) == f"5 ({reason} 5)"
 
 
 def test_a_port_in_use_is_named(capsys):

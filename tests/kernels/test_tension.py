@@ -16,11 +16,12 @@ from conftest import highs_t_star
 from cdpm_drake.kernels.call import bind
 from cdpm_drake.robot import Robot, load_robot
 from cdpm_drake.kernels.rotation import rotation_from_rpy, rpy_from_rotation
-from cdpm_drake.kernels.tension import (FEASIBLE, GENERAL, GRAVITY, balancing_rotation,
-                                distribution_kernel, grid_points, gravity_wrench,
-                                hand_force_directions, holding_tension, max_min_tension,
-                                max_min_tensions, step_grid, tension_distribution,
-                                wrench_feasibility, wrench_matrix)
+from cdpm_drake.kernels.tension import (FEASIBLE, GENERAL, GRAVITY, distribution_kernel,
+                                        gravity_wrench, grid_points, hand_force_directions,
+                                        step_grid, wrench_matrix)
+from cdpm_drake.robot.statics import (balancing_rotation, holding_tension, max_min_tensions,
+                                      wrench_feasibility)
+from cdpm_drake.robot.tension_program import max_min_tension, tension_distribution
 
 PAPER = load_robot("paper_7cable")
 # paper_7cable's attachment points before issue 18 recalibrated them with statics (commit

@@ -17,7 +17,8 @@ from cdpm_drake.kernels.interference import pair_distances, translation_distance
 from cdpm_drake.robot import load_robot
 from cdpm_drake.config import (interference_params, load_scenario, scenario_names,
                                  scenario_robot)
-from cdpm_drake.kernels.tension import gravity_wrench, holding_tension, step_grid, wrench_matrix
+from cdpm_drake.kernels.tension import gravity_wrench, step_grid, wrench_matrix
+from cdpm_drake.robot.statics import holding_tension
 
 # Paper, section 5: swaps (1-based cable pairs), platform position p (m), reported distances
 # (m). These numbers are typed from the paper, not from the calibration script.

@@ -396,7 +396,7 @@ def test_the_level_starts_of_the_three_experiments_are_accepted():
 
 
 def test_a_start_pose_no_tension_distribution_holds_is_refused():
-    # [1.4, 3.9, 1.2] m with cables 1 and 3 swapped: t* = 2.32 N (tension.holding_tension),
+    # [1.4, 3.9, 1.2] m with cables 1 and 3 swapped: t* = 2.32 N (statics.holding_tension),
     # cables 5 and 6 tied at it; a 0.05 rad yaw holds the platform at >= 5 N.
     overlay = "{initial_position: [1.4, 3.9, 1.2], plant: !DynamicReels {%s}}"
     with pytest.raises(ScenarioError) as e:
@@ -641,7 +641,8 @@ def test_cdpm_info_prints_the_wrench_feasibility_table(capsys):
     # against wrench_feasibility on the whole grid for that force and floor, without the
     # table's shortcut (solving each force only where the smaller one held).
     from cdpm_drake import cli
-    from cdpm_drake.kernels.tension import step_grid, wrench_feasibility
+    from cdpm_drake.kernels.tension import step_grid
+    from cdpm_drake.robot.statics import wrench_feasibility
 
     assert cli.main(["info", "paper_7cable", "--grid", "0.25"]) == 0
     out = capsys.readouterr().out

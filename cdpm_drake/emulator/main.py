@@ -1,0 +1,262 @@
+"""cdpm-reel-emulator: play the reel bridge on loopback, to rehearse a run before the robot.
+
+Two plants behind the bridge. `--plant kinematic` (the default): the reels follow the
+commanded velocities with a first-order lag, the encoders report what each reel paid out, the
+force sensor the operator's force at the best-fit platform pose. `--plant dynamic`: the
+scenario's robot with mass, elastic cables, drive friction and the operator, the dynamic plant
+of `plant: !DynamicReels` (systems/dynamic_plant.py) stepped in real time; the encoders report
+each reel's payout, zeroed at the start pose as a homing would (they read the rigid cable
+lengths there), the force sensor the operator's force on the true platform; the closing
+summary adds the cables' tensions, their slack ticks and the platform's tilt.
+Fault-injection flags impair the link (drop, delay, duplicate, reorder, corrupt) or break the
+bridge (freeze, NaN, stop, fault bits) from `--fault-after` seconds after the controller first
+enables the reels. The protocol is hardware/PROTOCOL.md.
+
+Each controller session (a `cdpm run`) after the first starts where the first did: the plant is
+reset to the start, as a homing between two runs would (its fault bits stay), and the operator's
+clock starts again at the session's first enabling command; the session's line says where the
+last one left the platform. With the dynamic plant, each session's close reports what the
+cables went through in it (tensions, when each went slack, the largest tilt and when, on the
+plant's clock), while the controller drove the reels and, apart, after they were stopped.
+
+Examples:
+  cdpm-reel-emulator --robot paper_7cable --start 1.77 3.65 1.22
+  cdpm-reel-emulator --scenario exp2_interaction --drop 0.01 --seed 3
+  cdpm-reel-emulator --scenario exp2_interaction --plant dynamic
+  cdpm-reel-emulator --stop --fault-after 2.0
+"""
+
+import argparse
+import gc
+import math
+import sys
+import time
+
+import numpy as np
+
+from cdpm_drake.emulator.bridges import DynamicBridge, ReelBridge
+from cdpm_drake.emulator.faults import FaultPlan
+from cdpm_drake.emulator.server import ReelBridgeServer, count_by_reason, vector_text
+from cdpm_drake.hardware.config import DEFAULT_BRIDGE_PORT
+from cdpm_drake.hardware.priority import set_realtime_priority
+from cdpm_drake.kernels.kinematics import cable_lengths
+
+
+def build_parser() -> argparse.ArgumentParser:
+    p = argparse.ArgumentParser(prog="cdpm-reel-emulator", description=__doc__,
+                                formatter_class=argparse.RawDescriptionHelpFormatter,
+                                epilog="exit codes: 0 done (--duration), 1 error (robot, "
+                                       "scenario, cannot listen), 2 bad usage, 130 after "
+                                       "Ctrl-C, 143 after SIGTERM (the summary is printed "
+                                       "first)")
+    g = p.add_argument_group("robot and operator")
+    g.add_argument("--scenario", help="take robot, cable swaps, start position, operator and "
+                   "bridge address/port from this scenario (name or path)")
+    g.add_argument("--scenario-text", help="YAML overlay applied to --scenario")
+    g.add_argument("--robot", help="built-in robot name or robot YAML path "
+                   "(default: paper_7cable, or the scenario's)")
+    g.add_argument("--start", nargs=3, type=float, metavar=("X", "Y", "Z"),
+                   help="platform start position, base frame, m (default: workspace centre, "
+                   "or the scenario's); the reels' initial lengths follow by inverse kinematics")
+    g.add_argument("--length-offset", nargs=2, action="append", default=[],
+                   metavar=("CABLE", "METRES"),
+                   help="add METRES to cable CABLE's (1-based) initial length, to rehearse the "
+                   "controller's refusal to enable on lengths that do not fit the robot")
+    g.add_argument("--force", nargs=3, type=float, metavar=("FX", "FY", "FZ"),
+                   help="constant operator force, base frame, N (overrides the scenario's)")
+    g.add_argument("--plant", choices=("kinematic", "dynamic"), default="kinematic",
+                   help="kinematic: reels with a first-order lag (default); dynamic: the "
+                   "scenario's robot with mass, elastic cables, drive friction and the "
+                   "operator (plant: !DynamicReels; its settings from the scenario's plant "
+                   "when that is one)")
+    g.add_argument("--time-constant", type=float, default=None,
+                   help="reel velocity lag, s (default: 0.02; kinematic plant only)")
+    n = p.add_argument_group("network")
+    n.add_argument("--address", default=None,
+                   help="address to listen on (default: 127.0.0.1, or the scenario's)")
+    n.add_argument("--port", type=int, default=None,
+                   help=f"UDP port to listen on (default: {DEFAULT_BRIDGE_PORT}, or the "
+                   "scenario's)")
+    n.add_argument("--controller", metavar="ADDRESS:PORT",
+                   help="send statuses only there and ignore commands from anyone else "
+                   "(default: answer the sender of the latest valid command)")
+    n.add_argument("--period", type=float, default=0.002, help="status period, s (default 0.002)")
+    n.add_argument("--command-timeout", type=float, default=0.05,
+                   help="raise COMMAND_TIMEOUT when enabled and no command came for this "
+                   "long, s (default 0.05)")
+    n.add_argument("--duration", type=float, default=None, help="stop after this long, s")
+    n.add_argument("--rt-priority", type=int, default=0, metavar="N",
+                   help="run under SCHED_FIFO at priority N (1..99; needs root or "
+                   "CAP_SYS_NICE), as a real bridge's firmware would; default 0: normal")
+    f = p.add_argument_group("fault injection (from --fault-after s after the first enable)")
+    f.add_argument("--seed", type=int, default=0, help="random seed of the impairments")
+    f.add_argument("--drop", type=float, default=0.0, help="share of datagrams dropped")
+    f.add_argument("--delay", type=float, default=0.0, help="extra status latency, s")
+    f.add_argument("--duplicate", type=float, default=0.0, help="share of statuses sent twice")
+    f.add_argument("--reorder", type=float, default=0.0, help="share of statuses reordered")
+    f.add_argument("--corrupt", type=float, default=0.0, help="share of statuses corrupted")
+    f.add_argument("--freeze", action="store_true", help="repeat the last status forever")
+    f.add_argument("--nan", action="store_true", help="report cable 1's length as NaN")
+    f.add_argument("--stop", action="store_true", help="stop sending statuses")
+    f.add_argument("--fault-bits", type=lambda s: int(s, 0), default=0,
+                   help="raise these fault bits, e.g. 0x1 for ESTOP (see PROTOCOL.md)")
+    f.add_argument("--fault-after", type=float, default=0.0,
+                   help="seconds after the first enabling command before faults start")
+    return p
+
+
+def build_server(args, log=None) -> ReelBridgeServer:
+    """The server described by parsed command-line arguments; `log` as ReelBridgeServer's."""
+    from cdpm_drake.robot import load_robot
+
+    force = None
+    address, port = "127.0.0.1", DEFAULT_BRIDGE_PORT
+    if args.scenario:
+        from cdpm_drake.config import load_scenario, scenario_operator, scenario_robot
+
+        scenario = load_scenario(args.scenario, args.scenario_text)
+        robot = scenario_robot(scenario)
+        start = scenario.initial_position
+        force = scenario_operator(scenario).force
+        address = getattr(scenario.plant, "address", address)
+        port = getattr(scenario.plant, "port", port)
+    else:
+        robot = load_robot(args.robot or "paper_7cable")
+        start = robot.workspace.center
+    if args.scenario and args.robot:
+        raise ValueError("give either --scenario or --robot, not both (the scenario names "
+                         "its robot)")
+    if args.start is not None:
+        start = args.start
+        box = robot.workspace
+        if not box.contains(start):
+            # The controller refuses to enable there (hardware.reels.start_pose_problem): a
+            # rehearsal from such a start rehearses nothing else.
+            raise ValueError(f"--start {[float(x) for x in start]!r} m is outside the workspace "
+                             f"box of robot {robot.name!r} (lower {box.lower.tolist()!r}, "
+                             f"upper {box.upper.tolist()!r} m); give a start inside it")
+    lengths = cable_lengths(robot, np.asarray(start, dtype=float))
+    for cable, metres in args.length_offset:
+        k = int(cable)
+        if not 1 <= k <= robot.num_cables:
+            raise ValueError(f"--length-offset cable {cable!r}: cables are numbered "
+                             f"1..{robot.num_cables}")
+        lengths[k - 1] += float(metres)
+    if args.force is not None:
+        constant = np.asarray(args.force, dtype=float)
+        force = lambda t, p, v: constant  # noqa: E731
+    controller = None
+    if args.controller:
+        host, _, cport = args.controller.rpartition(":")
+        if not host or not cport.isdigit():
+            raise ValueError(f"--controller must be ADDRESS:PORT, got {args.controller!r}")
+        controller = (host, int(cport))
+    faults = FaultPlan(drop=args.drop, delay=args.delay, duplicate=args.duplicate,
+                       reorder=args.reorder, corrupt=args.corrupt, freeze=args.freeze,
+                       nan=args.nan, stop=args.stop, fault_bits=args.fault_bits,
+                       after=args.fault_after)
+    if args.plant == "dynamic":
+        if args.time_constant is not None:
+            raise ValueError("--time-constant sets the kinematic plant's lag; the dynamic "
+                             "plant's drives come from the robot file's reel_drives section")
+        bridge = DynamicBridge(_dynamic_scenario(args, robot, start),
+                               length_offset=lengths - cable_lengths(robot, np.asarray(
+                                   start, dtype=float)))
+    else:
+        bridge = ReelBridge(robot, lengths, force=force, time_constant=0.02
+                            if args.time_constant is None else args.time_constant)
+    return ReelBridgeServer(bridge, address=(args.address or address,
+                                             args.port if args.port is not None else port),
+                            faults=faults, period=args.period, seed=args.seed,
+                            controller=controller, command_timeout=args.command_timeout,
+                            record=0, log=log)
+
+
+def _dynamic_scenario(args, robot, start):
+    """The resolved scenario of `--plant dynamic`: the scenario's (or, with --robot, a
+    scenario of that robot), at `start`, with --force as its operator, and a !DynamicReels
+    plant (the scenario's own when it has one)."""
+    import dataclasses as dc
+
+    from cdpm_drake.kernels.plant.operators import NoOperator, ScriptedOperator
+    from cdpm_drake.config import DynamicReels, Scenario, load_scenario, resolve_scenario
+
+    if args.scenario:
+        scenario = load_scenario(args.scenario, args.scenario_text)
+    else:
+        scenario = Scenario(robot=args.robot or "paper_7cable", swaps=[],
+                            operator=NoOperator())
+    plant = scenario.plant if isinstance(scenario.plant, DynamicReels) else DynamicReels()
+    operator = scenario.operator
+    if args.force is not None:
+        operator = ScriptedOperator(times=[0.0], forces=[[float(f) for f in args.force]])
+    scenario = dc.replace(scenario, plant=plant, operator=operator,
+                          initial_position=[float(x) for x in start])
+    resolved = resolve_scenario(scenario)
+    if resolved.robot.num_cables != robot.num_cables:  # pragma: no cover - same robot
+        raise ValueError("the scenario's robot changed under --plant dynamic")
+    return resolved
+
+
+def main(argv=None) -> int:
+    """Exit codes as `cdpm`'s: 0 done (--duration), 1 error (robot, scenario, cannot bind),
+    2 bad usage, 130 / 143 after Ctrl-C / SIGTERM (the summary is printed first)."""
+    from cdpm_drake.text import prefixed_log_records
+
+    with prefixed_log_records():
+        return _main(argv)
+
+
+def _main(argv) -> int:
+    from cdpm_drake.runs.interrupt import exit_code, terminate_raises
+    from cdpm_drake.robot import RobotError
+    from cdpm_drake.config import ScenarioError
+
+    parser = build_parser()
+    args = parser.parse_args(argv)
+    if args.duration is not None and not (args.duration > 0 and math.isfinite(args.duration)):
+        parser.error(f"--duration must be a number of seconds > 0, got {args.duration!r}")
+
+    def say(text):
+        print(f"cdpm-reel-emulator: {text}", flush=True)
+
+    try:
+        set_realtime_priority(args.rt_priority)
+        server = build_server(args, log=say)
+    except (RobotError, ScenarioError, OSError) as e:
+        why = e.strerror if isinstance(e, OSError) and e.strerror else e
+        print(f"cdpm-reel-emulator: error: {why}", file=sys.stderr)
+        return 1
+    except ValueError as e:  # a flag's value
+        print(f"cdpm-reel-emulator: error: {e}", file=sys.stderr)
+        return 2
+    # A full garbage collection scans every object alive, modules included (19 ms measured
+    # with pydrake loaded), long enough to trip the controller's watchdog; what exists now
+    # lives for the whole run, so take it out of the collector's sight.
+    gc.freeze()
+    host, port = server.address
+    robot = server.bridge.robot
+    say(f"robot {robot.name!r} ({robot.num_cables} cables) on {host}:{port}, period "
+        f"{server.period * 1e3:g} ms, {server.bridge.describe()}, start "
+        f"{vector_text(server.bridge.platform())} m"
+        + (f", faults {server.faults.describe()} from {server.faults.after:g} s after the "
+           "first enable (one session)" if server.faults.any else ""))
+    code = 0
+    with terminate_raises():
+        try:
+            server.run(duration=args.duration)
+        except KeyboardInterrupt as e:
+            code = exit_code(e)
+        finally:
+            server.stop()
+            now = time.monotonic() - server.start_wall if server.start_wall else 0.0
+            if server.session_open:
+                server.close_session(now, "the emulator stopped")
+            c = server.counters
+            rejected = {r: n for r, n in c["rejected"].items() if n}
+            say(f"{c['commands_received']} commands received ({server.session} controller "
+                f"session(s)), rejected {count_by_reason(rejected)}, {c['statuses_sent']} "
+                f"statuses sent, commands lost {server.commands_lost}, faults "
+                f"{server.bridge.faults:#06x}")
+            say(server.compute_summary())
+    return code
