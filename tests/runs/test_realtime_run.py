@@ -501,13 +501,15 @@ def test_cdpm_run_against_the_emulated_dynamic_plant(tmp_path):
     the comparison is loose: the estimated position
     within 15 mm of the simulated true one (4.5 mm measured on a loaded host), the tensions'
     largest value within 10 N of the simulated one. A run whose ticks show a host stall of
-    more than 20 ms (the emulator's plant then runs on with an old command) and misses is
-    repeated, up to three times in all."""
+    more than 20 ms (the emulator's plant then runs on with an old command) and misses, or
+    whose emulator fell behind its own clock (fewer than 900 of the 1000 driven ticks: a host
+    too busy to run the plant at 500 Hz), is repeated, up to three times in all."""
     import re
 
     sim = simulate(scenario=load_scenario("exp2_interaction", "plant: !DynamicReels {}"),
                    duration=2.0).log
     assert np.linalg.norm(sim["p_true"][-1] - sim["p_true"][0]) > 0.15
+    session = re.compile(r"session 1: dynamic plant over (\d+) ticks")
     for attempt in range(3):
         run_dir = tmp_path / f"run{attempt}"
         code, emulator_code, out, err = _run_against_dynamic_emulator(run_dir)
@@ -515,7 +517,9 @@ def test_cdpm_run_against_the_emulated_dynamic_plant(tmp_path):
         stalled = log is not None and len(log["time"]) > 1 and np.diff(log["wall"]).max() > 0.02
         error = (np.linalg.norm(log["p"] - sim["p_true"][:len(log["p"])], axis=1).max()
                  if log is not None else np.inf)
-        if code == 0 and error < 0.015 or not stalled:
+        driven = session.search(out)
+        behind = driven is not None and int(driven.group(1)) < 900
+        if (code == 0 and error < 0.015 or not stalled) and not behind:
             break
     assert emulator_code == 130, err  # Ctrl-C: the summary was printed first
     assert code == 0, out
