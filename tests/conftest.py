@@ -97,6 +97,22 @@ def highs_t_star(W, w):
     return -res.fun
 
 
+def highs_margin(W, w, floor, ceiling):
+    """kappa = max s s.t. W T + w = 0, floor + s <= T_i <= ceiling - s, by HiGHS (-inf when
+    infeasible for every s)."""
+    import numpy as np
+    from scipy.optimize import linprog
+
+    m = W.shape[1]
+    A_ub = np.vstack([np.hstack([-np.eye(m), np.ones((m, 1))]),
+                      np.hstack([np.eye(m), np.ones((m, 1))])])
+    b_ub = np.r_[-floor * np.ones(m), ceiling * np.ones(m)]
+    res = linprog(np.r_[np.zeros(m), -1.0], A_ub=A_ub, b_ub=b_ub,
+                  A_eq=np.hstack([W, np.zeros((W.shape[0], 1))]), b_eq=-w,
+                  bounds=[(None, None)] * (m + 1), method="highs")
+    return -res.fun if res.status == 0 else -np.inf
+
+
 def default_signals():
     """For a child process, before exec: SIGINT and SIGTERM at their defaults. A pytest
     started in the background by a shell without job control has SIGINT ignored; its children

@@ -178,7 +178,7 @@ def test_info_says_each_robot_warning_once_and_on_the_grid_it_prints(capsys, tmp
     # paper_7cable's attachment points before issue 18 (held on a quarter of the box), with
     # one pair ignored: loading logs both warnings; `info` says each once, in its report, and
     # the share in the statics warning is the one of the grid the report prints.
-    from test_robot_statics import PRE_18
+    from helpers_robots import PRE_18
 
     from conftest import to_yaml
 

@@ -1444,12 +1444,12 @@ def test_return_speed_brings_a_lost_margin_back_at_that_speed():
 def _holdable_share(robot, p, force, floor):
     """kappa at p (level platform) with the hand force at the handle, by HiGHS (the margin
     of the floor and a 100 N ceiling, tests/kernels/test_kinetostatics.py)."""
-    from test_kinetostatics import _highs_margin
+    from conftest import highs_margin
 
     from cdpm_drake.kernels.tension import gravity_wrench, wrench_matrix
 
     w = gravity_wrench(robot.dynamics.mass, force, robot.dynamics.handle)
-    return _highs_margin(wrench_matrix(robot, p), w, floor, 100.0)
+    return highs_margin(wrench_matrix(robot, p), w, floor, 100.0)
 
 
 @covers("Scenario.safety_filter.kinetostatic", "Scenario.safety_filter.kinetostatic_floor")

@@ -16,6 +16,7 @@ import numpy as np
 import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
+from helpers_robots import crossing_robot
 
 from cdpm_drake.kernels.interference import (InterferenceParams, distance_gradient, initial_side,
                                      interference_force, logistic_intensity, pair_distances,
@@ -655,19 +656,6 @@ def test_side_rule_transitions():
         paper = load_robot("paper_7cable")
         interference_force(paper, paper.workspace.center,
                             InterferenceParams.uniform(paper, 0.05, 0.06, 2.0), np.zeros(7))
-
-
-def crossing_robot():
-    """Cables 1 and 2 cross at p = 0 as the platform moves along x.
-
-    Cable 1 runs from B1 = p to A1 = (0, 2, 0); cable 2 from B2 = p + (1, 1, 1) to
-    A2 = (-3, 1, -3). At p = (x, 0, 0) cable 1 crosses the plane z = 0, y = 1 at x/2 (s = 1/2)
-    and cable 2 crosses it at 3x/4 (t = 1/4), so they meet only at x = 0, at interior points.
-    Cable 3 keeps the robot valid and stays far away.
-    """
-    return Robot(name="crossing", reels=np.array([[0, 2, 0], [-3, 1, -3], [0, -3, 0.0]]),
-                 attachments=np.array([[0, 0, 0], [1, 1, 1], [0, -0.3, 0.0]]),
-                 workspace=Workspace(np.array([-1.0, -1, -1]), np.array([1.0, 1, 1])))
 
 
 def test_scripted_crossing_flags_and_pushes_back():

@@ -251,7 +251,7 @@ def test_floor_never_weakens_a_crossed_pair():
     # The scripted crossing of test_interference.py (cables cross at x = 0, s = 1/2,
     # t = 1/4), with the largest floor allowed: before the crossing the pair's push is
     # scaled by |t - s| / 1 < 1, after it the pair pushes back at full F_u = 2 N.
-    from test_interference import crossing_robot
+    from helpers_robots import crossing_robot
 
     r = crossing_robot()
     k = r.pair_position(1, 2)

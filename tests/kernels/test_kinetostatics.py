@@ -7,7 +7,7 @@ import pytest
 from scipy.optimize import linprog
 
 from cdpm_drake.kernels.tension import max_min_lines
-from conftest import highs_t_star
+from conftest import highs_margin, highs_t_star
 
 
 def _highs_max_min(a, C):
@@ -46,19 +46,6 @@ def test_max_min_lines_equals_the_linear_program(k):
 # --- the margin of a pose ------------------------------------------------------------------------
 
 
-def _highs_margin(W, w, floor, ceiling):
-    """kappa = max s s.t. W T + w = 0, floor + s <= T_i <= ceiling - s, by HiGHS (-inf when
-    infeasible for every s)."""
-    m = W.shape[1]
-    A_ub = np.vstack([np.hstack([-np.eye(m), np.ones((m, 1))]),
-                      np.hstack([np.eye(m), np.ones((m, 1))])])
-    b_ub = np.r_[-floor * np.ones(m), ceiling * np.ones(m)]
-    res = linprog(np.r_[np.zeros(m), -1.0], A_ub=A_ub, b_ub=b_ub,
-                  A_eq=np.hstack([W, np.zeros((W.shape[0], 1))]), b_eq=-w,
-                  bounds=[(None, None)] * (m + 1), method="highs")
-    return -res.fun if res.status == 0 else -np.inf
-
-
 def _robot(name, swaps=()):
     from cdpm_drake.robot import load_robot, resolve_robot_path
 
@@ -85,7 +72,7 @@ def test_margin_equals_the_linear_program(name):
         w = gravity_wrench(robot.dynamics.mass, F, R @ robot.dynamics.handle)
         kappa, t_star = margin(robot.reels, robot.attachments, 6, p, R, w, 3.0, 100.0, scratch)
         W = wrench_matrix(robot, p, R)
-        ref = _highs_margin(W, w, 3.0, 100.0)
+        ref = highs_margin(W, w, 3.0, 100.0)
         if np.isfinite(ref):
             finite += 1
             assert kappa == pytest.approx(ref, abs=1e-6)
@@ -119,7 +106,7 @@ def _highs_kappa(robot, p, F, floor=3.0):
     from cdpm_drake.kernels.tension import gravity_wrench, wrench_matrix
 
     w = gravity_wrench(robot.dynamics.mass, F, robot.dynamics.handle)
-    return _highs_margin(wrench_matrix(robot, np.asarray(p, dtype=float)), w, floor, 100.0)
+    return highs_margin(wrench_matrix(robot, np.asarray(p, dtype=float)), w, floor, 100.0)
 
 
 def test_the_block_s_margin_gradient_is_the_linear_program_s_forward_difference():

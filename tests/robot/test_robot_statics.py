@@ -16,6 +16,7 @@ from cdpm_drake.robot import STATICS_FLOOR, STATICS_GRID, load_robot, robot_stat
 from cdpm_drake.kernels.tension import gravity_wrench, grid_points, step_grid, wrench_matrix
 
 from conftest import highs_t_star, to_yaml
+from helpers_robots import PRE_18
 
 
 
@@ -57,10 +58,6 @@ def test_cube_8cable_has_the_dynamic_plants_sections():
 
 # --- validation on load ------------------------------------------------------------------------
 
-# paper_7cable's attachment points before issue 18 (a test copy): held on 28 % of the box.
-PRE_18 = [[-0.0664, 0.0862, 0.1365], [0.15, 0.15, 0.15], [-0.0942, 0.1334, -0.15],
-          [0.15, 0.15, -0.15], [-0.1473, -0.1367, -0.15], [0.15, -0.15, -0.15],
-          [-0.0025, -0.15, 0.15]]
 # cube_8cable before issue 18: each cable at its own corner of a 0.2 m cube: rank 5.
 CORNER_CUBE = [[x, y, z] for z in (-0.1, 0.1) for x, y in ((-0.1, -0.1), (0.1, -0.1),
                                                           (0.1, 0.1), (-0.1, 0.1))]

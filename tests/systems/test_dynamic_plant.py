@@ -608,7 +608,7 @@ def test_the_dynamic_figures_mark_a_fault_like_the_others(dynamic_log):
 
 
 def test_meshcat_draws_the_true_rotated_platform_and_slack_cables(dynamic_log):
-    from test_meshcat_view import prop, transform
+    from helpers_meshcat import prop, transform
 
     from cdpm_drake.views import meshcat_view as mv
 
@@ -679,7 +679,7 @@ def test_the_plant_diagram_graphviz_is_stable_across_builds():
 
 def test_the_live_view_follows_the_true_platform_of_a_dynamic_run(dynamic_log):
     # The ground truth sits in loggers inside the plant: the live view finds them there.
-    from test_meshcat_view import transform
+    from helpers_meshcat import transform
 
     from cdpm_drake.runs.latest_signals import latest_signals
     from cdpm_drake.views import meshcat_view as mv

@@ -1,0 +1,25 @@
+"""Robots built for tests: geometry whose closest points and crossings are known by hand, and
+older attachment points of the shipped robots."""
+
+import numpy as np
+
+from cdpm_drake.robot import Robot, Workspace
+
+# paper_7cable's attachment points before they were calibrated for holding (a test copy):
+# the level platform is held on 28 % of the box.
+PRE_18 = [[-0.0664, 0.0862, 0.1365], [0.15, 0.15, 0.15], [-0.0942, 0.1334, -0.15],
+          [0.15, 0.15, -0.15], [-0.1473, -0.1367, -0.15], [0.15, -0.15, -0.15],
+          [-0.0025, -0.15, 0.15]]
+
+
+def crossing_robot():
+    """Cables 1 and 2 cross at p = 0 as the platform moves along x.
+
+    Cable 1 runs from B1 = p to A1 = (0, 2, 0); cable 2 from B2 = p + (1, 1, 1) to
+    A2 = (-3, 1, -3). At p = (x, 0, 0) cable 1 crosses the plane z = 0, y = 1 at x/2 (s = 1/2)
+    and cable 2 crosses it at 3x/4 (t = 1/4), so they meet only at x = 0, at interior points.
+    Cable 3 keeps the robot valid and stays far away.
+    """
+    return Robot(name="crossing", reels=np.array([[0, 2, 0], [-3, 1, -3], [0, -3, 0.0]]),
+                 attachments=np.array([[0, 0, 0], [1, 1, 1], [0, -0.3, 0.0]]),
+                 workspace=Workspace(np.array([-1.0, -1, -1]), np.array([1.0, 1, 1])))
