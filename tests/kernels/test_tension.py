@@ -250,7 +250,7 @@ ISSUE_18 = [
 
 
 @pytest.mark.parametrize("swaps,p,t_star,slack", ISSUE_18)
-def test_t_star_reproduces_issue_18s_measurements(swaps, p, t_star, slack):
+def test_t_star_reproduces_the_measured_holding_tensions(swaps, p, t_star, slack):
     robot = _swapped(PRE_18, swaps)
     W, w = wrench_matrix(robot, p), gravity_wrench(2.5)
     assert holding_tension(robot, p) == pytest.approx(t_star, abs=0.005)
@@ -280,7 +280,7 @@ def test_the_pose_where_the_old_solver_said_infeasible_is_held_at_any_floor():
         np.testing.assert_allclose(W @ d.tensions, -w, atol=1e-9 * d.tensions.max())
 
 
-def test_the_pre_18_robot_holds_its_platform_on_issue_18s_share_of_the_box():
+def test_the_uncalibrated_robot_holds_its_platform_on_its_measured_share_of_the_box():
     # Issue 18: unswapped, >= 5 N on "only 28 %" of the box on a 5 cm grid (51 x 65 x 43).
     pts = step_grid(PRE_18.workspace.lower, PRE_18.workspace.upper, 0.05)
     assert pts.shape == (51 * 65 * 43, 3)
