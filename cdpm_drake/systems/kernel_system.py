@@ -1,12 +1,12 @@
 """The generic stateless block: one LeafSystem that calls one compiled kernel per tick.
 
-Every block of the controller is built on it (systems/__init__.py): `KernelSystem` is the
-LeafSystem (one stacked input, one output, one kernel call), `build_kernel_block` adds it
-with its memory (a C++ one-tick delay) and its wiring (one C++ Selector that stacks the
-block's inputs and the memory and splits the result).
+Every Python LeafSystem of the controller is a `KernelSystem` (one stacked input, one
+output, one kernel call); `build_kernel_block` adds one with its memory (a C++ one-tick
+delay) and its wiring (one C++ Selector that stacks the block's inputs and the memory and
+splits the result). The plants' steps (plants/) are not: they read the time, for the
+person's force at the tick's time.
 """
 
-import numpy as np
 from pydrake.systems.framework import LeafSystem
 
 from cdpm_drake.kernels.call import owned
