@@ -14,21 +14,25 @@ from pydrake.systems.primitives import Adder, ConstantVectorSource, VectorLogSin
 from cdpm_drake.config import (DynamicReels as DynamicReelsConfig, ResolvedScenario, Scenario,
                        SimulatedReels as SimulatedReelsConfig, check_dynamic_reels,
                        resolve_scenario)
-from cdpm_drake.systems import WorkspaceWallForce, add_simulated_world
-from cdpm_drake.systems.plants.simulated_reels import add_measured_force
-from cdpm_drake.systems.wiring import (FUSED_DELAY, FUSED_WIRING, FlatBlock, fuse_delays, fuse_wiring,
-                             wiring)
 from cdpm_drake.systems.admittance import ADMITTANCE_MAIN, build_admittance
 from cdpm_drake.systems.force_sensor import FORCE_SENSOR_MAIN, build_force_sensor
 from cdpm_drake.systems.forward_kinematics import FORWARD_KINEMATICS_MAIN, build_forward_kinematics
 from cdpm_drake.systems.interference_force import INTERFERENCE_FORCE_MAIN, build_interference_force
 from cdpm_drake.systems.jacobian_mapping import JACOBIAN_MAPPING_MAIN, build_jacobian_mapping
+from cdpm_drake.systems.kernel_system import KERNEL_BLOCK_MAIN
+from cdpm_drake.systems.kinetostatic_force import build_kinetostatic_force
+from cdpm_drake.systems.model_monitor import build_model_monitor
+from cdpm_drake.systems.orientation_hold import build_orientation_hold
+from cdpm_drake.systems.plants.simulated_reels import add_measured_force, add_simulated_world
+from cdpm_drake.systems.pose_forward_kinematics import build_pose_forward_kinematics
+from cdpm_drake.systems.pose_jacobian_mapping import build_pose_jacobian_mapping
+from cdpm_drake.systems.posed_interference_force import build_posed_interference_force
+from cdpm_drake.systems.safety_filter import build_safety_filter
 from cdpm_drake.systems.safety_limits import SAFETY_LIMITS_MAIN, build_safety_limits
-from cdpm_drake.systems.safety_blocks import (MAIN as SAFETY_MAIN, build_kinetostatic_force,
-                                    build_model_monitor, build_safety_filter)
-from cdpm_drake.systems.pose_blocks import (MAIN as POSE_MAIN, build_orientation_hold,
-                                  build_pose_forward_kinematics, build_pose_jacobian_mapping,
-                                  build_posed_interference_force, build_tension_distribution)
+from cdpm_drake.systems.tension_distribution import build_tension_distribution
+from cdpm_drake.systems.wall_force import WorkspaceWallForce
+from cdpm_drake.systems.wiring import (FUSED_DELAY, FUSED_WIRING, FlatBlock, fuse_delays,
+                                       fuse_wiring, wiring)
 
 # Logged signals: (logger name suffix, system name, output port name). Every signal of the
 # paper's Figs. 10, 11, 13, 14 and 16, and what the limits and reels did with them.
@@ -127,7 +131,8 @@ def build_diagram(scenario: Scenario | ResolvedScenario,
     lengths = plant.GetOutputPort("cable_lengths")
     if full:
         fk = blocks["forward_kinematics"] = FlatBlock(
-            builder, "forward_kinematics", POSE_MAIN, lambda b: build_pose_forward_kinematics(
+            builder, "forward_kinematics", KERNEL_BLOCK_MAIN,
+            lambda b: build_pose_forward_kinematics(
                 b, robot, initial_position=p0, max_residual=resolved.fk_max_residual,
                 EA=robot.dynamics.EA if tension_control else 0.0, time_step=T))
         R_WP = fk.GetOutputPort("R_WP")
@@ -145,7 +150,7 @@ def build_diagram(scenario: Scenario | ResolvedScenario,
     if resolved.interference is not None and options.interference:
         if full:
             interference = blocks["interference_force"] = FlatBlock(
-                builder, "interference_force", POSE_MAIN,
+                builder, "interference_force", KERNEL_BLOCK_MAIN,
                 lambda b: build_posed_interference_force(b, robot, resolved.interference,
                                                          time_step=T))
             interference.connect_input(R_WP, "R_WP")
@@ -159,7 +164,7 @@ def build_diagram(scenario: Scenario | ResolvedScenario,
     hold = None
     if full:
         hold = blocks["orientation_hold"] = FlatBlock(
-            builder, "orientation_hold", POSE_MAIN, lambda b: build_orientation_hold(
+            builder, "orientation_hold", KERNEL_BLOCK_MAIN, lambda b: build_orientation_hold(
                 b, gain=controller.orientation_gain, time_step=T))
         hold.connect_input(R_WP, "R_WP")
     # Beyond the paper: the kinetostatic limit, for the safety filter's barrier and its felt
@@ -171,7 +176,7 @@ def build_diagram(scenario: Scenario | ResolvedScenario,
     kinetostatic = None
     if kinetostatic_on:
         kinetostatic = blocks["kinetostatic_force"] = FlatBlock(
-            builder, "kinetostatic_force", SAFETY_MAIN, lambda b: build_kinetostatic_force(
+            builder, "kinetostatic_force", KERNEL_BLOCK_MAIN, lambda b: build_kinetostatic_force(
                 b, robot, params=_kinetostatic_params(resolved),
                 full_pose=full, time_step=T))
         kinetostatic.connect_input(p_WP, "p_WP")
@@ -317,7 +322,7 @@ def _add_safety_filter(builder, blocks, resolved, velocity_desired, omega_desire
         return_speed=f.return_speed, full_pose=full, kinetostatic=kinetostatic is not None,
         box=scenario.limits.virtual_wall, smoothing=float(f.position_smoothing))
     block = blocks["safety_filter"] = FlatBlock(
-        builder, "safety_filter", SAFETY_MAIN, lambda b: build_safety_filter(
+        builder, "safety_filter", KERNEL_BLOCK_MAIN, lambda b: build_safety_filter(
             b, robot, d_min=resolved.d_min, params=params, full_pose=full, time_step=T))
     block.connect_input(velocity_desired, "velocity_desired")
     block.connect_input(p_WP, "p_WP")
@@ -361,7 +366,7 @@ def _add_model_monitor(builder, blocks, resolved, lengths, p_WP, R_WP, F_H, T):
         full_pose=R_WP is not None, rows=wrench_rows(robot),
         holdable=float(mon.holdable), slack_ticks=mon.slack_ticks)
     block = blocks["model_monitor"] = FlatBlock(
-        builder, "model_monitor", SAFETY_MAIN, lambda b: build_model_monitor(
+        builder, "model_monitor", KERNEL_BLOCK_MAIN, lambda b: build_model_monitor(
             b, robot, params=params, full_pose=R_WP is not None, estimate=estimate,
             time_step=T))
     block.connect_input(lengths, "cable_lengths")
@@ -388,7 +393,7 @@ def _add_pose_blocks(builder, blocks, resolved, fk, force_sensor, lengths, veloc
     R_WP = fk.GetOutputPort("R_WP")
     tension_control = controller.tension_control
     mapping = blocks["jacobian_mapping"] = FlatBlock(
-        builder, "jacobian_mapping", POSE_MAIN, lambda b: build_pose_jacobian_mapping(
+        builder, "jacobian_mapping", KERNEL_BLOCK_MAIN, lambda b: build_pose_jacobian_mapping(
             b, robot, length_gain=controller.length_gain,
             integral_gain=LENGTH_INTEGRAL_GAIN, tension=tension_control, time_step=T,
             dead_band=resolved.dead_band))
@@ -407,7 +412,7 @@ def _add_pose_blocks(builder, blocks, resolved, fk, force_sensor, lengths, veloc
     start = tension_distribution(wrench_matrix(robot, p0), gravity_wrench(robot.dynamics.mass),
                                  float(controller.min_tension)).tensions
     tension = blocks["tension_distribution"] = FlatBlock(
-        builder, "tension_distribution", POSE_MAIN, lambda b: build_tension_distribution(
+        builder, "tension_distribution", KERNEL_BLOCK_MAIN, lambda b: build_tension_distribution(
             b, robot, min_tension=controller.min_tension,
             max_tension=controller.max_tension, tension_floor=controller.tension_floor,
             slew_rate=TENSION_SLEW_RATE, fall_rate=TENSION_FALL_RATE,

@@ -220,7 +220,7 @@ def condition_number(robot, p) -> float:
 
 @_jit
 def simulated_reel_step(offsets, time_step, lag, max_reel_speed, command, state, out):
-    """One tick of the simulated reels (systems.SimulatedReels), compiled.
+    """One tick of the simulated reels (plants.simulated_reels.SimulatedReelsSystem), compiled.
 
     state and out (2 m + 6,): cable lengths (m), platform p (3, m), its velocity (3, m/s),
     lagged reel speeds (m, m/s). The command (m,) m/s is scaled down to max_reel_speed (all

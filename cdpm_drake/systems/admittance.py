@@ -36,7 +36,7 @@ def make_anti_windup_admittance(mass: float, damping: float, time_step: float):
                         D=np.zeros((3, 6)), time_period=time_step)
 
 
-class Admittance(Diagram):
+class AdmittanceSystem(Diagram):
     """The admittance of Fig. 5 with anti-windup: v_{k+1} = A_d u_k + B_d F_d,k, where A_d,
     B_d are `make_admittance`'s zero-order-hold matrices and u_k is the velocity actually
     commanded at tick k (after the safety limits). All C++: a Selector and a discrete
@@ -69,7 +69,7 @@ ADMITTANCE_MAIN = "dynamics"
 
 
 def build_admittance(builder, mass: float, damping: float, time_step: float):
-    """Admittance's systems and exported ports, into `builder` (a DiagramBuilder or a
+    """AdmittanceSystem's systems and exported ports, into `builder` (a DiagramBuilder or a
     FlatBlock)."""
     inputs = builder.AddNamedSystem("inputs", stack([3, 3]))
     dynamics = builder.AddNamedSystem("dynamics", make_anti_windup_admittance(

@@ -1,18 +1,20 @@
 """The force-sensor source of Fig. 5: sensor range and the sliding-average filter."""
 
 import numpy as np
-from pydrake.systems.framework import Diagram, LeafSystem
+from pydrake.systems.framework import Diagram
 from pydrake.systems.primitives import LinearSystem
 
 from cdpm_drake.kernels.call import bind, owned
 from cdpm_drake.kernels.force_sensor import clip_into, clip_to_sensor_range
+from cdpm_drake.systems.kernel_system import KernelSystem
 from cdpm_drake.systems.wiring import sub_diagram
 
 __all__ = ["ForceSensorSource", "SensorRange", "clip_to_sensor_range", "sliding_average"]
 
 
-class SensorRange(LeafSystem):
-    """The sensor's measuring range (`sensor.clip_to_sensor_range`), per sample; stateless.
+class SensorRange(KernelSystem):
+    """The sensor's measuring range (`force_sensor.clip_to_sensor_range`), per sample;
+    stateless.
 
     .. pydrake_system::
 
@@ -24,25 +26,13 @@ class SensorRange(LeafSystem):
     """
 
     def __init__(self, *, axial_axis, axial_range, transverse_range):
-        super().__init__()
         axis = np.asarray(axial_axis, dtype=float)
-        self._axis = owned(axis / np.linalg.norm(axis))
-        self._axial_range = float(axial_range)
-        self._transverse_range = float(transverse_range)
-        self._measured = self.DeclareVectorInputPort("measured_force", 3)
+        axis = owned(axis / np.linalg.norm(axis))
+        axial, transverse = float(axial_range), float(transverse_range)
         # Compiled (or loaded) now, not in the first tick.
-        clip = bind(clip_into, np.zeros(3), self._axis, self._axial_range,
-                    self._transverse_range, np.empty(3))
-        # The tick's callback is a closure over locals, not a method reading self: attribute
-        # lookups on a pybind LeafSystem cost ~0.2 us each (scripts/bench/count_instructions.py).
-        axis, axial, transverse = self._axis, self._axial_range, self._transverse_range
-        measured = self._measured.Eval
-
-        def calc_clipped_force(context, output):
-            clip(measured(context), axis, axial, transverse, output.get_mutable_value())
-
-        self.DeclareVectorOutputPort("clipped_force", 3, calc_clipped_force,
-                                     prerequisites_of_calc={self._measured.ticket()})
+        clip = bind(clip_into, np.zeros(3), axis, axial, transverse, np.empty(3))
+        super().__init__(3, 3, clip, after=(axis, axial, transverse),
+                         input_name="measured_force", output_name="clipped_force")
 
 
 def sliding_average(window: int, time_step: float) -> LinearSystem:

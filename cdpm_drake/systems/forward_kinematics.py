@@ -1,14 +1,15 @@
 """The forward-kinematics block of Fig. 5: cable lengths back to the platform position."""
 
 import numpy as np
-from pydrake.systems.framework import Diagram, LeafSystem
+from pydrake.systems.framework import Diagram
 
 from cdpm_drake.kernels.call import bind, owned
 from cdpm_drake.kernels.kinematics import forward_kinematics, gauss_newton_warm_stacked
+from cdpm_drake.systems.kernel_system import KernelSystem
 from cdpm_drake.systems.wiring import stack, sub_diagram, unit_delay
 
 
-class ForwardKinematicsSolve(LeafSystem):
+class ForwardKinematicsSolve(KernelSystem):
     """p from the lengths, warm-started at the previous estimate; stateless. Its inputs
     arrive stacked by a C++ Selector (one evaluation from Python, not two).
 
@@ -22,29 +23,21 @@ class ForwardKinematicsSolve(LeafSystem):
     """
 
     def __init__(self, robot, *, max_residual):
-        super().__init__()
-        self._robot = robot
-        self._offsets = owned(robot.attachments - robot.reels)
-        self._max_residual = float(max_residual)
-        self._m = m = robot.num_cables
-        self._inputs = self.DeclareVectorInputPort("inputs", m + 3)
+        m = robot.num_cables
+        offsets = owned(robot.attachments - robot.reels)
+        residual = float(max_residual)
         # Compiled (or loaded) now, not in the first tick.
-        solve = bind(gauss_newton_warm_stacked, self._offsets, np.ones(m + 3), 1e-10,
-                     self._max_residual, 8, np.empty(3))
-        # The tick's callback is a closure over locals, not a method reading self: attribute
-        # lookups on a pybind LeafSystem cost ~0.2 us each (scripts/bench/count_instructions.py).
-        offsets, residual, inputs = self._offsets, self._max_residual, self._inputs.Eval
+        solve = bind(gauss_newton_warm_stacked, offsets, np.ones(m + 3), 1e-10, residual, 8,
+                     np.empty(3))
 
-        def calc_p_WP(context, output):
-            x = inputs(context)
-            out = output.get_mutable_value()
-            # Plain Gauss-Newton from a tick away converges in two or three steps; anything
-            # else (and every error message) goes through kinematics.forward_kinematics.
-            if not solve(offsets, x, 1e-10, residual, 8, out):
-                out[:] = forward_kinematics(robot, x[:m], p_guess=x[m:], max_residual=residual)
+        def failed(status, x, out):
+            # Plain Gauss-Newton from a tick away converges in two or three steps; where it
+            # does not, the damped solver (and every error message) of
+            # kinematics.forward_kinematics.
+            out[:] = forward_kinematics(robot, x[:m], p_guess=x[m:], max_residual=residual)
 
-        self.DeclareVectorOutputPort("p_WP", 3, calc_p_WP,
-                                     prerequisites_of_calc={self._inputs.ticket()})
+        super().__init__(m + 3, 3, solve, (offsets,), (1e-10, residual, 8), ok=True,
+                         failed=failed, output_name="p_WP")
 
 
 class ForwardKinematicsEstimator(Diagram):

@@ -1,17 +1,18 @@
 """The interference-force block of Fig. 5 (section 4, eqs. 23-30)."""
 
 import numpy as np
-from pydrake.systems.framework import Diagram, LeafSystem
+from pydrake.systems.framework import Diagram
 
 from cdpm_drake.kernels.interference import interference_tick_stacked, pair_geometry, result_layout
 from cdpm_drake.kernels.call import bind, owned
+from cdpm_drake.systems.kernel_system import KernelSystem
 from cdpm_drake.systems.wiring import note_piece, sub_diagram, unit_delay, wiring
 
 # The ports of the block, in the order of the flat result (interference.result_layout).
 OUTPUTS = ("F_int", "pair_distances", "active", "crossed", "side")
 
 
-class InterferencePairs(LeafSystem):
+class InterferencePairs(KernelSystem):
     """Every watched pair at p, in one compiled evaluation per tick; stateless.
 
     The output is `interference.result_layout`'s flat vector: F_int (3), distances, active,
@@ -29,25 +30,13 @@ class InterferencePairs(LeafSystem):
     """
 
     def __init__(self, robot, params):
-        super().__init__()
         P = robot.num_pairs
-        self._geo = owned(pair_geometry(robot))
-        self._par = owned(params.packed)
-        self._floor, self._F_max = float(params.gradient_floor), float(params.F_max)
-        self._inputs = self.DeclareVectorInputPort("inputs", 3 + P)
+        geo, par = owned(pair_geometry(robot)), owned(params.packed)
+        floor, F_max = float(params.gradient_floor), float(params.F_max)
         # Compiled (or loaded) now, not in the first tick.
-        tick = bind(interference_tick_stacked, self._geo, self._par, self._floor, self._F_max,
-                    np.zeros(3 + P), np.empty(3 + 13 * P))
-        # The tick's callback is a closure over locals, not a method reading self: attribute
-        # lookups on a pybind LeafSystem cost ~0.2 us each (scripts/bench/count_instructions.py).
-        geo, par, floor, F_max, inputs = (self._geo, self._par, self._floor, self._F_max,
-                                          self._inputs.Eval)
-
-        def calc_result(context, output):
-            tick(geo, par, floor, F_max, inputs(context), output.get_mutable_value())
-
-        self.DeclareVectorOutputPort("result", 3 + 13 * P, calc_result,
-                                     prerequisites_of_calc={self._inputs.ticket()})
+        tick = bind(interference_tick_stacked, geo, par, floor, F_max, np.zeros(3 + P),
+                    np.empty(3 + 13 * P))
+        super().__init__(3 + P, 3 + 13 * P, tick, (geo, par, floor, F_max))
 
 
 class InterferenceForce(Diagram):

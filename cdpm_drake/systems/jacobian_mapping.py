@@ -1,17 +1,18 @@
 """The Jacobian velocity mapping of Fig. 5 (eq. 3, eq. 7), with a cable-length loop."""
 
 import numpy as np
-from pydrake.systems.framework import Diagram, LeafSystem
+from pydrake.systems.framework import Diagram
 
 from cdpm_drake.kernels.call import bind, owned
 from cdpm_drake.kernels.kinematics import length_loop_sizes, length_loop_tick
+from cdpm_drake.systems.kernel_system import KernelSystem
 from cdpm_drake.systems.wiring import note_piece, sub_diagram, unit_delay, wiring
 
 # The cable-length loop's gain when a caller gives none, 1/s (scenario.Controller).
 DEFAULT_LENGTH_GAIN = 40.0
 
 
-class ReelRates(LeafSystem):
+class ReelRates(KernelSystem):
     """l_dot = J(p) v + K_l (l_d - l) (`kinematics.length_loop_tick`) in one compiled call;
     stateless: the loop's memory (commanded position, length offsets, started flag) comes
     back through a C++ one-tick delay. Its inputs arrive stacked by a C++ Selector (one
@@ -27,26 +28,15 @@ class ReelRates(LeafSystem):
     """
 
     def __init__(self, robot, *, length_gain, time_step, dead_band=0.0):
-        super().__init__()
-        m = robot.num_cables
-        sizes = length_loop_sizes(m)
-        self._offsets = owned(robot.attachments - robot.reels)
-        self._inputs = self.DeclareVectorInputPort("inputs", sizes["x"])
+        sizes = length_loop_sizes(robot.num_cables)
+        offsets = owned(robot.attachments - robot.reels)
         gain, step, band = float(length_gain), float(time_step), float(dead_band)
         # Compiled (or loaded) now, not in the first tick.
         example = np.zeros(sizes["x"])
         example[:3] = robot.workspace.center
-        tick = bind(length_loop_tick, self._offsets, gain, step, band, example,
+        tick = bind(length_loop_tick, offsets, gain, step, band, example,
                     np.empty(sizes["out"]))
-        # The tick's callback is a closure over locals, not a method reading self: attribute
-        # lookups on a pybind LeafSystem cost ~0.2 us each (scripts/bench/count_instructions.py).
-        offsets, inputs = self._offsets, self._inputs.Eval
-
-        def calc_result(context, output):
-            tick(offsets, gain, step, band, inputs(context), output.get_mutable_value())
-
-        self.DeclareVectorOutputPort("result", sizes["out"], calc_result,
-                                     prerequisites_of_calc={self._inputs.ticket()})
+        super().__init__(sizes["x"], sizes["out"], tick, (offsets, gain, step, band))
 
 
 class JacobianVelocityMapping(Diagram):

@@ -1,14 +1,15 @@
 """The threshold block of Fig. 5: velocity, acceleration and the virtual wall."""
 
 import numpy as np
-from pydrake.systems.framework import Diagram, LeafSystem
+from pydrake.systems.framework import Diagram
 
 from cdpm_drake.kernels.call import bind, owned
 from cdpm_drake.kernels.safety_limits import limit_velocity_stacked
+from cdpm_drake.systems.kernel_system import KernelSystem
 from cdpm_drake.systems.wiring import stack, sub_diagram, unit_delay
 
 
-class VelocityLimit(LeafSystem):
+class VelocityLimit(KernelSystem):
     """`limits.limit_velocity` of the desired velocity, given the previous command; stateless.
     Its inputs arrive stacked by a C++ Selector (one evaluation from Python, not three).
 
@@ -23,25 +24,13 @@ class VelocityLimit(LeafSystem):
 
     def __init__(self, *, lower, upper, max_velocity, max_acceleration, virtual_wall,
                  time_step):
-        super().__init__()
-        self._bounds = owned([np.asarray(lower, dtype=float), np.asarray(upper, dtype=float)])
-        self._args = (float(max_velocity), float(max_acceleration), float(time_step),
-                      bool(virtual_wall))
-        self._inputs = self.DeclareVectorInputPort("inputs", 9)
+        bounds = owned([np.asarray(lower, dtype=float), np.asarray(upper, dtype=float)])
+        args = (float(max_velocity), float(max_acceleration), float(time_step),
+                bool(virtual_wall))
         # Compiled (or loaded) now, not in the first tick.
-        limit = bind(limit_velocity_stacked, np.zeros(9), self._bounds, *self._args,
-                     np.empty(3))
-        # The tick's callback is a closure over locals, not a method reading self: attribute
-        # lookups on a pybind LeafSystem cost ~0.2 us each (scripts/bench/count_instructions.py).
-        bounds, inputs = self._bounds, self._inputs.Eval
-        v_max, a_max, T, wall = self._args
-
-        def calc_velocity_command(context, output):
-            limit(inputs(context), bounds, v_max, a_max, T, wall, output.get_mutable_value())
-
-        self.DeclareVectorOutputPort(
-            "velocity_command", 3, calc_velocity_command,
-            prerequisites_of_calc={self._inputs.ticket()})
+        limit = bind(limit_velocity_stacked, np.zeros(9), bounds, *args, np.empty(3))
+        super().__init__(9, 3, limit, after=(bounds, *args),
+                         output_name="velocity_command")
 
 
 class SafetyLimits(Diagram):

@@ -72,10 +72,10 @@ RUNS = (
 # The kernels recorded: name -> (the block's module, the position of x in its arguments).
 KERNELS = {
     "interference_tick_stacked": ("interference_force", 4),
-    "interference_posed_tick": ("pose_blocks", 7),
-    "kinetostatic_tick": ("safety_blocks", 4),
-    "filter_tick": ("safety_blocks", 7),
-    "monitor_tick": ("safety_blocks", 4),
+    "interference_posed_tick": ("posed_interference_force", 7),
+    "kinetostatic_tick": ("kinetostatic_force", 4),
+    "filter_tick": ("safety_filter", 7),
+    "monitor_tick": ("model_monitor", 4),
 }
 SAFETY = ("filter_tick", "kinetostatic_tick", "monitor_tick")
 # Diagram variants of 3.: (label, overlay)

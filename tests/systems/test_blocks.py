@@ -12,10 +12,13 @@ from cdpm_drake.kernels.kinematics import KinematicsError, cable_lengths, jacobi
 from cdpm_drake.kernels.safety_limits import limit_velocity, wall_force
 from cdpm_drake.kernels.plant.operators import ForceProfile
 from cdpm_drake.robot import Robot, RobotLimits, Workspace, load_robot
-from cdpm_drake.systems import (ForceSensorSource, ForwardKinematicsEstimator,
-                                JacobianVelocityMapping, SafetyLimits, SensorNoise,
-                                SimulatedReels, WorkspaceWallForce, make_admittance)
-from cdpm_drake.systems.force_sensor import clip_to_sensor_range
+from cdpm_drake.systems.admittance import make_admittance
+from cdpm_drake.systems.force_sensor import ForceSensorSource, clip_to_sensor_range
+from cdpm_drake.systems.forward_kinematics import ForwardKinematicsEstimator
+from cdpm_drake.systems.jacobian_mapping import JacobianVelocityMapping
+from cdpm_drake.systems.plants.simulated_reels import SensorNoise, SimulatedReelsSystem
+from cdpm_drake.systems.safety_limits import SafetyLimits
+from cdpm_drake.systems.wall_force import WorkspaceWallForce
 
 T = 0.002
 
@@ -179,7 +182,7 @@ P0 = np.array([2.0, 1.2, 1.0])
 
 
 def reels_log(command, ticks, **kwargs):
-    reels = SimulatedReels(TRIPOD, initial_position=P0, time_step=T, **kwargs)
+    reels = SimulatedReelsSystem(TRIPOD, initial_position=P0, time_step=T, **kwargs)
     return run_chain(ConstantVectorSource(command), reels, ticks, output="cable_lengths")
 
 
@@ -214,7 +217,7 @@ def test_reel_lag_is_the_discrete_first_order_response():
 
 
 def test_reels_report_the_true_pose_consistent_with_the_lengths():
-    reels = SimulatedReels(TRIPOD, initial_position=P0, time_step=T)
+    reels = SimulatedReelsSystem(TRIPOD, initial_position=P0, time_step=T)
     context = reels.CreateDefaultContext()
     v = np.array([0.1, 0.05, -0.08])
     reels.GetInputPort("reel_velocity_command").FixValue(context, jacobian(TRIPOD, P0) @ v)
@@ -306,7 +309,7 @@ def test_simulated_person_is_the_model_at_each_tick_on_the_true_pose():
     ramp = ForceProfile([0.0, 1.0], [[0.0, 0.0, 0.0], [2.0, -4.0, 8.0]])
     v = np.array([0.1, 0.05, -0.08])
     for model in (ramp, SpringHand([P0, P0 + [0.2, 0.0, 0.0]], [0.0, 1.0], 60.0, 6.0, 5.0)):
-        reels = SimulatedReels(TRIPOD, initial_position=P0, time_step=T, operator=model)
+        reels = SimulatedReelsSystem(TRIPOD, initial_position=P0, time_step=T, operator=model)
         builder = DiagramBuilder()
         builder.AddSystem(reels)
         source = builder.AddSystem(ConstantVectorSource(jacobian(TRIPOD, P0) @ v))

@@ -134,7 +134,7 @@ def add_simulated_world(builder, robot, operator, *, initial_position, time_step
             {name: route.GetOutputPort(name) for name in pieces})
 
 
-class SimulatedReels(Diagram):
+class SimulatedReelsSystem(Diagram):
     """Reels that integrate their velocity commands to cable lengths at the control rate, and
     the person at the handle (an operator model, see `operators`; default: nobody).
 

@@ -1,0 +1,67 @@
+"""The tension-distribution block of the full pose with tension control (beyond the paper's
+Fig. 5): the target tensions at the estimated pose, and the tension estimate."""
+
+import numpy as np
+
+from cdpm_drake.kernels.call import bind, owned
+from cdpm_drake.kernels.full_pose import WARMUP_TICKS, sizes, tension_tick
+from cdpm_drake.systems.kernel_system import KernelSystem, build_kernel_block, owned_geometry
+from cdpm_drake.systems.wiring import unit_delay
+
+
+class TensionSolve(KernelSystem):
+    """tension_distribution: the target tensions at the pose, and their estimate."""
+
+
+def build_tension_distribution(builder, robot, *, min_tension, max_tension, tension_floor,
+                               slew_rate, initial_tensions, time_step, fall_rate=None):
+    """The tension estimate and the target tensions at the estimated pose
+    (full_pose.tension_tick). Inputs p_WP, R_WP, F_H (N), velocity_command (m/s),
+    residual (m), cable_lengths (m), tension_assumed (N: the forward kinematics'); outputs
+    tension_command (m, N: what the Jacobian block stretches the cables for: the target, at
+    most slew_rate N/s from the last), tension_estimate (m, N), tension_target (m, N: the
+    distribution, never below tension_floor), t_star (N: the largest achievable minimum
+    tension at the pose, inf where an internal force raises every tension), status (0: the
+    floor holds, 1: lowered, 2: W rank-deficient, nothing chosen, 3: the ceiling exceeded
+    for the hard floor, 4: the hard floor unreachable, weak cables raised to it), cable (the
+    1-based cable the status names: the weakest for 1, the one above the ceiling for 3, the
+    one raised most for 2 and 4; 0: none), and tension_estimate_previous (the memory's, for
+    the forward kinematics)."""
+    m = robot.num_cables
+    s = sizes(m)
+    d = robot.dynamics
+    reels, attachments = owned_geometry(robot)
+    fall_rate = slew_rate if fall_rate is None else fall_rate
+    params = owned(np.array([d.mass, *d.handle, d.EA, float(min_tension), float(max_tension),
+                             float(time_step), float(slew_rate), float(WARMUP_TICKS),
+                             float(tension_floor), float(fall_rate)]))
+    example = np.zeros(s["tension_x"])
+    example[:3] = robot.workspace.center
+    example[3:12] = np.eye(3).ravel()
+    example[18 + m:18 + 2 * m] = 1.0
+    solve = bind(tension_tick, reels, attachments, params, example,
+                 np.empty(s["tension_out"]))
+
+    start = np.concatenate([np.asarray(initial_tensions, dtype=float), np.zeros(4 + m)])
+    # The hand force of the previous tick: a plant may compute its force sample in the same
+    # step as it takes the reel command (the dynamic plant does), and this block's result
+    # feeds that command, so the force is taken a tick old (2 ms, inside the sensor's
+    # filter) rather than through an algebraic loop.
+    force = builder.AddNamedSystem("force_memory", unit_delay(3, time_step))
+    names = ("p_WP", "R_WP", "velocity_command", "residual", "cable_lengths",
+             "tension_assumed")
+    route = build_kernel_block(
+        builder, TensionSolve(s["tension_x"], s["tension_out"], solve,
+                              (reels, attachments, params)),
+        inputs=[("p_WP", 3), ("R_WP", 9), ("F_H_previous", 3), ("velocity_command", 3),
+                ("residual", m), ("cable_lengths", m), ("tension_assumed", m)],
+        memory=(s["tension_memory"], start),
+        outputs=[("tension_command", 0, m), ("tension_estimate", m, m),
+                 ("tension_target", 2 * m, m), ("t_star", 3 * m, 1),
+                 ("status", 3 * m + 1, 1), ("cable", 3 * m + 2, 1)],
+        memory_at=3 * m + 3, time_step=time_step,
+        memory_outputs=[("tension_estimate_previous", 0, m)], exported=False)
+    builder.Connect(force.get_output_port(), route.GetInputPort("F_H_previous"))
+    builder.ExportInput(force.get_input_port(), "F_H")
+    for name in names:
+        builder.ExportInput(route.GetInputPort(name), name)
