@@ -28,10 +28,10 @@ import os, subprocess, sys
 sys.path.insert(0, {code_root!r})
 sys.path.insert(1, {scripts!r})
 from pydrake.systems.analysis import Simulator
-try:
-    from cdpm_drake.config import load_scenario
-except ImportError:  # a checkout from before the package's layer folders (--code-root)
+try:  # a checkout from before the package's layer folders (--code-root): its own module
     from cdpm_drake.scenario import load_scenario
+except ImportError:
+    from cdpm_drake.config import load_scenario
 from cdpm_drake import diagram as d
 variant, seconds = {variant!r}, {seconds!r}
 patch = None
