@@ -9,10 +9,9 @@ from cdpm_drake.cli.compile_notice import compile_notice
 from cdpm_drake.cli.errors import CliError, InputError
 from cdpm_drake.text import prefixed_log_records
 
-DESCRIPTION = """cdpm: simulate, inspect and run the interference-aware admittance controller of a CDPM.
-
-Run `cdpm <command> --help` for each command's options.
-"""
+# The top of `cdpm --help`.
+DESCRIPTION = ("cdpm: simulate, inspect and run the interference-aware admittance controller "
+               "of a CDPM.\n\nRun `cdpm <command> --help` for each command's options.\n")
 
 EXIT_CODES = """\
 exit codes (every command):
@@ -38,6 +37,7 @@ class _Parser(argparse.ArgumentParser):
 
 
 def build_parser() -> argparse.ArgumentParser:
+    """The parser of `cdpm`: every command's options and help."""
     from cdpm_drake import __version__
 
     parser = _Parser(prog="cdpm", description=DESCRIPTION, epilog=EXIT_CODES,

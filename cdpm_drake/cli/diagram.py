@@ -58,7 +58,8 @@ def diagram_main(*, scenario, out_dir, depth=None, svg=True, out=None) -> int:
 
 
 def cmd_diagram(args) -> int:
+    """`cdpm diagram`: --depth checked, then diagram_main."""
     if args.depth is not None and args.depth < 1:
         raise CliError(f"--depth must be an integer >= 1, got {args.depth!r}")
-    return diagram_main(scenario=load_scenario_arg(args).scenario, out_dir=args.out, depth=args.depth,
-                        svg=not args.no_svg)
+    return diagram_main(scenario=load_scenario_arg(args).scenario, out_dir=args.out,
+                        depth=args.depth, svg=not args.no_svg)

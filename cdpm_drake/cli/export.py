@@ -10,6 +10,7 @@ from cdpm_drake.cli.recover import find_log
 
 
 def cmd_export(args) -> int:
+    """`cdpm export`: the log as CSV, to a file or stdout."""
     from cdpm_drake.views.log_csv import log_to_csv
 
     if is_sweep_dir(args.log):

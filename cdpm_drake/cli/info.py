@@ -59,10 +59,10 @@ def info(*, robot: str = "paper_7cable", swaps=None, plot_dir=None, grid_step: f
         print(f"swapped cables: {', '.join(f'{i}-{j}' for i, j in shown) or 'none'}", file=out)
     rows = [(i + 1, format_vector(r.reels[i]), format_vector(r.attachments[i]), f"{lengths[i]:.4f}")
             for i in range(r.num_cables)]
-    print(format_table(["cable", "reel a_i (m)", "attachment b_i (m)", "length at centre (m)"], rows),
-          file=out)
-    print(f"workspace box: lower {format_vector(r.workspace.lower)} m, upper {format_vector(r.workspace.upper)} m,"
-          f" centre {format_vector(c)} m", file=out)
+    print(format_table(["cable", "reel a_i (m)", "attachment b_i (m)", "length at centre (m)"],
+                       rows), file=out)
+    print(f"workspace box: lower {format_vector(r.workspace.lower)} m, upper "
+          f"{format_vector(r.workspace.upper)} m, centre {format_vector(c)} m", file=out)
     from cdpm_drake.robot import frame_warnings
     for message in frame_warnings(r):
         print(f"warning: {message}", file=out)
@@ -317,6 +317,7 @@ INFO_MAX_GRID_POINTS = 1_000_000
 
 
 def cmd_info(args) -> int:
+    """`cdpm info`: --grid and --plot checked before the report."""
     step = args.grid
     if not (step > 0 and np.isfinite(step)):
         raise CliError(f"--grid must be a step in m > 0, got {step!r}")

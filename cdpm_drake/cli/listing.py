@@ -54,4 +54,5 @@ def _first_sentence(text: str, limit: int = 110) -> str:
 
 
 def cmd_list(args) -> int:
+    """`cdpm list`."""
     return list_main()

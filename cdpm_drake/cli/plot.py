@@ -10,6 +10,7 @@ from cdpm_drake.cli.recover import find_log
 
 
 def cmd_plot(args) -> int:
+    """`cdpm plot`: a log's figures and replay, or a sweep's pictures."""
     from cdpm_drake.views.plots import plot_log
 
     if is_sweep_dir(args.log):

@@ -43,6 +43,7 @@ def recover_log(run_dir, out=None) -> None:
 
 
 def cmd_recover(args) -> int:
+    """`cdpm recover`: a run folder (or runs/<name>'s latest run) recovered."""
     from cdpm_drake.runs.run_folder import resolve_latest
 
     recover_log(resolve_latest(args.run_dir), out=sys.stdout)

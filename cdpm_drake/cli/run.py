@@ -82,6 +82,8 @@ def run_main(*, scenario, duration=None, out_dir=None, out=None, on_status=None,
 
 
 def cmd_run(args) -> int:
+    """`cdpm run`: the options checked (and the priority set) before the run, then
+    run_main."""
     check_duration_arg(args.duration)
     if args.rt_priority:
         from cdpm_drake.hardware.priority import PriorityError, set_realtime_priority

@@ -108,6 +108,7 @@ class _signals_ignored:
 
 
 def cmd_simulate(args) -> int:
+    """`cdpm simulate`: the options checked before the run, then simulate_main."""
     check_duration_arg(args.duration)
     on_chunk = None
     realtime = args.realtime

@@ -64,8 +64,8 @@ def safety_filter_summary(log) -> str:
     held a lost margin, braked to a hold; the smallest pair margin above d_min, by the
     controller's estimate and, with a true pose logged, the truth's; the smallest
     kinetostatic margin kappa (N)."""
-    from cdpm_drake.kernels.safety_filter import (BIND_TEXT, STATUS_HOLD, STATUS_MODIFIED, STATUS_NO_RETURN,
-                                STATUS_PASS)
+    from cdpm_drake.kernels.safety_filter import (BIND_TEXT, STATUS_HOLD, STATUS_MODIFIED,
+                                                  STATUS_NO_RETURN, STATUS_PASS)
 
     status = np.asarray(log["filter_status"]).reshape(-1).astype(int)
     binding = np.asarray(log["filter_binding"]).reshape(-1).astype(int)

@@ -8,6 +8,7 @@ from cdpm_drake.cli.errors import CliError
 
 
 def cmd_sweep(args) -> int:
+    """`cdpm sweep`: the runner options checked, then the sweep."""
     from cdpm_drake.runs.sweep import SweepError, sweep_main
 
     if args.workers is not None and args.workers < 1:
