@@ -17,6 +17,13 @@ def format_table(headers, rows) -> str:
     return "\n".join(lines)
 
 
+def format_vector(v, digits=3) -> str:
+    """A vector as `[1.500, 3.000, 1.000]`: each value with `digits` decimals."""
+    import numpy as np
+
+    return "[" + ", ".join(f"{x:.{digits}f}" for x in np.asarray(v, dtype=float)) + "]"
+
+
 class _LevelPrefix(logging.Formatter):
     def format(self, record):
         return f"{record.levelname.lower()}: {record.getMessage()}"

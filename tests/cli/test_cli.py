@@ -9,6 +9,9 @@ import numpy as np
 import pytest
 
 from cdpm_drake import cli
+from cdpm_drake.cli.compile_notice import (COMPILE_NOTICE, COMPILE_NOTICE_SAID,
+                                           compile_notice)
+from cdpm_drake.cli.listing import list_main
 from cdpm_drake.kernels.kinematics import cable_lengths, jacobian
 from cdpm_drake.robot import load_robot
 
@@ -177,7 +180,7 @@ def test_list_includes_sweeps_when_the_package_ships_them(capsys, tmp_path, monk
     (fake / "d_u_grid.yaml").write_text(
         "# Sweep d_u over five values. More text here.\nname: d_u_grid\n")
     monkeypatch.setattr(data, "SWEEPS_DIR", fake)
-    assert cli.list_main() == 0
+    assert list_main() == 0
     out = capsys.readouterr().out
     assert "sweeps (" in out and "d_u_grid  Sweep d_u over five values." in out
 
@@ -220,11 +223,11 @@ def test_a_first_compilation_is_announced_once(capsys):
         return 3.0 * x
 
     stream = io.StringIO()
-    with cli._compile_notice(stream) as notice:
+    with compile_notice(stream) as notice:
         assert twice(1.0) == 2.0 and thrice(1.0) == 3.0
-    assert stream.getvalue() == cli.COMPILE_NOTICE + "\n" and notice.said
+    assert stream.getvalue() == COMPILE_NOTICE + "\n" and notice.said
     stream = io.StringIO()
-    with cli._compile_notice(stream):
+    with compile_notice(stream):
         assert twice(2.0) == 4.0  # compiled for float already: no event
     assert stream.getvalue() == ""
     assert thrice(1) == 3  # an int signature compiles again, outside the block: not said
@@ -238,7 +241,7 @@ def test_a_process_started_after_the_notice_does_not_say_it_again(monkeypatch):
 
     import numba
 
-    monkeypatch.delenv(cli.COMPILE_NOTICE_SAID, raising=False)
+    monkeypatch.delenv(COMPILE_NOTICE_SAID, raising=False)
 
     @numba.njit
     def once(x):
@@ -249,19 +252,20 @@ def test_a_process_started_after_the_notice_does_not_say_it_again(monkeypatch):
         return x + 2.0
 
     stream = io.StringIO()
-    with cli._compile_notice(stream):
+    with compile_notice(stream):
         assert once(1.0) == 2.0
-        assert os.environ[cli.COMPILE_NOTICE_SAID] == "1"
-        child = subprocess.run([sys.executable, "-c", f"import os, sys; from cdpm_drake import "
-                                f"cli; n = cli._compile_notice(sys.stderr); print(n.said)"],
+        assert os.environ[COMPILE_NOTICE_SAID] == "1"
+        child = subprocess.run([sys.executable, "-c", "import os, sys; from cdpm_drake.cli."
+                                "compile_notice import compile_notice; "
+                                "n = compile_notice(sys.stderr); print(n.said)"],
                                capture_output=True, text=True, timeout=120)
         assert child.stdout.strip() == "True", child.stderr
-    assert stream.getvalue().count(cli.COMPILE_NOTICE) == 1
-    assert cli.COMPILE_NOTICE_SAID not in os.environ
+    assert stream.getvalue().count(COMPILE_NOTICE) == 1
+    assert COMPILE_NOTICE_SAID not in os.environ
     stream = io.StringIO()
-    with cli._compile_notice(stream):  # the next command in this process: said again
+    with compile_notice(stream):  # the next command in this process: said again
         assert again(1.0) == 3.0
-    assert stream.getvalue() == cli.COMPILE_NOTICE + "\n"
+    assert stream.getvalue() == COMPILE_NOTICE + "\n"
 
 
 def test_the_first_run_after_installing_says_it_compiles_and_the_next_does_not(tmp_path):
@@ -275,5 +279,5 @@ def test_the_first_run_after_installing_says_it_compiles_and_the_next_does_not(t
              "--duration", "0.01", "--no-progress", "--out", str(tmp_path / f"run{k}")],
             capture_output=True, text=True, env=env, timeout=600))
     assert [r.returncode for r in runs] == [0, 0], runs[0].stderr + runs[1].stderr
-    assert runs[0].stderr.count(cli.COMPILE_NOTICE) == 1, runs[0].stderr
-    assert cli.COMPILE_NOTICE not in runs[1].stderr, runs[1].stderr
+    assert runs[0].stderr.count(COMPILE_NOTICE) == 1, runs[0].stderr
+    assert COMPILE_NOTICE not in runs[1].stderr, runs[1].stderr

@@ -13,6 +13,8 @@ import numpy as np
 import pytest
 
 from cdpm_drake import cli
+from cdpm_drake.cli.simulate import simulate_main
+from cdpm_drake.cli.summaries import tension_control_summary
 from cdpm_drake.config import load_scenario, scenario_names
 
 LOG_FORMAT = Path(__file__).resolve().parents[2] / "docs" / "LOG_FORMAT.md"
@@ -303,7 +305,7 @@ def test_ctrl_c_during_a_simulation_keeps_the_log(tmp_path, capsys):
         raise KeyboardInterrupt
 
     scenario = load_scenario("exp1_no_interaction")
-    code = cli.simulate_main(scenario=scenario, duration=5.0, out_dir=tmp_path, progress=False,
+    code = simulate_main(scenario=scenario, duration=5.0, out_dir=tmp_path, progress=False,
                              on_chunk=interrupt)
     assert code == 130 and calls["n"] == 1
     assert "interrupted at t = " in capsys.readouterr().err
@@ -431,7 +433,7 @@ def test_the_tension_summary_counts_each_status_and_names_its_cables():
            "tension_cable": np.array([0, 0, 7, 7, 6, 2, 2, 5, 0, 0], dtype=float)[:, None],
            "t_star": np.array([20, 20, 4, 5, 6, np.inf, np.inf, -1.5, 3, 20.0])[:, None],
            "tension_estimate": np.array([[2.5, 40.0]] * 10)}
-    assert cli.tension_control_summary(log) == (
+    assert tension_control_summary(log) == (
         "tension control: the floor held on 3 of 10 ticks; lowered to what the pose and the "
         "ceiling allow on 3 (smallest t* 4.00 N; weakest cable: 7 (2 ticks), 6 (1 tick)); "
         "above controller.max_tension to keep every cable at controller.tension_floor on 2 "
@@ -478,7 +480,7 @@ def test_safety_filter_and_model_monitor_summaries_count_each_code():
     0, 0 (safety_filter.BIND_*: pairs 1, kinetostatic 4, speed 8); pair margins down to
     -0.5 mm; a true distance 1.25 mm below d_min on one tick; kappa down to -0.25 N. The
     monitor: slack from tick 4 (t = 0.008 s), the largest residual -3 mm on cable 2."""
-    from cdpm_drake.cli import model_monitor_summary, safety_filter_summary
+    from cdpm_drake.cli.summaries import model_monitor_summary, safety_filter_summary
 
     log = {"time": np.arange(6) * 0.002,
            "filter_status": np.array([[0], [1], [1], [2], [3], [0]]),

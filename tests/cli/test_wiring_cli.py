@@ -22,6 +22,7 @@ import pytest
 from conftest import case_registry
 
 from cdpm_drake import cli
+from cdpm_drake.cli.cdpm import build_parser
 from cdpm_drake import emulator as E
 from cdpm_drake.emulator import FaultPlan, ReelBridge, ReelBridgeServer
 from cdpm_drake.hardware.protocol import Command, encode_command
@@ -99,7 +100,7 @@ def _options(parser, command):
 def all_cli_options():
     """Every option of every cdpm command; `emulate` hands its arguments to the emulator's own
     parser, whose options are listed instead."""
-    parser = cli._parser()
+    parser = build_parser()
     keys = [k for k in _options(parser, "cdpm")]
     sub = next(a for a in parser._actions if isinstance(a, argparse._SubParsersAction))
     for command, p in sub.choices.items():

@@ -7,7 +7,7 @@ import ast
 import re
 from pathlib import Path
 
-from cdpm_drake import cli
+from cdpm_drake.cli.cdpm import EXIT_CODES, build_parser
 from helpers_docs import page
 
 REPO = Path(__file__).resolve().parents[2]
@@ -25,7 +25,7 @@ def test_the_readme_states_the_supported_platforms():
 
 
 def test_the_readme_lists_every_command():
-    parser = cli._parser()
+    parser = build_parser()
     commands = next(a for a in parser._actions if a.dest == "command").choices
     for name in commands:
         assert re.search(rf"^\| `cdpm {name}\b", README, re.MULTILINE), name
@@ -34,8 +34,8 @@ def test_the_readme_lists_every_command():
 def test_the_readme_and_help_give_the_same_exit_codes():
     for code in ("0", "1", "2", "130", "143"):
         assert f"`{code}`" in README
-        assert re.search(rf"^  {code}\s+\S", cli.EXIT_CODES, re.MULTILINE), code
-    assert "143` after SIGTERM" in FLAT and "143  stopped by SIGTERM" in cli.EXIT_CODES
+        assert re.search(rf"^  {code}\s+\S", EXIT_CODES, re.MULTILINE), code
+    assert "143` after SIGTERM" in FLAT and "143  stopped by SIGTERM" in EXIT_CODES
 
 
 def test_the_readme_defines_the_run_reports_figures():

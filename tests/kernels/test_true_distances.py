@@ -177,12 +177,12 @@ def test_a_quiet_plant_names_only_the_stretch_and_other_plants_nothing():
 def test_a_dynamic_run_logs_and_prints_the_truth_beside_the_estimate(tmp_path):
     import io
 
-    from cdpm_drake import cli
+    from cdpm_drake.cli.simulate import simulate_main
     from cdpm_drake.config import load_scenario
 
     scenario = load_scenario("exp2_interaction", "plant: !DynamicReels {}")
     out = io.StringIO()
-    code = cli.simulate_main(scenario=scenario, duration=0.5, out_dir=tmp_path / "run",
+    code = simulate_main(scenario=scenario, duration=0.5, out_dir=tmp_path / "run",
                              progress=False, out=out)
     assert code == 0
     with np.load(tmp_path / "run" / "log.npz") as f:

@@ -641,6 +641,7 @@ def test_cdpm_info_prints_the_wrench_feasibility_table(capsys):
     # against wrench_feasibility on the whole grid for that force and floor, without the
     # table's shortcut (solving each force only where the smaller one held).
     from cdpm_drake import cli
+    from cdpm_drake.cli.info import FEASIBILITY_FLOORS, FEASIBILITY_FORCES
     from cdpm_drake.kernels.tension import step_grid
     from cdpm_drake.robot.statics import wrench_feasibility
 
@@ -653,10 +654,10 @@ def test_cdpm_info_prints_the_wrench_feasibility_table(capsys):
     assert table.startswith(" on the same grid (25 cm grid from the lower corner: 11 x 13 x 9 "
                             "points)"), table
     rows = {}
-    for force in cli.FEASIBILITY_FORCES:
+    for force in FEASIBILITY_FORCES:
         shares = [wrench_feasibility(robot, mass=d.mass, hand_force=force, handle=d.handle,
                                      min_tension=floor, points=points).share
-                  for floor in cli.FEASIBILITY_FLOORS]
+                  for floor in FEASIBILITY_FLOORS]
         rows[force] = shares
         row = f"{force:g}" + "".join(f"  {100 * s:.1f}" for s in shares)
         assert " ".join(row.split()) in [" ".join(line.split()) for line in table.splitlines()]

@@ -8,7 +8,7 @@ from pathlib import Path
 
 import pytest
 
-from cdpm_drake.cli import DIAGRAMS as DIAGRAM_NAMES
+from cdpm_drake.cli.diagram import DIAGRAMS as DIAGRAM_NAMES
 from cdpm_drake.cli import main
 from cdpm_drake.diagram import BuildOptions, PLANT_PORTS, build_diagram
 from cdpm_drake.hardware.config import HardwareReels
@@ -246,7 +246,7 @@ def test_overview_draws_only_the_used_ports_of_a_system_with_many():
 def test_the_readme_counts_and_names_the_diagrams_cdpm_diagram_writes():
     # Issue 27: the README said "all eight diagrams" where ten are written. The sentence (now
     # in docs/viewing.md) names the full-depth ones and counts both kinds; both against
-    # cli.DIAGRAMS, which the test above holds to what `cdpm diagram` writes.
+    # DIAGRAM_NAMES, which the test above holds to what `cdpm diagram` writes.
     flat = " ".join((DIAGRAMS.parent / "docs" / "viewing.md").read_text().split())
     m = re.search(r"`cdpm diagram` regenerates the (\w+) diagrams, (\w+) at full depth "
                   r"\(([^)]*)\) and the overview of each", flat)

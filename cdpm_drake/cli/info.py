@@ -1,0 +1,330 @@
+"""`cdpm info`: a robot (or a scenario's robot, as the experiment uses it) as text: its
+cables, Jacobian conditioning, workspace box, the cable pairs' distances, and its statics:
+where the cables hold the level platform, alone and against a hand force. Metres, newtons,
+the world frame."""
+
+import sys
+from pathlib import Path
+
+import numpy as np
+
+from cdpm_drake.cli.arguments import check_writable_dir
+from cdpm_drake.cli.errors import CliError
+from cdpm_drake.text import format_table, format_vector
+
+
+def info(*, robot: str = "paper_7cable", swaps=None, plot_dir=None, grid_step: float = 0.05,
+         out=None) -> list[Path]:
+    """Print a robot description: cables, Jacobian conditioning, workspace, the cable pairs'
+    distances, and its statics (wrench-matrix rank, the share of the box that holds the
+    platform, the hand forces it holds). `robot` is a robot or a scenario (a built-in name or
+    a YAML path); a scenario shows its robot as the experiment uses it: with its swaps, its
+    start and its path (simulated on the kinematic plant). `swaps` [(i, j), ...] (1-based)
+    replace a scenario's swaps or swap a robot's cables. `plot_dir`: also write the workspace
+    pictures there. Returns the pictures written."""
+    out = sys.stdout if out is None else out
+    from cdpm_drake.kernels.kinematics import cable_lengths, condition_number
+
+    with _robot_warnings_in_report():
+        r, scenario = _info_target(robot)
+        base = r  # before any swap: the statics warnings compare with it
+        if scenario is not None:
+            import copy
+
+            from cdpm_drake.config import scenario_robot
+
+            unswapped = copy.copy(scenario)
+            unswapped.swaps = []
+            base = scenario_robot(unswapped)
+        if swaps is not None:
+            if scenario is not None:
+                scenario.swaps = [list(s) for s in swaps]
+            else:
+                for i, j in swaps:
+                    r = r.with_swapped_attachments(i, j)
+        if scenario is not None:
+            from cdpm_drake.config import resolve_scenario
+
+            resolved = resolve_scenario(scenario)
+            r = resolved.robot
+    if np.array_equal(r.attachments, base.attachments):
+        base = None
+    _check_info_grid(r, grid_step)  # before the report
+    c = r.workspace.center
+    lengths = cable_lengths(r, c)
+    what = (f"scenario {scenario.name!r}: " if scenario is not None else "") + f"robot {r.name!r}"
+    print(f"{what} ({r.source}): {r.num_cables} cables, {r.num_pairs} watched pairs", file=out)
+    if scenario is not None or swaps:
+        shown = scenario.swaps if scenario is not None else swaps
+        print(f"swapped cables: {', '.join(f'{i}-{j}' for i, j in shown) or 'none'}", file=out)
+    rows = [(i + 1, format_vector(r.reels[i]), format_vector(r.attachments[i]), f"{lengths[i]:.4f}")
+            for i in range(r.num_cables)]
+    print(format_table(["cable", "reel a_i (m)", "attachment b_i (m)", "length at centre (m)"],
+                       rows), file=out)
+    print(f"workspace box: lower {format_vector(r.workspace.lower)} m, upper "
+          f"{format_vector(r.workspace.upper)} m, centre {format_vector(c)} m", file=out)
+    from cdpm_drake.robot import frame_warnings
+    for message in frame_warnings(r):
+        print(f"warning: {message}", file=out)
+    print(f"Jacobian condition number at the centre: {condition_number(r, c):.3f}", file=out)
+    lim = r.limits
+    print(f"limits: velocity {lim.max_velocity} m/s, acceleration {lim.max_acceleration} m/s^2,"
+          f" reel speed {lim.max_reel_speed} m/s", file=out)
+    for pair, why in sorted(r.excluded_reasons.items()):
+        print(f"pair {pair} skipped: {why}", file=out)
+    from cdpm_drake.kernels.interference import pair_distances, translation_distance_bound
+
+    d = pair_distances(r, c)
+    g = translation_distance_bound(r)
+    rows = [(f"({i},{j})", f"{1000 * dk:.1f}", f"{1000 * gk:.1f}")
+            for (i, j), dk, gk in zip(r.pairs, d, g)]
+    print("cable-cable distances at the centre, and the largest any translation gives:",
+          file=out)
+    print(format_table(["pair", "distance (mm)", "largest (mm)"], rows), file=out)
+    print("(the two are equal where the closest points are the attachment points; d_u must "
+          "stay below 'largest' or that pair's force never switches off)", file=out)
+    path, grid, t_grid, grid_text = _print_statics(r, scenario, grid_step, out, base=base)
+    _print_wrench_feasibility(r, grid, t_grid, grid_text, out)
+    if plot_dir is None:
+        return []
+    from cdpm_drake.views.workspace_plots import plot_workspace
+
+    d_u = (resolved.interference.d_u if scenario is not None and resolved.interference
+           is not None else INFO_D_U)
+    written = plot_workspace(r, plot_dir, floor=INFO_FLOOR, d_u=d_u, path=path,
+                             name=scenario.name if scenario is not None else r.name)
+    for png in written:
+        print(f"plot: {png}", file=out)
+    return written
+
+
+class _robot_warnings_in_report:
+    """Within the block, the warnings that loading a robot logs (its statics, the pairs the
+    interference block skips) are not printed: `cdpm info`'s report says each of them, on
+    its own grid, once."""
+
+    def __enter__(self):
+        import logging
+
+        self._logger = logging.getLogger("cdpm_drake.robot")
+        self._filter = lambda record: record.levelno < logging.WARNING
+        self._logger.addFilter(self._filter)
+        return self
+
+    def __exit__(self, *exc):
+        self._logger.removeFilter(self._filter)
+
+
+def _check_info_grid(r, step) -> None:
+    """CliError when the --grid step gives more than INFO_MAX_GRID_POINTS on r's box."""
+    size = r.workspace.upper - r.workspace.lower
+
+    def counts_of(step):
+        return [int(np.floor(s / step + 1e-9)) + 1 for s in size]
+
+    counts = counts_of(step)
+    if np.prod(counts, dtype=float) > INFO_MAX_GRID_POINTS:
+        least = np.ceil(1000 * np.cbrt(np.prod(size) / INFO_MAX_GRID_POINTS)) / 1000
+        while np.prod(counts_of(least), dtype=float) > INFO_MAX_GRID_POINTS:
+            least += 0.001  # whole mm: the smallest step that fits
+        raise CliError(f"--grid {step!r} m gives {counts[0]} x {counts[1]} x {counts[2]} points "
+                       f"on the workspace box of robot {r.name!r}, more than "
+                       f"{INFO_MAX_GRID_POINTS:,}; give a step of at least {least:.3f} m")
+
+
+# The floor (N) of the statics summary and of the pictures, and the d_u (m) the
+# interference-free picture of a robot alone uses (the paper's experiments use 61-62 mm).
+INFO_FLOOR = 5.0
+INFO_D_U = 0.062
+
+
+def _info_target(name):
+    """(robot, None) for a robot, (its robot, the Scenario) for a scenario: a built-in name of
+    either, or a YAML file (a robot file has `reels`)."""
+    from cdpm_drake.robot import RobotError, is_path_like, load_robot, robot_names
+    from cdpm_drake.config import load_scenario, scenario_names, scenario_robot
+
+    text = str(name)
+    if text in robot_names():
+        return load_robot(text), None
+    if text in scenario_names():
+        scenario = load_scenario(text)
+        return scenario_robot(scenario), scenario
+    if is_path_like(text) or Path(text).is_file():
+        path = Path(text)
+        if path.is_file():
+            from pydrake.common.yaml import yaml_load
+
+            try:
+                raw = yaml_load(filename=str(path))
+            except Exception:
+                raw = None
+            if isinstance(raw, dict) and "reels" not in raw and (
+                    "robot" in raw or "initial_position" in raw or "operator" in raw):
+                scenario = load_scenario(str(path))
+                return scenario_robot(scenario), scenario
+        return load_robot(text), None
+    raise RobotError(f"unknown robot or scenario {text!r}; built-in robots: {robot_names()}, "
+                     f"built-in scenarios: {scenario_names()} (or give a path to a .yaml file)")
+
+
+def _print_statics(r, scenario, step, out, base=None):
+    """The statics summary, every share on one grid (the --grid step's); returns the
+    scenario's simulated path (None without one). `base`: the robot before the swaps (None
+    without swaps), which the warnings compare with."""
+    from cdpm_drake.robot import robot_statics, statics_warnings
+    from cdpm_drake.kernels.tension import step_grid
+    from cdpm_drake.robot.statics import holding_tension
+
+    statics = robot_statics(r)
+    mass = r.dynamics.mass
+    grid = step_grid(r.workspace.lower, r.workspace.upper, step)
+    counts = [len(np.arange(lo, hi + 1e-9, step))
+              for lo, hi in zip(r.workspace.lower, r.workspace.upper)]
+    grid_text = (f"{100 * step:g} cm grid from the lower corner: {counts[0]} x {counts[1]} x "
+                 f"{counts[2]} points")
+    print(f"statics of the level platform ({mass:g} kg at its centre, moments about the "
+          f"centre); t* = the largest achievable minimum cable tension (N):", file=out)
+    rank_note = ("" if statics.unreachable is None else
+                 f" < 6: no tension produces a {_describe(statics.unreachable)}")
+    centre = r.workspace.center
+    print(f"  wrench matrix rank at the workspace centre: {statics.rank}{rank_note}; t* there "
+          f"{_t_star_text(r, centre, statics.centre_t_star)}", file=out)
+    t_grid = t = holding_tension(r, grid)
+    share = float(np.mean(t >= INFO_FLOOR))
+    print(f"  held with every cable >= {INFO_FLOOR:g} N on {100 * share:.1f} % of the workspace "
+          f"box ({grid_text})", file=out)
+    # The warnings of the same grid and floor (loading the robot computed them on its own
+    # 11^3 grid, and `info` kept them off stderr: they are said here, once).
+    label = f"the same {100 * step:g} cm grid"
+    base_share = (None if base is None else
+                  float(np.mean(holding_tension(base, grid) >= INFO_FLOOR)))
+    import dataclasses
+    for message in statics_warnings(r, dataclasses.replace(statics, share=share,
+                                                           floor=INFO_FLOOR),
+                                    grid=label, base=base, base_share=base_share):
+        print(f"  warning: {message}", file=out)
+    if scenario is None:
+        return None, grid, t_grid, grid_text
+    p0 = np.asarray(scenario.initial_position, dtype=float)
+    print(f"  at the start {format_vector(p0, 2)} m: t* "
+          f"{_t_star_text(r, p0, float(holding_tension(r, p0)))}", file=out)
+    from cdpm_drake.runs.simulate import simulate
+
+    log = simulate(scenario=_kinematic_copy(scenario)).log
+    t = holding_tension(r, log["p"])
+    k = int(np.argmin(t))
+    print(f"  along the scenario's path (kinematic plant, {len(t)} ticks): smallest t* "
+          f"{_t_star_text(r, log['p'][k], t[k])} at t = {log['time'][k]:.3f} s, p = "
+          f"{format_vector(log['p'][k])} m; {100 * np.mean(t >= INFO_FLOOR):.1f} % of the ticks at "
+          f">= {INFO_FLOOR:g} N", file=out)
+    return log["p"], grid, t_grid, grid_text
+
+
+def _t_star_text(r, p, t) -> str:
+    """t* at p (m) as printed: N with two decimals, or what an infinite one means there. +inf
+    needs an internal force that raises every tension: where the wrench matrix is
+    rank-deficient (the cables' lines of action meet) it holds for the weight alone, at that
+    exact pose, and the platform still cannot resist the wrench the rank lacks."""
+    from cdpm_drake.kernels.nullspace import RANK_TOL
+    from cdpm_drake.kernels.tension import wrench_matrix
+
+    if t == -np.inf:
+        return "-inf (no tensions balance the weight)"
+    if t != np.inf:
+        return f"{t:.2f} N"
+    U, s, _ = np.linalg.svd(wrench_matrix(r, p))
+    rank = int(np.sum(s > RANK_TOL * max(s[0], 1e-300)))
+    if rank == 6:
+        return "+inf (an internal force raises every tension: any floor holds)"
+    return (f"+inf for the weight alone (the cables' lines of action meet there, so an "
+            f"internal force raises every tension), but the wrench matrix has rank {rank} < 6 "
+            f"there: the platform cannot resist a {_describe(U[:, rank])}, so no floor holds "
+            "it against anything else")
+
+
+def _kinematic_copy(scenario):
+    """The scenario with the kinematic plant (the path the controller commands)."""
+    import copy
+
+    from cdpm_drake.config import SimulatedReels
+
+    kinematic = copy.copy(scenario)
+    kinematic.plant = SimulatedReels()
+    return kinematic
+
+
+def _describe(direction) -> str:
+    from cdpm_drake.robot import describe_wrench
+
+    return describe_wrench(direction)
+
+
+# Hand forces (N, ascending from 0) and tension floors (N) of the feasibility table, and the
+# points per axis of its grid for robots without a compiled t* (not 7 or 8 cables).
+FEASIBILITY_FORCES = (0.0, 5.0, 10.0, 20.0)
+FEASIBILITY_FLOORS = (0.0, 5.0)
+FEASIBILITY_GRID = 5
+
+
+def feasibility_shares(r, points, t_weight) -> list[list[float]]:
+    """[force][floor]: the share of `points` (N, 3) m where the cables hold the level platform
+    (the robot file's mass at its centre) plus a hand force of each FEASIBILITY_FORCES at
+    the handle in each of the 26 directions, with every cable >= each FEASIBILITY_FLOORS.
+    `t_weight`: t* (N) of the weight alone at the points (holding_tension: the 0 N row). A
+    point that fails a force fails every larger one (t*, the minimum over a symmetric set of
+    directions, is concave in the wrench, so it does not rise with the force), so each force
+    is only solved where the one before held: the same shares, about half the work."""
+    from cdpm_drake.robot.statics import wrench_feasibility
+
+    d = r.dynamics
+    t = np.asarray(t_weight, dtype=float)
+    out = []
+    for force in FEASIBILITY_FORCES:  # ascending, from 0 N
+        if force > 0:
+            live = np.flatnonzero(t >= min(FEASIBILITY_FLOORS))
+            t = np.full(len(points), -np.inf)
+            if live.size:
+                t[live] = wrench_feasibility(r, mass=d.mass, hand_force=force,
+                                             handle=d.handle, points=points[live]).t_star
+        out.append([float(np.mean(t >= floor)) for floor in FEASIBILITY_FLOORS])
+    return out
+
+
+def _print_wrench_feasibility(r, points, t_weight, grid_text, out) -> None:
+    from cdpm_drake.kernels.tension import grid_points
+    from cdpm_drake.robot.statics import holding_tension
+
+    d = r.dynamics
+    if r.num_cables in (7, 8):  # compiled closed forms: the whole grid in about a second
+        where = f"on the same grid ({grid_text})"
+    else:  # a solver per point and direction: a coarser grid, said so
+        n = FEASIBILITY_GRID
+        points = grid_points(r.workspace.lower, r.workspace.upper, n)
+        t_weight = holding_tension(r, points)
+        where = (f"on a coarser {n} x {n} x {n} grid (corners included: {r.num_cables} cables "
+                 "need a solver per point)")
+    rows = [(f"{force:g}", *(f"{100 * share:.1f}" for share in shares))
+            for force, shares in zip(FEASIBILITY_FORCES,
+                                     feasibility_shares(r, points, t_weight))]
+    print(f"wrench feasibility {where}: the share where the cables hold the level platform "
+          f"({d.mass:g} kg, moments about its centre) plus a hand force at the handle "
+          f"{format_vector(d.handle, 2)} m in each of 26 directions:", file=out)
+    print(format_table(["hand force (N)"] + [f"all cables >= {floor:g} N (%)"
+                                             for floor in FEASIBILITY_FLOORS], rows), file=out)
+
+
+# The most points `cdpm info --grid` computes statics on (~1 us a point and hand-force
+# direction for 7 and 8 cables: a few seconds at the default 5 cm, ~140 k points).
+INFO_MAX_GRID_POINTS = 1_000_000
+
+
+def cmd_info(args) -> int:
+    """`cdpm info`: --grid and --plot checked before the report."""
+    step = args.grid
+    if not (step > 0 and np.isfinite(step)):
+        raise CliError(f"--grid must be a step in m > 0, got {step!r}")
+    if args.plot is not None:  # before the report: a folder found wanting after it is a waste
+        check_writable_dir(args.plot, "--plot")
+    info(robot=args.robot, swaps=args.swaps, plot_dir=args.plot, grid_step=args.grid)
+    return 0

@@ -1,0 +1,175 @@
+"""The run summaries `cdpm simulate` and `cdpm run` print after a run, read from its log: the
+cable pairs (the table of `runs.simulate.summary_rows`, the peak forces, the crossings), the
+hand force the sensor clipped, the tension control, the safety filter, the model monitor and
+the dynamic plant's ground truth. Distances in mm, forces in N, times in s."""
+
+import numpy as np
+
+from cdpm_drake.text import format_table, format_vector
+
+
+def _named_cables(cable, ticks) -> str:
+    """'7 (120 ticks), 6 (3 ticks)': the 1-based cables `cable` names on the `ticks` (bool
+    mask), most often named first."""
+    named = cable[ticks]
+    numbers, counts = np.unique(named[named > 0], return_counts=True)
+    order = np.argsort(-counts, kind="stable")
+    return ", ".join(f"{numbers[k]} ({counts[k]} tick{'s' if counts[k] != 1 else ''})"
+                     for k in order) or "none named"
+
+
+def tension_control_summary(log) -> str:
+    """One line on the tension control of a log (controller.tension_control): per status
+    (pose_control.tension_tick) how many ticks and which cables: the floor held; lowered to
+    what the pose and the ceiling allow (the weakest cable); the ceiling exceeded to keep
+    the hard floor (the cable above it); the hard floor unreachable (t* < tension_floor:
+    the cables raised to it); W rank-deficient; and on how many no distribution held at all
+    (t* < 0: outside the wrench-feasible workspace)."""
+    from cdpm_drake.kernels.full_pose import CEILING_EXCEEDED, FLOOR_UNREACHABLE
+    from cdpm_drake.kernels.tension import BELOW_FLOOR, FEASIBLE, GENERAL
+
+    status = np.asarray(log["tension_status"]).reshape(-1)
+    t_star = np.asarray(log["t_star"], dtype=float).reshape(-1)
+    # Logs written before the cable was logged name none.
+    cable = np.asarray(log["tension_cable"] if "tension_cable" in log
+                       else np.zeros(status.size)).reshape(-1).astype(int)
+    T = status.size
+    parts = [f"the floor held on {int(np.sum(status == FEASIBLE))} of {T} ticks"]
+    for code, what, role in (
+            (BELOW_FLOOR, "lowered to what the pose and the ceiling allow", "weakest cable"),
+            (CEILING_EXCEEDED, "above controller.max_tension to keep every cable at "
+             "controller.tension_floor", "cable above the ceiling"),
+            (FLOOR_UNREACHABLE, "the pose cannot hold every cable at controller.tension_floor"
+             " (t* below it), weak cables raised to it", "cable raised most"),
+            (GENERAL, "the wrench matrix rank-deficient (minimum-norm target)",
+             "cable raised most")):
+        ticks = status == code
+        if ticks.any():
+            smallest = t_star[ticks].min()
+            t_text = f"smallest t* {smallest:.2f} N; " if np.isfinite(smallest) else ""
+            parts.append(f"{what} on {int(ticks.sum())} ({t_text}{role}: "
+                         f"{_named_cables(cable, ticks)})")
+    text = "tension control: " + "; ".join(parts)
+    none = int(np.sum(t_star < 0))
+    if none:
+        text += (f"; NO tension distribution held on {none} ticks (t* < 0: outside the "
+                 "wrench-feasible workspace, a cable must go slack)")
+    estimate = np.asarray(log["tension_estimate"], dtype=float)
+    return text + (f"; estimated tensions {estimate.min():.2f} to {estimate.max():.1f} N")
+
+
+def safety_filter_summary(log) -> str:
+    """One line on the safety filter of a log (safety_filter.enabled): on how many ticks it
+    passed the command, changed it (and which constraints bound, safety_filter.BIND_TEXT),
+    held a lost margin, braked to a hold; the smallest pair margin above d_min, by the
+    controller's estimate and, with a true pose logged, the truth's; the smallest
+    kinetostatic margin kappa (N)."""
+    from cdpm_drake.kernels.safety_filter import (BIND_TEXT, STATUS_HOLD, STATUS_MODIFIED,
+                                                  STATUS_NO_RETURN, STATUS_PASS)
+
+    status = np.asarray(log["filter_status"]).reshape(-1).astype(int)
+    binding = np.asarray(log["filter_binding"]).reshape(-1).astype(int)
+    T = status.size
+    bound = [f"{what} {int(np.sum((binding & bit) != 0))}" for bit, what in BIND_TEXT
+             if np.any((binding & bit) != 0)]
+    text = (f"safety filter: passed {int(np.sum(status == STATUS_PASS))} of {T} ticks, "
+            f"changed {int(np.sum(status == STATUS_MODIFIED))}"
+            + (f" (bound: {', '.join(bound)})" if bound else ""))
+    for code, what in ((STATUS_NO_RETURN, "held a lost margin"),
+                       (STATUS_HOLD, "braked to a hold")):
+        n = int(np.sum(status == code))
+        if n:
+            text += f", {what} on {n}"
+    margin = np.asarray(log["pair_margin"], dtype=float).reshape(-1)
+    if np.isfinite(margin).any():
+        text += f"; smallest pair margin above d_min {1000 * margin.min():.2f} mm"
+        if "pair_distances_true" in log and "d_min" in log:
+            true = (np.asarray(log["pair_distances_true"], dtype=float)
+                    - np.asarray(log["d_min"], dtype=float)).min(axis=1)
+            text += f" (true {1000 * true.min():.2f} mm)"
+    kappa = np.asarray(log["kappa"], dtype=float).reshape(-1)
+    if np.isfinite(kappa).any():
+        text += f"; smallest kinetostatic margin {kappa[np.isfinite(kappa)].min():.2f} N"
+    return text
+
+
+def model_monitor_summary(log) -> str:
+    """One line on the model monitor of a log (model_monitor.enabled): whether the model
+    fitted on every tick, else which verdict first (model_monitor.REASONS); the largest
+    length residual (mm) and its cable."""
+    from cdpm_drake.kernels.model_monitor import REASONS
+
+    status = np.asarray(log["model_status"]).reshape(-1).astype(int)
+    residual = np.asarray(log["model_residual"], dtype=float)
+    bad = np.flatnonzero(status)
+    if bad.size:
+        k = int(bad[0])
+        text = (f"model monitor: {REASONS[status[k]]} at t = {log['time'][k]:.3f} s "
+                f"({bad.size} of {status.size} ticks)")
+    else:
+        text = f"model monitor: the model fitted on all {status.size} ticks"
+    if residual.size and np.isfinite(residual).any():
+        flat = np.nanargmax(np.abs(np.where(np.isfinite(residual), residual, 0.0)))
+        cable = int(flat % residual.shape[1]) + 1
+        text += (f"; largest length residual {1000 * residual.reshape(-1)[flat]:+.2f} mm "
+                 f"(cable {cable})")
+    return text
+
+
+def print_dynamic_summary(log, out) -> None:
+    from cdpm_drake.kernels.rotation import rotation_angle, rotations_from_rpy
+
+    T = len(log["time"])
+    slack = [f"{i + 1} ({int(n)} ticks)" for i, n in enumerate(log["slack"].sum(axis=0)) if n]
+    slack_ticks = int(np.any(log["slack"], axis=1).sum())
+    error = 1000 * np.linalg.norm(log["p"] - log["p_true"], axis=1).max()
+    rotation = np.degrees(rotation_angle(rotations_from_rpy(log["rpy_true"])).max())
+    print(f"dynamic plant (true): tensions {log['tensions'].min():.2f} to "
+          f"{log['tensions'].max():.1f} N; a cable slack on {slack_ticks} of {T} ticks "
+          f"({100 * slack_ticks / T:.2f} %), cables: {', '.join(slack) or 'none'}; largest "
+          f"rotation {rotation:.2f} deg; largest FK error {error:.2f} mm", file=out)
+    if "lengths_commanded" in log:
+        drift = 1000 * np.abs(log["lengths_commanded"] - log["lengths"]).max()
+        print(f"length loop: largest |l_d - l| {drift:.2f} mm (commanded vs encoder lengths)",
+              file=out)
+
+
+def print_pair_summary(log, out) -> None:
+    """The cable pairs of a log (`cdpm simulate`'s and `cdpm run`'s): each pair's closest
+    approach beside its d_l and d_u, the ticks it was within d_u and whether it crossed; the
+    peak forces; how many pairs crossed."""
+    from cdpm_drake.runs.log import summary_header, summary_rows
+
+    T = len(log["time"])
+    rows = summary_rows(log)
+    if rows:
+        print(format_table(summary_header(log), rows), file=out)
+    else:
+        print("no cable pair came within its d_u", file=out)
+    norms = {k: np.linalg.norm(log[k], axis=1).max() if T else 0.0
+             for k in ("F_H", "F_int", "F_d")}
+    print("peak |F_H| {F_H:.2f} N, |F_int| {F_int:.2f} N, |F_d| {F_d:.2f} N".format(**norms),
+          file=out)
+    crossings = int(np.any(log["crossed"], axis=0).sum()) if T else 0
+    if "crossed_true" in log:  # the controller's estimate beside the plant's truth
+        truly = int(np.any(log["crossed_true"], axis=0).sum()) if T else 0
+        print(f"pairs that crossed: {truly} truly (from the true pose), {crossings} by the "
+              "controller's estimate", file=out)
+    else:
+        print(f"pairs that crossed: {crossings}", file=out)
+
+
+def print_clipped(log, scenario, out) -> None:
+    """The ticks whose raw hand force (F_measured) the sensor model clipped, if any."""
+    from cdpm_drake.config import sensor_range_text
+    from cdpm_drake.kernels.force_sensor import beyond_range
+
+    if "F_measured" not in log or not len(log["time"]):
+        return
+    s = scenario.sensor
+    clipped = beyond_range(log["F_measured"], s.axial_axis, s.axial_range, s.transverse_range)
+    if clipped.any():
+        k = int(np.argmax(clipped))
+        print(f"hand force beyond the sensor's range ({sensor_range_text(s)}), clipped: "
+              f"{int(clipped.sum())} of {len(clipped)} ticks, the first at t = "
+              f"{log['time'][k]:.3f} s ({format_vector(log['F_measured'][k], 1)} N)", file=out)
