@@ -207,9 +207,10 @@ def check_holds_a_rigid_body(scenario: Scenario, robot: Robot, W, defaulted=()) 
     if rank >= 6 or scenario.plant.lock_rotation:
         return
     m = robot.num_cables
+    rpy = (f"plant.initial_rpy {list(scenario.plant.initial_rpy)!r} rad"
+           f"{_default_note(scenario.plant, 'initial_rpy')}")
     where = ((f" ({m} cables: below 6 at every pose)" if m < 6 else "")
-             + f" at the start, {start_text(scenario, robot, defaulted)} with plant.initial_rpy "
-             f"{list(scenario.plant.initial_rpy)!r} rad{_default_note(scenario.plant, 'initial_rpy')}")
+             + f" at the start, {start_text(scenario, robot, defaulted)} with {rpy}")
     raise UnholdableRobot(
         f"robot {robot.name!r} ({m} cables) cannot hold a platform that turns freely: its "
         f"wrench matrix has rank {rank} < 6{where}, so no cable tensions resist "
