@@ -244,7 +244,8 @@ def _print_statics(r, scenario, step, out, base=None):
           f"{_t_star_text(r, p0, float(holding_tension(r, p0)))}", file=out)
     from cdpm_drake.runs.simulate import simulate
 
-    log = simulate(scenario=_kinematic_copy(scenario)).log
+    with _robot_warnings_in_report():  # said above, once (loading it again would repeat them)
+        log = simulate(scenario=_kinematic_copy(scenario)).log
     t = holding_tension(r, log["p"])
     k = int(np.argmin(t))
     print(f"  along the scenario's path (kinematic plant, {len(t)} ticks): smallest t* "

@@ -198,7 +198,9 @@ def test_cdpm_info_says_the_run_would_be_refused_and_simulate_refuses_it(tmp_pat
     scenario = tmp_path / "free.yaml"
     scenario.write_text(f"name: free\nrobot: {path}\nduration: 0.2\nplant: !DynamicReels {{}}\n")
     assert main(["info", str(scenario), "--grid", "0.25"]) == 0
-    out = capsys.readouterr().out
+    out, err = capsys.readouterr()
+    # The robot's rank warning once (issue 32: the path's simulation printed it again).
+    assert (out + err).count("4 cables cannot hold the platform") == 1, out + err
     (line,) = [x for x in out.splitlines() if x.startswith("refused: ")]
     assert "`cdpm simulate` would refuse this scenario's run" in line
     assert "rank 3 < 6" in line and "moments about x, y and z" in line
