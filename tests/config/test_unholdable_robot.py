@@ -212,3 +212,22 @@ def test_cdpm_info_says_the_run_would_be_refused_and_simulate_refuses_it(tmp_pat
     assert code == 1, err  # cli.cdpm.EXIT_CODES: an invalid scenario
     assert "cannot hold a platform that turns freely" in err and "Traceback" not in err
     assert not (run / "log.npz").exists()
+
+
+def test_a_direction_coupling_a_force_and_a_moment_is_named_whole(tmp_path):
+    # hand_4cable (a garage robot written by hand): rank 4, and one of its two missing
+    # directions mixes a force with a moment; the words give both and the ratio, and read
+    # back they still span what W lacks.
+    from conftest import HAND_ROBOT
+
+    from cdpm_drake.robot import load_robot
+
+    robot = load_robot(HAND_ROBOT)
+    with pytest.raises(UnholdableRobot) as e:
+        load_scenario("exp1_no_interaction", OVERLAY.format(robot=HAND_ROBOT, plant=""))
+    message = str(e.value)
+    W = wrench_matrix_here(robot.reels, robot.attachments, robot.workspace.center)
+    rank, N, E = assert_names_the_missing_wrenches(message, W)
+    assert rank == 4 and "(2 directions;" in message
+    assert re.search(r"a force along \[[^\]]*\] with a moment about \[[^\]]*\] of \S+ N m per N",
+                     message), message
