@@ -60,7 +60,7 @@ def run_main(*, scenario, duration=None, out_dir=None, out=None, on_status=None,
         if "filter_status" in result.log:
             print(safety_filter_summary(result.log), file=out)
         if "model_status" in result.log:
-            print(model_monitor_summary(result.log), file=out)
+            print(model_monitor_summary(result.log, scenario.model_monitor), file=out)
     if result.ending == "fault":
         print(f"cdpm run: error: {result.error}", file=sys.stderr)
         if not result.enabled and any(why in str(result.error) for why in (
