@@ -55,7 +55,8 @@ from cdpm_drake.kernels.drive_torque import tension_from_drive
 from cdpm_drake.kernels.kinematics import KinematicsError, cable_lengths, forward_kinematics
 from cdpm_drake.hardware.config import HardwareReels, check_hardware_reels
 from cdpm_drake.hardware.link import ReelLink
-from cdpm_drake.hardware.protocol import VERSION, VERSIONS, fault_names, next_sequence, sequence_delta
+from cdpm_drake.hardware.protocol import (VERSION, VERSIONS, fault_names, next_sequence,
+                                          sequence_delta)
 
 # Book-keeping state vector (float64; 32-bit sequence numbers are exact in a double).
 STATUS_SEQ = 0        # sequence of the last accepted status
