@@ -321,6 +321,10 @@ class DynamicBridge:
         # otherwise land a hair either side of a step.
         steps = math.floor((self.time - self.operator_start) / self._h + 1e-6)
         if steps * self._h > self.plant_time:
+            # The reels' acceleration over the last plant step (the drives' force at the
+            # sample's instant, not averaged over a bridge tick that may span many steps).
+            if (steps - 1) * self._h > self.plant_time:
+                self._simulator.AdvanceTo((steps - 1) * self._h)
             w0, t0 = self.speed, self.plant_time
             self._simulator.AdvanceTo(steps * self._h)
             self._accel = (self.speed - w0) / (self.plant_time - t0)
@@ -348,7 +352,7 @@ class DynamicBridge:
     def drive_force(self) -> np.ndarray:
         """Each reel drive's force at the cable now, N, + pays out: the plant's `drive_force`
         output if it has one; else what the drive's velocity loop supplies to move its reel at
-        its speed and acceleration (over the last bridge step) against its cable's true
+        its speed and acceleration (over the last plant step) against its cable's true
         tension, with the plant's reel inertia and friction (a drive holding a taut cable
         at rest: -T)."""
         if self._drive_port is not None:

@@ -161,21 +161,29 @@ def test_dynamic_drives_hold_their_cables_at_rest():
 def test_dynamic_drive_forces_move_the_reels_against_their_true_tensions():
     """Driven: each drive's force is J a + b w + F_c sat(w / band) - T, the reel's equation
     of motion (written out here) with the plant's reel_drives, its speed w, its acceleration a
-    as the speed's difference over the last bridge step, and the plant's true tension T."""
+    over the last plant step (1 ms) and the plant's true tension T. One bridge stepped 2 ms a
+    tick, its twin 1 ms twice: the twin's speeds between the two steps give a."""
     resolved = _dynamic_resolved()
-    bridge = E.DynamicBridge(resolved)
+    bridge, twin = E.DynamicBridge(resolved), E.DynamicBridge(resolved)
     d = resolved.robot.dynamics
     band = d.coulomb_friction / (d.bandwidth * d.reel_inertia)
-    bridge.set_command(np.array([0.01, -0.02, 0.005, 0.0, 0.015, -0.01, 0.02]), enable=True)
+    h = resolved.scenario.plant.time_step
+    assert h == 0.001
+    u = np.array([0.01, -0.02, 0.005, 0.0, 0.015, -0.01, 0.02])
+    bridge.set_command(u, enable=True)
+    twin.set_command(u, enable=True)
     seen = 0.0
     for _ in range(60):
-        w0, t0 = bridge.speed, bridge.plant_time
         bridge.step(0.002)
+        twin.step(0.001)
+        w0 = twin.speed
+        twin.step(0.001)
         w, T = bridge.speed, bridge.true_tensions()
-        a = (w - w0) / (bridge.plant_time - t0)
+        np.testing.assert_array_equal(w, twin.speed)
+        a = (w - w0) / h
         expected = (d.reel_inertia * a + d.viscous_friction * w
                     + d.coulomb_friction * np.clip(w / band, -1, 1) - T)
-        np.testing.assert_allclose(bridge.drive_force(), expected, rtol=1e-12, atol=1e-12)
+        np.testing.assert_allclose(bridge.drive_force(), expected, rtol=1e-9, atol=1e-9)
         seen = max(seen, np.abs(expected + T).max())
     assert seen > 0.1  # the motion terms mattered (the reels accelerate from rest)
 
@@ -254,39 +262,98 @@ def _run_against_dynamic_emulator(tmp_path, extra=()):
     return code, out_dir, line + out, truth
 
 
+def _compare(log, truth, segments=4, lags=10):
+    """tension_measured against the plant's true tensions on the plant's clock (0 at the
+    first enabling command, as the run's log). The two clocks differ by the link's latency, a
+    few ticks, and a host stall on either side shifts that offset, so each of `segments`
+    equal stretches of the run takes its best of +-`lags` ticks of lag (the offset between two
+    clocks, not a fit of values). Returns (RMS error N, largest error N, per-cable
+    correlation, lags, rows compared)."""
+    measured, t = log["tension_measured"], log["time"]
+    pt, T = truth["plant_time"], truth["tensions"]
+    ok = np.isfinite(measured).all(axis=1) & (t > 0.05) & (t < 1.9)
+    rows = np.flatnonzero(ok)
+    aligned, chosen = np.empty((rows.size, M)), []
+    for part in np.array_split(np.arange(rows.size), segments):
+        k = rows[part]
+        best = None
+        for lag in range(-lags, lags + 1):
+            true = np.stack([np.interp(t[k] + lag * 0.002, pt, T[:, i]) for i in range(M)], 1)
+            rms = np.sqrt(np.mean((measured[k] - true) ** 2))
+            if best is None or rms < best[0]:
+                best = (rms, lag, true)
+        aligned[part] = best[2]
+        chosen.append(best[1])
+    error = measured[rows] - aligned
+    corr = [np.corrcoef(measured[rows, i], aligned[:, i])[0, 1] for i in range(M)]
+    return np.sqrt(np.mean(error ** 2)), np.abs(error).max(), corr, chosen, rows.size
+
+
+def _conversions_matched(log, truth, robot, gaps=50):
+    """How many of the run's finite tension_measured rows are exactly the conversion of
+    statuses the emulator sent: the reel's equation of motion (written out here) on a status
+    j's drive forces and speeds, with the acceleration from an earlier status j - s over their
+    `time` fields (s <= `gaps`, 50 statuses: the 0.1 s beyond which the controller takes no
+    acceleration; a busy host bunches statuses and the controller keeps the newest of those
+    waiting, so it skips some: 7 in a row seen). Returns (matched, finite rows)."""
+    d = robot.dynamics
+    band = d.coulomb_friction / (d.bandwidth * d.reel_inertia)
+    F, W, tt = truth["drive_force"], truth["reel_speed"], truth["time"]
+    rows = log["tension_measured"][np.isfinite(log["tension_measured"]).all(axis=1)]
+    matched = np.zeros(len(rows), dtype=bool)
+    for gap in range(1, gaps + 1):
+        a = (W[gap:] - W[:-gap]) / (tt[gap:] - tt[:-gap])[:, None]
+        w = W[gap:]
+        conversion = (d.reel_inertia * a + d.viscous_friction * w
+                      + d.coulomb_friction * np.clip(w / band, -1, 1) - F[gap:])
+        for chunk in np.array_split(np.arange(len(rows)), 10):
+            diff = np.abs(rows[chunk, None, :] - conversion[None, :, :]).max(axis=2)
+            matched[chunk] |= (diff < 1e-9 * (1 + np.abs(rows[chunk]).max())).any(axis=1)
+    return int(matched.sum()), len(rows)
+
+
 def test_cdpm_run_logs_tension_measured_that_follows_the_emulators_truth(tmp_path):
     """The drive-torque sensor end to end: the emulator's dynamic plant sends each drive's
-    force, the controller converts it back with the robot file's reel model and logs it. The
-    reference is the plant's true tension from the emulator's truth log, on the plant's clock
-    (0 at the first enabling command, as the run's log): the two clocks differ by the link's
-    latency, a few ticks, so the comparison takes the best of +-10 ticks of lag. Measured on
-    this host: correlation > 0.99 on every cable, RMS error 0.05 N, largest 0.5 N (at lag -2
-    ticks), against a true tension that moves by 0.5-2 N (std) over the run. A run that a
-    host stall of more than 20 ms disturbed and that misses is repeated, up to three times in
-    all."""
+    force, the controller converts it back with the robot file's reel model and logs it.
+
+    Every logged value is the conversion of forces and speeds the emulator sent (exact, from
+    its truth log). Against the plant's true tensions (`_compare`): measured on this host,
+    correlation > 0.98 on every cable and RMS error 0.05-0.11 N, largest 0.3-1.4 N, when
+    idle; RMS 0.26-0.38 N, largest 2.5-5.8 N, correlation > 0.94, with the host loaded (the
+    emulator's ticks then come irregularly, so its statuses' speeds are sampled at irregular
+    times and the acceleration from two of them is off), against a true tension that moves
+    by 0.5-2 N (std) over the run. A run that a host stall of more than 20 ms disturbed (the
+    controller's ticks or the bridge's statuses) and that misses is repeated, up to three
+    times in all."""
+    from cdpm_drake.config import scenario_robot
+
+    robot = scenario_robot(load_scenario("exp2_interaction"))
     for attempt in range(3):
         code, out_dir, out, truth_path = _run_against_dynamic_emulator(tmp_path / f"a{attempt}")
         assert code == 0, out
         log, truth = np.load(out_dir / "log.npz"), np.load(truth_path)
-        measured, t = log["tension_measured"], log["time"]
-        pt, T = truth["plant_time"], truth["tensions"]
-        ok = np.isfinite(measured).all(axis=1) & (t > 0.05) & (t < 1.9)
-        best = None
-        for lag in range(-10, 11):
-            true = np.stack([np.interp(t + lag * 0.002, pt, T[:, i]) for i in range(M)], 1)
-            rms = np.sqrt(np.mean((measured[ok] - true[ok]) ** 2))
-            if best is None or rms < best[0]:
-                corr = [np.corrcoef(measured[ok, i], true[ok, i])[0, 1] for i in range(M)]
-                best = (rms, lag, corr, np.abs(measured[ok] - true[ok]).max())
-        stalled = np.diff(log["wall"]).max() > 0.02
-        if best[0] < 0.3 or not stalled:
+        rms, worst, corr, lags, rows = _compare(log, truth)
+        stalled = (np.diff(log["wall"]).max() > 0.02
+                   or np.diff(truth["time"]).max() > 0.02)
+        if (rms < 0.5 and min(corr) > 0.9) or not stalled:
             break
     assert "session 1: speaking protocol version 2" in out
     # Only the first tick is NaN (no earlier reel speed for an acceleration).
-    assert np.isnan(measured[0]).all() and ok.sum() > 900
-    rms, lag, corr, worst = best
-    assert T[(pt > 0.05) & (pt < 1.9)].std(axis=0).min() > 0.3  # the truth moves
-    assert rms < 0.3 and worst < 2.0, best
-    assert min(corr) > 0.9, best
+    assert np.isnan(log["tension_measured"][0]).all() and rows > 900
+    # Every value the exact conversion of what was sent; NaN only at the first tick and
+    # after a silence of the bridge longer than 0.1 s (a host stall: no acceleration then).
+    matched, finite = _conversions_matched(log, truth, robot)
+    silences = int(np.sum(np.diff(truth["time"]) > 0.1))
+    assert matched == finite >= len(log["time"]) - 1 - silences
+    pt, T = truth["plant_time"], truth["tensions"]
+    run = (pt > 0.05) & (pt < 1.9)
+    assert T[run].std(axis=0).min() > 0.3  # the truth moves
+    assert rms < 0.5, (rms, worst, corr, lags)
+    assert min(corr) > 0.9, (rms, worst, corr, lags)
+    # Unbiased: each cable's mean over the run within 0.2 N of the truth's (0.07 N measured).
+    measured = log["tension_measured"]
+    t = log["time"]
+    mean_measured = np.nanmean(measured[(t > 0.05) & (t < 1.9)], axis=0)
+    np.testing.assert_allclose(mean_measured, T[run].mean(axis=0), atol=0.2)
     # Not the truth copied: the conversion's model (acceleration from two statuses) differs.
     assert rms > 1e-4
