@@ -27,14 +27,15 @@ from cdpm_drake.config.resolve import (ResolvedScenario, check_scenario, interfe
 from cdpm_drake.config.scenario import (Admittance, Controller, Interference, KinetostaticForce,
                                         Limits, Logistic, ModelMonitor, OperatorConfig,
                                         PairLogistic, SafetyFilter, Scenario, ScenarioError,
-                                        Sensor, WallForce)
+                                        Sensor, TensionDamping, WallForce)
 from cdpm_drake.config.yaml_io import (INTERNAL_FIELDS, check_yaml, explain_load_error,
                                        scenario_to_yaml, with_line)
 
 __all__ = [
     # The schema (scenario.py, plants.py).
     "Scenario", "Admittance", "Logistic", "PairLogistic", "Interference", "Limits",
-    "WallForce", "Sensor", "Controller", "KinetostaticForce", "SafetyFilter", "ModelMonitor",
+    "WallForce", "Sensor", "Controller", "TensionDamping", "KinetostaticForce", "SafetyFilter",
+    "ModelMonitor",
     "OperatorConfig", "SimulatedReels", "DynamicReels", "PlantConfig", "ScenarioError",
     # Loading and resolving (load.py, resolve.py).
     "scenario_names", "resolve_scenario_path", "load_scenario", "load_resolved_scenario",
