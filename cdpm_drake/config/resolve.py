@@ -118,6 +118,10 @@ def _resolve(scenario: Scenario, source: str) -> ResolvedScenario:
             f"controller.length_gain must be a number >= 0 1/s and below 1 / time_step = "
             f"{1.0 / scenario.time_step:g} 1/s (0: the paper's open loop), got {gain!r}")
     check_controller(scenario.controller, robot, scenario.plant)
+    scale = scenario.controller.tension_damping.gain_scale
+    if not (is_number(scale) and math.isfinite(float(scale)) and float(scale) >= 0):
+        raise ScenarioError(f"controller.tension_damping.gain_scale must be a number >= 0 "
+                            f"(1: the derived gain), got {scale!r}")
     if scenario.wall_force.enabled:
         check_positive(scenario.wall_force.margin, "wall_force.margin")
         check_positive(scenario.wall_force.max_force, "wall_force.max_force")
