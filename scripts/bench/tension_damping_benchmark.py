@@ -8,7 +8,8 @@ overlays, its ground truth recomputed from each log, t* at the true pose):
 - lift 40 N and corner 20 N on exp2 (paper_7cable, 1-3 swapped);
 - 10 N pushes across the swapped pair on the robots the controller was not tuned on
   (cube_8cable 5-7 swapped, own_7cable 5-7 swapped);
-- exp2 itself (its operator), for its smallest true tension.
+- the shipped experiments themselves (their operators), for their smallest true tension
+  (--duration 30 for their whole length).
 
     python scripts/bench/tension_damping_benchmark.py                 # the table (~4 min)
     python scripts/bench/tension_damping_benchmark.py --margin        # the stability margins
@@ -52,7 +53,8 @@ def hands() -> dict:
         path = str(adversarial.SCENARIOS / name)
         u = adversarial._direction(load_resolved_scenario(path), (5, 7))
         out[label] = (path, adversarial._scripted(10 * u))
-    out["exp2 (its operator)"] = ("exp2_interaction", "")
+    for name in ("exp1_no_interaction", "exp2_interaction", "exp3_two_pairs"):
+        out[f"{name[:4]} (its operator)"] = (name, "")
     return out
 
 
