@@ -395,6 +395,12 @@ def _add_tension_damping(builder, blocks, resolved, command, lengths, tensions, 
     block.connect_input(command, "reel_velocity_desired")
     block.connect_input(tensions, "tension_measured")
     block.connect_input(lengths, "cable_lengths")
+    if "tension_distribution" in blocks:
+        expected = blocks["tension_distribution"].GetOutputPort("tension_estimate")
+    else:  # no estimate: zeros (the high-pass takes out any constant)
+        expected = builder.AddNamedSystem("tension_damping_no_estimate", ConstantVectorSource(
+            np.zeros(robot.num_cables))).get_output_port()
+    block.connect_input(expected, "tension_expected")
     return block.GetOutputPort("reel_velocity_command")
 
 

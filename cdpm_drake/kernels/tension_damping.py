@@ -3,9 +3,10 @@ its cable, driven by the measured tension. numpy and numba, no Drake.
 
 Law, per cable i (reel speeds m/s of cable, positive paying out; tensions N):
 
-    u_i = u_map,i + kd (T_i - lowpass(T_i)) L_i / EA
+    u_i = u_map,i + kd (D_i - lowpass(D_i)) L_i / EA,   D_i = T_i - E_i
 
-T_i the measured tension, lowpass a first-order filter of time constant tau, L_i the cable's
+T_i the measured tension, E_i the tension the controller expects (damping_tick says why),
+lowpass a first-order filter of time constant tau, L_i the cable's
 (encoder) length, EA its axial stiffness. (T - lowpass T) L / EA is the stretch the tension's
 fast part puts on the cable; paying it out at rate kd makes the reel a damper c_i = k_i / kd
 (k_i = EA / L_i) in series with the cable's spring: a Maxwell element, whose loss per cycle
@@ -76,29 +77,37 @@ def damping_params(kd, tau, *, time_step, EA, max_reel_speed) -> np.ndarray:
 
 @_jit
 def damping_tick(params, x, out):
-    """x = [u (m) m/s the mapping's reel command, T (m) N measured tensions, L (m) m cable
-    lengths, memory: low-passed tensions (m) N, started (1)]; out = [u + damping (m) m/s,
-    damping (m) m/s, next memory (m + 1)].
+    """x = [u (m) m/s the mapping's reel command, T (m) N measured tensions, E (m) N the
+    tensions the controller expects (its estimate from the weight, the measured hand force,
+    the commanded acceleration and the lengths; zeros without one), L (m) m cable lengths,
+    memory: low-passed T - E (m) N, started (1)]; out = [u + damping (m) m/s, damping (m)
+    m/s, next memory (m + 1)].
+
+    What is damped is the measured tension's part the controller does not expect, T - E: a
+    hand that pushes raises the tensions as the statics say (E follows it, from the force
+    sensor), and paying that out would only make the platform yield to the hand (measured:
+    a 40 N push across exp2's pair 1-3 went 5.2 mm below d_l with T alone, 1.2 mm without
+    damping); the ringing the encoders cannot see is not in E.
 
     A cable whose tension is not finite (no sensor, a missing reading) gets no damping, its
     filter held; a command already beyond the reel speed limit passes unchanged (the plant
     scales it); else the sum is clipped to the limit. The filter starts at the first
     finite reading (no kick at the start)."""
-    m = (x.shape[0] - 1) // 4
+    m = (x.shape[0] - 1) // 5
     kd, alpha, EA, vmax = params[0], params[1], params[2], params[3]
-    started = x[4 * m] > 0.5
-    out[3 * m] = x[4 * m]
+    started = x[5 * m] > 0.5
+    out[3 * m] = x[5 * m]
     for i in range(m):
         u = x[i]
-        T = x[m + i]
-        lp = x[3 * m + i]
+        T = x[m + i] - x[2 * m + i]
+        lp = x[4 * m + i]
         d = 0.0
         if math.isfinite(T):
             if not (started and math.isfinite(lp)):
                 lp = T
             lp += alpha * (T - lp)
             if abs(u) <= vmax:
-                d = kd * (T - lp) * x[2 * m + i] / EA
+                d = kd * (T - lp) * x[3 * m + i] / EA
                 v = u + d
                 v = vmax if v > vmax else (-vmax if v < -vmax else v)
                 d = v - u

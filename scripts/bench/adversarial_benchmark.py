@@ -32,7 +32,7 @@ command.
 The dynamic plant's tension sensor (issue 31: `plant: !DynamicReels {tension_sensor: ...}`,
 which the tension damping block uses) is a column: the default controller's dynamic rows are
 run once per sensor of --sensors (default: drive_torque, the plant's default); the paper's
-method has no use for it (its rows: the default sensor).
+method runs without one (none: the paper's robot, and no damping).
 """
 
 import argparse
@@ -145,8 +145,9 @@ def cases(quick: bool = False, sensors=SENSORS) -> list:
             plants = ("dynamic", "kinematic") if kinematic_too else ("dynamic",)
             for plant in plants:
                 for method in ("paper", "default"):
+                    # The paper's robot has no tension sensor (nor its method a damping).
                     for sensor in (sensors if plant == "dynamic" and method == "default"
-                                   else (SENSORS[0] if plant == "dynamic" else "-",)):
+                                   else ("none" if plant == "dynamic" else "-",)):
                         text = "{duration: %g, %s%s%s}" % (
                             DURATION, FULL % sensor if plant == "dynamic" else "",
                             PAPER if method == "paper" else "", overlay)

@@ -14,7 +14,7 @@ KD, TAU, T, EA, VMAX = 50.0, 0.2, 0.002, 70000.0, 1.0
 
 def _tick(u, tensions, lengths, memory):
     params = damping_params(KD, TAU, time_step=T, EA=EA, max_reel_speed=VMAX)
-    x = np.concatenate([u, tensions, lengths, memory])
+    x = np.concatenate([u, tensions, np.zeros(M), lengths, memory])
     out = np.empty(3 * M + 1)
     damping_tick(params, x, out)
     return out[:M], out[M:2 * M], out[2 * M:]
@@ -91,3 +91,22 @@ def test_the_gains_are_the_mode_band_capped_by_the_delays():
     assert slow == math.pi / (4 * (0.003 + 0.02 + 0.01))
     assert damping_gains(modes, time_step=0.002, sensor_lag=0.002, drive_bandwidth=100.0,
                          gain_scale=3.0)[0] == 120.0
+
+
+def test_a_tension_change_the_controller_expects_is_not_damped():
+    # A hand's push raises the tensions as the statics say, and the estimate E with them:
+    # only T - E is damped, so the reels do not yield to the hand.
+    params = damping_params(KD, TAU, time_step=T, EA=EA, max_reel_speed=VMAX)
+    L = np.full(M, 2.0)
+    memory = np.zeros(M + 1)
+    for k in range(20):
+        tensions = np.array([20.0, 30.0, 10.0]) + 0.5 * k  # rising 250 N/s
+        x = np.concatenate([np.zeros(M), tensions, tensions - 3.0, L, memory])
+        out = np.empty(3 * M + 1)
+        damping_tick(params, x, out)
+        memory = out[2 * M:]
+        assert np.all(out[M:2 * M] == 0.0)
+    # The same rise unexpected (E held) is damped, paying out.
+    x = np.concatenate([np.zeros(M), tensions + 0.5, tensions - 3.0, L, memory])
+    damping_tick(params, x, out)
+    assert np.all(out[M:2 * M] > 0)
