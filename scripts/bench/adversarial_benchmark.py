@@ -29,7 +29,7 @@ command.
     python scripts/bench/adversarial_benchmark.py --json out.json --jobs 2
     python scripts/bench/adversarial_benchmark.py --sensors none,drive_torque,load_cell
 
-The dynamic plant's tension sensor (issue 31: `plant: !DynamicReels {tension_sensor: ...}`,
+The dynamic plant's tension sensor (`plant: !DynamicReels {tension_sensor: ...}`,
 which the tension damping block uses) is a column: the default controller's dynamic rows are
 run once per sensor of --sensors (default: drive_torque, the plant's default); the paper's
 method runs without one (none: the paper's robot, and no damping).

@@ -1,4 +1,4 @@
-"""Measured tensions and the tension damping block (issue 31) on the dynamic plant with the
+"""Measured tensions and the tension damping block on the dynamic plant with the
 full pose and tension control: slack where the statics could hold the hand, per tension
 sensor, with the damping on and off, and the gain at which the damping goes unstable.
 
