@@ -363,10 +363,10 @@ def _add_safety_filter(builder, blocks, resolved, velocity_desired, omega_desire
 
 
 def _senses_tensions(cfg, plant) -> bool:
-    """The plant measures tensions (a tension_measured port, its sensor not `none`; the
-    kinematic plant's is NaN throughout)."""
-    return (not isinstance(cfg, SimulatedReelsConfig) and plant.HasOutputPort(TENSION_PORT)
-            and getattr(cfg, "tension_sensor", "none") != "none")
+    """The plant has a tension_measured port. Where it reads NaN (the kinematic plant, a
+    plant without a sensor, a reel bridge that sends no torque) the block passes the
+    command through unchanged, bit for bit: one diagram for every plant."""
+    return plant.HasOutputPort(TENSION_PORT)
 
 
 def _sensor_lag(cfg) -> float:
@@ -391,16 +391,16 @@ def _add_tension_damping(builder, blocks, resolved, command, lengths, tensions, 
         sensor_lag=_sensor_lag(scenario.plant), gain_scale=float(cfg.gain_scale))
     block = blocks["tension_damping"] = FlatBlock(
         builder, "tension_damping", KERNEL_BLOCK_MAIN, lambda b: build_tension_damping(
-            b, robot, kd=kd, tau=tau, max_reel_speed=resolved.max_reel_speed, time_step=T))
+            b, robot, kd=kd, tau=tau, max_reel_speed=resolved.max_reel_speed,
+            estimate="tension_distribution" in blocks, time_step=T))
     block.connect_input(command, "reel_velocity_desired")
     block.connect_input(tensions, "tension_measured")
     block.connect_input(lengths, "cable_lengths")
-    if "tension_distribution" in blocks:
-        expected = blocks["tension_distribution"].GetOutputPort("tension_estimate")
-    else:  # no estimate: zeros (the high-pass takes out any constant)
-        expected = builder.AddNamedSystem("tension_damping_no_estimate", ConstantVectorSource(
-            np.zeros(robot.num_cables))).get_output_port()
-    block.connect_input(expected, "tension_expected")
+    # No estimate (no tension control): the slot takes the lengths, which the kernel then
+    # ignores (estimate=False; a source of zeros would cost a system).
+    estimate = "tension_distribution" in blocks
+    block.connect_input(blocks["tension_distribution"].GetOutputPort("tension_estimate")
+                        if estimate else lengths, "tension_expected")
     return block.GetOutputPort("reel_velocity_command")
 
 

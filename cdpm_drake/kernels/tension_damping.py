@@ -69,17 +69,19 @@ def damping_gains(modes, *, time_step, sensor_lag, drive_bandwidth, gain_scale=1
     return gain_scale * kd, 5.0 / w1
 
 
-def damping_params(kd, tau, *, time_step, EA, max_reel_speed) -> np.ndarray:
+def damping_params(kd, tau, *, time_step, EA, max_reel_speed, estimate=True) -> np.ndarray:
     """damping_tick's params: [kd 1/s, the low-pass's gain per tick, EA N, reel speed limit
-    m/s]."""
-    return np.array([kd, 1.0 - math.exp(-time_step / tau), EA, max_reel_speed], dtype=float)
+    m/s, 1 where the expected tensions E are an estimate (0: none, E taken as zero)]."""
+    return np.array([kd, 1.0 - math.exp(-time_step / tau), EA, max_reel_speed,
+                     1.0 if estimate else 0.0], dtype=float)
 
 
 @_jit
 def damping_tick(params, x, out):
     """x = [u (m) m/s the mapping's reel command, T (m) N measured tensions, E (m) N the
     tensions the controller expects (its estimate from the weight, the measured hand force,
-    the commanded acceleration and the lengths; zeros without one), L (m) m cable lengths,
+    the commanded acceleration and the lengths; ignored without one, params[4] = 0), L (m) m
+    cable lengths,
     memory: low-passed T - E (m) N, started (1)]; out = [u + damping (m) m/s, damping (m)
     m/s, next memory (m + 1)].
 
@@ -95,11 +97,12 @@ def damping_tick(params, x, out):
     finite reading (no kick at the start)."""
     m = (x.shape[0] - 1) // 5
     kd, alpha, EA, vmax = params[0], params[1], params[2], params[3]
+    expected = params[4] > 0.5
     started = x[5 * m] > 0.5
     out[3 * m] = x[5 * m]
     for i in range(m):
         u = x[i]
-        T = x[m + i] - x[2 * m + i]
+        T = x[m + i] - x[2 * m + i] if expected else x[m + i]
         lp = x[4 * m + i]
         d = 0.0
         if math.isfinite(T):

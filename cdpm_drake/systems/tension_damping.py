@@ -23,14 +23,14 @@ def tension_damping_gains(robot, initial_position, *, time_step, sensor_lag, gai
                          drive_bandwidth=d.bandwidth, gain_scale=gain_scale)
 
 
-def build_tension_damping(builder, robot, *, kd, tau, max_reel_speed, time_step):
+def build_tension_damping(builder, robot, *, kd, tau, max_reel_speed, estimate, time_step):
     """Inputs reel_velocity_desired (m) m/s (the mapping's reel_velocity_command),
-    tension_measured (m) N, tension_expected (m) N (the controller's estimate, or zeros),
-    cable_lengths (m) m; outputs reel_velocity_command (m) m/s (to the reels) and damping (m)
+    tension_measured (m) N, tension_expected (m) N (the controller's estimate; ignored
+    without one, `estimate` False), cable_lengths (m) m; outputs reel_velocity_command (m) m/s (to the reels) and damping (m)
     m/s (its part of it)."""
     m = robot.num_cables
     params = owned(damping_params(kd, tau, time_step=time_step, EA=robot.dynamics.EA,
-                                  max_reel_speed=max_reel_speed))
+                                  max_reel_speed=max_reel_speed, estimate=estimate))
     x = np.zeros(5 * m + 1)
     kernel = bind(damping_tick, params, x, np.empty(3 * m + 1))
     build_kernel_block(

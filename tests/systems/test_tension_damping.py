@@ -72,16 +72,26 @@ def test_the_damping_takes_the_slack_out_of_a_hard_push_on_a_robot_it_was_not_tu
     assert np.abs(log_on["reel_velocity"]).max() <= 0.8 + 1e-12  # own_7cable's reel limit
 
 
-def test_the_block_is_where_a_plant_measures_tensions_only():
+def test_without_a_tension_sensor_the_block_passes_the_command_through_bit_for_bit():
     def names(overlay):
         return {s.get_name() for s in build_diagram(load_scenario(OWN_5_7, overlay)).GetSystems()}
 
+    # One diagram for every plant (the real reels' too): the block is there wherever the
+    # plant has the port, unless switched off.
     assert "tension_damping" in names(_overlay(True))
-    assert "tension_damping" in names(_overlay(True, "load_cell"))
-    assert "tension_damping" not in names(_overlay(True, "none"))
+    assert "tension_damping" in names(_overlay(True, "none"))
     assert "tension_damping" not in names(_overlay(False))
-    # The kinematic plant has no tensions: its diagram is the paper's, the block left out.
-    assert "tension_damping" not in names("{}")
+    assert "tension_damping" in names("{}")
+    # NaN tensions (no sensor; the kinematic plant): nothing added, the same run exactly.
+    for overlay in ("{duration: 1.0}", _overlay(True, "none", duration=1.0)):
+        on = simulate(scenario=load_scenario(OWN_5_7, overlay)).log
+        off = simulate(scenario=load_scenario(OWN_5_7, overlay.replace(
+            "{duration: 1.0}", "{duration: 1.0, controller: {tension_damping: "
+            "{enabled: false}}}").replace("enabled: true", "enabled: false"))).log
+        assert np.all(np.isnan(on["tension_measured"]))
+        assert np.all(on["reel_velocity_damping"] == 0.0)
+        for key in ("reel_velocity", "lengths", "p"):
+            np.testing.assert_array_equal(on[key], off[key])
 
 
 @pytest.mark.parametrize("scale", [-1.0, math.nan])

@@ -232,6 +232,8 @@ def build_dynamic_plant(scenario, robot, operator, start_tensions, *, log_truth=
 
     builder.ExportInput(route.GetInputPort("reel_velocity_command"), "reel_velocity_command")
     builder.ExportOutput(encoders.get_output_port(), "cable_lengths")
+    add_measured_force(builder, route.GetOutputPort("measured_force"), scenario, T)
+    # After measured_force: the plants' ports in one order (the real reels' too).
     if sensing:
         system, start = tension_sensor(scenario, robot, tensions0)
         tick = builder.AddNamedSystem("tension_sensor", system)
@@ -243,7 +245,6 @@ def build_dynamic_plant(scenario, robot, operator, start_tensions, *, log_truth=
     else:
         nan = builder.AddNamedSystem("tension_sensor", ConstantVectorSource(np.full(m, np.nan)))
         builder.ExportOutput(nan.get_output_port(), "tension_measured")
-    add_measured_force(builder, route.GetOutputPort("measured_force"), scenario, T)
     if log_truth:
         source = route.GetOutputPort("truth")
         logger = builder.AddNamedSystem(TRUTH_LOG, VectorLogSink(source.size(), T))
