@@ -63,7 +63,13 @@ def damping_gains(modes, *, time_step, sensor_lag, drive_bandwidth, gain_scale=1
     """(kd 1/s, low-pass time constant s) from the platform's modes (rad/s, ascending) and
     the loop's delays: the tick s, the sensor's lag s and the drives' bandwidth rad/s (the
     module's docstring derives them)."""
-    w1, w3 = float(modes[0]), float(modes[2])
+    modes = np.asarray(modes, dtype=float)
+    # A robot whose cables cannot resist every motion (fewer than six, or a singular pose)
+    # has modes without stiffness: nothing rings there; the band is its stiff modes'.
+    stiff = modes[modes > 1e-6 * max(float(modes.max()), 1e-300)]
+    if stiff.size == 0:
+        return 0.0, math.inf
+    w1, w3 = float(stiff[0]), float(stiff[min(2, stiff.size - 1)])
     delay = 1.5 * time_step + sensor_lag + 1.0 / drive_bandwidth
     kd = min(math.sqrt(w1 * w3), math.pi / (4.0 * delay))
     return gain_scale * kd, 5.0 / w1
@@ -72,7 +78,8 @@ def damping_gains(modes, *, time_step, sensor_lag, drive_bandwidth, gain_scale=1
 def damping_params(kd, tau, *, time_step, EA, max_reel_speed, estimate=True) -> np.ndarray:
     """damping_tick's params: [kd 1/s, the low-pass's gain per tick, EA N, reel speed limit
     m/s, 1 where the expected tensions E are an estimate (0: none, E taken as zero)]."""
-    return np.array([kd, 1.0 - math.exp(-time_step / tau), EA, max_reel_speed,
+    return np.array([kd, 1.0 - math.exp(-time_step / tau) if tau > 0 else 1.0, EA,
+                     max_reel_speed,
                      1.0 if estimate else 0.0], dtype=float)
 
 

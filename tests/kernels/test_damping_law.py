@@ -110,3 +110,14 @@ def test_a_tension_change_the_controller_expects_is_not_damped():
     x = np.concatenate([np.zeros(M), tensions + 0.5, tensions - 3.0, L, memory])
     damping_tick(params, x, out)
     assert np.all(out[M:2 * M] > 0)
+
+
+def test_modes_without_stiffness_are_left_out_of_the_band():
+    # Three cables in a plane hold no motion out of it: zero modes. The band is the stiff
+    # modes' (here the first two), and a robot with none gets no damping.
+    modes = np.array([0.0, 0.0, 0.0, 30.0, 120.0, 300.0])
+    kd, tau = damping_gains(modes, time_step=0.002, sensor_lag=0.0, drive_bandwidth=1e9)
+    assert kd == math.sqrt(30.0 * 300.0) and tau == 5.0 / 30.0
+    assert damping_gains(np.zeros(6), time_step=0.002, sensor_lag=0.0,
+                         drive_bandwidth=100.0) == (0.0, math.inf)
+    assert damping_params(0.0, math.inf, time_step=0.002, EA=EA, max_reel_speed=1.0)[1] == 0.0

@@ -288,7 +288,9 @@ def tension_sensor(scenario, robot, tensions0):
         filtered = np.asarray(tensions0, dtype=float)
     layout = sensor_layout(m)
     n = sum(size for _, size in layout.values())
-    start = np.concatenate([tensions0, filtered, np.zeros(m), [0.0]])
+    # The first reading (logged at t = 0): the start tensions as the sensor reads them.
+    start = np.concatenate([np.asarray(tensions0, dtype=float) + bias, filtered, np.zeros(m),
+                            [0.0]])
     params, bias = owned(params), owned(bias)
     kernel = bind(tension_sensor_tick, params, bias, np.zeros(3 * m + n),
                   np.empty(n))
