@@ -58,8 +58,10 @@ ROBOTS = (
     ("cube_8cable, 5-7 swapped", str(SCENARIOS / "cube_5_7.yaml"), [(5, 7)]),
     ("own_7cable, 5-7 swapped", str(SCENARIOS / "own_5_7.yaml"), [(5, 7)]),
 )
-FULL = ("controller: {pose: full, tension_control: true}, plant: !DynamicReels "
-        "{tension_sensor: %s}, ")
+FULL = "controller: {pose: full, tension_control: true}, plant: !DynamicReels {}, "
+# The same with the plant's tension sensor named.
+FULL_SENSOR = ("controller: {pose: full, tension_control: true}, plant: !DynamicReels "
+               "{tension_sensor: %s}, ")
 SENSORS = ("drive_torque",)
 PAPER = "safety_filter: {enabled: false}, model_monitor: {enabled: false}, "
 DURATION = 10.0
@@ -149,7 +151,7 @@ def cases(quick: bool = False, sensors=SENSORS) -> list:
                     for sensor in (sensors if plant == "dynamic" and method == "default"
                                    else ("none" if plant == "dynamic" else "-",)):
                         text = "{duration: %g, %s%s%s}" % (
-                            DURATION, FULL % sensor if plant == "dynamic" else "",
+                            DURATION, FULL_SENSOR % sensor if plant == "dynamic" else "",
                             PAPER if method == "paper" else "", overlay)
                         out.append(Case(label, scenario, hand, plant, method, text, sensor))
     return out

@@ -156,17 +156,18 @@ def test_the_smallest_grid_step_suggested_fits(capsys, valid_spec, write_robot):
 # lengths; per watched pair (21) pair_distances, active, crossed; and the time.
 # The safety filter, the kinetostatic limit and the model monitor add velocity_limited and
 # F_kin (3 each), filter_status, filter_binding, pair_margin, kappa, t_c, model_status and
-# t_star_hand (1 each) and model_residual per cable (7).
-EXP2_VALUES = 7 * 3 + 3 * 7 + 3 * 21 + 1 + (2 * 3 + 7 + 7)
+# t_star_hand (1 each) and model_residual per cable (7); the plant's measured tensions and the
+# tension damping's part of the reel command (issue 31) 7 each.
+EXP2_VALUES = 7 * 3 + 3 * 7 + 3 * 21 + 1 + (2 * 3 + 7 + 7) + 2 * 7
 # The dynamic plant's ground truth adds tensions and slack per cable, p_true and rpy_true,
 # logged with their own time.
 EXP2_DYNAMIC_VALUES = EXP2_VALUES + 2 * 7 + 3 + 3 + 1
 
 
 @pytest.mark.parametrize("overlay, values, size", [
-    # 5e11 ticks x 2,016 bytes (126 values, twice) = 1.008e15 bytes; x 2,352 = 1.18e15.
-    ("{duration: 1e9}", EXP2_VALUES, "1.01 PB"),
-    ("{duration: 1e9, plant: !DynamicReels {}}", EXP2_DYNAMIC_VALUES, "1.18 PB")])
+    # 5e11 ticks x 2,240 bytes (140 values, twice) = 1.12e15 bytes; x 2,576 = 1.29e15.
+    ("{duration: 1e9}", EXP2_VALUES, "1.12 PB"),
+    ("{duration: 1e9, plant: !DynamicReels {}}", EXP2_DYNAMIC_VALUES, "1.29 PB")])
 def test_a_duration_whose_log_cannot_fit_is_refused_naming_the_size(tmp_path, capsys,
                                                                     monkeypatch, overlay,
                                                                     values, size):
