@@ -363,10 +363,11 @@ def _add_safety_filter(builder, blocks, resolved, velocity_desired, omega_desire
 
 
 def _senses_tensions(cfg, plant) -> bool:
-    """The plant has a tension_measured port. Where it reads NaN (the kinematic plant, a
-    plant without a sensor, a reel bridge that sends no torque) the block passes the
-    command through unchanged, bit for bit: one diagram for every plant."""
-    return plant.HasOutputPort(TENSION_PORT)
+    """The plant has a tension_measured port and may measure: not the kinematic plant (no
+    tensions at all: the block would cost 12 % of the paper's Fig. 5 run for nothing).
+    Where a sensor reads NaN (`tension_sensor: none`, a reel bridge that sends no torque)
+    the block passes the command through unchanged, bit for bit."""
+    return not isinstance(cfg, SimulatedReelsConfig) and plant.HasOutputPort(TENSION_PORT)
 
 
 def _sensor_lag(cfg) -> float:

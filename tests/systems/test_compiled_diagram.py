@@ -80,13 +80,12 @@ def test_each_python_block_is_evaluated_once_per_tick(monkeypatch):
     ticks = 250
     result = simulate(scenario=load_scenario("exp2_interaction"), duration=ticks * 0.002)
     assert result.error is None
-    # The ten Python blocks of exp2 (sensor range, FK, interference, limits, Jacobian, the
+    # The nine Python blocks of exp2 (sensor range, FK, interference, limits, Jacobian, the
     # simulated world's step; issue 26: the kinetostatic limit, the safety filter, the model
-    # monitor; issue 31: the tension damping, a pass-through of NaN tensions here), each
-    # computed once per tick: ticks + 1 published rows, the first at t = 0
+    # monitor), each computed once per tick: ticks + 1 published rows, the first at t = 0
     # before any update; the world's step feeds only the plant's state update, so it runs at
     # the `ticks` updates. A second evaluation per tick would double a count.
-    assert len(calls) == 10, calls
+    assert len(calls) == 9, calls
     for key, n in calls.items():
         assert n == (ticks if key.startswith("ReelStep") else ticks + 1), (key, n)
 

@@ -97,9 +97,7 @@ def test_every_bound_call_passes_the_types_it_was_bound_for(monkeypatch, name, o
                 "limit_velocity_stacked", "length_loop_tick", "simulated_reel_step_stacked",
                 "operator_force_on_state",
                 # issue 26: the kinetostatic limit, the safety filter, the model monitor
-                "kinetostatic_tick", "filter_tick", "monitor_tick",
-                # issue 31: the tension damping (NaN tensions on this plant: a pass-through)
-                "damping_tick"}
+                "kinetostatic_tick", "filter_tick", "monitor_tick"}
     expected |= {"wall_force_into"} if overlay else set()
     assert set(calls) == expected
     assert min(calls.values()) >= 50  # every tick went through the checks
@@ -182,9 +180,9 @@ def test_the_fused_diagram_has_one_selector_and_no_multiplexers():
     # warm start, crossing sides, the limits' previous command, the length loop's commanded
     # position, offsets and started flag; issue 26: the kinetostatic block's hand force of
     # the last tick, the filter's barrier position, its valid flag and last twist, the
-    # monitor's counters; issue 31: the tension damping's low-pass and started flag) one delay.
-    assert [type(s).__name__ for s in plain.GetSystems()].count("Selector") == 10
-    assert len(list(plain.GetSystems())) - len(list(diagram.GetSystems())) == 9 + 7
+    # monitor's counters) one delay.
+    assert [type(s).__name__ for s in plain.GetSystems()].count("Selector") == 9
+    assert len(list(plain.GetSystems())) - len(list(diagram.GetSystems())) == 8 + 6
     names = {s.get_name() for s in diagram.GetSystems()}
     assert FUSED_DELAY in names and not names & {
         "forward_kinematics_previous", "interference_force_side_memory",
@@ -196,7 +194,7 @@ def test_the_fused_diagram_has_one_selector_and_no_multiplexers():
     state = memory.GetMyContextFromRoot(context).get_discrete_state_vector().get_value()
     scenario = load_scenario("exp2_interaction")
     np.testing.assert_array_equal(state[:3], scenario.initial_position)
-    assert state.size == 3 + 21 + 3 + (3 + 7 + 1) + 3 + (3 + 1 + 6) + 3 + (7 + 1)
+    assert state.size == 3 + 21 + 3 + (3 + 7 + 1) + 3 + (3 + 1 + 6) + 3
     assert not np.any(state[3:])
 
 
