@@ -312,8 +312,17 @@ def _kinetostatic_params(resolved):
 def _filter_braking(resolved) -> float:
     """The deceleration the safety filter's barriers brake with, m/s^2: per axis as the
     virtual wall does (limits._wall_caps), a / sqrt(3), which keeps the braking within the
-    acceleration limit where three barriers meet."""
-    return resolved.max_acceleration / np.sqrt(3.0)
+    acceleration limit where three barriers meet; and no harder than the cables can take
+    without ringing a cable slack (kinetostatics.ringing_deceleration: the onset of braking
+    is a step of the platform's acceleration, which its cables answer with up to twice the
+    static change of their tensions; kept within the kinetostatic floor)."""
+    from cdpm_drake.kernels.kinetostatics import ringing_deceleration, wrench_rows
+
+    scenario, robot = resolved.scenario, resolved.robot
+    ringing = ringing_deceleration(robot, np.asarray(scenario.initial_position, dtype=float),
+                                   wrench_rows(robot),
+                                   float(scenario.safety_filter.kinetostatic_floor))
+    return min(resolved.max_acceleration / np.sqrt(3.0), ringing)
 
 
 def _add_safety_filter(builder, blocks, resolved, velocity_desired, omega_desired, p_WP, R_WP,
