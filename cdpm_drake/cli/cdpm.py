@@ -275,6 +275,17 @@ def _command(name: str):
 
 
 def main(argv=None) -> int:
+    """Run `cdpm` on argv (default: sys.argv[1:]); the exit code (EXIT_CODES)."""
+    try:
+        return _main(argv)
+    except KeyboardInterrupt:
+        # Ctrl-C before a command's own handler is in place (while pydrake and the kernels
+        # import, about a second): no traceback, the code of an interrupt.
+        print("cdpm: interrupted (Ctrl-C)", file=sys.stderr)
+        return 130
+
+
+def _main(argv) -> int:
     from cdpm_drake.hardware.tick_log import TickLogError
     from cdpm_drake.runs.interrupt import Terminated, exit_code, terminate_raises
     from cdpm_drake.kernels.kinematics import KinematicsError

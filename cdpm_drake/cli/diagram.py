@@ -3,7 +3,7 @@ plant and as a full-pose controller, at full depth and as an overview."""
 
 import sys
 
-from cdpm_drake.cli.arguments import load_scenario_arg
+from cdpm_drake.cli.arguments import check_writable_dir, load_scenario_arg
 from cdpm_drake.cli.errors import CliError
 
 
@@ -61,5 +61,6 @@ def cmd_diagram(args) -> int:
     """`cdpm diagram`: --depth checked, then diagram_main."""
     if args.depth is not None and args.depth < 1:
         raise CliError(f"--depth must be an integer >= 1, got {args.depth!r}")
+    check_writable_dir(args.out, "--out")  # before the diagrams are built, not after
     return diagram_main(scenario=load_scenario_arg(args).scenario, out_dir=args.out,
                         depth=args.depth, svg=not args.no_svg)

@@ -5,7 +5,7 @@ the dynamic plant's ground truth. Distances in mm, forces in N, times in s."""
 
 import numpy as np
 
-from cdpm_drake.text import format_table, format_vector
+from cdpm_drake.text import format_number, format_table, format_vector
 
 
 def _named_cables(cable, ticks) -> str:
@@ -82,11 +82,11 @@ def safety_filter_summary(log) -> str:
             text += f", {what} on {n}"
     margin = np.asarray(log["pair_margin"], dtype=float).reshape(-1)
     if np.isfinite(margin).any():
-        text += f"; smallest pair margin above d_min {1000 * margin.min():.2f} mm"
+        text += f"; smallest pair margin above d_min {format_number(1000 * margin.min())} mm"
         if "pair_distances_true" in log and "d_min" in log:
             true = (np.asarray(log["pair_distances_true"], dtype=float)
                     - np.asarray(log["d_min"], dtype=float)).min(axis=1)
-            text += f" (true {1000 * true.min():.2f} mm)"
+            text += f" (true {format_number(1000 * true.min())} mm)"
     kappa = np.asarray(log["kappa"], dtype=float).reshape(-1)
     if np.isfinite(kappa).any():
         text += f"; smallest kinetostatic margin {kappa[np.isfinite(kappa)].min():.2f} N"
@@ -111,7 +111,7 @@ def model_monitor_summary(log) -> str:
     if residual.size and np.isfinite(residual).any():
         flat = np.nanargmax(np.abs(np.where(np.isfinite(residual), residual, 0.0)))
         cable = int(flat % residual.shape[1]) + 1
-        text += (f"; largest length residual {1000 * residual.reshape(-1)[flat]:+.2f} mm "
+        text += (f"; largest length residual {format_number(1000 * residual.reshape(-1)[flat], sign=True)} mm "
                  f"(cable {cable})")
     return text
 

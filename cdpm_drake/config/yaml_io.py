@@ -23,6 +23,12 @@ def check_yaml_text(source: str, **where) -> None:
         raise ScenarioError(f"{source}: not valid YAML: {e}") from None
     if raw is None:
         return
+    from cdpm_drake.text import duplicate_yaml_keys
+
+    twice = duplicate_yaml_keys(filename=where.get("filename"), data=where.get("data"))
+    if twice:
+        raise ScenarioError(f"{source}: the key {twice[0]}: write each key once (YAML would "
+                            "keep the last one and drop the first without a word)")
     try:
         check_yaml(raw, Scenario, "")
     except ScenarioError as e:

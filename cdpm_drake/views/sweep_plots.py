@@ -258,14 +258,16 @@ def _file_part(field: str) -> str:
 
 
 def plot_sweep(columns, rows, out_dir, metric="min_distance", dpi: int = 110) -> list[Path]:
-    """Write heatmap.png (two or more swept fields), <metric>_vs_<field>.png per field and
-    pareto.png into out_dir; returns the paths."""
+    """Write <metric>_heatmap.png (two or more swept fields), <metric>_vs_<field>.png per field
+    and pareto.png (min_distance against operator_effort, whatever the metric) into out_dir;
+    returns the paths. Each metric's pictures carry its name: plotting a second metric into
+    the same folder keeps the first one's."""
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     fields = swept_fields(columns)
     figures = []
     if len(fields) >= 2:
-        figures.append(("heatmap.png", figure_heatmap(columns, rows, metric)))
+        figures.append((f"{metric}_heatmap.png", figure_heatmap(columns, rows, metric)))
     for f in fields:
         figures.append((f"{metric}_vs_{_file_part(f)}.png",
                         figure_metric_vs_axis(columns, rows, metric, f)))

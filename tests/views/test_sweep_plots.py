@@ -60,7 +60,7 @@ def test_pareto_front_keeps_the_non_dominated_runs():
 
 def test_plot_sweep_writes_the_pictures(tmp_path):
     paths = sp.plot_sweep(COLUMNS, ROWS, tmp_path, metric="operator_effort")
-    assert [p.name for p in paths] == ["heatmap.png", "operator_effort_vs_a.png",
+    assert [p.name for p in paths] == ["operator_effort_heatmap.png", "operator_effort_vs_a.png",
                                        "operator_effort_vs_b.png", "pareto.png"]
     assert all(p.stat().st_size > 1000 for p in paths)
 
