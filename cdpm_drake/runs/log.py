@@ -199,6 +199,9 @@ def assemble_log(time_column, signals: dict, scenario: Scenario | ResolvedScenar
     if "tension_target" in log:  # tension control: its target's floor and ceiling
         log["controller_min_tension"] = np.array(float(scenario.controller.min_tension))
         log["controller_max_tension"] = np.array(float(scenario.controller.max_tension))
+    # The speed limit, m/s (the robot's or the scenario's): the summary tells a command held
+    # at it from one slowed below it while a margin is lost.
+    log["max_velocity"] = np.array(float(resolved.max_velocity))
     # The hard floor the safety filter keeps each pair at (d_min; logged whether or
     # not the filter ran, like d_l and d_u).
     if resolved.d_min is not None and len(resolved.d_min) == P:

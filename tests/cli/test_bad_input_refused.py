@@ -147,3 +147,42 @@ def test_a_key_written_twice_is_refused_with_both_lines(tmp_path, capsys):
                   "duration: 0.01\nduration: 0.02", "--out", str(tmp_path / "run2")]) == 1
     assert "'duration' (duration) on lines 1 and 2" in capsys.readouterr().err
 
+
+
+def _filter_log():
+    """20 ticks of 2 ms: kappa below 0 on ticks 5-9 (to -0.11 N) and 14-15; the speed ball
+    binding at max_velocity 0.5 m/s on ticks 0-1, at the lost-margin cap (0.05 m/s) on 6-9;
+    the pairs binding on 6-9 as well (a tick bound two ways)."""
+    from cdpm_drake.kernels.safety_filter import (BIND_PAIR, BIND_SPEED, STATUS_MODIFIED,
+                                                  STATUS_PASS)
+
+    T = 20
+    kappa = np.full(T, 2.0)
+    kappa[5:10] = [-0.01, -0.05, -0.11, -0.08, -0.02]
+    kappa[14:16] = -0.03
+    status = np.full(T, STATUS_PASS)
+    binding = np.zeros(T, dtype=int)
+    velocity = np.zeros((T, 3))
+    status[[0, 1]] = STATUS_MODIFIED
+    binding[[0, 1]] = BIND_SPEED
+    velocity[[0, 1], 0] = 0.5
+    status[6:10] = STATUS_MODIFIED
+    binding[6:10] = BIND_SPEED | BIND_PAIR
+    velocity[6:10, 0] = 0.05
+    return {"time": 0.002 * np.arange(T), "filter_status": status, "filter_binding": binding,
+            "velocity": velocity, "kappa": kappa, "pair_margin": np.full(T, 0.004),
+            "max_velocity": np.array(0.5)}
+
+
+def test_the_filter_summary_says_when_a_margin_was_lost_and_names_the_cap():
+    from cdpm_drake.cli.summaries import safety_filter_summary
+
+    text = safety_filter_summary(_filter_log())
+    # 7 ticks below 0 in two spans, 14 ms (7 x 2 ms), the first from tick 5 to 9.
+    assert ("kinetostatic margin LOST on 7 ticks (0.01 s in 2 spans, the first from 0.01 to "
+            "0.02 s), down to -0.11 N") in text, text
+    assert "speed limit 2," in text and "lost-margin speed cap (towards 0.05 m/s) 4" in text
+    assert "cable pairs 4" in text
+    # 2 + 4 + 4 bound against 6 ticks changed: the summary says why they add up to more.
+    assert "a tick can bind several ways" in text
+    assert "changed 6" in text
