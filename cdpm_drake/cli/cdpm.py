@@ -190,6 +190,11 @@ def _scenario_args(p, default="exp2_interaction"):
     p.add_argument("--scenario-text", default=None, metavar="YAML",
                    help="YAML overlay for one-off changes, e.g. "
                         "'{duration: 5, interference: {default: {F_u: 4.0}}}'")
+    p.add_argument("--method", choices=("promise", "paper"), default=None,
+                   help="which controller: promise, the paper's Fig. 5 with the safety filter "
+                        "that keeps every cable pair at or above d_min (the default); paper, "
+                        "the paper's method exactly (no safety filter). Overrides the "
+                        "scenario's `method:`")
 
 
 def _export_parser(sub) -> None:

@@ -61,6 +61,7 @@ def cmd_diagram(args) -> int:
     """`cdpm diagram`: --depth checked, then diagram_main."""
     if args.depth is not None and args.depth < 1:
         raise CliError(f"--depth must be an integer >= 1, got {args.depth!r}")
+    scenario = load_scenario_arg(args).scenario  # a bad scenario leaves no folder behind
     check_writable_dir(args.out, "--out")  # before the diagrams are built, not after
-    return diagram_main(scenario=load_scenario_arg(args).scenario, out_dir=args.out,
+    return diagram_main(scenario=scenario, out_dir=args.out,
                         depth=args.depth, svg=not args.no_svg)

@@ -27,9 +27,11 @@ def load_scenario(name_or_path="exp2_interaction", overlay_text: str | None = No
 
 
 def load_resolved_scenario(name_or_path="exp2_interaction",
-                           overlay_text: str | None = None) -> "ResolvedScenario":
+                           overlay_text: str | None = None,
+                           method: str | None = None) -> "ResolvedScenario":
     """`load_scenario`, returning the check's `resolve_scenario` result, so that a caller that
-    goes on to build and run it resolves it only once."""
+    goes on to build and run it resolves it only once. `method` (the command line's
+    --method) replaces the scenario's Scenario.method after the overlay."""
     from pydrake.common.yaml import yaml_load, yaml_load_typed
 
     path = resolve_scenario_path(name_or_path)
@@ -58,6 +60,8 @@ def load_resolved_scenario(name_or_path="exp2_interaction",
     # Absolute, so the resolved scenario written beside a log (which records base_dir) finds
     # the same robot and CSV files when loaded back from elsewhere.
     scenario.base_dir = str((path.parent / scenario.base_dir).resolve())
+    if method is not None:
+        scenario.method = method
     resolved = resolve_scenario(scenario, source=str(path))
     if resolved.interference is not None:
         warn_unreachable_d_u(resolved.robot, resolved.interference)

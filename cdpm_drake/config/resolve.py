@@ -75,7 +75,18 @@ def check_scenario(scenario: Scenario, source: str = "<scenario>") -> Robot:
     return resolve_scenario(scenario, source).robot
 
 
+# Scenario.method's values: the hard promise (the default), the paper's method.
+METHODS = ("promise", "paper")
+
+
 def _resolve(scenario: Scenario, source: str) -> ResolvedScenario:
+    if scenario.method not in METHODS:
+        raise ScenarioError(f"method must be one of {list(METHODS)} (promise: the paper's "
+                            f"Fig. 5 with the safety filter; paper: without it), got "
+                            f"{scenario.method!r}")
+    if scenario.method == "paper":
+        scenario = dataclasses.replace(scenario, safety_filter=dataclasses.replace(
+            scenario.safety_filter, enabled=False))
     robot = scenario_robot(scenario)
     check_positive(scenario.duration, "duration")
     check_positive(scenario.time_step, "time_step")

@@ -43,13 +43,15 @@ from cdpm_drake.kernels.kinematics import cable_lengths
 
 
 def _port_number(text: str) -> int:
-    """--port's type: a UDP port, 1-65535 (argparse turns the error into exit code 2)."""
+    """--port's type: a UDP port, 0-65535, 0 picking a free one (argparse turns the error
+    into exit code 2)."""
     try:
         port = int(text)
     except ValueError:
-        raise argparse.ArgumentTypeError(f"must be an integer 1-65535, got {text!r}") from None
-    if not 1 <= port <= 65535:
-        raise argparse.ArgumentTypeError(f"must be a UDP port 1-65535, got {port}")
+        raise argparse.ArgumentTypeError(f"must be an integer 0-65535, got {text!r}") from None
+    if not 0 <= port <= 65535:
+        raise argparse.ArgumentTypeError(f"must be a UDP port 0-65535 (0: any free one), "
+                                         f"got {port}")
     return port
 
 

@@ -133,8 +133,8 @@ def test_a_run_folder_moves_and_reruns_bit_for_bit(capsys, tmp_path, write_robot
 
 def test_summary_reports_ticks_and_the_logged_minimum_distances(exp1_run):
     _, out, out_dir = exp1_run
-    assert re.search(r"scenario 'exp1_no_interaction' \(kinematic plant, translation only\): "
-                     r"101 ticks, 0\.200 s simulated", out), out
+    assert re.search(r"scenario 'exp1_no_interaction' \(the hard promise: safety filter on, "
+                     r"kinematic plant, translation only\): 101 ticks, 0\.200 s simulated", out), out
     assert f"log: {out_dir / 'log.npz'}" in out
     with np.load(out_dir / "log.npz") as log:
         pairs = [f"({i},{j})" for i, j in log["pairs"]]
@@ -162,7 +162,8 @@ def test_every_shipped_scenario_runs_through_the_cli(capsys, tmp_path, name):
                                   "--no-progress")
     assert code == 0, err
     assert (tmp_path / "log.npz").is_file() and (tmp_path / "scenario.yaml").is_file()
-    assert f"scenario {name!r} (kinematic plant, translation only): 51 ticks" in out
+    assert (f"scenario {name!r} (the hard promise: safety filter on, kinematic plant, "
+            "translation only): 51 ticks") in out
 
 
 def test_scenario_text_overlay_reaches_the_run(capsys, tmp_path):
@@ -365,12 +366,19 @@ def test_latest_points_at_a_run_as_it_starts_and_back_if_it_writes_nothing(tmp_p
 
 
 @pytest.mark.parametrize("overlay, words, tag", [
-    ("{}", "kinematic plant, translation only", ""),
-    ("plant: !DynamicReels {}", "dynamic plant, translation only", "-dynamic"),
-    ("{plant: !DynamicReels {}, controller: {pose: full}}", "dynamic plant, full pose",
-     "-dynamic-full-pose"),
+    ("{}", "the hard promise: safety filter on, kinematic plant, translation only", ""),
+    # Issue 32: the paper's method in one word, named first and in the folder.
+    ("method: paper", "the paper's method: no safety filter, kinematic plant, translation only",
+     "-paper"),
+    ("safety_filter: {enabled: false}", "safety filter off, kinematic plant, translation only",
+     "-no-filter"),
+    ("plant: !DynamicReels {}", "the hard promise: safety filter on, dynamic plant, "
+     "translation only", "-dynamic"),
+    ("{plant: !DynamicReels {}, controller: {pose: full}}", "the hard promise: safety filter "
+     "on, dynamic plant, full pose", "-dynamic-full-pose"),
     ("{plant: !DynamicReels {}, controller: {pose: full, tension_control: true}}",
-     "dynamic plant, full pose, tension control", "-dynamic-full-pose-tension-control")])
+     "the hard promise: safety filter on, dynamic plant, full pose, tension control",
+     "-dynamic-full-pose-tension-control")])
 def test_a_runs_variant_is_named_in_its_summary_and_its_folder(capsys, tmp_path, monkeypatch,
                                                               overlay, words, tag):
     # Issue 27: runs of the dynamic plant or the full pose were indistinguishable from the
