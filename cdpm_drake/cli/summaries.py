@@ -73,10 +73,10 @@ def lost_margin_text(mask, time, depth, what, unit, scale=1.0) -> str:
         return ""
     spans = _spans(mask, time)
     dt = float(np.median(np.diff(time))) if len(time) > 1 else 0.0
-    first = f"from {spans[0][0]:.2f} to {spans[0][1]:.2f} s"
+    first = f"from {spans[0][0]:.3f} to {spans[0][1]:.3f} s"
     where = (first if len(spans) == 1
-             else f"{n * dt:.2f} s in {len(spans)} spans, the first {first}")
-    return (f"{what} LOST on {n} ticks ({where}), down to "
+             else f"{n * dt:.3f} s in {len(spans)} spans, the first {first}")
+    return (f"{what} LOST on {n} tick{'s' if n != 1 else ''} ({where}), down to "
             f"{format_number(scale * float(np.min(depth[mask])))} {unit}")
 
 

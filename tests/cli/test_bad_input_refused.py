@@ -179,8 +179,8 @@ def test_the_filter_summary_says_when_a_margin_was_lost_and_names_the_cap():
 
     text = safety_filter_summary(_filter_log())
     # 7 ticks below 0 in two spans, 14 ms (7 x 2 ms), the first from tick 5 to 9.
-    assert ("kinetostatic margin LOST on 7 ticks (0.01 s in 2 spans, the first from 0.01 to "
-            "0.02 s), down to -0.11 N") in text, text
+    assert ("kinetostatic margin LOST on 7 ticks (0.014 s in 2 spans, the first from 0.010 to "
+            "0.018 s), down to -0.11 N") in text, text
     assert "speed limit 2," in text and "lost-margin speed cap (towards 0.05 m/s) 4" in text
     assert "cable pairs 4" in text
     # 2 + 4 + 4 bound against 6 ticks changed: the summary says why they add up to more.

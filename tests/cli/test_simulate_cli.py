@@ -496,13 +496,16 @@ def test_safety_filter_and_model_monitor_summaries_count_each_code():
            "pair_margin": np.array([[0.01], [0.002], [-0.0005], [0.0], [0.001], [0.003]]),
            "kappa": np.array([[5.0], [2.0], [-0.25], [np.nan], [1.0], [3.0]]),
            "d_min": np.array([0.05, 0.06]),
-           "pair_distances_true": np.full((6, 2), 0.1)}
+           "pair_distances_true": np.full((6, 2), 0.1),
+           # At the speed limit on the tick that binds it (a cap below it is named apart).
+           "velocity": np.tile([0.5, 0.0, 0.0], (6, 1)), "max_velocity": np.array(0.5)}
     log["pair_distances_true"][2, 1] = 0.06 - 0.00125
     assert safety_filter_summary(log) == (
         "safety filter: passed 2 of 6 ticks, changed 2 (bound: cable pairs 2, kinetostatic "
-        "limit 1, speed limit 1), held a lost margin on 1, braked to a hold on 1; smallest "
-        "pair margin above d_min -0.50 mm (true -1.25 mm); smallest kinetostatic margin "
-        "-0.25 N")
+        "limit 1, speed limit 1), held a lost margin (not restored) on 1, braked to a hold on "
+        "1; pair margin LOST on 1 tick (from 0.004 to 0.004 s), down to -0.50 mm; kinetostatic "
+        "margin LOST on 1 tick (from 0.004 to 0.004 s), down to -0.25 N; smallest pair margin "
+        "above d_min -0.50 mm (true -1.25 mm); smallest kinetostatic margin -0.25 N")
     residual = np.zeros((6, 3))
     residual[3, 1] = -0.003
     residual[1, 2] = 0.001

@@ -144,6 +144,20 @@ def test_simulate_scenario_text_overlays_the_run(tmp_path):
     assert load_scenario(out / "scenario.yaml").admittance.damping == 3.7
 
 
+@covers("simulate --method", "diagram --method")
+def test_method_paper_runs_and_draws_fig_5_without_the_filter(tmp_path):
+    out = tmp_path / "o"
+    assert cdpm("simulate", _scenario_file(tmp_path), "--method", "paper", "--out", out,
+                "--no-progress") == 0
+    assert "filter_status" not in run_log(out)
+    assert cdpm("diagram", _scenario_file(tmp_path), "--method", "paper", "--out",
+                tmp_path / "d", "--no-svg") == 0
+    assert cdpm("diagram", _scenario_file(tmp_path), "--out", tmp_path / "p", "--no-svg") == 0
+    paper = (tmp_path / "d" / "controller_simulated.dot").read_text()
+    promise = (tmp_path / "p" / "controller_simulated.dot").read_text()
+    assert "safety_filter" not in paper and "safety_filter" in promise
+
+
 @covers("simulate --duration")
 def test_simulate_duration_sets_the_log_length(tmp_path):
     # The scenario says 0.1 s; --duration 0.046 s gives 0.046 / 0.002 + 1 = 24 rows.
@@ -345,6 +359,15 @@ def test_run_out_is_the_folder_and_force_overwrites_it(tmp_path, monkeypatch, br
     assert cdpm("run", scenario, "--scenario-text", bridge.overlay, "--out", out,
                 "--duration", 0.06, "--force") == 0
     assert len(run_log(out)["time"]) == 31
+
+
+@covers("run --method")
+def test_run_method_paper_runs_without_the_filter(tmp_path, bridge):
+    out = tmp_path / "o"
+    assert cdpm("run", _scenario_file(tmp_path, duration=0.02), "--scenario-text",
+                bridge.overlay, "--method", "paper", "--out", out) == 0
+    log = run_log(out)
+    assert "filter_status" not in log and len(log["time"]) == 11
 
 
 @covers("run --rt-priority")
