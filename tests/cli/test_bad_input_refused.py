@@ -186,3 +186,41 @@ def test_the_filter_summary_says_when_a_margin_was_lost_and_names_the_cap():
     # 2 + 4 + 4 bound against 6 ticks changed: the summary says why they add up to more.
     assert "a tick can bind several ways" in text
     assert "changed 6" in text
+
+
+@pytest.mark.parametrize("text, words", [
+    ("", "the file is empty"),
+    ("# only a comment\n", "the file is empty"),
+    ("- 1\n- 2\n", "a scenario is a mapping of fields"),
+    ("duration: .nan\n", "line 1: duration must be a finite number > 0, got nan"),
+    ("duration: 0.1\nadmittance:\n  mass: -1.0\n", "line 3: admittance.mass must be a finite "
+                                                   "number > 0, got -1.0")])
+def test_a_bad_scenario_file_is_named_with_its_line_not_python_class_names(tmp_path, capsys,
+                                                                          text, words):
+    path = tmp_path / "s.yaml"
+    path.write_text(text)
+    assert _main(["simulate", str(path), "--no-progress", "--out", str(tmp_path / "o")]) == 1
+    err = capsys.readouterr().err
+    assert words in err and str(path) in err and "<class" not in err, err
+
+
+def test_a_bad_value_in_an_overlay_is_named_with_the_overlays_line(tmp_path, capsys):
+    assert _main(["simulate", "exp1_no_interaction", "--scenario-text",
+                  "duration: 0.1\nadmittance: {mass: -2}", "--out", str(tmp_path / "o")]) == 1
+    assert "--scenario-text 'duration: 0.1\\nadmittance: {mass: -2}': line 2: admittance.mass" \
+        in capsys.readouterr().err
+
+
+def test_a_robot_given_as_a_folder_says_so(tmp_path, capsys):
+    (tmp_path / "robots").mkdir()
+    (tmp_path / "robots" / "mine.yaml").write_text("name: x\n")
+    path = tmp_path / "s.yaml"
+    path.write_text("robot: robots/\nduration: 0.01\n")
+    assert _main(["simulate", str(path), "--out", str(tmp_path / "o")]) == 1
+    assert "is a folder, not a robot file: give the .yaml file itself (it holds ['mine.yaml'])" \
+        in capsys.readouterr().err
+
+
+def test_recover_of_a_folder_that_does_not_exist_says_so(tmp_path, capsys):
+    assert _main(["recover", str(tmp_path / "nodir")]) == 1
+    assert "does not exist" in capsys.readouterr().err

@@ -40,7 +40,7 @@ CASES = {
                 (["exp1_no_interaction", "--depth", "0"], 2, "--depth must be")],
     "sweep": [(["MISSING/sweep.yaml"], 1, "does not exist"),
               (["exp2_du_Fu", "--workers", "0"], 2, "--workers must be")],
-    "recover": [(["MISSING"], 1, "has no ticks.bin"),
+    "recover": [(["MISSING"], 1, "does not exist"),
                 (["EMPTY"], 1, "has no ticks.bin"),
                 ([], 2, "the following arguments are required: RUN_DIR")],
     "list": [(["extra"], 2, "unrecognized arguments: extra")],
