@@ -110,6 +110,9 @@ def build_parser() -> argparse.ArgumentParser:
                    help="show the robot live in Meshcat (prints the URL to open)")
     p.add_argument("--force", action="store_true",
                    help="empty a non-empty --out that holds an earlier run, then write there")
+    p.add_argument("--plot", action="store_true",
+                   help="after the run, write the paper's figures (PNG) into its folder, as "
+                        "cdpm simulate --plot")
 
     p = sub.add_parser("emulate", help="play the reel bridge on loopback (cdpm-reel-emulator)",
                        description="Same as cdpm-reel-emulator; `cdpm emulate --help` lists "

@@ -390,6 +390,11 @@ def test_a_runs_variant_is_named_in_its_summary_and_its_folder(capsys, tmp_path,
     assert out.startswith(f"scenario 'exp2_interaction' ({words}): 6 ticks"), out
     (folder,) = [p for p in (tmp_path / "runs" / "exp2_interaction").iterdir()
                  if p.name != "latest"]
+    # Issue 32: an overlay shows in the name too (its hash: the overlay is in scenario.yaml).
+    from cdpm_drake.runs.run_folder import overlay_tag
+    text = overlay_tag(overlay)
+    assert (text == "") == (overlay == "{}")
+    tag = tag + (f"-{text}" if text else "")
     assert re.fullmatch(r"\d{8}T\d{6}\.\d{3}Z" + re.escape(tag), folder.name), folder.name
     latest = tmp_path / "runs" / "exp2_interaction" / "latest"
     assert latest.resolve() == folder.resolve()

@@ -370,6 +370,16 @@ def test_run_method_paper_runs_without_the_filter(tmp_path, bridge):
     assert "filter_status" not in log and len(log["time"]) == 11
 
 
+@covers("run --plot")
+def test_run_plot_writes_the_figures_beside_the_log(tmp_path, bridge):
+    out = tmp_path / "o"
+    assert cdpm("run", _scenario_file(tmp_path, duration=0.04), "--scenario-text",
+                bridge.overlay, "--plot", "--out", out) == 0
+    from cdpm_drake.views.plots import FIGURE_FILES, figures_of
+    expected = {FIGURE_FILES[name] for name in figures_of(run_log(out))}
+    assert expected and expected <= {p.name for p in out.glob("*.png")}
+
+
 @covers("run --rt-priority")
 def test_run_rt_priority_reaches_the_scheduler_call(tmp_path, monkeypatch, bridge):
     from cdpm_drake.hardware import priority
