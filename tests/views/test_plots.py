@@ -491,8 +491,9 @@ def test_an_interrupted_run_is_marked_like_a_fault():
             star = [line for line in fig.axes[0].get_lines()
                     if line.get_gid() == "interrupted"][0]
             np.testing.assert_allclose(np.array(star.get_data_3d()).ravel(), log["p"][-1])
-    # distances 1, forces 3, cables 2, timing 2, tensions 2, pose error 2, safety 4.
-    assert time_axes == 16
+    # distances 1, forces 3, cables 2, timing 2, tensions 2, pose error 2, safety 5 (the
+    # bands, the speeds, what the filter changed, the tensions, the pair margin).
+    assert time_axes == 17
 
 
 def test_cables_slack_at_the_same_time_each_have_their_row():
