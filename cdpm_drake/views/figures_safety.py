@@ -19,7 +19,8 @@ from matplotlib.figure import Figure
 
 from cdpm_drake.kernels.safety_filter import LOST_SPEED
 from cdpm_drake.views.figure_keys import check_figure
-from cdpm_drake.views.figure_layout import FAULT_COLOR, log_title, mark_fault_time, suptitle
+from cdpm_drake.views.figure_layout import (FAULT_COLOR, log_title, mark_fault_time, shade_spans,
+                                           spans, spans_text, suptitle)
 
 # filter_status codes (safety_filter.STATUS_TEXT) and filter_binding bits (BIND_TEXT), for the
 # views; views read logs, never a block's insides. The speed bit is drawn on two rows: the
@@ -39,31 +40,6 @@ LEGEND_WIDTH = 40
 # The speed limit is drawn as a line when the speeds reach this share of it, else named in
 # a note: a line far above the speeds would squash them to the bottom of the axis.
 SHOW_LIMIT_FROM = 0.4
-
-
-def spans(mask, t) -> list[tuple[float, float]]:
-    """(first, last) time (s) of each run of True ticks in `mask`."""
-    m = np.concatenate([[False], np.asarray(mask, dtype=bool), [False]])
-    edges = np.flatnonzero(np.diff(m.astype(int)))
-    return [(float(t[a]), float(t[b - 1])) for a, b in zip(edges[::2], edges[1::2])]
-
-
-def spans_text(runs, n: int) -> str:
-    """'10.26-11.56 s' (one span), '0.10-0.20 s, 0.50-0.52 s' (two), '... and k more'."""
-    shown = ", ".join(f"{a:.2f}-{b:.2f} s" for a, b in runs[:2])
-    more = f" and {len(runs) - 2} more" if len(runs) > 2 else ""
-    return f"{shown}{more} ({n} tick{'s' if n != 1 else ''})"
-
-
-def shade_spans(ax, mask, t, label: str, gid: str, color: str, ymin=0.0, ymax=1.0,
-                **style) -> None:
-    """An axvspan over each run of True ticks of `mask` (half a tick wider on each side, so a
-    single tick shows), the first one labelled `label`, each with `gid`."""
-    half = 0.5 * float(np.median(np.diff(t))) if len(t) > 1 else 0.0
-    for k, (a, b) in enumerate(spans(mask, t)):
-        patch = ax.axvspan(a - half, b + half, ymin=ymin, ymax=ymax, color=color,
-                           linewidth=0, label=label if k == 0 else "_", **style)
-        patch.set_gid(gid)
 
 
 def speed_split(log: Mapping, t) -> tuple[np.ndarray, np.ndarray, float]:
