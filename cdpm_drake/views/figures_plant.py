@@ -212,9 +212,9 @@ def _floor_and_t_star(ax, log: Mapping, t, floor, ceiling) -> None:
                         + spans_text(spans(inf, t), int(inf.sum())), "t_star +inf", "0.5",
                         ymin=0.88, ymax=1.0, alpha=0.35, hatch="//")
     if "controller_max_tension" in log and ceiling is None:
-        ax.text(0.99, 0.04, f"ceiling max_tension = {float(log['controller_max_tension']):g} "
-                "N: above the cables' panels", transform=ax.transAxes, ha="right",
-                va="bottom", fontsize="small", color=LIMIT_COLOR, gid="controller_max_tension")
+        ax.set_title(f"ceiling max_tension = {float(log['controller_max_tension']):g} N: "
+                     "above the cables' panels", loc="right", fontsize="small",
+                     color=LIMIT_COLOR).set_gid("controller_max_tension")
     ax.set_ylabel("tension (N)")
     handles, labels = ax.get_legend_handles_labels()
     if handles:

@@ -100,9 +100,9 @@ def _draw_speeds(ax, ax_d, log: Mapping, t) -> None:
             ax.axhline(v_max, color="tab:red", linestyle="--", linewidth=1.0,
                        label=what).set_gid("max_velocity")
         else:
-            ax.text(0.99, 0.95, f"{what}: far above these speeds", ha="right", va="top",
-                    transform=ax.transAxes, fontsize="small", color="tab:red",
-                    gid="max_velocity")
+            # Above the axes, where no curve runs.
+            ax.set_title(f"{what}: far above these speeds", loc="right", fontsize="small",
+                         color="tab:red").set_gid("max_velocity")
     if capped.any():
         line, = ax.plot(t, np.where(capped, given, np.nan), color="tab:orange", linewidth=2.6,
                         label=f"held at the lost-margin speed cap (slowing to {LOST_SPEED:g} "
