@@ -71,6 +71,7 @@ LOGGED = (
     ("tension_cable", "tension_distribution", "cable"),
     ("lengths", "reels", "cable_lengths"),
     ("F_measured", "reels", "measured_force"),
+    ("tension_measured", "reels", "tension_measured"),
     ("pair_distances", "interference_force", "pair_distances"),
     ("active", "interference_force", "active"),
     ("crossed", "interference_force", "crossed"),

@@ -38,7 +38,8 @@ class ScriptedLink:
     def monotonic(self) -> float:
         return self.now
 
-    def send_command(self, velocity, enable, echo_sequence, echo_time=0.0, time=0.0) -> int:
+    def send_command(self, velocity, enable, echo_sequence, echo_time=0.0, time=0.0,
+                     version=1) -> int:
         self.sequence += 1
         self.counters.sent += 1
         self.sent.append((self.tick, self.sequence, bool(enable),
@@ -48,7 +49,7 @@ class ScriptedLink:
     def wait(self, timeout) -> bool:
         return True
 
-    def receive(self, last):
+    def receive(self, last, versions=(1, 2)):
         if last is None:  # start-up: the bridge answers the greeting at once
             return self._status(0, self.sequence, 0, None)
         self.tick += 1

@@ -26,7 +26,7 @@ def info(*, robot: str = "paper_7cable", swaps=None, plot_dir=None, grid_step: f
     from cdpm_drake.kernels.kinematics import cable_lengths, condition_number
 
     with _robot_warnings_in_report():
-        r, scenario = _info_target(robot)
+        r, scenario, refused = _info_target(robot)
         base = r  # before any swap: the statics warnings compare with it
         if scenario is not None:
             import copy
@@ -43,9 +43,8 @@ def info(*, robot: str = "paper_7cable", swaps=None, plot_dir=None, grid_step: f
                 for i, j in swaps:
                     r = r.with_swapped_attachments(i, j)
         if scenario is not None:
-            from cdpm_drake.config import resolve_scenario
-
-            resolved = resolve_scenario(scenario)
+            resolved, refusal = _resolve_reporting_refusal(scenario)
+            refused = refused or refusal
             r = resolved.robot
     if np.array_equal(r.attachments, base.attachments):
         base = None
@@ -57,6 +56,9 @@ def info(*, robot: str = "paper_7cable", swaps=None, plot_dir=None, grid_step: f
     if scenario is not None or swaps:
         shown = scenario.swaps if scenario is not None else swaps
         print(f"swapped cables: {', '.join(f'{i}-{j}' for i, j in shown) or 'none'}", file=out)
+    if refused is not None:
+        print(f"refused: `cdpm simulate` would refuse this scenario's run (and `cdpm "
+              f"emulate` its dynamic plant): {refused}", file=out)
     rows = [(i + 1, format_vector(r.reels[i]), format_vector(r.attachments[i]), f"{lengths[i]:.4f}")
             for i in range(r.num_cables)]
     print(format_table(["cable", "reel a_i (m)", "attachment b_i (m)", "length at centre (m)"],
@@ -96,6 +98,36 @@ def info(*, robot: str = "paper_7cable", swaps=None, plot_dir=None, grid_step: f
     for png in written:
         print(f"plot: {png}", file=out)
     return written
+
+
+def _load_reporting_refusal(name: str):
+    """(Scenario, None), or for a scenario whose run would be refused because its robot
+    cannot hold the free-rotating platform (config.UnholdableRobot): the scenario with the
+    platform's rotation locked, so the report goes on, and the refusal's message."""
+    from cdpm_drake.config import UnholdableRobot, load_scenario
+
+    try:
+        return load_scenario(name), None
+    except UnholdableRobot as e:
+        return _locked(e.scenario), str(e)
+
+
+def _resolve_reporting_refusal(scenario):
+    """(ResolvedScenario, None), or as `_load_reporting_refusal` (after --swaps): the
+    scenario resolved with the platform's rotation locked, and the refusal's message."""
+    from cdpm_drake.config import UnholdableRobot, resolve_scenario
+
+    try:
+        return resolve_scenario(scenario), None
+    except UnholdableRobot as e:
+        return resolve_scenario(_locked(e.scenario)), str(e)
+
+
+def _locked(scenario):
+    import dataclasses
+
+    return dataclasses.replace(scenario, plant=dataclasses.replace(scenario.plant,
+                                                                    lock_rotation=True))
 
 
 class _robot_warnings_in_report:
@@ -150,18 +182,19 @@ def _robot_only_fields() -> set:
 
 
 def _info_target(name):
-    """(robot, None) for a robot, (its robot, the Scenario) for a scenario: a built-in name of
-    either, or a YAML file (a robot file is one with a field no scenario has, e.g. `reels`;
-    any other mapping is a scenario, as `cdpm simulate` reads it)."""
+    """(robot, None, None) for a robot, (its robot, the Scenario, the refusal of its run or
+    None) for a scenario: a built-in name of either, or a YAML file (a robot file is one with
+    a field no scenario has, e.g. `reels`; any other mapping is a scenario, as `cdpm
+    simulate` reads it)."""
     from cdpm_drake.robot import RobotError, is_path_like, load_robot, robot_names
-    from cdpm_drake.config import load_scenario, scenario_names, scenario_robot
+    from cdpm_drake.config import scenario_names, scenario_robot
 
     text = str(name)
     if text in robot_names():
-        return load_robot(text), None
+        return load_robot(text), None, None
     if text in scenario_names():
-        scenario = load_scenario(text)
-        return scenario_robot(scenario), scenario
+        scenario, refused = _load_reporting_refusal(text)
+        return scenario_robot(scenario), scenario, refused
     if is_path_like(text) or Path(text).is_file():
         path = Path(text)
         if path.is_file():
@@ -173,9 +206,9 @@ def _info_target(name):
                 raw = None
             if isinstance(raw, dict) and not set(raw) & _robot_only_fields():
                 # As `cdpm simulate` reads it: a scenario, its robot paper_7cable unless named.
-                scenario = load_scenario(str(path))
-                return scenario_robot(scenario), scenario
-        return load_robot(text), None
+                scenario, refused = _load_reporting_refusal(str(path))
+                return scenario_robot(scenario), scenario, refused
+        return load_robot(text), None, None
     raise RobotError(f"unknown robot or scenario {text!r}; built-in robots: {robot_names()}, "
                      f"built-in scenarios: {scenario_names()} (or give a path to a .yaml file)")
 
@@ -198,7 +231,7 @@ def _print_statics(r, scenario, step, out, base=None):
     print(f"statics of the level platform ({mass:g} kg at its centre, moments about the "
           f"centre); t* = the largest achievable minimum cable tension (N):", file=out)
     rank_note = ("" if statics.unreachable is None else
-                 f" < 6: no tension produces a {_describe(statics.unreachable)}")
+                 f" < 6: no tensions resist {_describe(r, r.workspace.center)}")
     centre = r.workspace.center
     print(f"  wrench matrix rank at the workspace centre: {statics.rank}{rank_note}; t* there "
           f"{_t_star_text(r, centre, statics.centre_t_star)}", file=out)
@@ -223,7 +256,8 @@ def _print_statics(r, scenario, step, out, base=None):
           f"{_t_star_text(r, p0, float(holding_tension(r, p0)))}", file=out)
     from cdpm_drake.runs.simulate import simulate
 
-    log = simulate(scenario=_kinematic_copy(scenario)).log
+    with _robot_warnings_in_report():  # said above, once (loading it again would repeat them)
+        log = simulate(scenario=_kinematic_copy(scenario)).log
     t = holding_tension(r, log["p"])
     k = int(np.argmin(t))
     print(f"  along the scenario's path (kinematic plant, {len(t)} ticks): smallest t* "
@@ -251,7 +285,7 @@ def _t_star_text(r, p, t) -> str:
         return "+inf (an internal force raises every tension: any floor holds)"
     return (f"+inf for the weight alone (the cables' lines of action meet there, so an "
             f"internal force raises every tension), but the wrench matrix has rank {rank} < 6 "
-            f"there: the platform cannot resist a {_describe(U[:, rank])}, so no floor holds "
+            f"there: the platform cannot resist {_describe(r, p)}, so no floor holds "
             "it against anything else")
 
 
@@ -266,10 +300,12 @@ def _kinematic_copy(scenario):
     return kinematic
 
 
-def _describe(direction) -> str:
-    from cdpm_drake.robot import describe_wrench
+def _describe(r, p) -> str:
+    """Every wrench direction r's level platform at p (m) cannot resist, in words."""
+    from cdpm_drake.kernels.tension import wrench_matrix
+    from cdpm_drake.robot.unresisted import unresisted_text
 
-    return describe_wrench(direction)
+    return unresisted_text(wrench_matrix(r, p))
 
 
 # Hand forces (N, ascending from 0) and tension floors (N) of the feasibility table, and the
@@ -353,7 +389,7 @@ def _check_swaps_option(name, swaps) -> None:
 
     try:
         check_swaps([list(s) for s in swaps])
-        r, _ = _info_target(name)
+        r = _info_target(name)[0]
         for i, j in swaps:
             r = r.with_swapped_attachments(i, j)
     except (ScenarioError, RobotError) as e:

@@ -63,7 +63,7 @@ def run_main(*, scenario, duration=None, out_dir=None, out=None, on_status=None,
         if "filter_status" in result.log:
             print(safety_filter_summary(result.log), file=out)
         if "model_status" in result.log:
-            print(model_monitor_summary(result.log), file=out)
+            print(model_monitor_summary(result.log, scenario.model_monitor), file=out)
         if plots and result.log_path is not None:
             _plot(result.log, out_dir, out)
     if result.ending == "fault":

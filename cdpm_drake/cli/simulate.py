@@ -56,7 +56,7 @@ def simulate_main(*, scenario, duration=None, out_dir=None, progress=True, out=N
     if T and "filter_status" in log:  # safety_filter.enabled
         print(safety_filter_summary(log), file=out)
     if T and "model_status" in log:  # model_monitor.enabled
-        print(model_monitor_summary(log), file=out)
+        print(model_monitor_summary(log, scenario.model_monitor), file=out)
     if T and "tensions" in log:  # the dynamic plant's ground truth
         print_dynamic_summary(log, out)
     print(f"log: {path}", file=out)

@@ -145,12 +145,17 @@ def safety_filter_summary(log) -> str:
     return text
 
 
-def model_monitor_summary(log) -> str:
+def model_monitor_summary(log, monitor=None) -> str:
     """One line on the model monitor of a log (model_monitor.enabled): whether the model
-    fitted on every tick, else which verdict first (model_monitor.REASONS); the largest
-    length residual (mm) and its cable."""
+    fitted on every tick (and then by what it watches), else which verdict first
+    (model_monitor.REASONS); the largest length residual (mm) and its cable. With the
+    plant's truth logged (`slack`, the dynamic plant), the slack the monitor did not see: on
+    how many ticks, and why (`monitor_blindness`). `monitor`: the scenario's
+    config.ModelMonitor, for its thresholds (its defaults otherwise)."""
+    from cdpm_drake.config import ModelMonitor
     from cdpm_drake.kernels.model_monitor import REASONS
 
+    monitor = ModelMonitor() if monitor is None else monitor
     status = np.asarray(log["model_status"]).reshape(-1).astype(int)
     residual = np.asarray(log["model_residual"], dtype=float)
     bad = np.flatnonzero(status)
@@ -165,7 +170,77 @@ def model_monitor_summary(log) -> str:
         cable = int(flat % residual.shape[1]) + 1
         worst = format_number(1000 * residual.reshape(-1)[flat], sign=True)
         text += f"; largest length residual {worst} mm (cable {cable})"
-    return text
+    if not bad.size:  # "fitted" says only as much as what it watches
+        slack_by = (f"a tension estimate below -{monitor.slack_tension:g} N" if
+                    "tension_estimate" in log else f"a cable over "
+                    f"{1000 * monitor.slack_length:g} mm longer than the estimated pose's "
+                    "geometry")
+        text += (f"; what it watches: slack as {slack_by}, lengths within "
+                 f"{1000 * monitor.fit_tolerance:g} mm of the pose, t* of the measured hand "
+                 f">= {0.0 - float(monitor.unholdable):g} N (from the encoder lengths, the "
+                 "estimated pose and the hand force)")
+    blind = monitor_blindness(log, monitor)
+    return text + (f"; {blind}" if blind else "")
+
+
+def _longest_run(mask) -> int:
+    """The most consecutive True entries of a bool vector."""
+    best = run = 0
+    for x in np.asarray(mask, dtype=bool):
+        run = run + 1 if x else 0
+        best = max(best, run)
+    return best
+
+
+def monitor_blindness(log, monitor) -> str:
+    """The dynamic plant's truly slack ticks (log `slack`) the model monitor passed as fitted
+    (model_status ok), in words with the reason: what the monitor reads for a slack cable (its
+    length residual, or its tension estimate) at its most telling on those ticks against the
+    threshold, the platform's true turn where the pose estimate is a translation, and the
+    longest slack spell against the ticks a fault needs. "" when there are none."""
+    from cdpm_drake.kernels.model_monitor import OK, SLACK
+    from cdpm_drake.kernels.rotation import rotation_angle, rotations_from_rpy
+
+    if "slack" not in log:
+        return ""
+    slack = np.asarray(log["slack"], dtype=bool)
+    status = np.asarray(log["model_status"]).reshape(-1).astype(int)
+    unseen = slack & (status == OK)[:, None]
+    ticks = np.any(unseen, axis=1)
+    if not ticks.any():
+        return ""
+    T = status.size
+    cables = ", ".join(f"{i + 1} ({int(n)})" for i, n in enumerate(unseen.sum(axis=0)) if n)
+    first = float(log["time"][int(np.argmax(np.any(slack, axis=1)))])
+    text = (f"NOT SEEN by it: the plant's truth has a cable slack on {int(ticks.sum())} of {T} "
+            f"ticks the monitor passed (cable (ticks): {cables}; first truly slack at t = "
+            f"{first:.3f} s")
+    seen = np.flatnonzero(status == SLACK)
+    late = 1000 * (float(log["time"][seen[0]]) - first) if seen.size else None
+    text += f", the monitor's first slack verdict {late:.0f} ms later)" if seen.size else ")"
+    why = []
+    if "tension_estimate" in log:
+        est = np.asarray(log["tension_estimate"], dtype=float)[unseen]
+        why.append(f"the slack cables' tension estimates stayed >= {est.min():.2f} N on those "
+                   f"ticks (slack needs < -{monitor.slack_tension:g} N; the estimate comes from "
+                   "the encoder lengths and the pose fit)")
+    else:
+        r = np.asarray(log["model_residual"], dtype=float)[unseen]
+        why.append(f"the slack cables were at most {max(0.0, -1000 * r.min()):.2f} mm longer "
+                   f"than the estimated pose's geometry on those ticks (slack needs > "
+                   f"{1000 * monitor.slack_length:g} mm)")
+    if "rpy_true" in log and "rpy" not in log:
+        turn = float(np.degrees(rotation_angle(rotations_from_rpy(
+            np.asarray(log["rpy_true"], dtype=float))).max()))
+        if turn >= 1.0:
+            why.append(f"the platform truly turned up to {turn:.1f} deg, which the translating "
+                       "pose estimate cannot represent: a turned platform's lengths fit a "
+                       "shifted, level one")
+    longest = _longest_run(ticks)
+    if longest < monitor.ticks:
+        why.append(f"each slack spell lasted at most {longest} ticks (a verdict needs "
+                   f"model_monitor.ticks = {monitor.ticks})")
+    return text + ": " + "; ".join(why)
 
 
 def print_dynamic_summary(log, out) -> None:

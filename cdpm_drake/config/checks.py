@@ -183,6 +183,49 @@ def _default_note(config, field: str) -> str:
     return " (default)" if getattr(config, field) == value else ""
 
 
+class UnholdableRobot(ScenarioError):
+    """A run on the free-rotating dynamic plant of a robot whose cables cannot resist every
+    wrench of the rigid platform (wrench matrix rank < 6 at the start): refused, the message
+    says why and the ways out. `cdpm info` reports it without stopping: `scenario` is the
+    scenario refused (its start filled in)."""
+
+    def __init__(self, message: str, scenario: Scenario):
+        super().__init__(message)
+        self.scenario = scenario
+
+
+def check_holds_a_rigid_body(scenario: Scenario, robot: Robot, W, defaulted=()) -> None:
+    """UnholdableRobot when W (6, m; the start pose's wrench matrix, moments about the
+    platform centre) has rank < 6 and the plant lets the platform turn (lock_rotation false):
+    the platform turns under the wrenches the rank lacks and a cable goes slack, while the
+    controller's translating statics (t* = +inf where the cables' lines meet) see nothing.
+    The message names the robot, its cables, the rank, every direction it cannot resist
+    (robot.unresisted) and the ways out."""
+    from cdpm_drake.robot.unresisted import unresisted_directions, unresisted_text
+
+    rank, directions = unresisted_directions(W)
+    if rank >= 6 or scenario.plant.lock_rotation:
+        return
+    m = robot.num_cables
+    rpy = (f"plant.initial_rpy {list(scenario.plant.initial_rpy)!r} rad"
+           f"{_default_note(scenario.plant, 'initial_rpy')}")
+    where = ((f" ({m} cables: below 6 at every pose)" if m < 6 else "")
+             + f" at the start, {start_text(scenario, robot, defaulted)} with {rpy}")
+    raise UnholdableRobot(
+        f"robot {robot.name!r} ({m} cables) cannot hold a platform that turns freely: its "
+        f"wrench matrix has rank {rank} < 6{where}, so no cable tensions resist "
+        f"{unresisted_text(W)} ({len(directions)} direction{'s' if len(directions) > 1 else ''}"
+        f"; moments about the platform centre, base frame). On plant: !DynamicReels with "
+        f"lock_rotation: false{_default_note(scenario.plant, 'lock_rotation')} the platform "
+        "would turn and a cable go slack while the controller's translating model sees "
+        "nothing, so the run is refused. Ways out: plant.lock_rotation: true (plant: "
+        "!DynamicReels {lock_rotation: true}: the platform held at its start orientation, the "
+        "paper's translation-only model), "
+        "the kinematic plant (plant: !SimulatedReels {}), or a robot whose cables resist "
+        "every force and moment (rank 6: at least 7 cables for a positive internal force, "
+        "attachment points spread so their moments span all three axes)", scenario)
+
+
 def check_dynamic_reels(scenario: Scenario, robot: Robot, defaulted=()):
     """Check a !DynamicReels plant and its start; returns the start tension distribution
     (tension_program.Distribution). A start pose no positive tension distribution holds is refused,
@@ -214,6 +257,7 @@ def check_dynamic_reels(scenario: Scenario, robot: Robot, defaulted=()):
                     else default_start(robot), dtype=float)
     dyn = robot.dynamics
     W, wrench = wrench_matrix(robot, p0, rotation_from_rpy(rpy)), gravity_wrench(dyn.mass)
+    check_holds_a_rigid_body(scenario, robot, W, defaulted)
     if cfg.lock_rotation:  # the lock takes the moments; the cables balance the force
         W, wrench = W[:3], wrench[:3]
     dist = tension_distribution(W, wrench, cfg.min_tension)

@@ -1,14 +1,25 @@
 """The bridge's two plants, without sockets, behind one interface (set_command, raise_fault,
-step, lengths, force, platform, reset, describe): ReelBridge, reels following their commands
-with a first-order lag (`--plant kinematic`), and DynamicBridge, the dynamic plant of
-`plant: !DynamicReels` stepped to the bridge's clock (`--plant dynamic`). Lengths m, speeds
-m/s of cable, forces N in the base frame, times s."""
+step, lengths, speed, force, drive_force, load_cell, platform, reset, describe): ReelBridge,
+reels following their commands with a first-order lag (`--plant kinematic`), and
+DynamicBridge, the dynamic plant of `plant: !DynamicReels` stepped to the bridge's clock
+(`--plant dynamic`). Lengths m, speeds m/s of cable, forces N in the base frame (drive
+forces at the cable, + pays out), times s.
+
+What the drives report (protocol version 2): the kinematic plant has no cable tensions (its
+cables are rigid and its reels follow their commands), so it reports no drive force and no
+load cell (NaN: "no reading"). A drive force for the reels' own motion with zero tension would
+convert to 0 N at the controller, which reads as every cable slack; NaN says honestly that
+this plant cannot tell. The dynamic plant reports each drive's force from the plant (its
+`drive_force` output where it has one, else the force its velocity loop needs to move the
+reel against its cable's true tension, kernels/drive_torque.drive_force_for_tension) and,
+with `load_cells`, its true tensions as ideal load cells."""
 
 import math
 
 import numpy as np
 
 from cdpm_drake.hardware.protocol import FAULT_OVERSPEED, MAX_FORCE
+from cdpm_drake.kernels.drive_torque import drive_force_for_tension
 from cdpm_drake.kernels.kinematics import KinematicsError, forward_kinematics, jacobian
 
 
@@ -117,6 +128,15 @@ class ReelBridge:
             self.p = self._best_fit(self.p)
             self.v = np.linalg.lstsq(jacobian(self.robot, self.p), self.speed, rcond=None)[0]
 
+    def drive_force(self) -> np.ndarray:
+        """No drive force (NaN): rigid cables carry no tension this plant could load a drive
+        with (see the module docstring)."""
+        return np.full(self.robot.num_cables, np.nan)
+
+    def load_cell(self) -> np.ndarray:
+        """No load cells (NaN)."""
+        return np.full(self.robot.num_cables, np.nan)
+
     def force(self) -> np.ndarray:
         """The force sample, N, saturated at the link's range like a real ADC."""
         if self.force_fn is None:
@@ -135,10 +155,11 @@ class DynamicBridge:
     plant settings). The platform rests at the start until the first enabling command; the
     plant's (and the operator's) clock starts then. The encoders read each reel's payout L0
     plus its cable's stretch at the start (zeroed at the start pose, as a homing would: they
-    read the rigid cable lengths there), plus `length_offset` (m, per cable).
+    read the rigid cable lengths there), plus `length_offset` (m, per cable). `load_cells`:
+    report the true tensions as ideal load cells (else NaN: none).
     """
 
-    def __init__(self, resolved, length_offset=None):
+    def __init__(self, resolved, length_offset=None, load_cells: bool = False):
         from pydrake.systems.analysis import Simulator
         from pydrake.systems.framework import DiagramBuilder
 
@@ -158,6 +179,13 @@ class DynamicBridge:
         self._context = self._simulator.get_mutable_context()
         self._command_port = self._diagram.get_input_port(0)
         self._force_port = self._plant.GetOutputPort("measured_force")
+        # The plant's own drive forces where it models them (issue 31), else computed here.
+        self._drive_port = (self._plant.GetOutputPort("drive_force")
+                            if self._plant.HasOutputPort("drive_force") else None)
+        d = robot.dynamics
+        self._drive_model = (float(d.reel_inertia), float(d.viscous_friction),
+                             float(d.coulomb_friction), float(d.dead_band))
+        self.load_cells = bool(load_cells)
         self._plant_context = self._plant.GetMyContextFromRoot(self._context)
         self.max_reel_speed = float(scenario.plant.max_reel_speed
                                     if scenario.plant.max_reel_speed is not None
@@ -210,6 +238,7 @@ class DynamicBridge:
         # the reels were stopped (disabled or faulted: the drives brake a moving platform and
         # the operator pulls on, which can raise tensions the run itself never saw).
         m = self.robot.num_cables
+        self._accel = np.zeros(m)                   # reel accelerations, m/s^2 (last step)
         self.driven = _Record(m)
         self.stopped = _Record(m)
         self.stop_time = None                       # plant time the reels were stopped, s
@@ -292,7 +321,13 @@ class DynamicBridge:
         # otherwise land a hair either side of a step.
         steps = math.floor((self.time - self.operator_start) / self._h + 1e-6)
         if steps * self._h > self.plant_time:
+            # The reels' acceleration over the last plant step (the drives' force at the
+            # sample's instant, not averaged over a bridge tick that may span many steps).
+            if (steps - 1) * self._h > self.plant_time:
+                self._simulator.AdvanceTo((steps - 1) * self._h)
+            w0, t0 = self.speed, self.plant_time
             self._simulator.AdvanceTo(steps * self._h)
+            self._accel = (self.speed - w0) / (self.plant_time - t0)
             self._observe()
 
     def _observe(self) -> None:
@@ -308,6 +343,28 @@ class DynamicBridge:
         tilt = math.acos(max(-1.0, min(1.0, (trace - 1) / 2)))
         record = self.driven if self.stop_time is None else self.stopped
         record.observe(T, slack, tilt, self.plant_time)
+        self._true_tensions = np.array(T)
+
+    def true_tensions(self) -> np.ndarray:
+        """The cables' true tensions now, N (the plant's ground truth)."""
+        return self._true_tensions.copy()
+
+    def drive_force(self) -> np.ndarray:
+        """Each reel drive's force at the cable now, N, + pays out: the plant's `drive_force`
+        output if it has one; else what the drive's velocity loop supplies to move its reel at
+        its speed and acceleration (over the last plant step) against its cable's true
+        tension, with the plant's reel inertia and friction (a drive holding a taut cable
+        at rest: -T)."""
+        if self._drive_port is not None:
+            return np.array(self._drive_port.Eval(self._plant_context))
+        return drive_force_for_tension(self._true_tensions, self.speed, self._accel,
+                                       *self._drive_model)
+
+    def load_cell(self) -> np.ndarray:
+        """The load cells, N: the true tensions with `load_cells`, else NaN (none)."""
+        if self.load_cells:
+            return self.true_tensions()
+        return np.full(self.robot.num_cables, np.nan)
 
     def force(self) -> np.ndarray:
         """The force sample, N: the operator's force on the true platform (the plant's

@@ -19,10 +19,19 @@ last one left the platform. With the dynamic plant, each session's close reports
 cables went through in it (tensions, when each went slack, the largest tilt and when, on the
 plant's clock), while the controller drove the reels and, apart, after they were stopped.
 
+Protocol version 2 (the default; `--protocol-version 1` plays a version-1 bridge, to rehearse
+one): each status also carries each drive's force at the cable, the reels' speeds and load
+cells. The kinematic plant has no cable tensions: it sends NaN ("no reading") for the drive
+forces and load cells. The dynamic plant sends each drive's force from the plant and, with
+`--load-cells`, its true tensions as ideal load cells; `--truth-log FILE.npz` keeps what each
+status carried beside the plant's true tensions, to compare with the controller's log.
+
 Examples:
   cdpm-reel-emulator --robot paper_7cable --start 1.77 3.65 1.22
   cdpm-reel-emulator --scenario exp2_interaction --drop 0.01 --seed 3
   cdpm-reel-emulator --scenario exp2_interaction --plant dynamic
+  cdpm-reel-emulator --scenario exp2_interaction --plant dynamic --truth-log truth.npz
+  cdpm-reel-emulator --scenario exp2_interaction --protocol-version 1
   cdpm-reel-emulator --stop --fault-after 2.0
 """
 
@@ -84,6 +93,14 @@ def build_parser() -> argparse.ArgumentParser:
                    "when that is one)")
     g.add_argument("--time-constant", type=float, default=None,
                    help="reel velocity lag, s (default: 0.02; kinematic plant only)")
+    g.add_argument("--load-cells", action="store_true",
+                   help="dynamic plant only: report each cable's true tension as its load "
+                   "cell (ideal load cells; default: none, NaN)")
+    g.add_argument("--truth-log", metavar="FILE.npz",
+                   help="dynamic plant only: write, when the emulator stops, each version-2 "
+                   "status's bridge time, plant time, the true tensions and the drive forces "
+                   "and reel speeds it carried (keys time, plant_time, tensions, drive_force, "
+                   "reel_speed; the last 10 minutes at 500 Hz)")
     n = p.add_argument_group("network")
     n.add_argument("--address", default=None,
                    help="address to listen on (default: 127.0.0.1, or the scenario's)")
@@ -94,6 +111,10 @@ def build_parser() -> argparse.ArgumentParser:
                    help="send statuses only there and ignore commands from anyone else "
                    "(default: answer the sender of the latest valid command)")
     n.add_argument("--period", type=float, default=0.002, help="status period, s (default 0.002)")
+    n.add_argument("--protocol-version", type=int, choices=(1, 2), default=2,
+                   help="newest protocol version spoken (default 2: statuses carry the drives' "
+                   "forces, reel speeds and load cells to a controller that asks for them; "
+                   "1: a version-1 bridge, which refuses version-2 commands)")
     n.add_argument("--command-timeout", type=float, default=0.05,
                    help="raise COMMAND_TIMEOUT when enabled and no command came for this "
                    "long, s (default 0.05)")
@@ -174,15 +195,38 @@ def build_server(args, log=None) -> ReelBridgeServer:
                              "plant's drives come from the robot file's reel_drives section")
         bridge = DynamicBridge(_dynamic_scenario(args, robot, start),
                                length_offset=lengths - cable_lengths(robot, np.asarray(
-                                   start, dtype=float)))
+                                   start, dtype=float)), load_cells=args.load_cells)
     else:
+        for flag, given in (("--load-cells", args.load_cells),
+                            ("--truth-log", args.truth_log)):
+            if given:
+                raise ValueError(f"{flag} needs --plant dynamic: the kinematic plant's cables "
+                                 "are rigid and carry no tension")
         bridge = ReelBridge(robot, lengths, force=force, time_constant=0.02
                             if args.time_constant is None else args.time_constant)
     return ReelBridgeServer(bridge, address=(args.address or address,
                                              args.port if args.port is not None else port),
                             faults=faults, period=args.period, seed=args.seed,
                             controller=controller, command_timeout=args.command_timeout,
-                            record=0, log=log)
+                            record=0, log=log, protocol_version=args.protocol_version,
+                            truth=TRUTH_ROWS if args.truth_log else 0)
+
+
+# Statuses the truth log keeps: the last 10 minutes at 500 Hz.
+TRUTH_ROWS = 300_000
+
+
+def write_truth_log(server, path) -> int:
+    """The server's truth record as an npz at `path` (keys time, plant_time s, tensions,
+    drive_force N, reel_speed m/s; one row per version-2 status sent); returns the rows."""
+    rows = list(server.truth or ())
+    m = server.bridge.robot.num_cables
+    columns = list(zip(*rows)) if rows else [[]] * 5
+    np.savez(path, time=np.array(columns[0], dtype=float),
+             plant_time=np.array(columns[1], dtype=float),
+             **{key: np.array(columns[k], dtype=float).reshape(len(rows), m) for k, key in
+                ((2, "tensions"), (3, "drive_force"), (4, "reel_speed"))})
+    return len(rows)
 
 
 def _dynamic_scenario(args, robot, start):
@@ -251,7 +295,8 @@ def _main(argv) -> int:
     robot = server.bridge.robot
     say(f"robot {robot.name!r} ({robot.num_cables} cables) on {host}:{port}, period "
         f"{server.period * 1e3:g} ms, {server.bridge.describe()}, start "
-        f"{vector_text(server.bridge.platform())} m"
+        f"{vector_text(server.bridge.platform())} m, protocol version "
+        f"{server.protocol_version}"
         + (f", faults {server.faults.describe()} from {server.faults.after:g} s after the "
            "first enable (one session)" if server.faults.any else ""))
     code = 0
@@ -272,4 +317,7 @@ def _main(argv) -> int:
                 f"statuses sent, commands lost {server.commands_lost}, faults "
                 f"{server.bridge.faults:#06x}")
             say(server.compute_summary())
+            if args.truth_log:
+                say(f"truth log: {write_truth_log(server, args.truth_log)} statuses written to "
+                    f"{args.truth_log}")
     return code

@@ -16,9 +16,9 @@ import numpy as np
 from cdpm_drake.emulator.bridges import ReelBridge
 from cdpm_drake.emulator.faults import FaultPlan
 from cdpm_drake.hardware.link import resolve_ipv4
-from cdpm_drake.hardware.protocol import (FAULT_COMMAND_TIMEOUT, REASONS, ProtocolError,
-                                          SequenceTracker, Status, decode_command,
-                                          encode_status, next_sequence)
+from cdpm_drake.hardware.protocol import (FAULT_COMMAND_TIMEOUT, REASONS, VERSION, VERSIONS,
+                                          ProtocolError, SequenceTracker, Status,
+                                          decode_command, encode_status, next_sequence)
 
 # Ticks whose compute time the server keeps for its summary (8.7 min at 500 Hz).
 COMPUTE_WINDOW = 1 << 18
@@ -49,19 +49,34 @@ class ReelBridgeServer:
     def __init__(self, bridge: ReelBridge, address: tuple[str, int] = ("127.0.0.1", 0),
                  faults: FaultPlan = FaultPlan(), period: float = 0.002, seed: int = 0,
                  controller: tuple[str, int] | None = None, command_timeout: float = 0.05,
-                 record: int = 100_000, log=None, session_timeout: float = 1.0):
+                 record: int = 100_000, log=None, session_timeout: float = 1.0,
+                 protocol_version: int = VERSION, truth: int = 0):
         """`record`: how many received commands to keep in `commands` (tests read them; the
         command-line emulator keeps none). `log(text)` is told what the bridge sees: each
         controller session opened and closed, the first rejected datagram of each reason per
         session (None: silent). A session closes when a new one starts or after
         `session_timeout` s without a valid command. The fault plan applies to one session:
-        the first in which it takes effect; later sessions run without faults."""
+        the first in which it takes effect; later sessions run without faults.
+
+        `protocol_version`: the newest version the bridge speaks (1 plays a version-1 bridge:
+        it refuses version-2 commands). A version-2 bridge answers in version 1 until it
+        accepts a version-2 command in a session (hardware/PROTOCOL.md "Versions"); its
+        statuses carry the plant's drive forces, reel speeds and load cells (`drive_force()`,
+        `speed`, `load_cell()` of the bridge plant). `truth`: how many statuses to keep in
+        `truth` with the plant's ground truth beside what they carried (a plant with
+        `true_tensions()` only; 0: none)."""
         if not (math.isfinite(period) and period > 0):
             raise ValueError(f"period must be a finite number > 0 s, got {period!r}")
         if not (math.isfinite(session_timeout) and session_timeout > 0):
             raise ValueError(f"session_timeout must be a finite number > 0 s, got "
                              f"{session_timeout!r}")
+        if protocol_version not in VERSIONS:
+            raise ValueError(f"protocol_version must be one of {VERSIONS}, got "
+                             f"{protocol_version!r}")
         self.bridge = bridge
+        self.protocol_version = int(protocol_version)
+        self._versions = tuple(v for v in VERSIONS if v <= protocol_version)
+        self._status_version = 1         # the session's, until a version-2 command
         self.period = float(period)
         self.command_timeout = float(command_timeout)
         self._faults = faults
@@ -102,6 +117,10 @@ class ReelBridgeServer:
         self.fault_onset_tick = None
         self.tick = 0
         self.commands = collections.deque(maxlen=record)
+        # (bridge time s, plant time s, true tensions N, drive_force sent N, reel_speed sent
+        # m/s) per status sent, if asked for and the plant has a ground truth.
+        self.truth = collections.deque(maxlen=truth or None) if (
+            truth and hasattr(bridge, "true_tensions")) else None
         # Controller sessions, numbered from 1 (0: none yet); `session_open` while one runs.
         self.session = 0
         self.session_open = False
@@ -221,7 +240,7 @@ class ReelBridgeServer:
                 self.counters["commands_dropped"] += 1
                 continue
             try:
-                command = decode_command(data, self._m)
+                command = decode_command(data, self._m, self._versions)
                 self._accept_sequence(command, now, sender)
             except ProtocolError as e:
                 self.counters["rejected"][e.reason] += 1
@@ -229,6 +248,11 @@ class ReelBridgeServer:
                 continue
             if not self.session_open:
                 self._open_session(now, sender)
+            if command.version > self._status_version:
+                # The controller reads this version: answer in it to the session's end.
+                self._status_version = command.version
+                self._say(f"session {self.session}: speaking protocol version "
+                          f"{command.version}")
             self.counters["commands_received"] += 1
             self._session_commands += 1
             self._controller = sender
@@ -264,6 +288,7 @@ class ReelBridgeServer:
     def _open_session(self, now: float, sender) -> None:
         self.session += 1
         self.session_open = True
+        self._status_version = 1
         self._session_start = now
         self._session_commands = 0
         self._session_rejected = {}
@@ -330,12 +355,20 @@ class ReelBridgeServer:
         lengths = b.lengths.copy()
         if plan.nan:
             lengths[0] = np.nan
+        drive = {}
+        if self._status_version >= 2:
+            drive = dict(drive_force=b.drive_force(), reel_speed=b.speed.copy(),
+                         load_cell=b.load_cell())
+            if self.truth is not None:
+                self.truth.append((now, b.plant_time, b.true_tensions(), drive["drive_force"],
+                                   drive["reel_speed"]))
         data = encode_status(Status(
             sequence=self._sequence, time=now, lengths=lengths, force=b.force(),
             faults=b.faults, enabled=b.enabled,
             echo_sequence=None if c is None else c.sequence,
             echo_time=0.0 if c is None else c.time,
-            commands_lost=self._tracker.lost % (1 << 32)), check=not plan.nan)
+            commands_lost=self._tracker.lost % (1 << 32), version=self._status_version,
+            **drive), check=not plan.nan)
         self._frozen = data  # what a hung bridge task would keep resending
         rng = self._rng
         if plan.drop and rng.random() < plan.drop:

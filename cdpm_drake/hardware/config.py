@@ -13,6 +13,8 @@ from cdpm_drake.hardware.link import resolve_ipv4
 DEFAULT_BRIDGE_PORT = 47100
 # Longest wait for a stopped bridge to answer before the fault latches, s.
 MAX_RESUME_WITHIN = 1.0
+# What `tension_measured` is made from (hardware/PROTOCOL.md, "Controller behaviour").
+TENSION_SENSORS = ("drive_torque", "load_cell", "none")
 
 
 @dataclasses.dataclass
@@ -48,6 +50,11 @@ class HardwareReels:
     # Copies of the final zero-velocity, enable-off command sent by shutdown() (UDP may
     # drop one; the bridge ignores the repeats' identical content).
     shutdown_repeats: int = 3
+    # Where the `tension_measured` output (N per cable) comes from, with a version-2 bridge:
+    # drive_torque, each reel drive's force at the cable through the reel's equation of motion
+    # with the robot file's reel_drives (inertia, friction); load_cell, the bridge's load
+    # cells; none, no tension sensor (NaN, as with a version-1 bridge).
+    tension_sensor: str = "drive_torque"
 
 
 def check_hardware_reels(config: HardwareReels, field: str = "plant") -> None:
@@ -68,6 +75,9 @@ def check_hardware_reels(config: HardwareReels, field: str = "plant") -> None:
                          f"{config.resume_within!r}")
     _number(config.ramp_time, f"{field}.ramp_time", "s", positive=False)
     _number(config.max_length_residual, f"{field}.max_length_residual", "m", positive=True)
+    if config.tension_sensor not in TENSION_SENSORS:
+        raise ValueError(f"{field}.tension_sensor must be one of "
+                         f"{', '.join(TENSION_SENSORS)}, got {config.tension_sensor!r}")
 
 
 def _int_in(value, lo, hi, field, what):

@@ -14,8 +14,9 @@ import socket
 
 import numpy as np
 
-from cdpm_drake.hardware.protocol import (REASONS, Command, ProtocolError, Status, check_sequence, decode_status,
-                       encode_command, next_sequence)
+from cdpm_drake.hardware.protocol import (REASONS, VERSIONS, Command, ProtocolError, Status,
+                                          check_sequence, decode_status, encode_command,
+                                          next_sequence)
 
 # A status burst larger than this in one tick means the loop stalled for a long time; the
 # rest stays queued for the next call, so one call stays bounded in time.
@@ -98,14 +99,14 @@ class ReelLink:
         return self._sock.fileno() < 0
 
     def send_command(self, velocity, enable: bool, echo_sequence: int | None,
-                     echo_time: float = 0.0, time: float = 0.0) -> int:
-        """Send one command; returns its sequence number. Velocities in m/s of cable.
-        Never blocks: a full socket buffer counts as a send error."""
+                     echo_time: float = 0.0, time: float = 0.0, version: int = 1) -> int:
+        """Send one command of protocol `version`; returns its sequence number. Velocities in
+        m/s of cable. Never blocks: a full socket buffer counts as a send error."""
         self._sequence = next_sequence(self._sequence)
         data = encode_command(Command(sequence=self._sequence, time=float(time),
                                       velocity=np.asarray(velocity, dtype=float),
                                       enable=bool(enable), echo_sequence=echo_sequence,
-                                      echo_time=float(echo_time)))
+                                      echo_time=float(echo_time), version=int(version)))
         try:
             self._sock.sendto(data, self.bridge)
             self.counters.sent += 1
@@ -115,9 +116,9 @@ class ReelLink:
             self.counters.send_errors += 1
         return self._sequence
 
-    def receive(self, last_sequence: int | None) -> Status | None:
-        """Drain waiting datagrams; the newest valid status that is newer than
-        `last_sequence` (None: accept any), or None if there is none."""
+    def receive(self, last_sequence: int | None, versions=VERSIONS) -> Status | None:
+        """Drain waiting datagrams; the newest valid status of one of `versions` that is newer
+        than `last_sequence` (None: accept any), or None if there is none."""
         newest = None
         last = last_sequence
         sock = self._sock
@@ -135,7 +136,7 @@ class ReelLink:
                 continue
             self.counters.received += 1
             try:
-                status = decode_status(data, self.num_cables)
+                status = decode_status(data, self.num_cables, versions)
                 gap = check_sequence(status.sequence, last)
             except ProtocolError as e:
                 self.counters.rejected[e.reason] += 1

@@ -7,6 +7,11 @@ magic, version, cable count, flags, CRC, value ranges; the first failure raises 
 naming the field and the value. Sequence numbers are 32-bit and wrap; `check_sequence` orders
 them with serial-number arithmetic (RFC 1982).
 
+Two versions: version 1, and version 2, whose status adds per drive its force at the cable,
+the reel's speed and an optional load cell's tension (NaN: no reading). A version-2 command is
+byte for byte a version-1 command with 2 in its version field: it tells the bridge that the
+controller reads version-2 statuses. Decoders take the versions they accept.
+
 Cables are numbered 1..m in messages; arrays are 0-based.
 """
 
@@ -19,7 +24,8 @@ import numpy as np
 
 MAGIC_COMMAND = b"CDPC"
 MAGIC_STATUS = b"CDPS"
-VERSION = 1
+VERSION = 2           # the newest version this code speaks
+VERSIONS = (1, 2)     # every version it reads
 MAX_CABLES = 64
 
 # Header shared by both directions: magic, version, cable count, flags, sequence,
@@ -61,6 +67,13 @@ MAX_VELOCITY = 10.0      # |reel velocity|, m/s of cable
 MAX_LENGTH = 100.0       # cable length in [0, MAX_LENGTH], m
 MAX_FORCE = 2000.0       # |force component|, N (the FSE103 saturates at 100 N)
 MAX_TIME = 1.0e9         # timestamps in [0, MAX_TIME], s
+# Version 2's drive fields: NaN is "no reading"; anything else must be finite and within these.
+MAX_CABLE_FORCE = 1.0e5  # |drive force| and |load-cell tension| at the cable, N
+MAX_REEL_SPEED = 100.0   # |measured reel speed|, m/s of cable
+
+# Version 2's per-cable status arrays, in wire order, and the largest |value| of each.
+DRIVE_FIELDS = {"drive_force": MAX_CABLE_FORCE, "reel_speed": MAX_REEL_SPEED,
+                "load_cell": MAX_CABLE_FORCE}
 
 SEQUENCE_MODULUS = 1 << 32
 _HALF = 1 << 31
@@ -88,12 +101,16 @@ class Command:
     enable: bool
     echo_sequence: int | None   # sequence of the last status accepted; None before the first
     echo_time: float = 0.0      # `time` of that status, s
+    version: int = 1            # 2: the controller reads version-2 statuses
 
 
 @dataclasses.dataclass(frozen=True)
 class Status:
     """Bridge -> controller. lengths: (m,) measured cable lengths, m; force: (3,) raw force
-    sample, base frame, N."""
+    sample, base frame, N. Version 2 adds, per cable (NaN: no reading; None encodes as all
+    NaN; a decoded version-1 status has them all NaN): drive_force, the drive's force at the
+    cable (its torque over the drum radius), N, + pays cable out; reel_speed, the reel's
+    measured speed, m/s of cable, + pays out; load_cell, a load cell's tension, N."""
 
     sequence: int
     time: float                 # bridge clock when sent, s
@@ -104,16 +121,21 @@ class Status:
     echo_sequence: int | None = None  # sequence of the last command accepted
     echo_time: float = 0.0      # `time` of that command, s
     commands_lost: int = 0      # command sequence numbers the bridge never received
+    version: int = 1
+    drive_force: np.ndarray | None = None
+    reel_speed: np.ndarray | None = None
+    load_cell: np.ndarray | None = None
 
 
-def command_size(num_cables: int) -> int:
-    """Bytes in a command datagram for m cables."""
+def command_size(num_cables: int, version: int = 1) -> int:
+    """Bytes in a command datagram for m cables (the same in both versions)."""
     return HEADER.size + 8 * num_cables + CRC.size
 
 
-def status_size(num_cables: int) -> int:
-    """Bytes in a status datagram for m cables."""
-    return HEADER.size + STATUS_WORDS.size + 8 * num_cables + 24 + CRC.size
+def status_size(num_cables: int, version: int = 1) -> int:
+    """Bytes in a status datagram for m cables: version 2 adds 3 x 8 bytes per cable."""
+    extra = 24 * num_cables if version >= 2 else 0
+    return HEADER.size + STATUS_WORDS.size + 8 * num_cables + 24 + extra + CRC.size
 
 
 def fault_names(faults: int) -> list[str]:
@@ -135,6 +157,7 @@ def encode_command(command: Command, check: bool = True) -> bytes:
     v = np.ascontiguousarray(command.velocity, dtype="<f8")
     m = v.shape[0]
     _check_count(m, "velocity")
+    _check_version(command.version)
     if check:
         _check_sequence_field(command.sequence, "sequence")
         _check_time(command.time, "time")
@@ -147,7 +170,7 @@ def encode_command(command: Command, check: bool = True) -> bytes:
             _check_sequence_field(command.echo_sequence, "echo_sequence")
         flags |= FLAG_ECHO_VALID
         echo = command.echo_sequence
-    body = HEADER.pack(MAGIC_COMMAND, VERSION, m, flags, command.sequence, echo,
+    body = HEADER.pack(MAGIC_COMMAND, command.version, m, flags, command.sequence, echo,
                        command.time, command.echo_time) + v.tobytes()
     return body + CRC.pack(zlib.crc32(body))
 
@@ -159,7 +182,12 @@ def encode_status(status: Status, check: bool = True) -> bytes:
     force = np.ascontiguousarray(status.force, dtype="<f8")
     m = lengths.shape[0]
     _check_count(m, "lengths")
+    _check_version(status.version)
+    drive = [_drive_array(getattr(status, name), m, name) for name in DRIVE_FIELDS] \
+        if status.version >= 2 else []
     if check:
+        for (name, hi), values in zip(DRIVE_FIELDS.items(), drive):
+            _check_drive_array(values, hi, name)
         if force.shape != (3,):
             raise ProtocolError("value", f"force must have 3 components, got shape "
                                          f"{force.shape!r}")
@@ -178,32 +206,36 @@ def encode_status(status: Status, check: bool = True) -> bytes:
     if status.echo_sequence is not None:
         flags |= FLAG_ECHO_VALID
         echo = status.echo_sequence
-    body = (HEADER.pack(MAGIC_STATUS, VERSION, m, flags, status.sequence, echo, status.time,
-                        status.echo_time)
+    body = (HEADER.pack(MAGIC_STATUS, status.version, m, flags, status.sequence, echo,
+                        status.time, status.echo_time)
             + STATUS_WORDS.pack(status.faults, status.commands_lost)
-            + lengths.tobytes() + force.tobytes())
+            + lengths.tobytes() + force.tobytes() + b"".join(a.tobytes() for a in drive))
     return body + CRC.pack(zlib.crc32(body))
 
 
 # --- decoding --------------------------------------------------------------------------------
 
 
-def decode_command(data: bytes, num_cables: int) -> Command:
-    """Parse and check a command datagram for a robot with `num_cables` cables."""
-    flags, seq, echo, t, echo_t = _decode_header(data, num_cables, MAGIC_COMMAND, "command",
-                                                 command_size, COMMAND_FLAGS)
+def decode_command(data: bytes, num_cables: int, versions=VERSIONS) -> Command:
+    """Parse and check a command datagram for a robot with `num_cables` cables, of one of
+    `versions`."""
+    version, flags, seq, echo, t, echo_t = _decode_header(
+        data, num_cables, MAGIC_COMMAND, "command", command_size, COMMAND_FLAGS, versions)
     v = np.frombuffer(data, dtype="<f8", count=num_cables, offset=HEADER.size).astype(float)
     _check_time(t, "time")
     _check_time(echo_t, "echo_time")
     _check_array(v, MAX_VELOCITY, "velocity", "m/s", lo=-MAX_VELOCITY)
     return Command(sequence=seq, time=t, velocity=v, enable=bool(flags & COMMAND_FLAG_ENABLE),
-                   echo_sequence=echo if flags & FLAG_ECHO_VALID else None, echo_time=echo_t)
+                   echo_sequence=echo if flags & FLAG_ECHO_VALID else None, echo_time=echo_t,
+                   version=version)
 
 
-def decode_status(data: bytes, num_cables: int) -> Status:
-    """Parse and check a status datagram for a robot with `num_cables` cables."""
-    flags, seq, echo, t, echo_t = _decode_header(data, num_cables, MAGIC_STATUS, "status",
-                                                 status_size, STATUS_FLAGS)
+def decode_status(data: bytes, num_cables: int, versions=VERSIONS) -> Status:
+    """Parse and check a status datagram for a robot with `num_cables` cables, of one of
+    `versions`. A version-1 status decodes with drive_force, reel_speed and load_cell all
+    NaN."""
+    version, flags, seq, echo, t, echo_t = _decode_header(
+        data, num_cables, MAGIC_STATUS, "status", status_size, STATUS_FLAGS, versions)
     faults, lost = STATUS_WORDS.unpack_from(data, HEADER.size)
     arrays = np.frombuffer(data, dtype="<f8", count=num_cables + 3,
                            offset=HEADER.size + STATUS_WORDS.size).astype(float)
@@ -212,13 +244,50 @@ def decode_status(data: bytes, num_cables: int) -> Status:
     _check_time(echo_t, "echo_time")
     _check_array(lengths, MAX_LENGTH, "lengths", "m", lo=0.0)
     _check_array(force, MAX_FORCE, "force", "N", lo=-MAX_FORCE)
+    m = num_cables
+    if version >= 2:
+        drive = np.frombuffer(data, dtype="<f8", count=3 * m, offset=HEADER.size
+                              + STATUS_WORDS.size + 8 * m + 24).astype(float)
+        drive = [drive[k * m:(k + 1) * m] for k in range(3)]
+        for (name, hi), values in zip(DRIVE_FIELDS.items(), drive):
+            _check_drive_array(values, hi, name)
+    else:
+        drive = [np.full(m, np.nan) for _ in range(3)]
     return Status(sequence=seq, time=t, lengths=lengths, force=force, faults=faults,
                   enabled=bool(flags & STATUS_FLAG_ENABLED),
                   echo_sequence=echo if flags & FLAG_ECHO_VALID else None, echo_time=echo_t,
-                  commands_lost=lost)
+                  commands_lost=lost, version=version, drive_force=drive[0],
+                  reel_speed=drive[1], load_cell=drive[2])
 
 
-def _decode_header(data, num_cables, magic, kind, size_of, allowed_flags):
+def _drive_array(values, m, field):
+    if values is None:
+        return np.full(m, np.nan, dtype="<f8")
+    values = np.ascontiguousarray(values, dtype="<f8")
+    if values.shape != (m,):
+        raise ProtocolError("value", f"{field} must have {m} entries (one per cable), got "
+                                     f"shape {values.shape!r}")
+    return values
+
+
+def _check_drive_array(values, hi, field):
+    """NaN is "no reading"; any other value must be finite and within [-hi, hi]."""
+    bad = ~np.isnan(values) & ~(np.abs(values) <= hi)
+    if bad.any():
+        k = int(np.argmax(bad))
+        unit = "m/s" if field == "reel_speed" else "N"
+        raise ProtocolError("value", f"{field} of cable {k + 1} is {float(values[k])!r} "
+                                     f"{unit}, outside [{-hi:g}, {hi:g}] {unit} (NaN: no "
+                                     f"reading)")
+
+
+def _check_version(version):
+    if version not in VERSIONS:
+        raise ProtocolError("version", f"version is {version!r}, this link speaks versions "
+                                       f"{', '.join(map(str, VERSIONS))}")
+
+
+def _decode_header(data, num_cables, magic, kind, size_of, allowed_flags, versions):
     _check_count(num_cables, "num_cables")
     n = len(data)
     if n < HEADER.size:
@@ -230,13 +299,14 @@ def _decode_header(data, num_cables, magic, kind, size_of, allowed_flags):
         hint = f" (that is {other} datagram)" if other else ""
         raise ProtocolError("magic", f"magic is {got_magic!r}{hint}, expected {magic!r} "
                                      f"for a {kind}")
-    if version != VERSION:
-        raise ProtocolError("version", f"version is {version!r}, this link speaks version "
-                                       f"{VERSION}")
+    if version not in versions:
+        raise ProtocolError("version", f"version is {version!r}, this link speaks version"
+                                       f"{'s' if len(versions) > 1 else ''} "
+                                       f"{', '.join(map(str, versions))}")
     if m != num_cables:
         raise ProtocolError("cable_count", f"cable_count is {m!r}, expected {num_cables} "
                                            f"(the robot's cables)")
-    expected = size_of(m)
+    expected = size_of(m, version)
     if n != expected:
         raise ProtocolError("length", f"{kind} datagram is {n} bytes, expected {expected} "
                                       f"for {m} cables")
@@ -248,7 +318,7 @@ def _decode_header(data, num_cables, magic, kind, size_of, allowed_flags):
     if crc != actual:
         raise ProtocolError("crc", f"crc is {crc:#010x}, the datagram's bytes give "
                                    f"{actual:#010x}")
-    return flags, seq, echo, t, echo_t
+    return version, flags, seq, echo, t, echo_t
 
 
 def _check_count(m, field):

@@ -30,6 +30,15 @@ broken, e.g. an emulator on a virtual machine whose host holds a virtual CPU for
 (measured on the shared VM this was developed on: scripts/bench/soak_realtime.py), would otherwise
 end a person's interaction; the reels stop within the same `watchdog_ticks` either way.
 
+Protocol version (hardware/PROTOCOL.md "Versions"): the start-up greetings alternate version 2
+and version 1; the first status that settles it fixes the version for the run (book
+PROTOCOL). With version 2, each status's drive forces, reel speeds and load cells give the
+`tension_measured` output by `config.tension_sensor` (drive_torque: the reel's equation of
+motion, kernels/drive_torque.py, with the robot file's reel_drives; load_cell; none: NaN);
+NaN where a reading is missing, and always with a version-1 bridge. It is computed in the same
+discrete update as the lengths, with numpy and one compiled kernel (compiled in the
+constructor, never on the real-time path), and nothing in it raises.
+
 The socket is a resource, not state: it is held as an attribute because it cannot be copied
 into or restored from a Context. Everything that changes what the system outputs or sends
 (lengths, force, sequence numbers, watchdog counter, fault latch, enable flag, ramp) lives in
@@ -42,10 +51,12 @@ import time
 import numpy as np
 from pydrake.systems.framework import LeafSystem
 
+from cdpm_drake.kernels.drive_torque import tension_from_drive
 from cdpm_drake.kernels.kinematics import KinematicsError, cable_lengths, forward_kinematics
 from cdpm_drake.hardware.config import HardwareReels, check_hardware_reels
 from cdpm_drake.hardware.link import ReelLink
-from cdpm_drake.hardware.protocol import fault_names, next_sequence, sequence_delta
+from cdpm_drake.hardware.protocol import (VERSION, VERSIONS, fault_names, next_sequence,
+                                          sequence_delta)
 
 # Book-keeping state vector (float64; 32-bit sequence numbers are exact in a double).
 STATUS_SEQ = 0        # sequence of the last accepted status
@@ -68,7 +79,13 @@ HOLD_LOST = 16        # the link's count of lost statuses when the hold began
 HOLD_MISSED = 17      # silent ticks when the watchdog stopped the reels
 HOLDS = 18            # holds that ended with the bridge answering (the run went on)
 LONGEST_HOLD = 19     # the longest of those, s (wall clock)
-BOOK_SIZE = 20
+PROTOCOL = 20         # the protocol version agreed with the bridge at start-up (1 or 2)
+SPEED_TIME = 21       # the `time` of the status whose reel speeds the state holds, s (NaN: none)
+BOOK_SIZE = 22
+
+# A reel acceleration is taken from two statuses at most this far apart on the bridge's
+# clock, s; further apart (a long silence, a bridge restart) it is unknown (NaN).
+MAX_ACCEL_INTERVAL = 0.1
 
 # Why the run stops: a silent bridge (no answer within resume_within), a bridge fault bit, a
 # bridge that answered the watchdog's stop after losing statuses on the way.
@@ -95,6 +112,7 @@ class HardwareReelsSystem(LeafSystem):
         output_ports:
         - cable_lengths (m, one per cable, as measured)
         - measured_force (N, base frame, raw sensor sample)
+        - tension_measured (N, one per cable; NaN where there is no reading)
 
     `robot`: the robot (after cable swaps); its reel speed limit scales down any command
     above it (the direction of motion is kept). `config`: a HardwareReels. `time_step`: the
@@ -112,6 +130,14 @@ class HardwareReelsSystem(LeafSystem):
         self._T = float(time_step)
         self._m = m = robot.num_cables
         self._vmax = float(robot.limits.max_reel_speed)
+        d = robot.dynamics
+        # The controller's model of its reel drives (robot file reel_drives), at the cable.
+        self._drive_model = (float(d.reel_inertia), float(d.viscous_friction),
+                             float(d.coulomb_friction), float(d.dead_band))
+        self._sensor = config.tension_sensor
+        # Compile the kernel now: a first call on the real-time path would take seconds.
+        tension_from_drive(np.zeros(m), np.zeros(m), np.zeros(m), *self._drive_model,
+                           np.empty(m))
         self._ramp_step = 1.0 if config.ramp_time == 0 else self._T / config.ramp_time
         # A catch-up burst of ticks after a stall of this process runs faster than the bridge
         # sends; the watchdog also waits this much wall-clock time so such a burst cannot
@@ -129,8 +155,12 @@ class HardwareReelsSystem(LeafSystem):
         book = np.zeros(BOOK_SIZE)
         book[COMMAND_ECHO] = -1.0
         self._book = self.DeclareDiscreteState(book)
+        # The last reel speeds received (m/s; for the acceleration) and the tensions, N.
+        self._speed = self.DeclareDiscreteState(np.full(m, np.nan))
+        self._tension = self.DeclareDiscreteState(np.full(m, np.nan))
         self.DeclareStateOutputPort("cable_lengths", self._lengths)
         self.DeclareStateOutputPort("measured_force", self._force)
+        self.DeclareStateOutputPort("tension_measured", self._tension)
         self.DeclareInitializationUnrestrictedUpdateEvent(self._initialize_from_bridge)
         self.DeclarePeriodicDiscreteUpdateEvent(self._T, 0.0, self._update_from_bridge)
         self.DeclarePeriodicPublishEvent(self._T, 0.0, self._publish_command)
@@ -158,6 +188,7 @@ class HardwareReelsSystem(LeafSystem):
         link = self._link
         if link is None or link.closed or self._stopped_at == link.counters.sent:
             return
+        # Version 1, whatever was agreed: every bridge reads it.
         for _ in range(self._config.shutdown_repeats):
             link.send_command(np.zeros(self._m), enable=False, echo_sequence=None)
         self._stopped_at = link.counters.sent
@@ -174,7 +205,8 @@ class HardwareReelsSystem(LeafSystem):
         names = ("status_sequence", "have_status", "command_echo", "missed_ticks", "enabled",
                  "ramp", "last_status_wall", "fault", "fault_bits", "fault_time",
                  "status_time", "commands_lost", "hold", "hold_wall", "hold_time",
-                 "hold_sequence", "hold_lost", "hold_missed", "holds", "longest_hold")
+                 "hold_sequence", "hold_lost", "hold_missed", "holds", "longest_hold",
+                 "protocol_version", "speed_time")
         return {k: float(b[i]) for i, k in enumerate(names)}
 
     # --- events ------------------------------------------------------------------------------
@@ -184,13 +216,21 @@ class HardwareReelsSystem(LeafSystem):
         link = self._open_link()
         zero = np.zeros(self._m)
         deadline = time.monotonic() + c.startup_timeout
-        status = None
-        while status is None:
-            # Zero-velocity, enable-off greetings tell the bridge where to send its statuses.
-            link.send_command(zero, enable=False, echo_sequence=None, time=context.get_time())
+        status, version = None, None
+        first_v2 = None  # the sequence of the first version-2 greeting
+        greeting = VERSION
+        while version is None:
+            # Zero-velocity, enable-off greetings tell the bridge where to send its statuses;
+            # they alternate versions 2 and 1 until a status settles which one it speaks.
+            sent = link.send_command(zero, enable=False, echo_sequence=None,
+                                     time=context.get_time(), version=greeting)
+            if greeting == 2 and first_v2 is None:
+                first_v2 = sent
+            greeting = 1 if greeting == 2 else VERSION
             link.wait(min(self._T, max(0.0, deadline - time.monotonic())))
-            status = link.receive(None)
-            if status is None and time.monotonic() >= deadline:
+            status = link.receive(None, VERSIONS)
+            version = agreed_version(status, first_v2)
+            if version is None and time.monotonic() >= deadline:
                 raise ReelFault(
                     f"no valid status from the reel bridge at {c.address}:{c.port} within "
                     f"startup_timeout = {c.startup_timeout:g} s; is the bridge (or "
@@ -219,7 +259,14 @@ class HardwareReelsSystem(LeafSystem):
             raise ReelFault(f"refusing to enable the reels: {problem}", context.get_time())
         state.get_mutable_discrete_state(self._lengths).SetFromVector(status.lengths)
         state.get_mutable_discrete_state(self._force).SetFromVector(status.force)
+        speed = state.get_mutable_discrete_state(self._speed).get_mutable_value()
+        tension = state.get_mutable_discrete_state(self._tension).get_mutable_value()
+        speed[:] = np.nan
+        tension[:] = np.nan
         book = np.zeros(BOOK_SIZE)
+        book[PROTOCOL] = version
+        book[SPEED_TIME] = np.nan
+        self._measure_tension(book, status, speed, tension)
         book[STATUS_SEQ] = status.sequence
         book[HAVE_STATUS] = 1.0
         book[COMMAND_ECHO] = -1.0 if status.echo_sequence is None else status.echo_sequence
@@ -236,11 +283,14 @@ class HardwareReelsSystem(LeafSystem):
             return  # latched; the next publish ends the run
         link = self._open_link()
         last = int(book[STATUS_SEQ]) if book[HAVE_STATUS] else None
-        status = link.receive(last)
+        status = link.receive(last, (int(book[PROTOCOL]),) if book[PROTOCOL] else VERSIONS)
         now = time.monotonic()
         if status is not None:
             state.get_mutable_vector(self._lengths).SetFromVector(status.lengths)
             state.get_mutable_vector(self._force).SetFromVector(status.force)
+            self._measure_tension(
+                book, status, state.get_mutable_vector(self._speed).get_mutable_value(),
+                state.get_mutable_vector(self._tension).get_mutable_value())
             book[STATUS_SEQ] = status.sequence
             book[HAVE_STATUS] = 1.0
             if status.echo_sequence is not None:
@@ -270,6 +320,27 @@ class HardwareReelsSystem(LeafSystem):
         elif book[ENABLED]:
             book[RAMP] = min(1.0, book[RAMP] + self._ramp_step)
         state.get_mutable_vector(self._book).SetFromVector(book)
+
+    def _measure_tension(self, book, status, speed, tension) -> None:
+        """The cables' tensions (N) into `tension` from a new status, by the tension sensor;
+        `speed` holds the previous status's reel speeds (m/s) and takes this one's. NaN where a
+        reading is missing; never raises (numpy and a compiled kernel with numpy's error
+        model: NaN and inf propagate)."""
+        if status.version < 2 or self._sensor == "none":
+            tension[:] = np.nan
+            return
+        if self._sensor == "load_cell":
+            tension[:] = status.load_cell
+            return
+        w = status.reel_speed
+        dt = status.time - book[SPEED_TIME]  # NaN without an earlier speed
+        if 0.0 < dt <= MAX_ACCEL_INTERVAL:
+            accel = (w - speed) / dt
+        else:
+            accel = np.full(self._m, np.nan)
+        tension_from_drive(status.drive_force, w, accel, *self._drive_model, tension)
+        speed[:] = w
+        book[SPEED_TIME] = status.time
 
     def _start_hold(self, book, t, now, link) -> None:
         """The watchdog: stop the reels now (zero velocity, enable off), then hold for the
@@ -326,7 +397,8 @@ class HardwareReelsSystem(LeafSystem):
             v = np.zeros(self._m)
         echo = int(book[STATUS_SEQ]) if book[HAVE_STATUS] else None
         link.send_command(v, enable=bool(book[ENABLED]), echo_sequence=echo,
-                          echo_time=float(book[STATUS_TIME]), time=context.get_time())
+                          echo_time=float(book[STATUS_TIME]), time=context.get_time(),
+                          version=int(book[PROTOCOL]) or 1)
 
     # --- messages ----------------------------------------------------------------------------
 
@@ -361,6 +433,21 @@ class HardwareReelsSystem(LeafSystem):
                         f"{c.resume_within * 1e3:g} ms")
         return (f"reel fault at t = {t:.3f} s: {why}; zero reel velocity sent. "
                 f"{self._link_summary()}")
+
+
+def agreed_version(status, first_v2) -> int | None:
+    """The protocol version a start-up status settles (hardware/PROTOCOL.md "Versions"), or
+    None while it is open: 2 for a version-2 status; 1 for a version-1 status that echoes a
+    command sent after the first version-2 greeting (sequence `first_v2`), which the bridge
+    would have answered in version 2 had it read it."""
+    if status is None:
+        return None
+    if status.version >= 2:
+        return 2
+    if (first_v2 is not None and status.echo_sequence is not None
+            and sequence_delta(status.echo_sequence, first_v2) >= 1):
+        return 1
+    return None
 
 
 # Where the reels may be enabled: the platform centre that the measured lengths give inside

@@ -82,6 +82,15 @@ def describe_wrench(direction) -> str:
     return " and ".join(parts[:2])
 
 
+def _missing(robot: "Robot") -> str:
+    """Every wrench direction the cables of the level platform at the workspace centre cannot
+    resist, in words (robot.unresisted)."""
+    from cdpm_drake.kernels.tension import wrench_matrix
+    from cdpm_drake.robot.unresisted import unresisted_text
+
+    return unresisted_text(wrench_matrix(robot, robot.workspace.center))
+
+
 def statics_warnings(robot: "Robot", statics, *, grid: str | None = None, base=None,
                      base_share: float | None = None) -> list[str]:
     """What is wrong with a robot's statics, in words (empty when its box is mostly held).
@@ -97,16 +106,15 @@ def statics_warnings(robot: "Robot", statics, *, grid: str | None = None, base=N
         # Too few cables for six equations: the rank and the share only restate that.
         return [f"{robot.name}: {m} cables cannot hold the platform against all six force and "
                 f"moment components (wrench matrix rank {statics.rank} at the workspace "
-                "centre): a free platform would turn; the kinematic plant, and plant: "
-                "!DynamicReels {lock_rotation: true}, model one that only translates"]
+                f"centre: no cable tensions resist {_missing(robot)} there): a free platform "
+                "would turn; the kinematic plant, and plant: !DynamicReels {lock_rotation: "
+                "true}, model one that only translates (the free-rotating !DynamicReels "
+                "refuses it)"]
     if statics.unreachable is not None:
-        more = 6 - statics.rank - 1
         out.append(f"{robot.name}: the wrench matrix has rank {statics.rank} < 6 at the "
                    f"workspace centre {robot.workspace.center.tolist()!r} m: no cable tensions "
-                   f"produce a {describe_wrench(statics.unreachable)} there"
-                   + (f" (nor {more} more wrench direction(s))" if more else "")
-                   + ", so the platform cannot resist one: the cables' lines of action leave "
-                   "it free to turn or slide")
+                   f"resist {_missing(robot)} there, so the platform cannot resist them: the "
+                   "cables' lines of action leave it free to turn or slide")
     if statics.share < STATICS_WARN_SHARE:
         from cdpm_drake.robot.statics import point_platform_share
 

@@ -595,6 +595,28 @@ def test_emulate_rt_priority_reaches_the_scheduler_call(monkeypatch):
     assert asked == [41]
 
 
+@covers("emulate --protocol-version", "emulate --load-cells", "emulate --truth-log")
+def test_emulate_protocol_version_load_cells_and_truth_log_reach_the_server(tmp_path):
+    # Issue 31: the version spoken, ideal load cells on the dynamic plant (its true tensions),
+    # and the truth log written when the emulator stops (no status sent here: zero rows).
+    v1 = _server_from("--port", 0, "--protocol-version", 1)
+    try:
+        assert v1.protocol_version == 1
+    finally:
+        v1.stop()
+    server = _server_from("--scenario", "exp2_interaction", "--plant", "dynamic",
+                          "--load-cells", "--truth-log", tmp_path / "t.npz", "--port", 0)
+    try:
+        assert server.protocol_version == 2 and server.truth is not None
+        np.testing.assert_array_equal(server.bridge.load_cell(), server.bridge.true_tensions())
+    finally:
+        server.stop()
+    truth = tmp_path / "truth.npz"
+    assert cdpm("emulate", "--scenario", "exp2_interaction", "--plant", "dynamic", "--port", 0,
+                "--duration", 0.05, "--truth-log", truth) == 0
+    assert len(np.load(truth)["time"]) == 0
+
+
 # --- plot ----------------------------------------------------------------------------------
 
 

@@ -1299,6 +1299,43 @@ def test_hardware_shutdown_repeats_sets_the_final_zero_commands(tmp_path):
     assert len(trailing) >= 5 and len(trailing) % 5 == 0, len(trailing)
 
 
+@covers("Scenario.plant!HardwareReels.tension_sensor")
+def test_hardware_tension_sensor_reaches_the_reels(monkeypatch):
+    """The scenario's sensor is the one the reels measure with: on a scripted version-2 link
+    (tests/helpers_scripted_link.py) whose load cells read 10 + cable number N, `load_cell`
+    logs exactly those, `none` NaN; a sensor that does not exist is refused by its field."""
+    from pydrake.systems.analysis import Simulator
+
+    from cdpm_drake.diagram import build_diagram
+    from helpers_scripted_link import ScriptedLink, answering, install
+
+    cells = 10.0 + np.arange(1, 8)
+
+    class CellLink(ScriptedLink):  # a version-2 bridge with load cells, no drive readings
+        def _status(self, *args):
+            return dataclasses.replace(
+                super()._status(*args), version=2, load_cell=cells,
+                drive_force=np.full(7, np.nan), reel_speed=np.full(7, np.nan))
+
+    lengths = cable_lengths(load_robot("paper_7cable"), np.array(P0))
+    for sensor in ("load_cell", "none"):
+        diagram = build_diagram(_hw(47100, tension_sensor=sensor))
+        reels = diagram.GetSubsystemByName("reels")
+        link = CellLink(lengths, answering)
+        install(monkeypatch, reels, link)
+        simulator = Simulator(diagram)
+        simulator.Initialize()
+        simulator.AdvanceTo(0.02)
+        got = reels.GetOutputPort("tension_measured").Eval(
+            reels.GetMyContextFromRoot(simulator.get_context()))
+        if sensor == "none":
+            assert np.isnan(got).all()
+        else:
+            np.testing.assert_array_equal(got, cells)
+    with pytest.raises(ValueError, match="tension_sensor"):
+        build_diagram(_hw(47100, tension_sensor="strain_gauge"))
+
+
 @covers("Scenario.plant!HardwareReels.resume_within")
 def test_hardware_resume_within_bounds_the_wait_for_the_bridge_after_a_stop(monkeypatch):
     """The scenario's diagram on a scripted link (tests/helpers_scripted_link.py: one period

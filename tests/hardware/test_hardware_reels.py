@@ -135,8 +135,10 @@ def test_ports_match_the_simulated_plant_contract(robot):
     outputs = {reels.get_output_port(k).get_name(): reels.get_output_port(k).size()
                for k in range(reels.num_output_ports())}
     assert inputs == {"reel_velocity_command": 7}
-    assert outputs == {"cable_lengths": 7, "measured_force": 3}
-    assert set(inputs) | set(outputs) == set(PLANT_PORTS)
+    assert outputs == {"cable_lengths": 7, "measured_force": 3, "tension_measured": 7}
+    # Issue 31: every plant that has measured tensions has this port (PLANT_PORTS gains it
+    # once every plant has it).
+    assert set(inputs) | set(outputs) == set(PLANT_PORTS) | {"tension_measured"}
 
 
 # --- start-up --------------------------------------------------------------------------------
@@ -628,5 +630,7 @@ def test_a_silence_just_short_of_the_watchdog_never_stops(monkeypatch, robot, p0
     # Two silent ticks (watchdog_ticks = 3): the reels never stop, the ramp never restarts.
     simulator, reels, link = _scripted(monkeypatch, robot, p0, _silent(range(50, 52)))
     simulator.AdvanceTo(0.2)
-    assert all(on for _, _, on, _ in link.sent[1:])
+    # The scripted bridge speaks version 1: two greetings (version 2, then 1) settle it.
+    assert [on for _, _, on, _ in link.sent[:2]] == [False, False]
+    assert all(on for _, _, on, _ in link.sent[2:])
     assert _book(simulator, reels)["holds"] == 0

@@ -129,7 +129,12 @@ def test_wrong_magic_names_both_and_spots_a_command_sent_as_status():
 
 
 def test_wrong_version_is_rejected_even_with_a_good_crc():
-    _reject(_patch(encode_status(_status()), 4, "<B", 2), 7, "version", r"version is 2")
+    _reject(_patch(encode_status(_status()), 4, "<B", 3), 7, "version", r"version is 3")
+    # A receiver that settled on version 1 refuses a version-2 datagram (and the reverse).
+    _reject(encode_status(_status(version=2)), 7, "version", r"version is 2, this link "
+            r"speaks version 1", decode=lambda d, m: decode_status(d, m, versions=(1,)))
+    _reject(encode_command(_command()), 7, "version", r"version is 1",
+            decode=lambda d, m: decode_command(d, m, versions=(2,)))
 
 
 def test_wrong_cable_count_names_the_expected_count():
@@ -260,3 +265,96 @@ def test_fault_names_cover_the_documented_bits():
     assert P.fault_names(0x7F) == ["ESTOP", "DRIVE", "ENCODER", "FORCE_SENSOR",
                                    "COMMAND_TIMEOUT", "LENGTH_LIMIT", "OVERSPEED"]
     assert P.fault_names(1 << 9) == ["BIT9"]
+
+
+# --- version 2: the drives' force, the reels' speed, a load cell (issue 31) --------------------
+
+
+def test_version_2_status_bytes_sit_at_the_documented_offsets():
+    """PROTOCOL.md's version-2 status table for m = 2: the version-1 body, then drive_force at
+    80, reel_speed at 96, load_cell at 112 (f64 x m each), the CRC at 128; 132 bytes."""
+    data = encode_status(_status(m=2, lengths=np.array([1.25, 2.5]), version=2,
+                                 drive_force=np.array([-12.5, 3.0]),
+                                 reel_speed=np.array([0.125, -0.5]),
+                                 load_cell=np.array([np.nan, 7.75])))
+    assert len(data) == 132 == P.status_size(2, version=2)
+    assert data[4] == 2
+    assert struct.unpack_from("<2d", data, 40) == (1.25, 2.5)
+    assert struct.unpack_from("<3d", data, 56) == (1.0, -2.0, 3.5)
+    assert struct.unpack_from("<2d", data, 80) == (-12.5, 3.0)
+    assert struct.unpack_from("<2d", data, 96) == (0.125, -0.5)
+    cell = struct.unpack_from("<2d", data, 112)
+    assert np.isnan(cell[0]) and cell[1] == 7.75
+    assert struct.unpack_from("<I", data, 128)[0] == zlib.crc32(data[:128])
+    # 7 cables: 124 + 3 x 8 x 7 = 292 bytes.
+    assert P.status_size(7, version=2) == 292
+
+
+def test_hand_built_version_2_bytes_decode_to_their_fields():
+    """A datagram packed by hand from the table (not by encode_status) decodes field by
+    field; NaN in the drive arrays is "no reading" and passes."""
+    m = 3
+    body = (struct.pack("<4sBBHIIdd", b"CDPS", 2, m, 0x3, 77, 12, 4.5, 4.25)
+            + struct.pack("<II", 0, 5)
+            + struct.pack("<3d", 2.0, 2.5, 3.0) + struct.pack("<3d", 0.5, 0.0, -9.0)
+            + struct.pack("<3d", -20.0, np.nan, 4.0)        # drive_force, N
+            + struct.pack("<3d", 0.01, -0.02, np.nan)       # reel_speed, m/s
+            + struct.pack("<3d", np.nan, np.nan, np.nan))   # load_cell: none
+    data = body + struct.pack("<I", zlib.crc32(body))
+    s = decode_status(data, m)
+    assert (s.version, s.sequence, s.echo_sequence, s.enabled, s.commands_lost) == (
+        2, 77, 12, True, 5)
+    np.testing.assert_array_equal(s.lengths, [2.0, 2.5, 3.0])
+    np.testing.assert_array_equal(s.drive_force, [-20.0, np.nan, 4.0])
+    np.testing.assert_array_equal(s.reel_speed, [0.01, -0.02, np.nan])
+    assert np.isnan(s.load_cell).all()
+    # The same body sent as version 1 (its shorter length) decodes with no drive readings.
+    v1 = (struct.pack("<4sBBHIIdd", b"CDPS", 1, m, 0x3, 77, 12, 4.5, 4.25) + body[32:88])
+    s1 = decode_status(v1 + struct.pack("<I", zlib.crc32(v1)), m)
+    assert s1.version == 1 and np.isnan(s1.drive_force).all()
+    assert np.isnan(s1.reel_speed).all() and np.isnan(s1.load_cell).all()
+    np.testing.assert_array_equal(s1.lengths, s.lengths)
+
+
+@settings(max_examples=40, deadline=None)
+@given(m=st.integers(1, 64), data=st.data())
+def test_version_2_round_trip_is_exact_nan_included(m, data):
+    def draw(hi):
+        return np.array(data.draw(st.lists(st.one_of(st.floats(-hi, hi), st.just(np.nan)),
+                                           min_size=m, max_size=m)), dtype=float)
+
+    force, speed, cell = draw(1e5), draw(100.0), draw(1e5)
+    s = _status(m=m, lengths=np.full(m, 2.0), version=2, drive_force=force, reel_speed=speed,
+                load_cell=cell)
+    back = decode_status(encode_status(s), m)
+    assert back.version == 2
+    for sent, got in ((force, back.drive_force), (speed, back.reel_speed),
+                      (cell, back.load_cell)):
+        np.testing.assert_array_equal(got, sent)  # NaN where NaN, bit-exact elsewhere
+
+
+def test_absent_drive_arrays_encode_as_no_reading():
+    back = decode_status(encode_status(_status(version=2)), 7)
+    assert np.isnan(back.drive_force).all() and np.isnan(back.load_cell).all()
+
+
+@pytest.mark.parametrize("field,value,match", [
+    ("drive_force", np.inf, r"drive_force of cable 2 is inf N, outside \[-100000, 100000\] N"),
+    ("reel_speed", -100.5, r"reel_speed of cable 2 is -100.5 m/s"),
+    ("load_cell", 2e5, r"load_cell of cable 2 is 200000.0 N"),
+])
+def test_version_2_values_out_of_range_are_rejected_by_name(field, value, match):
+    arr = np.zeros(7)
+    arr[1] = value
+    data = encode_status(_status(version=2, **{field: arr}), check=False)
+    _reject(data, 7, "value", match)
+    with pytest.raises(ProtocolError, match=match):
+        encode_status(_status(version=2, **{field: arr}))
+
+
+def test_a_version_2_command_is_a_version_1_command_with_another_version_byte():
+    one = encode_command(_command())
+    two = encode_command(_command(version=2))
+    assert len(one) == len(two) == P.command_size(7)
+    assert two[4] == 2 and one[:4] + one[5:-4] == two[:4] + two[5:-4]
+    assert decode_command(two, 7).version == 2 and decode_command(one, 7).version == 1

@@ -413,8 +413,9 @@ def test_a_start_pose_no_tension_distribution_holds_is_refused():
 
 
 def test_a_robot_whose_cables_cannot_balance_the_moments_is_refused_unless_locked(tmp_path):
-    # Four cables to off-centre points: six equations, four tensions; gravity's balance needs
-    # moments the cables cannot give. Locked, the joints take the moments.
+    # Four cables to off-centre points: six equations, four tensions (rank 4); a free platform
+    # turns under the moments the cables cannot give, so the run is refused before its start
+    # is even tried (issue 31). Locked, the joints take the moments.
     robot_file = tmp_path / "four.yaml"
     robot_file.write_text((Path(__file__).parents[1] / "data" / "robots" / "hand_4cable.yaml")
                           .read_text())
@@ -424,7 +425,8 @@ def test_a_robot_whose_cables_cannot_balance_the_moments_is_refused_unless_locke
            "{enabled: false}, plant: !DynamicReels {%s}}"
     with pytest.raises(ScenarioError) as e:
         load_scenario("exp2_interaction", text % "")
-    assert "cannot balance the platform's weight at all" in str(e.value)
+    assert "(4 cables) cannot hold a platform that turns freely" in str(e.value)
+    assert "rank 4 < 6" in str(e.value)
     assert "plant.lock_rotation: true" in str(e.value)
     # Locked: four cables, three force equations; the least-norm positive solution holds
     # the 2.5 kg (the floor cable 4 pulls down against).
