@@ -65,7 +65,9 @@ def load_resolved_scenario(name_or_path="exp2_interaction",
     try:
         resolved = resolve_scenario(scenario, source=str(path))
     except ScenarioError as e:
-        raise ScenarioError(_where_written(str(e), path, overlay_text, raw)) from None
+        # The same error (a refusal's own class kept), its message with where it is written.
+        e.args = (_where_written(str(e), path, overlay_text, raw),) + e.args[1:]
+        raise
     if resolved.interference is not None:
         warn_unreachable_d_u(resolved.robot, resolved.interference)
     warn_reel_saturation(scenario, resolved.robot)
