@@ -15,7 +15,9 @@ One message per tick on each topic, stamped with the log's `time` from 0 (t = 0 
 - /platform/hand_wrench, /platform/interference_wrench, /platform/desired_wrench
   (geometry_msgs/WrenchStamped): the forces `F_H`, `F_int`, `F_d` (torque zero);
 - /cables (visualization_msgs/MarkerArray): per cable i a LINE_LIST marker, id i (1-based),
-  from its reel a_i to its attachment p + R b_i at the estimated pose.
+  from its reel a_i to its attachment p + R b_i at the estimated pose;
+- /cables_true: the same at the dynamic plant's true pose (only in its logs): what the
+  cables really did.
 
 Message types of ROS 2 Jazzy; each message's definition is stored in the file. No Drake.
 """
@@ -35,7 +37,8 @@ NEEDS = ("time", "lengths", "reel_velocity", "p", "F_H", "F_int", "F_d", "reels"
 WRENCHES = {"/platform/hand_wrench": "F_H", "/platform/interference_wrench": "F_int",
             "/platform/desired_wrench": "F_d"}
 CABLE_WIDTH = 0.005  # m, the line width of the cable markers
-CABLE_COLOR = (0.1, 0.45, 0.85, 1.0)  # RGBA
+CABLE_COLOR = (0.1, 0.45, 0.85, 1.0)  # RGBA, the cables at the estimated pose
+TRUE_CABLE_COLOR = (0.9, 0.45, 0.1, 1.0)  # and at the true pose
 LINE_LIST = 5  # visualization_msgs/Marker's type: a line per pair of points
 
 
@@ -82,14 +85,15 @@ def quaternions_from_rpy(rpy) -> np.ndarray:
                      cr * cp * cy + sr * sp * sy], axis=1)
 
 
-def cable_segments(log: Mapping) -> np.ndarray:
+def cable_segments(log: Mapping, p_key: str = "p", rpy_key: str = "rpy") -> np.ndarray:
     """(T, m, 2, 3): per tick and cable, its reel a_i and its attachment p + R b_i (m) at the
-    controller's estimated pose (R from `rpy` where logged, else the identity)."""
-    p = np.asarray(log["p"], dtype=float)
+    pose of `p_key` and `rpy_key` (the controller's estimate by default; R the identity
+    where the log has no `rpy_key`)."""
+    p = np.asarray(log[p_key], dtype=float)
     b = np.asarray(log["attachments"], dtype=float)
     a = np.asarray(log["reels"], dtype=float)
-    if "rpy" in log:
-        ends = p[:, None, :] + np.einsum("tij,mj->tmi", rotations_from_rpy(log["rpy"]), b)
+    if rpy_key in log:
+        ends = p[:, None, :] + np.einsum("tij,mj->tmi", rotations_from_rpy(log[rpy_key]), b)
     else:
         ends = p[:, None, :] + b[None, :, :]
     return np.stack([np.broadcast_to(a, ends.shape), ends], axis=2)
@@ -158,6 +162,8 @@ def topics(log: Mapping) -> dict:
         out["/platform/pose_true"] = "geometry_msgs/msg/PoseStamped"
     out.update({t: "geometry_msgs/msg/WrenchStamped" for t in WRENCHES})
     out["/cables"] = "visualization_msgs/msg/MarkerArray"
+    if "p_true" in log:
+        out["/cables_true"] = "visualization_msgs/msg/MarkerArray"
     return out
 
 
@@ -167,7 +173,7 @@ def write_log_mcap(log: Mapping, path) -> dict:
     import shutil
     import tempfile
 
-    from rosbags.rosbag2 import StoragePlugin, Writer
+    from rosbags.rosbag2 import CompressionFormat, CompressionMode, StoragePlugin, Writer
 
     check_mcap_keys(log)
     path = Path(path)
@@ -188,9 +194,10 @@ def write_log_mcap(log: Mapping, path) -> dict:
              else np.tile([0.0, 0.0, 0.0, 1.0], (T, 1)))
         pose_data[topic] = (np.asarray(log[pk], dtype=float), q)
     forces = {t: np.asarray(log[k], dtype=float) for t, k in WRENCHES.items()}
-    segments = cable_segments(log)
-    color = new("std_msgs/msg/ColorRGBA", r=CABLE_COLOR[0], g=CABLE_COLOR[1],
-                b=CABLE_COLOR[2], a=CABLE_COLOR[3])
+    cables = {"/cables": (cable_segments(log), _color(new, CABLE_COLOR))}
+    if "p_true" in log:
+        cables["/cables_true"] = (cable_segments(log, "p_true", "rpy_true"),
+                                  _color(new, TRUE_CABLE_COLOR))
     scale = new("geometry_msgs/msg/Vector3", x=CABLE_WIDTH)
     identity = new("geometry_msgs/msg/Pose",
                    orientation=new("geometry_msgs/msg/Quaternion", w=1.0))
@@ -200,7 +207,11 @@ def write_log_mcap(log: Mapping, path) -> dict:
     # same metadata, so it alone is the bag handed over.
     with tempfile.TemporaryDirectory(dir=path.parent, prefix=".cdpm_export_") as tmp:
         bag = Path(tmp) / "bag"
-        with Writer(bag, version=9, storage_plugin=StoragePlugin.MCAP) as writer:
+        writer = Writer(bag, version=9, storage_plugin=StoragePlugin.MCAP)
+        # zstd chunks, as `ros2 bag record --storage-preset-profile zstd_fast` writes them:
+        # exp2's 30 s in 7.5 MB instead of 42 MB; Foxglove and the mcap readers decompress them.
+        writer.set_compression(CompressionMode.STORAGE, CompressionFormat.ZSTD)
+        with writer:
             conns = {t: writer.add_connection(t, ty, typestore=M.store)
                      for t, ty in topics(log).items()}
             for k in range(T):
@@ -221,18 +232,24 @@ def write_log_mcap(log: Mapping, path) -> dict:
                     msgs.append((topic, new("geometry_msgs/msg/WrenchStamped", header=header,
                                             wrench=new("geometry_msgs/msg/Wrench",
                                                        force=_vector(new, f[k])))))
-                markers = [new("visualization_msgs/msg/Marker", header=header, ns="cables",
-                               id=i + 1, type=LINE_LIST, action=0, pose=identity, scale=scale,
-                               color=color, points=[_point(new, segments[k, i, 0]),
-                                                    _point(new, segments[k, i, 1])])
-                           for i in range(m)]
-                msgs.append(("/cables", new("visualization_msgs/msg/MarkerArray",
+                for topic, (segments, color) in cables.items():
+                    markers = [new("visualization_msgs/msg/Marker", header=header,
+                                   ns=topic[1:], id=i + 1, type=LINE_LIST, action=0,
+                                   pose=identity, scale=scale, color=color,
+                                   points=[_point(new, segments[k, i, 0]),
+                                           _point(new, segments[k, i, 1])])
+                               for i in range(m)]
+                    msgs.append((topic, new("visualization_msgs/msg/MarkerArray",
                                             markers=markers)))
                 for topic, msg in msgs:
                     writer.write(conns[topic], ns, M.serialize(msg))
                     counts[topic] += 1
         shutil.move(str(bag / "bag.mcap"), str(path))
     return counts
+
+
+def _color(new, rgba):
+    return new("std_msgs/msg/ColorRGBA", r=rgba[0], g=rgba[1], b=rgba[2], a=rgba[3])
 
 
 def _point(new, v):

@@ -19,7 +19,8 @@ TOPICS = {"/reels/joint_states": "sensor_msgs/msg/JointState",
           "/platform/hand_wrench": "geometry_msgs/msg/WrenchStamped",
           "/platform/interference_wrench": "geometry_msgs/msg/WrenchStamped",
           "/platform/desired_wrench": "geometry_msgs/msg/WrenchStamped",
-          "/cables": "visualization_msgs/msg/MarkerArray"}
+          "/cables": "visualization_msgs/msg/MarkerArray",
+          "/cables_true": "visualization_msgs/msg/MarkerArray"}
 
 
 def _decoder_factories():
@@ -106,6 +107,7 @@ def test_every_topic_has_one_message_per_tick_with_the_log_s_values(tmp_path):
         assert summary.schemas[channels[topic].schema_id].name == msgtype
         assert channels[topic].message_encoding == "cdr"
     assert summary.statistics.message_start_time == 0
+    assert {c.compression for c in summary.chunk_indexes} == {"zstd"}  # chunks compressed
     # The rosbag2 metadata is inside the file (ros2 bag reads it from there).
     assert "rosbag2" in {i.name for i in summary.metadata_indexes}
     # Stamps: the log's time from 0, in ns, bag and header alike.
@@ -135,16 +137,21 @@ def test_every_topic_has_one_message_per_tick_with_the_log_s_values(tmp_path):
             assert wrench.header.frame_id == "base"
             np.testing.assert_array_equal(_xyz(wrench.wrench.force), log[key][k])
             np.testing.assert_array_equal(_xyz(wrench.wrench.torque), np.zeros(3))
-        markers = messages["/cables"][k][1].markers
-        assert [mk.id for mk in markers] == list(range(1, m + 1))
-        R = rotation(*log["rpy"][k])
-        for mk in markers:
-            i = mk.id - 1
-            assert mk.type == 5 and mk.action == 0 and mk.header.frame_id == "base"  # LINE_LIST
-            assert len(mk.points) == 2 and mk.scale.x > 0 and mk.color.a == 1.0
-            np.testing.assert_allclose(_xyz(mk.points[0]), log["reels"][i], atol=1e-12)
-            np.testing.assert_allclose(_xyz(mk.points[1]),
-                                       log["p"][k] + R @ log["attachments"][i], atol=1e-12)
+        # The cables at the estimated and at the true pose: reel a_i to p + R b_i.
+        for topic, (pk, rk) in {"/cables": ("p", "rpy"),
+                                "/cables_true": ("p_true", "rpy_true")}.items():
+            markers = messages[topic][k][1].markers
+            assert [mk.id for mk in markers] == list(range(1, m + 1))
+            R = rotation(*log[rk][k])
+            for mk in markers:
+                i = mk.id - 1
+                assert mk.type == 5 and mk.action == 0  # LINE_LIST, ADD
+                assert mk.header.frame_id == "base" and mk.ns == topic[1:]
+                assert len(mk.points) == 2 and mk.scale.x > 0 and mk.color.a == 1.0
+                np.testing.assert_allclose(_xyz(mk.points[0]), log["reels"][i], atol=1e-12)
+                np.testing.assert_allclose(_xyz(mk.points[1]),
+                                           log[pk][k] + R @ log["attachments"][i],
+                                           atol=1e-12)
 
 
 def test_joint_effort_falls_back_on_the_true_tensions_then_on_none(tmp_path):
@@ -158,7 +165,7 @@ def test_joint_effort_falls_back_on_the_true_tensions_then_on_none(tmp_path):
                                   log["tensions"][2])
     plain = synthetic_log(duration=0.01)  # the kinematic plant: no tensions at all
     counts = write_log_mcap(plain, tmp_path / "b.mcap")
-    assert "/platform/pose_true" not in counts
+    assert "/platform/pose_true" not in counts and "/cables_true" not in counts
     _, messages = read_bag(tmp_path / "b.mcap")
     assert len(messages["/reels/joint_states"][0][1].effort) == 0
     # Without rpy the pose is the translating platform's: identity orientation, and the
@@ -177,7 +184,7 @@ def test_cdpm_export_mcap_of_a_run(tmp_path, capsys):
     capsys.readouterr()
     assert main(["export", str(run), "--mcap"]) == 0
     out = capsys.readouterr().out
-    assert out.startswith(f"mcap: {run / 'log.mcap'} (a ROS 2 bag, 7 topics, 11 messages each")
+    assert out.startswith(f"mcap: {run / 'log.mcap'} (a ROS 2 bag, 8 topics, 11 messages each")
     summary, messages = read_bag(run / "log.mcap")
     with np.load(run / "log.npz") as data:
         log = {k: data[k] for k in data.files}
@@ -191,6 +198,11 @@ def test_cdpm_export_mcap_of_a_run(tmp_path, capsys):
     np.testing.assert_array_equal(joints.position, log["lengths"][k])
     effort = log["tension_measured"] if "tension_measured" in log else log["tensions"]
     np.testing.assert_array_equal(joints.effort, effort[k])
+    # The true cable of cable 5 ends where the plant's true pose puts its attachment.
+    end = messages["/cables_true"][k][1].markers[4].points[1]
+    np.testing.assert_allclose(
+        _xyz(end), log["p_true"][k] + rotation(*log["rpy_true"][k]) @ log["attachments"][4],
+        atol=1e-12)
     # Elsewhere with --out; an unwritable --out is bad usage naming the option.
     assert main(["export", str(run), "--mcap", "--out", str(tmp_path / "o" / "b.mcap")]) == 0
     assert (tmp_path / "o" / "b.mcap").is_file()
