@@ -52,6 +52,12 @@ def write_log_mat(log: Mapping, path) -> Path:
     from scipy.io import savemat
 
     path = Path(path)
-    savemat(path, log_to_mat_dict(log), format="5", oned_as="column",
-            long_field_names=True, do_compression=True)
+    # Written beside, then renamed: an export stopped part-way leaves no half file.
+    part = path.with_name(f".{path.name}.part")
+    try:
+        savemat(part, log_to_mat_dict(log), format="5", oned_as="column",
+                long_field_names=True, do_compression=True)
+        part.replace(path)
+    finally:
+        part.unlink(missing_ok=True)
     return path

@@ -92,6 +92,7 @@ def test_mat_holds_every_log_key_read_back_by_loadmat(tmp_path):
     log["t_star"][3] = np.inf  # an internal force raises every tension
     log["tension_cable"] = np.arange(T).reshape(T, 1) % (m + 1)
     path = write_log_mat(log, tmp_path / "log.mat")
+    assert [p.name for p in tmp_path.iterdir()] == ["log.mat"]  # no part file left
     mat = _loaded(path)
     for key in log:
         _compare(log, mat, key)
