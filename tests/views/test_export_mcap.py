@@ -196,7 +196,11 @@ def test_cdpm_export_mcap_of_a_run(tmp_path, capsys):
         _xyz(messages["/platform/desired_wrench"][k][1].wrench.force), log["F_d"][k])
     joints = messages["/reels/joint_states"][k][1]
     np.testing.assert_array_equal(joints.position, log["lengths"][k])
-    effort = log["tension_measured"] if "tension_measured" in log else log["tensions"]
+    # The rule of docs/viewing.md: the measured tension where the log holds numbers there
+    # (issue 31's sensor), else the plant's true one.
+    measured = log.get("tension_measured")
+    effort = (measured if measured is not None and np.isfinite(measured).any()
+              else log["tensions"])
     np.testing.assert_array_equal(joints.effort, effort[k])
     # The true cable of cable 5 ends where the plant's true pose puts its attachment.
     end = messages["/cables_true"][k][1].markers[4].points[1]
