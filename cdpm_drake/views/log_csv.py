@@ -77,8 +77,10 @@ COLUMNS = {
     "rpy_true": ("rad", "rpy"),
     "pair_distances_true": ("m", "pairs"),
     "crossed_true": ("0/1", "pairs"),
-    # The sensed tensions (issue 31; NaN where the plant has no sensor).
+    # Issue 31: the sensed tensions (NaN where the plant has no sensor) and the tension
+    # damping's part of reel_velocity.
     "tension_measured": ("N", "cables"),
+    "reel_velocity_damping": ("m/s", "cables"),
 }
 # The per-run constants (docs/LOG_FORMAT.md), their units: "-" a number without one (cable
 # numbers) or text.
