@@ -35,7 +35,8 @@ CASES = {
              ([], 2, "the following arguments are required: log")],
     "export": [(["MISSING", "--csv"], 1, "does not exist"),
                (["EMPTY"], 1, "does not exist"),  # CSV is the default format
-               (["EMPTY", "--xlsx"], 2, "unrecognized arguments: --xlsx")],
+               (["EMPTY", "--xlsx"], 2, "unrecognized arguments: --xlsx"),
+               (["EMPTY", "--mat", "--mcap"], 2, "argument --mcap: not allowed with")],
     "diagram": [(["MISSING/s.yaml"], 1, "does not exist"),
                 (["exp1_no_interaction", "--depth", "0"], 2, "--depth must be")],
     "sweep": [(["MISSING/sweep.yaml"], 1, "does not exist"),

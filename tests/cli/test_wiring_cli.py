@@ -672,6 +672,18 @@ def test_export_out_is_where_the_csv_goes(tmp_path, logged):
     assert out.read_text().startswith("time [s],") and not (logged / "log.csv").exists()
 
 
+@covers("export --mat", "export --mcap")
+def test_export_mat_and_mcap_write_their_files(tmp_path, logged):
+    # Issue 32: the format flags choose the writer (the files' contents: tests/views/
+    # test_export_mat.py and test_export_mcap.py). The .mat's magic text and the .mcap's.
+    pytest.importorskip("scipy")
+    pytest.importorskip("rosbags")
+    assert cdpm("export", logged, "--mat", "--out", tmp_path / "a.mat") == 0
+    assert (tmp_path / "a.mat").read_bytes().startswith(b"MATLAB 5.0 MAT-file")
+    assert cdpm("export", logged, "--mcap", "--out", tmp_path / "a.mcap") == 0
+    assert (tmp_path / "a.mcap").read_bytes().startswith(b"\x89MCAP0\r\n")
+
+
 def test_plot_logistic_curve_spans_the_band_and_never_negative_distances(logged):
     """Fig. 8 is drawn over [max(0, d_l - w), d_u + w] with w = d_u - d_l: for d_l = 10 mm,
     d_u = 30 mm that is 0..50 mm (d_l - w would be -10 mm)."""
