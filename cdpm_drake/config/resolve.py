@@ -12,7 +12,7 @@ import numpy as np
 from cdpm_drake.config.checks import (check_controller, check_duration, check_dynamic_reels,
                                       check_finite, check_logistic_set, check_positive,
                                       check_safety, default_start)
-from cdpm_drake.config.plants import DynamicReels, SimulatedReels
+from cdpm_drake.config.plants import DynamicReels, SimulatedReels, check_tension_sensor
 from cdpm_drake.config.scenario import PairLogistic, Scenario, ScenarioError
 from cdpm_drake.config.yaml_io import is_number
 from cdpm_drake.kernels.plant.operators import CsvOperator, OperatorError, make_operator
@@ -129,10 +129,18 @@ def _resolve(scenario: Scenario, source: str) -> ResolvedScenario:
             f"controller.length_gain must be a number >= 0 1/s and below 1 / time_step = "
             f"{1.0 / scenario.time_step:g} 1/s (0: the paper's open loop), got {gain!r}")
     check_controller(scenario.controller, robot, scenario.plant)
+    scale = scenario.controller.tension_damping.gain_scale
+    if not (is_number(scale) and math.isfinite(float(scale)) and float(scale) >= 0):
+        raise ScenarioError(f"controller.tension_damping.gain_scale must be a number >= 0 "
+                            f"(1: the derived gain), got {scale!r}")
     if scenario.wall_force.enabled:
         check_positive(scenario.wall_force.margin, "wall_force.margin")
         check_positive(scenario.wall_force.max_force, "wall_force.max_force")
     if isinstance(scenario.plant, DynamicReels):
+        try:
+            check_tension_sensor(scenario.plant)
+        except ValueError as e:
+            raise ScenarioError(str(e)) from None
         check_dynamic_reels(scenario, robot, defaulted=defaulted)
     elif not isinstance(scenario.plant, SimulatedReels):
         from cdpm_drake.hardware.config import check_hardware_reels

@@ -583,7 +583,7 @@ def test_a_run_that_stops_part_way_is_a_fault_row_with_its_metrics(tmp_path, mon
 ALL_FAULT = """\
 name: all_fault
 base: exp2_interaction
-overlay: {duration: 1.0, plant: !DynamicReels {}, controller: {length_gain: 0}}
+overlay: {duration: 1.0, plant: !DynamicReels {tension_sensor: none}, controller: {length_gain: 0}}
 axes:
   - {field: plant.max_length_residual, values: [1.1e-3, 1.2e-3]}
 """
