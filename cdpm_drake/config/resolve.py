@@ -75,7 +75,18 @@ def check_scenario(scenario: Scenario, source: str = "<scenario>") -> Robot:
     return resolve_scenario(scenario, source).robot
 
 
+# Scenario.method's values: the hard promise (the default), the paper's method.
+METHODS = ("promise", "paper")
+
+
 def _resolve(scenario: Scenario, source: str) -> ResolvedScenario:
+    if scenario.method not in METHODS:
+        raise ScenarioError(f"method must be one of {list(METHODS)} (promise: the paper's "
+                            f"Fig. 5 with the safety filter; paper: without it), got "
+                            f"{scenario.method!r}")
+    if scenario.method == "paper":
+        scenario = dataclasses.replace(scenario, safety_filter=dataclasses.replace(
+            scenario.safety_filter, enabled=False))
     robot = scenario_robot(scenario)
     check_positive(scenario.duration, "duration")
     check_positive(scenario.time_step, "time_step")
@@ -189,14 +200,38 @@ def scenario_robot(scenario: Scenario) -> Robot:
         robot = load_robot(ref)
     except RobotError as e:
         raise ScenarioError(f"robot: {e}") from None
+    check_swaps(scenario.swaps)
     for k, swap in enumerate(scenario.swaps):
-        if len(swap) != 2:
-            raise ScenarioError(f"swaps[{k}] must be two cable numbers [i, j], got {swap!r}")
         try:
             robot = robot.with_swapped_attachments(int(swap[0]), int(swap[1]))
         except RobotError as e:
             raise ScenarioError(f"swaps[{k}] = {swap!r}: {e}") from None
     return robot
+
+
+def check_swaps(swaps) -> None:
+    """ScenarioError for swaps that do not swap: a cable with itself ([1, 1]), or a list whose
+    swaps undo each other for some cable ([[1, 3], [3, 1]]: the run would be unswapped while
+    the file says 1-3 is). Cable numbers 1-based; their range is the robot's to check."""
+    where = list(range(1 + max((int(c) for s in swaps if len(s) == 2 for c in s), default=0)))
+    named = {}
+    for k, swap in enumerate(swaps):
+        if len(swap) != 2:
+            raise ScenarioError(f"swaps[{k}] must be two cable numbers [i, j], got {swap!r}")
+        i, j = (int(c) for c in swap)
+        if i == j:
+            raise ScenarioError(f"swaps[{k}] = {list(swap)!r} swaps cable {i} with itself; "
+                                "give two different cables")
+        for c in (i, j):
+            named.setdefault(c, []).append(k)
+        if min(i, j) >= 1:
+            where[i], where[j] = where[j], where[i]
+    back = sorted(c for c in named if c >= 1 and where[c] == c)
+    if back:
+        ks = sorted({k for c in back for k in named[c]})
+        listed = ", ".join(f"swaps[{k}] = {list(swaps[k])!r}" for k in ks)
+        raise ScenarioError(f"{listed} undo each other: cable(s) {back} end where they "
+                            "started, so the run would not swap them; list each swap once")
 
 
 def scenario_operator(scenario: Scenario):

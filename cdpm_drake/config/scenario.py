@@ -307,6 +307,12 @@ class Scenario:
     name: str = "unnamed"
     # What the run shows.
     description: str = ""
+    # Which controller runs: "promise" (the default), the paper's Fig. 5 with the safety filter
+    # that keeps every cable pair at or above d_min whatever the hand does (safety_filter:,
+    # with its kinetostatic force); "paper", the paper's method exactly: Fig. 5 without the
+    # filter, the logistic interference force alone keeping the pairs apart (it overrides
+    # safety_filter.enabled). The model monitor only watches and stays as configured.
+    method: str = "promise"
     # A built-in robot's name or a path to a robot YAML (relative to the scenario file).
     robot: str = "paper_7cable"
     # Cable pairs whose platform attachment points are swapped, 1-based (the paper swaps

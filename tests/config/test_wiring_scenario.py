@@ -168,6 +168,13 @@ def test_a_robot_file_relative_to_base_dir_reaches_the_geometry(tmp_path, valid_
                                atol=1e-9)
 
 
+@covers("Scenario.method")
+def test_method_paper_removes_the_safety_filter_and_promise_keeps_it():
+    # The default is the promise: the filter's columns are logged; the paper's method has none.
+    assert "filter_status" in sim(base(), 0.01)
+    assert "filter_status" not in sim(base(method="paper"), 0.01)
+
+
 @covers("Scenario.swaps")
 def test_swaps_trade_the_two_cables_attachment_points():
     robot = load_robot("paper_7cable")

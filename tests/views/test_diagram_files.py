@@ -192,7 +192,8 @@ def test_the_dynamic_plant_overview_fits_the_readme_with_the_multibody_plant_col
                           BuildOptions(loggers=False)).GetSubsystemByName("reels")
     mbp = plant.GetSubsystemByName("platform_plant")
     assert mbp.num_input_ports() + mbp.num_output_ports() > 20
-    dot = overview_graphviz(plant)
+    from cdpm_drake.cli.diagram import diagram_caption
+    dot = overview_graphviz(plant, caption=diagram_caption(load_scenario("exp2_interaction")))
     assert dot == (DIAGRAMS / "plant_dynamic_overview.dot").read_text()
     width, height = _svg_size((DIAGRAMS / "plant_dynamic_overview.svg").read_text())
     assert width <= README_WIDTH_PT and height <= 900, (width, height)  # measured 348 x 432
@@ -354,3 +355,15 @@ def test_the_full_pose_overview_ranks_the_blocks_in_signal_order():
     # The monitor, which no block reads, at the bottom (beside the last block).
     assert y["model_monitor"] == pytest.approx(y["tension_damping"], abs=60)
     assert sorted(order, key=lambda name: -y[name]) == order
+
+
+def test_diagram_of_a_robot_or_another_scenario_says_which_it_was_built_for(tmp_path, capsys):
+    # Issue 32: `cdpm diagram exp3_two_pairs` wrote files identical to the default's (the
+    # blocks are the same; the parameters are not drawn) and a robot's name was refused.
+    assert main(["diagram", "exp3_two_pairs", "--out", str(tmp_path / "exp3"), "--no-svg"]) == 0
+    assert main(["diagram", "cube_8cable", "--out", str(tmp_path / "cube"), "--no-svg"]) == 0
+    exp3 = (tmp_path / "exp3" / "controller_simulated_overview.dot").read_text()
+    cube = (tmp_path / "cube" / "controller_simulated_overview.dot").read_text()
+    assert ('label="scenario exp3_two_pairs: robot paper_7cable_swap13_swap57, 7 cables, '
+            'swapped 1-3, 5-7, method promise"') in exp3
+    assert 'label="scenario cube_8cable: robot cube_8cable, 8 cables, method promise"' in cube
