@@ -1411,7 +1411,7 @@ def test_d_min_is_the_floor_the_filter_keeps_each_pair_at():
     default = Logistic(d_l=0.055, d_u=0.061, d_min=0.0535)
     for pairs, floor in (([], 0.0535), ([PairLogistic(pair=[1, 3], d_min=0.052)], 0.052)):
         log = sim(push(force, swaps=[[1, 3]], initial_position=list(P_EXP1),
-                       interference=Interference(default=default, pairs=pairs)), 1.5)
+                       interference=Interference(default=default, pairs=pairs)), 3.0)
         expected = np.full(robot.num_pairs, 0.0535)
         expected[k] = floor
         np.testing.assert_array_equal(log["d_min"], expected)
@@ -1463,10 +1463,11 @@ def test_gamma_is_the_share_of_the_margin_a_tick_may_use():
     ~1e-4, which shows at 0.3 % in these ratios."""
     for gamma in (0.25, 0.37):
         log = sim(push([0, 0, -5.0], initial_position=[1.77, 2.4, 0.34],
-                       safety_filter=SafetyFilter(gamma=gamma, position_smoothing=0.0)), 0.6)
+                       safety_filter=SafetyFilter(gamma=gamma, position_smoothing=0.0)), 1.2)
         gap = log["p"][:, 2] - 0.3
         # (Below ~0.6 um the virtual wall's own curve, sqrt(2 a gap) - a T / 2, is zero.)
-        near = (gap[:-1] < 2e-5) & (gap[:-1] > 2e-6)
+        # (Above ~1e-5 m the braking curve at the ringing bound's deceleration binds.)
+        near = (gap[:-1] < 1e-5) & (gap[:-1] > 1e-6)
         assert near.sum() >= 3
         np.testing.assert_allclose(gap[1:][near] / gap[:-1][near], 1 - gamma, rtol=2e-3)
 
@@ -1505,10 +1506,12 @@ def test_the_kinetostatic_barrier_keeps_the_platform_where_its_cables_hold_it():
     (HiGHS): with the barrier the platform stops where kappa (floor 2.7 N + 0.1 N per newton
     of hand: 3.2 N) is zero; the log's t_c - kappa is that floor. Without, it goes on."""
     robot = scenario_robot(base())
-    on = sim(push([5.0, 0, 0], safety_filter=SafetyFilter(kinetostatic_floor=2.7)), 3.0)
+    on = sim(push([5.0, 0, 0], safety_filter=SafetyFilter(kinetostatic_floor=2.7)), 4.0)
     off = sim(push([5.0, 0, 0], safety_filter=SafetyFilter(kinetostatic=False)), 3.0)
     floor = 2.7 + 0.1 * 5.0
-    end_on, end_off = on["p"][-1], off["p"][-1]
+    # Where it comes closest to the limit (it then slides along it to the box's x face).
+    closest = int(np.argmin(on["kappa"][:, 0]))
+    end_on, end_off = on["p"][closest], off["p"][-1]
     assert abs(_holdable_share(robot, end_on, [5.0, 0, 0], floor)) < 0.1
     assert _holdable_share(robot, end_off, [5.0, 0, 0], floor) < -1.0
     assert "kappa" not in off and "F_kin" not in off
@@ -1530,7 +1533,7 @@ def test_the_kinetostatic_cue_is_the_logistic_of_its_parameters():
     from cdpm_drake.config import KinetostaticForce
 
     cue = KinetostaticForce(t_l=3.3, t_u=6.1, F_u=2.2, eps=0.15)
-    log = sim(push([5.0, 0, 0], safety_filter=SafetyFilter(kinetostatic_force=cue)), 3.0)
+    log = sim(push([5.0, 0, 0], safety_filter=SafetyFilter(kinetostatic_force=cue)), 6.0)
     t = log["kappa"][:, 0] + 3.0
     b = 2 * np.log((2.2 - 0.15) / 0.15) / (3.3 - 6.1)
     expected = np.where(t <= 6.1, 2.2 / (1 + np.exp(-b * (t - 0.5 * (3.3 + 6.1)))), 0.0)
