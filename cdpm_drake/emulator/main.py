@@ -33,6 +33,9 @@ Examples:
   cdpm-reel-emulator --scenario exp2_interaction --plant dynamic --truth-log truth.npz
   cdpm-reel-emulator --scenario exp2_interaction --protocol-version 1
   cdpm-reel-emulator --stop --fault-after 2.0
+
+`--canopen` plays CiA 402 drives on a CAN bus instead (emulator/canopen_drives.py; `cdpm
+emulate --canopen --help` lists its options).
 """
 
 import argparse
@@ -247,6 +250,11 @@ def main(argv=None) -> int:
     2 bad usage, 130 / 143 after Ctrl-C / SIGTERM (the summary is printed first)."""
     from cdpm_drake.text import prefixed_log_records
 
+    argv = list(sys.argv[1:] if argv is None else argv)
+    if "--canopen" in argv:  # CiA 402 drives on a CAN bus instead of the UDP bridge
+        from cdpm_drake.emulator.canopen_drives import main as canopen_main
+        argv.remove("--canopen")
+        return canopen_main(argv)
     with prefixed_log_records():
         return _main(argv)
 

@@ -185,15 +185,16 @@ class CanopenReelsSystem(LeafSystem):
         zero = np.zeros(m)
         deadline = time.monotonic() + c.startup_timeout
         while True:
-            self.master.send_cycle([CW_DISABLE_VOLTAGE if not c.fault_reset else 0] * m, zero)
+            self.master.send_cycle([CW_DISABLE_VOLTAGE] * m, zero)
             time.sleep(self._T)
-            sw, pos, torque, count, hb_wall, _, _ = self.master.snapshot()
+            sw, pos, torque, count, _, hb_state, _ = self.master.snapshot()
+            # A heartbeat that says operational: the one before NMT start says otherwise.
             waiting = [k for k in range(m) if count[k] == 0
-                       or (c.heartbeat_period > 0 and np.isnan(hb_wall[k]))]
+                       or (c.heartbeat_period > 0 and hb_state[k] != HEARTBEAT_OPERATIONAL)]
             if not waiting:
                 break
             if time.monotonic() > deadline:
-                what = "TPDO" + (" or heartbeat" if c.heartbeat_period > 0 else "")
+                what = "TPDO" + (" or operational heartbeat" if c.heartbeat_period > 0 else "")
                 raise self._fail(
                     f"no {what} within startup_timeout = {c.startup_timeout:g} s from the "
                     f"drive(s) of " + ", ".join(f"cable {k + 1} (node {self._ids[k]})"
