@@ -13,7 +13,8 @@ Events at the control rate (period `time_step`), as HardwareReelsSystem's:
 * discrete update at t_k: reads the drives' latest TPDOs, EMCY and heartbeats (kept by
   python-can's notifier thread) into the lengths and tensions, and judges them: a drive's
   fault bit or any state but operation enabled, an EMCY with an error code, no TPDO for
-  `missed_tpdo_ticks` ticks, a heartbeat older than `heartbeat_timeout` or not operational,
+  `missed_tpdo_ticks` ticks (and as many periods less one of wall time, as HardwareReels's
+  watchdog: a catch-up burst after a stall of this process must not trip it), a heartbeat older than `heartbeat_timeout` or not operational,
   a frozen position (unchanged over `frozen_ticks` TPDOs while commanded at least
   `frozen_speed`), a CAN send error (bus-off). Any of them latches the fault and sends every
   drive target velocity 0 with quick stop and a SYNC, at once.
@@ -112,6 +113,7 @@ class CanopenReelsSystem(LeafSystem):
         tension_from_drive(np.zeros(m), np.zeros(m), np.zeros(m), *self._drive_model,
                            np.empty(m))
         self._ramp_step = 1.0 if config.ramp_time == 0 else self._T / config.ramp_time
+        self._silence = (config.missed_tpdo_ticks - 1) * self._T
         self.master = CanopenMaster(config.interface, config.channel, config.bitrate,
                                     self._ids)
         self._moving = np.zeros(m)  # consecutive commands >= frozen_speed, same sign
@@ -125,8 +127,8 @@ class CanopenReelsSystem(LeafSystem):
         self._tension = self.DeclareDiscreteState(np.full(m, np.nan))
         self._book = self.DeclareDiscreteState(np.zeros(BOOK_SIZE))
         # Per drive: TPDOs counted, ticks without one, position (counts), ticks unchanged,
-        # reel speed from the last two positions (m/s).
-        self._drives = self.DeclareDiscreteState(np.zeros(5 * m))
+        # reel speed from the last two positions (m/s), time.monotonic() of the last new TPDO.
+        self._drives = self.DeclareDiscreteState(np.zeros(6 * m))
         self.DeclareStateOutputPort("cable_lengths", self._lengths)
         self.DeclareStateOutputPort("measured_force", self._force)
         self.DeclareStateOutputPort("tension_measured", self._tension)
@@ -225,9 +227,10 @@ class CanopenReelsSystem(LeafSystem):
         lengths = self._offset + pos / self._counts
         state.get_mutable_discrete_state(self._lengths).SetFromVector(lengths)
         state.get_mutable_discrete_state(self._force).SetFromVector(np.zeros(3))
-        drives = np.zeros(5 * m)
+        drives = np.zeros(6 * m)
         drives[0:m], drives[2 * m:3 * m] = count, pos
-        drives[4 * m:] = np.nan
+        drives[4 * m:5 * m] = np.nan
+        drives[5 * m:] = time.monotonic()
         state.get_mutable_discrete_state(self._drives).SetFromVector(drives)
         book = np.zeros(BOOK_SIZE)
         book[ENABLED] = 1.0
@@ -276,11 +279,12 @@ class CanopenReelsSystem(LeafSystem):
         c, m, T = self._config, self._m, self._T
         drives = context.get_discrete_state(self._drives).get_value().copy()
         count0, missed, pos0 = drives[0:m], drives[m:2 * m], drives[2 * m:3 * m]
-        still, speed0 = drives[3 * m:4 * m], drives[4 * m:]
+        still, speed0, heard = drives[3 * m:4 * m], drives[4 * m:5 * m], drives[5 * m:]
         sw, pos, torque, count, hb_wall, hb_state, emcy = self.master.snapshot()
         now = time.monotonic()
         new = count != count0
         missed[:] = np.where(new, 0.0, missed + 1.0)
+        heard[:] = np.where(new, now, heard)
         self.lost_tpdos += int(np.count_nonzero(~new))
         lengths = self._offset + pos / self._counts
         speed = np.where(new, (pos - pos0) / self._counts / T, speed0)
@@ -292,8 +296,11 @@ class CanopenReelsSystem(LeafSystem):
                                *self._drive_model, tension)
         else:
             tension[:] = np.nan
-        drives[0:m], drives[2 * m:3 * m], drives[4 * m:] = count, pos, speed
-        reason, cable, detail = self._judge(sw, missed, still, hb_wall, hb_state, emcy, now)
+        drives[0:m], drives[2 * m:3 * m], drives[4 * m:5 * m] = count, pos, speed
+        # Silent for missed_tpdo_ticks ticks and (missed_tpdo_ticks - 1) periods of wall time:
+        # the catch-up ticks after a stall of this process come faster than drives answer.
+        silent = np.where(now - heard >= self._silence, missed, 0.0)
+        reason, cable, detail = self._judge(sw, silent, still, hb_wall, hb_state, emcy, now)
         book[TICKS] += 1.0
         book[LOST] = self.lost_tpdos
         if reason != FAULT_NONE:
