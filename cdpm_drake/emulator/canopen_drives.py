@@ -154,6 +154,7 @@ class EmulatedDrives:
                 raise ValueError(f"fault cable must be in 1..{m}, got {cable + 1}")
         self.bus_off = False
         self.syncs = 0
+        self.tpdo_sent = 0
         self.first_enable_time = None
         self.fault_syncs = {}  # kind -> the SYNC count when it was injected
         # Per SYNC: (sync count, states, controlwords, target velocities m/s) of each drive.
@@ -199,15 +200,17 @@ class EmulatedDrives:
 
     # --- frames ------------------------------------------------------------------------------
 
-    def _send(self, cob_id: int, data: bytes, drive=None) -> None:
+    def _send(self, cob_id: int, data: bytes, drive=None) -> bool:
         import can
 
         if self.bus_off or (drive is not None and drive.dead):
-            return
+            return False
         try:
             self.bus.send(can.Message(arbitration_id=cob_id, data=data, is_extended_id=False))
+            return True
         except Exception as e:  # a full queue: a frame lost, as on a real bus
             self._say(f"send failed: {e}")
+            return False
 
     def _handle(self, cob_id: int, data: bytes) -> None:
         if cob_id == COB_NMT and len(data) >= 2:
@@ -303,7 +306,6 @@ class EmulatedDrives:
     # --- the cycle ---------------------------------------------------------------------------
 
     def _sync(self) -> None:
-        self.syncs += 1
         m = len(self.drives)
         velocity = np.zeros(m)
         cws, targets = [], []
@@ -324,11 +326,13 @@ class EmulatedDrives:
             for d in self.drives:
                 self._drive_fault(d, 0x8400)
         self.bridge.step(self.period)
-        self.record.append((self.syncs, [d.state for d in self.drives], cws, targets))
+        self.record.append((self.syncs + 1, [d.state for d in self.drives], cws, targets))
         for d in self.drives:
             if d.nmt == "operational" and not d.lost_tpdo:
                 payload = b"".join(struct.pack(fmt, self._value(d, key)) for key, fmt in d.tpdo)
-                self._send(d.od[(0x1800, 1)] & 0x7FF, payload, d)
+                if self._send(d.od[(0x1800, 1)] & 0x7FF, payload, d):
+                    self.tpdo_sent += 1
+        self.syncs += 1  # last: a SYNC counted is one fully answered
 
     def _drive_fault(self, d: Drive, code: int) -> None:
         d.state = "fault"

@@ -190,11 +190,12 @@ class CanopenMaster:
             self.last_send_error = f"{type(e).__name__}: {e}"
             return False
 
-    def snapshot(self):
+    def snapshot(self, drain_emcy: bool = True):
         """(statusword, position, torque, tpdo_count, heartbeat_wall, heartbeat_state,
-        new EMCY list) copied under the lock; the EMCY list is emptied."""
+        new EMCY list) copied under the lock; the EMCY list is emptied if `drain_emcy`."""
         with self.lock:
-            emcy, self.emcy = self.emcy, []
+            emcy = self.emcy
+            self.emcy = [] if drain_emcy else list(emcy)
             return (self.statusword.copy(), self.position.copy(), self.torque.copy(),
                     self.tpdo_count.copy(), self.heartbeat_wall.copy(),
                     self.heartbeat_state.copy(), emcy)

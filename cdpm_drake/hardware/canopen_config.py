@@ -45,8 +45,9 @@ class CanopenReels:
     force_per_torque_unit: float = 0.1
     # tension_measured from the drives' torque (kernels/drive_torque) or none (NaN).
     tension_sensor: str = "drive_torque"
-    # Control ticks without a TPDO from a drive after which every drive is stopped.
-    missed_tpdo_ticks: int = 3
+    # Control ticks without a TPDO from a drive after which every drive is stopped (and as
+    # many control periods less one of wall time).
+    missed_tpdo_ticks: int = 2
     # Heartbeat producer time written to each drive (0x1017), s; 0: no heartbeat watch.
     heartbeat_period: float = 0.1
     # A drive whose heartbeat is older than this is lost, s (wall clock).

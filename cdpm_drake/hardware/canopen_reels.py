@@ -16,11 +16,14 @@ Events at the control rate (period `time_step`), as HardwareReelsSystem's:
   `missed_tpdo_ticks` ticks (and as many periods less one of wall time, as HardwareReels's
   watchdog: a catch-up burst after a stall of this process must not trip it), a heartbeat older than `heartbeat_timeout` or not operational,
   a frozen position (unchanged over `frozen_ticks` TPDOs while commanded at least
-  `frozen_speed`), a CAN send error (bus-off). Any of them latches the fault and sends every
-  drive target velocity 0 with quick stop and a SYNC, at once.
-* publish at t_k: one RPDO per drive (enable operation, ramp x reel_velocity_command in drive
-  units) and a SYNC. After a fault: target velocity 0 with disable voltage (every drive to
-  switch on disabled) and a SYNC, then ReelFault ends the run (tick k+1 at the latest).
+  `frozen_speed`), a CAN send error (bus-off). Any of them latches the fault and stops every
+  drive at once: target velocity 0 with quick stop and a SYNC, then target velocity 0 with
+  disable voltage (to switch on disabled) and a SYNC.
+* publish at t_k: judges the TPDOs received since the last update the same way (Drake runs
+  the update at t_k right after this publish: without it a fault would stop the drives a
+  tick later) and on a fault stops the drives as above and raises ReelFault; otherwise one
+  RPDO per drive (enable operation, ramp x reel_velocity_command in drive units) and a SYNC.
+  A fault latched by the update raises ReelFault at the next publish, ending the run.
 
 The bus (CanopenMaster, its notifier thread) is a resource held as an attribute; what the
 system outputs and judges lives in the Context, except the count of consecutive commands
@@ -118,7 +121,7 @@ class CanopenReelsSystem(LeafSystem):
                                     self._ids)
         self._moving = np.zeros(m)  # consecutive commands >= frozen_speed, same sign
         self._last_sign = np.zeros(m)
-        self._stopped = False
+        self._stopped = self._quick_stopped = False
         self.lost_tpdos = 0
 
         self._command = self.DeclareVectorInputPort("reel_velocity_command", m)
@@ -146,13 +149,14 @@ class CanopenReelsSystem(LeafSystem):
     def quick_stop(self) -> None:
         """Every drive: target velocity 0 with quick stop, and a SYNC to act on it."""
         self.master.send_cycle([CW_QUICK_STOP] * self._m, np.zeros(self._m))
+        self._quick_stopped = True
 
     def shutdown(self) -> None:
         """Every drive: target velocity 0 with disable voltage (to switch on disabled), and a
         SYNC. Safe at any time and more than once (the CLI's Ctrl-C and SIGTERM)."""
         if self.master.network is None:
             return
-        if not self._stopped:
+        if not self._quick_stopped:
             self.quick_stop()
         self.master.send_cycle([CW_DISABLE_VOLTAGE] * self._m, np.zeros(self._m))
         self._stopped = True
@@ -235,7 +239,7 @@ class CanopenReelsSystem(LeafSystem):
         book = np.zeros(BOOK_SIZE)
         book[ENABLED] = 1.0
         state.get_mutable_discrete_state(self._book).SetFromVector(book)
-        self._stopped = False
+        self._stopped = self._quick_stopped = False
 
     def _enable(self, t) -> None:
         """Shutdown, switch on, enable operation, each drive from the state its statusword
@@ -272,23 +276,40 @@ class CanopenReelsSystem(LeafSystem):
 
     # --- the tick ----------------------------------------------------------------------------
 
+    def _advance(self, context, snap, now):
+        """The per-drive state after the bus snapshot `snap` (CanopenMaster.snapshot) read at
+        `now` (time.monotonic()), the speeds before it, which drives sent a new TPDO, and
+        the verdict (reason, cable, detail) on them."""
+        m, T = self._m, self._T
+        drives = context.get_discrete_state(self._drives).get_value().copy()
+        count0, missed, pos0 = drives[0:m], drives[m:2 * m], drives[2 * m:3 * m]
+        still, speed0, heard = drives[3 * m:4 * m], drives[4 * m:5 * m], drives[5 * m:]
+        speed0 = speed0.copy()
+        sw, pos, torque, count, hb_wall, hb_state, emcy = snap
+        new = count != count0
+        missed[:] = np.where(new, 0.0, missed + 1.0)
+        heard[:] = np.where(new, now, heard)
+        still[:] = np.where(new, np.where(pos == pos0, still + 1.0, 0.0), still)
+        speed = np.where(new, (pos - pos0) / self._counts / T, speed0)
+        drives[0:m], drives[2 * m:3 * m], drives[4 * m:5 * m] = count, pos, speed
+        # Silent for missed_tpdo_ticks ticks and (missed_tpdo_ticks - 1) periods of wall time:
+        # the catch-up ticks after a stall of this process come faster than drives answer.
+        silent = np.where(now - heard >= self._silence, missed, 0.0)
+        verdict = self._judge(sw, silent, still, hb_wall, hb_state, emcy, now)
+        return drives, speed0, new, verdict
+
     def _update(self, context, state):
         book = context.get_discrete_state(self._book).get_value().copy()
         if book[FAULT] != FAULT_NONE:
             return  # latched; the next publish ends the run
         c, m, T = self._config, self._m, self._T
-        drives = context.get_discrete_state(self._drives).get_value().copy()
-        count0, missed, pos0 = drives[0:m], drives[m:2 * m], drives[2 * m:3 * m]
-        still, speed0, heard = drives[3 * m:4 * m], drives[4 * m:5 * m], drives[5 * m:]
-        sw, pos, torque, count, hb_wall, hb_state, emcy = self.master.snapshot()
-        now = time.monotonic()
-        new = count != count0
-        missed[:] = np.where(new, 0.0, missed + 1.0)
-        heard[:] = np.where(new, now, heard)
+        snap = self.master.snapshot()
+        drives, speed0, new, (reason, cable, detail) = self._advance(
+            context, snap, time.monotonic())
         self.lost_tpdos += int(np.count_nonzero(~new))
+        pos, torque = snap[1], snap[2]
+        speed = drives[4 * m:5 * m]
         lengths = self._offset + pos / self._counts
-        speed = np.where(new, (pos - pos0) / self._counts / T, speed0)
-        still[:] = np.where(new, np.where(pos == pos0, still + 1.0, 0.0), still)
         tension = state.get_mutable_vector(self._tension).get_mutable_value()
         if c.tension_sensor == "drive_torque":
             accel = (speed - speed0) / T  # NaN while a speed is unknown
@@ -296,18 +317,13 @@ class CanopenReelsSystem(LeafSystem):
                                *self._drive_model, tension)
         else:
             tension[:] = np.nan
-        drives[0:m], drives[2 * m:3 * m], drives[4 * m:5 * m] = count, pos, speed
-        # Silent for missed_tpdo_ticks ticks and (missed_tpdo_ticks - 1) periods of wall time:
-        # the catch-up ticks after a stall of this process come faster than drives answer.
-        silent = np.where(now - heard >= self._silence, missed, 0.0)
-        reason, cable, detail = self._judge(sw, silent, still, hb_wall, hb_state, emcy, now)
         book[TICKS] += 1.0
         book[LOST] = self.lost_tpdos
         if reason != FAULT_NONE:
             book[FAULT], book[FAULT_CABLE], book[FAULT_DETAIL] = reason, cable, detail
             book[FAULT_TIME] = context.get_time()
             book[ENABLED] = book[RAMP] = 0.0
-            self.quick_stop()  # now, not at the next publish
+            self.shutdown()  # now, not at the next publish
         else:
             book[RAMP] = min(1.0, book[RAMP] + self._ramp_step)
         state.get_mutable_vector(self._lengths).SetFromVector(lengths)
@@ -345,6 +361,18 @@ class CanopenReelsSystem(LeafSystem):
         if book[FAULT] != FAULT_NONE:
             self.shutdown()
             raise ReelFault(self._fault_message(book), float(book[FAULT_TIME]))
+        # Drake runs this tick's update right after this publish, so the update has not
+        # seen the TPDOs that came in during the period just ended: judge them here too, so
+        # that a fault stops the drives in place of this tick's command, not the next one's.
+        t = context.get_time()
+        _, _, _, (reason, cable, detail) = self._advance(
+            context, self.master.snapshot(drain_emcy=False), time.monotonic())
+        if reason != FAULT_NONE:
+            fault = book.copy()
+            fault[FAULT], fault[FAULT_CABLE], fault[FAULT_DETAIL] = reason, cable, detail
+            fault[FAULT_TIME] = t
+            self.shutdown()
+            raise ReelFault(self._fault_message(fault), t)
         u = self._command.Eval(context)
         bad = ~np.isfinite(u)
         if bad.any():
