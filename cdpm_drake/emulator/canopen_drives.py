@@ -379,6 +379,22 @@ class EmulatedDrives:
             self.faults.remove(f)
             self.inject(f[0], f[1])
 
+    def fault_report(self) -> list[str]:
+        """For each injected fault: the SYNCs after it until every live drive had target
+        velocity 0, and until every live drive was out of operation enabled."""
+        lines = []
+        for kind, at in self.fault_syncs.items():
+            dead = {d.cable for d in self.drives if d.dead}
+            live = [k for k in range(len(self.drives)) if k not in dead]
+            after = [r for r in self.record if r[0] > at]
+            zero = next((r[0] - at for r in after if all(r[3][k] == 0 for k in live)), None)
+            off = next((r[0] - at for r in after
+                        if all(r[1][k] != "operation enabled" for k in live)), None)
+            lines.append(f"{kind} after SYNC {at}: target velocity 0 on every live drive "
+                         f"{zero} SYNC(s) later, none in operation enabled {off} SYNC(s) later "
+                         f"(None: never)")
+        return lines
+
     def _say(self, text: str) -> None:
         if self._log is not None:
             self._log(text)
@@ -494,4 +510,6 @@ def main(argv=None) -> int:
             states = ", ".join(f"{d.node_id}: {d.state}" for d in drives.drives)
             say(f"{drives.syncs} SYNCs; drive states {states}; lengths "
                 f"{np.round(drives.bridge.lengths, 4).tolist()} m")
+            for line in drives.fault_report():
+                say(line)
     return code

@@ -1,6 +1,7 @@
 """The controller's side of a CANopen bus of CiA 402 drives (no Drake): SDO configuration of
 the PDO mapping and the mode, NMT, the cyclic RPDOs and SYNC, and what the drives send back
-(TPDOs, EMCY, heartbeats), kept by python-can's notifier thread for the control loop to read.
+(TPDOs, EMCY, heartbeats), read into arrays by python-can's notifier thread while the drives
+are configured, then by the control loop itself, without blocking (poll).
 
 The CiA 402 words (controlword commands, statusword states) are here too: the emulated
 drives (emulator/canopen_drives.py) speak the same ones.
@@ -56,7 +57,8 @@ class CanopenError(RuntimeError):
 class CanopenMaster:
     """The controller's end of the bus: `node_ids` drives, one per cable (0-based inside).
 
-    Arrays updated by the notifier thread (read them under `lock`): statusword, position
+    Arrays updated by the notifier thread until stop_notifier(), then by poll() (read them
+with snapshot()): statusword, position
     (counts), torque (per mille), tpdo_count (TPDOs received per drive), heartbeat_wall
     (time.monotonic() of the last heartbeat, NaN: none), heartbeat_state, and `emcy`, a list
     of (cable, error code, error register) of the EMCY frames with a non-zero code.
@@ -80,6 +82,12 @@ class CanopenMaster:
         self.send_errors = 0
         self.last_send_error = ""
         self.network = None
+        self.polling = False
+        self._handlers = {}
+        for node_id in self.node_ids:
+            self._handlers[COB_TPDO1 + node_id] = self._on_tpdo
+            self._handlers[COB_EMCY + node_id] = self._on_emcy
+            self._handlers[COB_HEARTBEAT + node_id] = self._on_heartbeat
 
     # --- connection and configuration -----------------------------------------------------
 
@@ -190,9 +198,41 @@ class CanopenMaster:
             self.last_send_error = f"{type(e).__name__}: {e}"
             return False
 
+    def stop_notifier(self) -> None:
+        """From now on the frames are read by poll() in the caller's thread (snapshot() does):
+        a notifier thread waits for the interpreter's lock while the control loop's Python
+        runs (up to the 5 ms switch interval), longer than a tick. SDO needs the notifier:
+        call this after configure()."""
+        network = self.network
+        if network is not None and network.notifier is not None:
+            network.notifier.stop(1.5)
+            network.notifier = None
+            self.polling = True
+
+    def poll(self) -> int:
+        """Read every frame waiting on the bus (without blocking) into the arrays; returns
+        how many were read. Nothing to do while the notifier thread reads them."""
+        if not self.polling or self.network is None:
+            return 0
+        bus, handlers, n = self.network.bus, self._handlers, 0
+        while True:
+            try:
+                msg = bus.recv(0.0)
+            except Exception as e:  # a bus gone bad: the silence it makes is judged
+                self.last_send_error = f"receive: {type(e).__name__}: {e}"
+                return n
+            if msg is None:
+                return n
+            n += 1
+            handler = handlers.get(msg.arbitration_id)
+            if handler is not None and not msg.is_error_frame and not msg.is_remote_frame:
+                handler(msg.arbitration_id, msg.data, msg.timestamp)
+
     def snapshot(self, drain_emcy: bool = True):
         """(statusword, position, torque, tpdo_count, heartbeat_wall, heartbeat_state,
-        new EMCY list) copied under the lock; the EMCY list is emptied if `drain_emcy`."""
+        new EMCY list) after poll(), copied under the lock; the EMCY list is emptied if
+        `drain_emcy`."""
+        self.poll()
         with self.lock:
             emcy = self.emcy
             self.emcy = [] if drain_emcy else list(emcy)

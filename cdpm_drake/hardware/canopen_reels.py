@@ -25,7 +25,8 @@ Events at the control rate (period `time_step`), as HardwareReelsSystem's:
   RPDO per drive (enable operation, ramp x reel_velocity_command in drive units) and a SYNC.
   A fault latched by the update raises ReelFault at the next publish, ending the run.
 
-The bus (CanopenMaster, its notifier thread) is a resource held as an attribute; what the
+The bus (CanopenMaster) is a resource held as an attribute; after the SDO configuration it
+is read in the events themselves, without blocking, as HardwareReelsSystem reads its socket; what the
 system outputs and judges lives in the Context, except the count of consecutive commands
 above `frozen_speed` that publish keeps (a publish cannot write the Context), a fact about
 the commands sent like HardwareReelsSystem's `_stopped_at`.
@@ -185,6 +186,7 @@ class CanopenReelsSystem(LeafSystem):
         try:
             self.master.open()
             self.master.configure(c.heartbeat_period)
+            self.master.stop_notifier()
         except CanopenError as e:
             raise self._fail(f"refusing to enable the drives: {e}", t) from None
         self.master.nmt(NMT_START, 0)

@@ -60,8 +60,8 @@ def _rig(robot, *, faults=(), u=U, **overrides):
 
 def _lockstep(sim, reels, drives, until):
     """Advance tick by tick to `until` s, each tick taking at least T of wall time, and
-    before the next tick wait (0.1 s at most) until the drives acted on every SYNC sent and
-    every TPDO they sent reached the controller: the ticks of a host that answers in time,
+    before the next tick wait (0.1 s at most) until the drives acted on every SYNC sent (and
+    so sent their TPDOs): the ticks of a host that answers in time,
     whatever the load of this shared 2-core machine (the silence a fault makes stays one)."""
     t = sim.get_context().get_time()
     while t < until - 1e-9:
@@ -69,11 +69,19 @@ def _lockstep(sim, reels, drives, until):
         t += T
         sim.AdvanceTo(t)
         deadline = start + 0.1
-        while ((drives.syncs != reels.master.syncs
-                or int(reels.master.tpdo_count.sum()) != drives.tpdo_sent)
-               and time.monotonic() < deadline):
+        # The virtual bus delivers a frame into the receivers' queues as it is sent.
+        while drives.syncs != reels.master.syncs and time.monotonic() < deadline:
             time.sleep(0.0002)
         time.sleep(max(0.0, T - (time.monotonic() - start)))
+
+
+def _close(reels, drives):
+    """Close the controller's end, then wait (1 s at most) for the drives to act on the last
+    SYNC it sent before they stop."""
+    reels.close()
+    deadline = time.monotonic() + 1.0
+    while drives.syncs != reels.master.syncs and time.monotonic() < deadline:
+        time.sleep(0.001)
 
 
 def test_config_from_yaml_and_refusals_name_the_field(robot):
@@ -127,7 +135,7 @@ def test_life_cycle_mapping_and_lengths_follow_the_commands(robot):
         sim.AdvanceTo(1.0)
         context = reels.GetMyContextFromRoot(sim.get_context())
         measured = reels.get_output_port(0).Eval(context).copy()
-        reels.close()
+        _close(reels, drives)
     finally:
         drives.stop()
     for d in drives.drives:
@@ -167,7 +175,7 @@ def test_enable_timeout_names_the_node_and_its_statusword(robot, monkeypatch):
                            r"in operation enabled within enable_timeout = 0.2 s, statusword "
                            r"0x0250 \(switch on disabled\)$"):
             start_realtime(sim)
-        reels.close()
+        _close(reels, drives)
     finally:
         drives.stop()
     assert [d.state for d in drives.drives if d.node_id != 3] == ["switch on disabled"] * 6
@@ -185,7 +193,7 @@ def test_a_drive_in_fault_at_start_is_refused_unless_fault_reset(robot):
                 with pytest.raises(ReelFault, match=r"cable 2 \(node 2\) is in fault, "
                                    r"statusword 0x0218; .* fault_reset: true"):
                     start_realtime(sim)
-            reels.close()
+            _close(reels, drives)
         finally:
             drives.stop()
 
@@ -205,7 +213,7 @@ def test_each_fault_ends_in_zero_velocity_and_disabled_drives_within_3_ticks(rob
         start_realtime(sim, 0.0)
         with pytest.raises(ReelFault, match=message):
             _lockstep(sim, reels, drives, 2.0)
-        reels.close()
+        _close(reels, drives)
     finally:
         drives.stop()
     injected = drives.fault_syncs[kind]  # the last SYNC before the fault
