@@ -28,6 +28,7 @@ bus_off (every node leaves the bus: nothing sent or received; the reels stop).
 
 import argparse
 import collections
+import gc
 import math
 import struct
 import sys
@@ -436,7 +437,7 @@ def build_drives(args, log=None) -> EmulatedDrives:
     from cdpm_drake.emulator.main import _dynamic_scenario
     from cdpm_drake.hardware.canopen_config import (CanopenReels, resolved_node_ids,
                                                     resolved_offsets, velocity_units)
-    from cdpm_drake.kernels.kinematics import cable_lengths
+    from cdpm_drake.kernels.kinematics import cable_lengths, jacobian
     from cdpm_drake.robot import load_robot
 
     config, force, period = CanopenReels(interface="virtual"), None, 0.002
@@ -461,6 +462,9 @@ def build_drives(args, log=None) -> EmulatedDrives:
     else:
         bridge = ReelBridge(robot, cable_lengths(robot, start), force=force,
                             time_constant=args.time_constant)
+    # Compile (or load) the kinematics a SYNC uses now, not on the first SYNC enabled: a
+    # first call takes tens of ms, which the controller would see as silent drives.
+    jacobian(robot, bridge.platform())
     interface = args.interface or config.interface
     channel = args.channel or config.channel
     kwargs = dict(interface=interface, channel=channel)
@@ -492,6 +496,10 @@ def main(argv=None) -> int:
     except Exception as e:  # a robot, a scenario, a bus that will not open: say which
         print(f"cdpm emulate --canopen: error: {e}", file=sys.stderr)
         return 1
+    # What exists now lives for the whole run: out of the collector's sight, as in the UDP
+    # emulator (a full collection with pydrake loaded takes ~20 ms, ten SYNCs unanswered).
+    gc.collect()
+    gc.freeze()
     robot = drives.bridge.robot
     say(f"robot {robot.name!r}: {len(drives.drives)} CiA 402 drives, nodes "
         f"{[d.node_id for d in drives.drives]}, on {args.interface or 'the scenario bus'}, "

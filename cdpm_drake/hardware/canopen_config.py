@@ -46,8 +46,9 @@ class CanopenReels:
     # tension_measured from the drives' torque (kernels/drive_torque) or none (NaN).
     tension_sensor: str = "drive_torque"
     # Control ticks without a TPDO from a drive after which every drive is stopped (and as
-    # many control periods less one of wall time).
-    missed_tpdo_ticks: int = 2
+    # many control periods less one of wall time), as HardwareReels's watchdog_ticks: the
+    # third silent tick stops them. 2 stops a tick sooner and trips on a 4 ms stall.
+    missed_tpdo_ticks: int = 3
     # Heartbeat producer time written to each drive (0x1017), s; 0: no heartbeat watch.
     heartbeat_period: float = 0.1
     # A drive whose heartbeat is older than this is lost, s (wall clock).
