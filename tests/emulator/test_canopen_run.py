@@ -85,16 +85,21 @@ def test_cdpm_run_against_emulated_canopen_drives(tmp_path):
     assert str(log["ending"]) == "completed"
     n = len(log["time"])
     assert n == 1001  # ticks 0..1000 of 2 s at 500 Hz
-    # The drives integrate their target velocities one plant step per SYNC; the controller
-    # reads position actual (1 um counts) one to two ticks after a command went out. The
-    # lengths' change over the run is therefore the sum of the commands less the last few.
+    # The drives integrate their target velocities one plant step per SYNC (lag 0); the
+    # command logged at tick k goes out with SYNC k, and the drives' answer to it is read
+    # on tick k + 1 (Drake runs the update right after the publish). So the lengths logged
+    # at tick k + 1 are the start plus the sum of the commands of ticks 0..k times T, to the
+    # quantisation: 1 um position counts (0.5 um at each end) and 1 um/s velocity units
+    # (at most 1 um over 2 s). A TPDO late by a period leaves a tick's lengths one tick
+    # stale; the rest must match.
     lengths, command = log["lengths"], log["reel_velocity"]
-    moved = lengths[-1] - lengths[0]
-    errors = [np.abs(moved - command[:n - d].sum(axis=0) * T).max() for d in range(4)]
-    best = min(errors)
-    assert np.abs(moved).max() > 0.005  # exp2's operator moved the platform centimetres
-    # Quantisation: 1 um counts at each end, 1 um/s velocity units over 2 s.
-    assert best <= 2e-6 + 2e-6 * 2.0, (errors, moved)
+    integral = np.cumsum(command, axis=0) * T
+    now = np.abs(lengths[1:] - lengths[0] - integral[:-1]).max(axis=1)
+    stale = np.abs(lengths[2:] - lengths[0] - integral[:-2]).max(axis=1)
+    assert np.abs(lengths[-1] - lengths[0]).max() > 0.005  # exp2's operator moved it cm
+    fresh = now <= 2e-6
+    assert np.all(fresh[1:] | (stale <= 2e-6)), (now.max(), stale.max())
+    assert fresh.mean() > 0.9, fresh.mean()
     assert "drive states 1: switch on disabled" in texts["emulator.txt"]
 
 
