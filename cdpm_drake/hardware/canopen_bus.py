@@ -92,8 +92,11 @@ with snapshot()): statusword, position
     # --- connection and configuration -----------------------------------------------------
 
     def open(self) -> None:
-        import canopen
-
+        try:
+            import canopen
+        except ImportError:
+            raise CanopenError("plant: !CanopenReels needs the canopen and python-can "
+                               "packages: pip install 'cdpm_drake[canopen]'") from None
         if self.network is not None:
             return
         kwargs = dict(interface=self.interface, channel=self.channel)

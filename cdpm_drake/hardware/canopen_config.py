@@ -41,7 +41,7 @@ class CanopenReels:
     # Target velocity (0x60FF) units per m/s of cable; None: counts_per_metre (counts/s).
     velocity_units_per_mps: typing.Optional[float] = None
     # Drive force at the cable (N, + pays out) per unit of torque actual (0x6077, per mille
-    # of rated torque): rated torque / 1000 / drum radius / gear ratio.
+    # of rated torque): rated motor torque / 1000 x gear ratio / drum radius.
     force_per_torque_unit: float = 0.1
     # tension_measured from the drives' torque (kernels/drive_torque) or none (NaN).
     tension_sensor: str = "drive_torque"
@@ -60,9 +60,10 @@ class CanopenReels:
     # True: a drive found in Fault at start-up is sent a fault reset (controlword bit 7);
     # False (default): the run refuses to start. A fault during the run always ends it.
     fault_reset: bool = False
-    # A drive commanded at least this fast (m/s of cable, same sign) whose position did not
-    # change over `frozen_ticks` TPDOs has a frozen encoder.
+    # A drive commanded at least this fast, m/s of cable (the same sign for frozen_ticks + 2
+    # ticks), whose position did not change over `frozen_ticks` TPDOs has a frozen encoder.
     frozen_speed: float = 0.005
+    # TPDOs with an unchanged position that make a frozen encoder (with frozen_speed).
     frozen_ticks: int = 2
     # Time for the commanded reel velocity to ramp from 0 to full after enabling, s.
     ramp_time: float = 0.5

@@ -10,9 +10,11 @@ target velocity) is the ground truth of what reached the drives; the plant behin
 import itertools
 import time
 
-import can
 import numpy as np
 import pytest
+
+can = pytest.importorskip("can", reason="the canopen extra (python-can) is not installed")
+pytest.importorskip("canopen", reason="the canopen extra is not installed")
 
 from cdpm_drake.config import ScenarioError, load_scenario
 from cdpm_drake.emulator.bridges import ReelBridge
