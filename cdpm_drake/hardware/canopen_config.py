@@ -60,8 +60,9 @@ class CanopenReels:
     # True: a drive found in Fault at start-up is sent a fault reset (controlword bit 7);
     # False (default): the run refuses to start. A fault during the run always ends it.
     fault_reset: bool = False
-    # A drive commanded at least this fast, m/s of cable (the same sign for frozen_ticks + 2
-    # ticks), whose position did not change over `frozen_ticks` TPDOs has a frozen encoder.
+    # A drive commanded at least this fast, m/s of cable (the same sign for frozen_ticks + 10
+    # ticks), whose position did not change over `frozen_ticks` TPDOs (or as many as 3
+    # counts take at this speed, if more) has a frozen encoder.
     frozen_speed: float = 0.005
     # TPDOs with an unchanged position that make a frozen encoder (with frozen_speed).
     frozen_ticks: int = 2

@@ -15,8 +15,9 @@ Events at the control rate (period `time_step`), as HardwareReelsSystem's:
   fault bit or any state but operation enabled, an EMCY with an error code, no TPDO for
   `missed_tpdo_ticks` ticks (and as many periods less one of wall time, as HardwareReels's
   watchdog: a catch-up burst after a stall of this process must not trip it), a heartbeat older than `heartbeat_timeout` or not operational,
-  a frozen position (unchanged over `frozen_ticks` TPDOs while commanded at least
-  `frozen_speed`), a CAN send error (bus-off). Any of them latches the fault and stops every
+  a frozen position (unchanged over `frozen_ticks` TPDOs, or as many as 3 counts take at
+  `frozen_speed`, while commanded at least `frozen_speed` the same way for 10 ticks more),
+  a CAN send error (bus-off). Any of them latches the fault and stops every
   drive at once: target velocity 0 with quick stop and a SYNC, then target velocity 0 with
   disable voltage (to switch on disabled) and a SYNC.
 * publish at t_k: judges the TPDOs received since the last update the same way (Drake runs
@@ -49,6 +50,11 @@ from cdpm_drake.hardware.reels import ReelFault, start_pose_problem
 from cdpm_drake.kernels.drive_torque import tension_from_drive
 from cdpm_drake.kernels.kinematics import KinematicsError, cable_lengths, forward_kinematics
 
+# A frozen encoder: its position unchanged while the commands would have moved it at least
+# this many counts, after FROZEN_LAG_TICKS ticks of commands of the same sign (20 ms at 2 ms:
+# a drive with a 20 ms velocity lag that reverses has caught up by then).
+FROZEN_COUNTS = 3
+FROZEN_LAG_TICKS = 10
 # Book-keeping state vector.
 ENABLED, RAMP, FAULT, FAULT_CABLE, FAULT_DETAIL, FAULT_TIME, TICKS, LOST = range(8)
 BOOK_SIZE = 8
@@ -121,6 +127,11 @@ class CanopenReelsSystem(LeafSystem):
         self.master = CanopenMaster(config.interface, config.channel, config.bitrate,
                                     self._ids)
         self._moving = np.zeros(m)  # consecutive commands >= frozen_speed, same sign
+        # TPDOs of an unchanged position that make a frozen encoder: frozen_ticks, or more
+        # where frozen_speed moves less than FROZEN_COUNTS counts in frozen_ticks (coarse
+        # counts leave a slow drive's position unchanged for several ticks).
+        per_tick = config.frozen_speed * self._T * abs(self._counts)
+        self._frozen_ticks = max(config.frozen_ticks, int(np.ceil(FROZEN_COUNTS / per_tick)))
         self._last_sign = np.zeros(m)
         self._stopped = self._quick_stopped = False
         self.lost_tpdos = 0
@@ -351,7 +362,9 @@ class CanopenReelsSystem(LeafSystem):
                     return FAULT_HEARTBEAT, k, age[k]
                 if hb_state[k] != HEARTBEAT_OPERATIONAL:
                     return FAULT_HEARTBEAT, k, -float(hb_state[k])
-        frozen = (still >= c.frozen_ticks) & (self._moving >= c.frozen_ticks + 2)
+        # Commanded the same way long enough that a lagging drive (tens of ms) moves too.
+        frozen = ((still >= self._frozen_ticks)
+                  & (self._moving >= self._frozen_ticks + FROZEN_LAG_TICKS))
         if frozen.any():
             return FAULT_FROZEN, int(np.argmax(frozen)), still[int(np.argmax(frozen))]
         if self.master.send_errors:

@@ -245,3 +245,14 @@ def test_each_fault_ends_in_zero_velocity_and_disabled_drives_within_3_ticks(rob
     # Before the fault they were driven at U.
     before = [r for r in drives.record if r[0] <= injected][-1]
     assert np.allclose(before[3], U, atol=1e-6)
+
+
+def test_coarse_counts_lengthen_the_frozen_window(robot):
+    """A slow drive with coarse counts leaves its position unchanged for ticks on end: the
+    window is as many TPDOs as 3 counts take at frozen_speed (closed form: 5 mm/s x 2 ms x
+    10 000 counts/m = 0.1 count per tick -> 30 TPDOs), and frozen_ticks where that is fewer."""
+    from cdpm_drake.hardware.canopen_reels import CanopenReelsSystem
+
+    coarse = CanopenReelsSystem(robot, CanopenReels(counts_per_metre=10_000.0), time_step=T)
+    fine = CanopenReelsSystem(robot, CanopenReels(counts_per_metre=-1_000_000.0), time_step=T)
+    assert coarse._frozen_ticks == 30 and fine._frozen_ticks == 2
