@@ -62,8 +62,9 @@ class CanopenReels:
     fault_reset: bool = False
     # A drive commanded at least this fast, m/s of cable (the same sign for frozen_ticks + 10
     # ticks), whose position did not change over `frozen_ticks` TPDOs (or as many as 3
-    # counts take at this speed, if more) has a frozen encoder.
-    frozen_speed: float = 0.005
+    # counts take at this speed, if more) has a frozen encoder. Above the drives' dead band
+    # (the robot file's reel_drives: 5 mm/s), where a reel may stick without a fault.
+    frozen_speed: float = 0.01
     # TPDOs with an unchanged position that make a frozen encoder (with frozen_speed).
     frozen_ticks: int = 2
     # Time for the commanded reel velocity to ramp from 0 to full after enabling, s.

@@ -16,7 +16,7 @@ Events at the control rate (period `time_step`), as HardwareReelsSystem's:
   `missed_tpdo_ticks` ticks (and as many periods less one of wall time, as HardwareReels's
   watchdog: a catch-up burst after a stall of this process must not trip it), a heartbeat older than `heartbeat_timeout` or not operational,
   a frozen position (unchanged over `frozen_ticks` TPDOs, or as many as 3 counts take at
-  `frozen_speed`, while commanded at least `frozen_speed` the same way for 10 ticks more),
+  `frozen_speed`, 10 mm/s, while commanded at least `frozen_speed` the same way for 10 ticks more),
   a CAN send error (bus-off). Any of them latches the fault and stops every
   drive at once: target velocity 0 with quick stop and a SYNC, then target velocity 0 with
   disable voltage (to switch on disabled) and a SYNC.

@@ -27,7 +27,7 @@ from cdpm_drake.robot import load_robot
 
 T = 0.002
 _channels = itertools.count()
-# Each cable's command, m/s: all of them at least the frozen-position speed (5 mm/s) and small
+# Each cable's command, m/s: all of them at least the frozen-position speed (10 mm/s) and small
 # enough to stay in the workspace for the runs' 1-2 s.
 U = np.array([0.02, -0.02, 0.015, -0.015, 0.01, -0.01, 0.012])
 
@@ -249,10 +249,10 @@ def test_each_fault_ends_in_zero_velocity_and_disabled_drives_within_3_ticks(rob
 
 def test_coarse_counts_lengthen_the_frozen_window(robot):
     """A slow drive with coarse counts leaves its position unchanged for ticks on end: the
-    window is as many TPDOs as 3 counts take at frozen_speed (closed form: 5 mm/s x 2 ms x
-    10 000 counts/m = 0.1 count per tick -> 30 TPDOs), and frozen_ticks where that is fewer."""
+    window is as many TPDOs as 3 counts take at frozen_speed (closed form: 10 mm/s x 2 ms x
+    10 000 counts/m = 0.2 count per tick -> 15 TPDOs), and frozen_ticks where that is fewer."""
     from cdpm_drake.hardware.canopen_reels import CanopenReelsSystem
 
     coarse = CanopenReelsSystem(robot, CanopenReels(counts_per_metre=10_000.0), time_step=T)
     fine = CanopenReelsSystem(robot, CanopenReels(counts_per_metre=-1_000_000.0), time_step=T)
-    assert coarse._frozen_ticks == 30 and fine._frozen_ticks == 2
+    assert coarse._frozen_ticks == 15 and fine._frozen_ticks == 2
