@@ -434,7 +434,7 @@ def build_drives(args, log=None) -> EmulatedDrives:
     import can
 
     from cdpm_drake.emulator.bridges import DynamicBridge, ReelBridge
-    from cdpm_drake.emulator.main import _dynamic_scenario
+    from cdpm_drake.emulator.main import dynamic_scenario
     from cdpm_drake.hardware.canopen_config import (CanopenReels, resolved_node_ids,
                                                     resolved_offsets, velocity_units)
     from cdpm_drake.kernels.kinematics import cable_lengths, jacobian
@@ -458,7 +458,7 @@ def build_drives(args, log=None) -> EmulatedDrives:
     m = robot.num_cables
     if args.plant == "dynamic":
         args.force = None
-        bridge = DynamicBridge(_dynamic_scenario(args, robot, start))
+        bridge = DynamicBridge(dynamic_scenario(args, robot, start))
     else:
         bridge = ReelBridge(robot, cable_lengths(robot, start), force=force,
                             time_constant=args.time_constant)

@@ -183,7 +183,7 @@ def build_server(args, log=None) -> ReelBridgeServer:
         if args.time_constant is not None:
             raise ValueError("--time-constant sets the kinematic plant's lag; the dynamic "
                              "plant's drives come from the robot file's reel_drives section")
-        bridge = DynamicBridge(_dynamic_scenario(args, robot, start),
+        bridge = DynamicBridge(dynamic_scenario(args, robot, start),
                                length_offset=lengths - cable_lengths(robot, np.asarray(
                                    start, dtype=float)), load_cells=args.load_cells)
     else:
@@ -219,7 +219,7 @@ def write_truth_log(server, path) -> int:
     return len(rows)
 
 
-def _dynamic_scenario(args, robot, start):
+def dynamic_scenario(args, robot, start):
     """The resolved scenario of `--plant dynamic`: the scenario's (or, with --robot, a
     scenario of that robot), at `start`, with --force as its operator, and a !DynamicReels
     plant (the scenario's own when it has one)."""

@@ -268,7 +268,7 @@ class CanopenReelsSystem(LeafSystem):
             if time.monotonic() - start > c.enable_timeout:
                 late = [k for k in range(m) if states[k] != "operation enabled"]
                 raise self._fail(
-                    f"enable sequence timed out: " + "; ".join(
+                    "enable sequence timed out: " + "; ".join(
                         f"cable {k + 1} (node {self._ids[k]}) not in operation enabled within "
                         f"enable_timeout = {c.enable_timeout:g} s, statusword "
                         f"{int(sw[k]):#06x} ({states[k]})" for k in late), t)

@@ -7,9 +7,6 @@ The drives' record (EmulatedDrives.record: per SYNC, each drive's state, control
 target velocity) is the ground truth of what reached the drives; the plant behind them
 (ReelBridge, ideal drives) integrates the target velocities exactly."""
 
-import itertools
-import time
-
 import numpy as np
 import pytest
 
@@ -17,16 +14,13 @@ can = pytest.importorskip("can", reason="the canopen extra (python-can) is not i
 pytest.importorskip("canopen", reason="the canopen extra is not installed")
 
 from cdpm_drake.config import ScenarioError, load_scenario
-from cdpm_drake.emulator.bridges import ReelBridge
-from cdpm_drake.emulator.canopen_drives import Drive, EmulatedDrives
+from cdpm_drake.emulator.canopen_drives import Drive
 from cdpm_drake.hardware.canopen_config import (CanopenReels, bus_load, check_canopen_reels,
                                                 frame_bits, max_drives)
 from cdpm_drake.hardware.reels import ReelFault, start_realtime
-from cdpm_drake.kernels.kinematics import cable_lengths
 from cdpm_drake.robot import load_robot
+from helpers_canopen import T, close, fresh_channel, lockstep, rig
 
-T = 0.002
-_channels = itertools.count()
 # Each cable's command, m/s: all of them at least the frozen-position speed (10 mm/s) and small
 # enough to stay in the workspace for the runs' 1-2 s.
 U = np.array([0.02, -0.02, 0.015, -0.015, 0.01, -0.01, 0.012])
@@ -38,52 +32,17 @@ def robot():
 
 
 def _rig(robot, *, faults=(), u=U, **overrides):
-    """(simulator, reels system, drives, bridge, start lengths) on a fresh virtual channel;
-    the drives run in a thread (stopped by the caller via drives.stop())."""
-    from pydrake.systems.analysis import Simulator
-    from pydrake.systems.framework import DiagramBuilder
-    from pydrake.systems.primitives import ConstantVectorSource
-
-    from cdpm_drake.hardware.canopen_reels import CanopenReelsSystem
-
-    channel = f"canopen-test-{next(_channels)}"
-    L0 = cable_lengths(robot, robot.workspace.center)
-    bridge = ReelBridge(robot, L0, time_constant=0.0)
-    bus = can.Bus(interface="virtual", channel=channel, receive_own_messages=False)
-    drives = EmulatedDrives(bridge, bus, list(range(1, robot.num_cables + 1)), faults=faults)
-    config = CanopenReels(**dict(dict(interface="virtual", channel=channel, ramp_time=0.0),
-                                 **overrides))
-    b = DiagramBuilder()
-    reels = b.AddSystem(CanopenReelsSystem(robot, config, time_step=T))
-    source = b.AddSystem(ConstantVectorSource(np.asarray(u, dtype=float)))
-    b.Connect(source.get_output_port(), reels.get_input_port())
-    return Simulator(b.Build()), reels, drives.start(), bridge, L0
+    """helpers_canopen.rig with a CanopenReels on a fresh virtual channel, ramp_time 0."""
+    config = CanopenReels(**dict(dict(interface="virtual", channel=fresh_channel(),
+                                      ramp_time=0.0), **overrides))
+    return rig(robot, config, u, faults=faults)
 
 
-def _lockstep(sim, reels, drives, until):
-    """Advance tick by tick to `until` s, each tick taking at least T of wall time, and
-    before the next tick wait (0.1 s at most) until the drives acted on every SYNC sent (and
-    so sent their TPDOs): the ticks of a host that answers in time,
-    whatever the load of this shared 2-core machine (the silence a fault makes stays one)."""
-    t = sim.get_context().get_time()
-    while t < until - 1e-9:
-        start = time.monotonic()
-        t += T
-        sim.AdvanceTo(t)
-        deadline = start + 0.1
-        # The virtual bus delivers a frame into the receivers' queues as it is sent.
-        while drives.syncs != reels.master.syncs and time.monotonic() < deadline:
-            time.sleep(0.0002)
-        time.sleep(max(0.0, T - (time.monotonic() - start)))
+_lockstep = lockstep
 
 
 def _close(reels, drives):
-    """Close the controller's end, then wait (1 s at most) for the drives to act on the last
-    SYNC it sent before they stop."""
-    reels.close()
-    deadline = time.monotonic() + 1.0
-    while drives.syncs != reels.master.syncs and time.monotonic() < deadline:
-        time.sleep(0.001)
+    close(reels, drives)
 
 
 def test_config_from_yaml_and_refusals_name_the_field(robot):
