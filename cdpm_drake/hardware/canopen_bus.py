@@ -7,6 +7,7 @@ The CiA 402 words (controlword commands, statusword states) are here too: the em
 drives (emulator/canopen_drives.py) speak the same ones.
 """
 
+import logging
 import struct
 import threading
 import time
@@ -36,6 +37,7 @@ COB_NMT, COB_SYNC, COB_EMCY, COB_TPDO1, COB_RPDO1 = 0x000, 0x080, 0x080, 0x180, 
 COB_SDO_TX, COB_SDO_RX, COB_HEARTBEAT = 0x580, 0x600, 0x700
 NMT_START, NMT_STOP, NMT_PRE_OPERATIONAL = 0x01, 0x02, 0x80
 HEARTBEAT_OPERATIONAL = 0x05
+_log = logging.getLogger(__name__)
 
 
 def state_name(statusword: int) -> str:
@@ -82,6 +84,8 @@ with snapshot()): statusword, position
         self.send_errors = 0
         self.last_send_error = ""
         self.network = None
+        self.heartbeat_watched = np.zeros(m, dtype=bool)
+        self.notes: list[str] = []  # what a drive refused that the run does without
         self.polling = False
         self._handlers = {}
         for node_id in self.node_ids:
@@ -128,7 +132,9 @@ with snapshot()): statusword, position
     def configure(self, heartbeat_period: float) -> None:
         """Each drive to pre-operational, then over SDO: mode 9 (cyclic synchronous velocity),
         RPDO1 = controlword + target velocity and TPDO1 = statusword + position actual +
-        torque actual, both synchronous (every SYNC), and the heartbeat producer time."""
+        torque actual, both synchronous (every SYNC), and the heartbeat producer time
+        (`heartbeat_watched` says for which drives it was accepted; a refusal, like one of
+        reading back 0x6061, goes to `notes`)."""
         for node_id in self.node_ids:
             self.nmt(NMT_PRE_OPERATIONAL, node_id)
         for k, node_id in enumerate(self.node_ids):
@@ -136,9 +142,21 @@ with snapshot()): statusword, position
             write(0x6060, 0, struct.pack("<b", MODE_CSV), "modes of operation")
             self._map(write, 0x1400, 0x1600, COB_RPDO1 + node_id, RPDO_OBJECTS, "RPDO1")
             self._map(write, 0x1800, 0x1A00, COB_TPDO1 + node_id, TPDO_OBJECTS, "TPDO1")
-            write(0x1017, 0, struct.pack("<H", int(round(heartbeat_period * 1000))),
-                  "producer heartbeat time")
-            mode = self._read(k, node_id, 0x6061, 0, "modes of operation display")
+            if heartbeat_period > 0:
+                try:
+                    write(0x1017, 0, struct.pack("<H", int(round(heartbeat_period * 1000))),
+                          "producer heartbeat time")
+                    self.heartbeat_watched[k] = True
+                except CanopenError as e:
+                    # A drive without a heartbeat producer is watched by its TPDOs alone.
+                    self.notes.append(str(e))
+                    _log.warning("%s; its heartbeat is not watched", e)
+            try:
+                mode = self._read(k, node_id, 0x6061, 0, "modes of operation display")
+            except CanopenError as e:  # no read-back: the write of 0x6060 was accepted
+                self.notes.append(str(e))
+                _log.warning("%s; mode 9 written to 0x6060 is not confirmed", e)
+                continue
             if len(mode) < 1 or struct.unpack_from("<b", mode)[0] != MODE_CSV:
                 raise CanopenError(f"drive of cable {k + 1} (node {node_id}) reports mode "
                                    f"{mode.hex()} in 0x6061 after mode {MODE_CSV} (cyclic "

@@ -209,7 +209,8 @@ class CanopenReelsSystem(LeafSystem):
             sw, pos, torque, count, _, hb_state, _ = self.master.snapshot()
             # A heartbeat that says operational: the one before NMT start says otherwise.
             waiting = [k for k in range(m) if count[k] == 0
-                       or (c.heartbeat_period > 0 and hb_state[k] != HEARTBEAT_OPERATIONAL)]
+                       or (self.master.heartbeat_watched[k]
+                           and hb_state[k] != HEARTBEAT_OPERATIONAL)]
             if not waiting:
                 break
             if time.monotonic() > deadline:
@@ -357,7 +358,7 @@ class CanopenReelsSystem(LeafSystem):
             return FAULT_SILENT, k, missed[k]
         if c.heartbeat_period > 0:
             age = now - hb_wall
-            for k in range(self._m):
+            for k in np.flatnonzero(self.master.heartbeat_watched):
                 if not age[k] <= c.heartbeat_timeout:
                     return FAULT_HEARTBEAT, k, age[k]
                 if hb_state[k] != HEARTBEAT_OPERATIONAL:

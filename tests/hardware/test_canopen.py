@@ -215,3 +215,25 @@ def test_coarse_counts_lengthen_the_frozen_window(robot):
     coarse = CanopenReelsSystem(robot, CanopenReels(counts_per_metre=10_000.0), time_step=T)
     fine = CanopenReelsSystem(robot, CanopenReels(counts_per_metre=-1_000_000.0), time_step=T)
     assert coarse._frozen_ticks == 15 and fine._frozen_ticks == 2
+
+
+def test_a_drive_without_heartbeat_or_mode_read_back_is_watched_by_its_tpdos(robot,
+                                                                                monkeypatch):
+    """Drives whose dictionaries have no 0x1017 and no 0x6061 (their SDO servers abort them:
+    7 x 2 refusals noted) still run: their heartbeats are not watched, and a silent one still
+    stops every drive."""
+    from cdpm_drake.emulator import canopen_drives
+
+    objects = {k: v for k, v in canopen_drives.OBJECTS.items()
+               if k not in ((0x1017, 0), (0x6061, 0))}
+    monkeypatch.setattr(canopen_drives, "OBJECTS", objects)
+    sim, reels, drives, _, _ = _rig(robot, faults=[("lost_tpdo", 0, 0.1)])
+    try:
+        start_realtime(sim, 0.0)
+        assert not reels.master.heartbeat_watched.any()
+        assert len(reels.master.notes) == 14 and "0x1017:0" in reels.master.notes[0]
+        with pytest.raises(ReelFault, match=r"no TPDO from the drive of cable 1 \(node 1\) "
+                           r"for 3 ticks"):
+            _lockstep(sim, reels, drives, 1.0)
+    finally:
+        _close(reels, drives)
