@@ -87,19 +87,16 @@ def test_cdpm_run_against_emulated_canopen_drives(tmp_path):
     assert n == 1001  # ticks 0..1000 of 2 s at 500 Hz
     # The drives integrate their target velocities one plant step per SYNC (lag 0); the
     # command logged at tick k goes out with SYNC k, and the drives' answer to it is read
-    # on tick k + 1 (Drake runs the update right after the publish). So the lengths logged
-    # at tick k + 1 are the start plus the sum of the commands of ticks 0..k times T, to the
-    # quantisation: 1 um position counts (0.5 um at each end) and 1 um/s velocity units
-    # (at most 1 um over 2 s). A TPDO late by a period leaves a tick's lengths one tick
-    # stale; the rest must match.
+    # on tick k + 1 (Drake runs the update right after the publish). So from tick k to
+    # k + 1 the logged lengths move by the command of tick k times T, to the quantisation
+    # (1 um position counts: 1 um on a difference; 1 um/s velocity units). A TPDO late by
+    # a period moves two ticks' worth at once on the next tick, and a frame the multicast
+    # socket dropped (a SYNC: the drives skip a step) shifts the rest: the ticks must match
+    # but for a few.
     lengths, command = log["lengths"], log["reel_velocity"]
-    integral = np.cumsum(command, axis=0) * T
-    now = np.abs(lengths[1:] - lengths[0] - integral[:-1]).max(axis=1)
-    stale = np.abs(lengths[2:] - lengths[0] - integral[:-2]).max(axis=1)
+    step = np.abs(np.diff(lengths, axis=0)[1:] - command[1:-1] * T).max(axis=1)
     assert np.abs(lengths[-1] - lengths[0]).max() > 0.005  # exp2's operator moved it cm
-    fresh = now <= 2e-6
-    assert np.all(fresh[1:] | (stale <= 2e-6)), (now.max(), stale.max())
-    assert fresh.mean() > 0.9, fresh.mean()
+    assert (step <= 1.5e-6).mean() > 0.97, np.sort(step)[-20:]
     assert "drive states 1: switch on disabled" in texts["emulator.txt"]
 
 
