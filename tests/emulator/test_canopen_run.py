@@ -4,9 +4,12 @@ multicast frames stay in this test). Skipped, with the reason, where the namespa
 made (not root, no unshare or ip).
 
 Checked: the run completes and its logged lengths are the integral of its logged commands
-(the emulated drives are ideal: lag 0, one plant step per SYNC); a drive fault ends the run
-with the log kept up to the fault and every drive stopped and disabled within 3 SYNCs."""
+(the emulated drives are ideal: lag 0, one plant step per SYNC); a drive fault, a dead node
+and a frozen encoder each end the run with the log kept up to the fault, every live drive
+stopped (target velocity 0, quick stop) by the third SYNC after the fault (the fourth for a
+silent or frozen drive, whose TPDOs take ticks to tell) and disabled on the next."""
 
+import re
 import shutil
 import subprocess
 import sys
@@ -23,6 +26,9 @@ ATTEMPTS = 3
 # are about the run, not the silence (whose tests are in tests/hardware).
 PLANT = ("plant: !CanopenReels {interface: udp_multicast, channel: 239.74.163.2, "
          "ramp_time: 0.0, missed_tpdo_ticks: 6}")
+# The fault runs keep the default missed_tpdo_ticks (3): a silent drive is what they test.
+FAULT_PLANT = ("plant: !CanopenReels {interface: udp_multicast, channel: 239.74.163.2, "
+               "ramp_time: 0.0}")
 
 
 def _namespace_problem() -> str:
@@ -38,33 +44,33 @@ def _namespace_problem() -> str:
     return ""
 
 
-def _script(out: Path, emulate_flags: str, duration: float) -> str:
+def _script(out: Path, emulate_flags: str, duration: float, plant: str) -> str:
     py = f"PYTHONPATH={REPO} {sys.executable} -m cdpm_drake.cli"
     return f"""
 set -u
 ip link set lo up
 ip route add 224.0.0.0/4 dev lo
 cd {out}
-{py} emulate --canopen --scenario exp2_interaction --scenario-text '{PLANT}' \\
+{py} emulate --canopen --scenario exp2_interaction --scenario-text '{plant}' \\
     --time-constant 0 --duration 120 {emulate_flags} > emulator.txt 2>&1 &
 EMU=$!
 for i in $(seq 600); do grep -q "CiA 402 drives" emulator.txt && break; sleep 0.1; done
 {py} run exp2_interaction --duration {duration} --out {out}/run \\
-    --scenario-text '{PLANT}' > run.txt 2>&1
+    --scenario-text '{plant}' > run.txt 2>&1
 echo $? > run_code.txt
 kill -TERM $EMU
 wait $EMU || true
 """
 
 
-def _run(tmp_path, name, emulate_flags="", duration=2.0):
+def _run(tmp_path, name, emulate_flags="", duration=2.0, plant=None):
     problem = _namespace_problem()
     if problem:
         pytest.skip(f"no private network namespace for udp_multicast: {problem}")
     out = tmp_path / name
     out.mkdir()
     done = subprocess.run(["unshare", "-n", "bash", "-c", _script(out, emulate_flags,
-                                                                   duration)],
+                                                                   duration, plant or PLANT)],
                           capture_output=True, text=True, timeout=300)
     assert done.returncode == 0, done.stderr
     texts = {f: (out / f).read_text() for f in ("run.txt", "emulator.txt")}
@@ -100,11 +106,29 @@ def test_cdpm_run_against_emulated_canopen_drives(tmp_path):
     assert "drive states 1: switch on disabled" in texts["emulator.txt"]
 
 
-def test_a_drive_fault_ends_the_run_with_the_log_kept_and_the_drives_disabled(tmp_path):
-    code, run_dir, texts = _run(tmp_path, "fault", "--fault drive_fault --fault-cable 3 "
-                                "--fault-after 1.0", duration=3.0)
+@pytest.mark.parametrize("fault, cable, message, within", [
+    # EMCY and the fault bit: seen on the tick after the fault, stopped with its SYNC.
+    ("drive_fault", 3, r"the drive of cable 3 \(node 3\) sent EMCY error code 0x2310", 3),
+    # Silent: missed_tpdo_ticks = 3 ticks without its TPDO, then stopped with that SYNC.
+    ("dead_node", 2, r"no TPDO from the drive of cable 2 \(node 2\) for 3 ticks", 4),
+    # Frozen: cable 5 runs at ~14 mm/s there; 2 TPDOs unchanged (the one before the fault
+    # may already carry the frozen count, or a TPDO come a tick late), then stopped.
+    ("frozen_position", 5, r"cable 5 \(node 5\)'s position actual has not changed for 2 "
+                           r"TPDOs", 4),
+])
+def test_a_fault_ends_the_run_with_the_log_kept_and_the_drives_disabled(tmp_path, fault, cable,
+                                                                       message, within):
+    """The fault runs of the UDP link, on the bus: the run ends by the fault, its log kept up
+    to it, and by the `within`-th SYNC after the fault every live drive has target velocity 0
+    (quick stop), on the next it is disabled (the emulator's own record says which SYNC)."""
+    for attempt in range(ATTEMPTS):
+        code, run_dir, texts = _run(tmp_path, f"{fault}{attempt}", f"--fault {fault} "
+                                    f"--fault-cable {cable} --fault-after 1.0", duration=3.0,
+                                    plant=FAULT_PLANT)
+        if re.search(message, texts["run.txt"]) or "injected" not in texts["emulator.txt"]:
+            break  # the fault's own ending (or a stall before it, which fails below)
     assert code != 0
-    assert "sent EMCY error code 0x2310" in texts["run.txt"], texts
+    assert re.search(message, texts["run.txt"]), texts
     log = np.load(run_dir / "log.npz")
     assert str(log["ending"]) == "fault"
     # The log runs up to the fault (about 1 s after the drives were enabled), not past it.
@@ -112,8 +136,12 @@ def test_a_drive_fault_ends_the_run_with_the_log_kept_and_the_drives_disabled(tm
     assert 0.8 < fault_time < 2.0 and log["time"][-1] <= fault_time + T
     assert len(log["time"]) >= int(0.8 / T)
     emu = texts["emulator.txt"]
-    line = next(x for x in emu.splitlines() if "drive_fault after SYNC" in x)
+    line = next(x for x in emu.splitlines() if f"{fault} after SYNC" in x)
     zero = int(line.split("live drive ")[1].split(" SYNC")[0])
     off = int(line.split("operation enabled ")[1].split(" SYNC")[0])
-    assert zero <= 3 and off <= 3, line
-    assert "3: fault" in emu and "1: switch on disabled" in emu
+    assert zero <= within and off <= zero + 1, line
+    states = emu.split("drive states ")[-1].split("; lengths")[0]
+    expected = {"drive_fault": "fault", "dead_node": "switch on disabled"}.get(
+        fault, "switch on disabled")
+    assert f"{cable}: {expected}" in states and all(
+        f"{k}: switch on disabled" in states for k in range(1, 8) if k != cable), states
