@@ -421,6 +421,9 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--period", type=float, default=None,
                    help="plant step per SYNC, s (default: the scenario's time_step, 0.002)")
     p.add_argument("--duration", type=float, default=None, help="stop after this long, s")
+    p.add_argument("--rt-priority", type=int, default=0, metavar="N",
+                   help="run under SCHED_FIFO at priority N (1..99; needs root or "
+                   "CAP_SYS_NICE), as a drive's firmware would; default 0: normal")
     p.add_argument("--fault", choices=FAULT_KINDS, action="append", default=[],
                    help="inject this fault (repeatable)")
     p.add_argument("--fault-cable", type=int, default=1, help="cable of the fault (1-based)")
@@ -492,6 +495,9 @@ def main(argv=None) -> int:
         print(f"cdpm emulate --canopen: {text}", flush=True)
 
     try:
+        from cdpm_drake.hardware.priority import set_realtime_priority
+
+        set_realtime_priority(args.rt_priority)
         drives = build_drives(args, log=say)
     except Exception as e:  # a robot, a scenario, a bus that will not open: say which
         print(f"cdpm emulate --canopen: error: {e}", file=sys.stderr)
