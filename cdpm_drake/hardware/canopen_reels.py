@@ -33,6 +33,7 @@ above `frozen_speed` that publish keeps (a publish cannot write the Context), a 
 the commands sent like HardwareReelsSystem's `_stopped_at`.
 """
 
+import logging
 import time
 
 import numpy as np
@@ -49,6 +50,8 @@ from cdpm_drake.hardware.canopen_config import (CanopenReels, check_canopen_reel
 from cdpm_drake.hardware.reels import ReelFault, start_pose_problem
 from cdpm_drake.kernels.drive_torque import tension_from_drive
 from cdpm_drake.kernels.kinematics import KinematicsError, cable_lengths, forward_kinematics
+
+_log = logging.getLogger(__name__)
 
 # A frozen encoder: its position unchanged while the commands would have moved it at least
 # this many counts, after FROZEN_LAG_TICKS ticks of commands of the same sign (20 ms at 2 ms:
@@ -203,24 +206,38 @@ class CanopenReelsSystem(LeafSystem):
         self.master.nmt(NMT_START, 0)
         zero = np.zeros(m)
         deadline = time.monotonic() + c.startup_timeout
+        all_tpdos = None  # time.monotonic() when every drive had sent a TPDO
         while True:
             self.master.send_cycle([CW_DISABLE_VOLTAGE] * m, zero)
             time.sleep(self._T)
             sw, pos, torque, count, _, hb_state, _ = self.master.snapshot()
+            now = time.monotonic()
+            silent = [k for k in range(m) if count[k] == 0]
             # A heartbeat that says operational: the one before NMT start says otherwise.
-            waiting = [k for k in range(m) if count[k] == 0
-                       or (self.master.heartbeat_watched[k]
-                           and hb_state[k] != HEARTBEAT_OPERATIONAL)]
-            if not waiting:
+            hb_waiting = [k for k in range(m) if self.master.heartbeat_watched[k]
+                          and hb_state[k] != HEARTBEAT_OPERATIONAL]
+            if not silent and all_tpdos is None:
+                all_tpdos = now
+            if not silent and (not hb_waiting or now - all_tpdos > c.heartbeat_timeout):
                 break
-            if time.monotonic() > deadline:
-                what = "TPDO" + (" or operational heartbeat" if c.heartbeat_period > 0 else "")
+            if now > deadline:
                 raise self._fail(
-                    f"no {what} within startup_timeout = {c.startup_timeout:g} s from the "
+                    f"no TPDO within startup_timeout = {c.startup_timeout:g} s from the "
                     f"drive(s) of " + ", ".join(f"cable {k + 1} (node {self._ids[k]})"
-                                                for k in waiting)
+                                                for k in silent)
                     + f" on {c.interface} {c.channel!r}; are they powered, on this bus, with "
                     f"these node ids?", t)
+        for k in hb_waiting:
+            if hb_state[k] >= 0:  # it speaks, but not as operational
+                raise self._fail(
+                    f"refusing to enable the drives: the drive of cable {k + 1} (node "
+                    f"{self._ids[k]}) sends TPDOs but its heartbeat reports NMT state "
+                    f"{int(hb_state[k])}, not operational (5)", t)
+            # A drive that took 0x1017 but sends no heartbeat: watched by its TPDOs alone.
+            self.master.heartbeat_watched[k] = False
+            self.master.notes.append(f"no heartbeat from the drive of cable {k + 1} (node "
+                                     f"{self._ids[k]}) within heartbeat_timeout")
+            _log.warning("%s; its heartbeat is not watched", self.master.notes[-1])
         faulted = [k for k in range(m) if sw[k] & SW_FAULT_BIT]
         if faulted and not c.fault_reset:
             raise self._fail(

@@ -237,3 +237,29 @@ def test_a_drive_without_heartbeat_or_mode_read_back_is_watched_by_its_tpdos(rob
             _lockstep(sim, reels, drives, 1.0)
     finally:
         _close(reels, drives)
+
+
+def test_drives_without_heartbeats_run_and_a_wrong_nmt_state_is_refused(robot, monkeypatch):
+    """Drives that take 0x1017 but never send a heartbeat run, watched by their TPDOs (a note
+    each); a heartbeat that says pre-operational (0x7F) while TPDOs flow is refused."""
+    from cdpm_drake.emulator import canopen_drives
+
+    monkeypatch.setattr(canopen_drives.EmulatedDrives, "_heartbeats", lambda self, now: None)
+    sim, reels, drives, _, _ = _rig(robot)
+    try:
+        start_realtime(sim, 0.0)
+        assert not reels.master.heartbeat_watched.any()
+        assert [n.split(" within")[0] for n in reels.master.notes] == [
+            f"no heartbeat from the drive of cable {k} (node {k})" for k in range(1, 8)]
+    finally:
+        _close(reels, drives)
+    monkeypatch.undo()
+    monkeypatch.setattr(canopen_drives, "NMT_STATE", dict(canopen_drives.NMT_STATE,
+                                                          operational=0x7F))
+    sim, reels, drives, _, _ = _rig(robot)
+    try:
+        with pytest.raises(ReelFault, match=r"cable 1 \(node 1\) sends TPDOs but its heartbeat "
+                           r"reports NMT state 127, not operational \(5\)"):
+            start_realtime(sim, 0.0)
+    finally:
+        _close(reels, drives)
