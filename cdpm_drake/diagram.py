@@ -58,6 +58,10 @@ LOGGED = (
     ("model_status", "model_monitor", "status"),
     ("model_residual", "model_monitor", "residual"),
     ("reel_velocity", "jacobian_mapping", "reel_velocity_command"),
+    # With the tension damping (a plant with a tension sensor), the reels follow its command;
+    # its part of it beside.
+    ("reel_velocity", "tension_damping", "reel_velocity_command"),
+    ("reel_velocity_damping", "tension_damping", "damping"),
     ("lengths_commanded", "jacobian_mapping", "commanded_lengths"),
     # controller.pose: full, and its tension control (each only where the block has it).
     ("rpy", "forward_kinematics", "rpy_WP"),
@@ -78,6 +82,9 @@ LOGGED = (
 )
 
 PLANT_PORTS = ("reel_velocity_command", "cable_lengths", "measured_force")
+# The simulated plants' too (N per cable, NaN where the plant has no tension sensor); the
+# real reels have it where their protocol carries the drives' torques.
+TENSION_PORT = "tension_measured"
 
 # The logger: every logged signal of the diagram, in LOGGED order, multiplexed into one C++
 # VectorLogSink (one publish event per tick instead of one per signal); `logged_signals`
@@ -231,8 +238,11 @@ def build_diagram(scenario: Scenario | ResolvedScenario,
         mapping.connect_input(lengths, "cable_lengths")
     mapping.connect_input(p_WP, "p_WP")
     mapping.connect_input(velocity_command, "velocity_command")
-    builder.Connect(mapping.GetOutputPort("reel_velocity_command"),
-                    plant.GetInputPort("reel_velocity_command"))
+    command = mapping.GetOutputPort("reel_velocity_command")
+    if controller.tension_damping.enabled and _senses_tensions(scenario.plant, plant):
+        command = _add_tension_damping(builder, blocks, resolved, command, lengths,
+                                       plant.GetOutputPort("tension_measured"), T)
+    builder.Connect(command, plant.GetInputPort("reel_velocity_command"))
     if monitor_on:
         _add_model_monitor(builder, blocks, resolved, lengths, p_WP, R_WP if full else None,
                            force_sensor.GetOutputPort("F_H"), T)
@@ -302,8 +312,17 @@ def _kinetostatic_params(resolved):
 def _filter_braking(resolved) -> float:
     """The deceleration the safety filter's barriers brake with, m/s^2: per axis as the
     virtual wall does (limits._wall_caps), a / sqrt(3), which keeps the braking within the
-    acceleration limit where three barriers meet."""
-    return resolved.max_acceleration / np.sqrt(3.0)
+    acceleration limit where three barriers meet; and no harder than the cables can take
+    without ringing a cable slack (kinetostatics.ringing_deceleration: the onset of braking
+    is a step of the platform's acceleration, which its cables answer with up to twice the
+    static change of their tensions; kept within the kinetostatic floor)."""
+    from cdpm_drake.kernels.kinetostatics import ringing_deceleration, wrench_rows
+
+    scenario, robot = resolved.scenario, resolved.robot
+    ringing = ringing_deceleration(robot, np.asarray(scenario.initial_position, dtype=float),
+                                   wrench_rows(robot),
+                                   float(scenario.safety_filter.kinetostatic_floor))
+    return min(resolved.max_acceleration / np.sqrt(3.0), ringing)
 
 
 def _add_safety_filter(builder, blocks, resolved, velocity_desired, omega_desired, p_WP, R_WP,
@@ -350,6 +369,49 @@ def _add_safety_filter(builder, blocks, resolved, velocity_desired, omega_desire
         block.connect_input(R_WP, "R_WP")
         return block.GetOutputPort("velocity_command"), block.GetOutputPort("omega_command")
     return block.GetOutputPort("velocity_command"), None
+
+
+def _senses_tensions(cfg, plant) -> bool:
+    """The plant has a tension_measured port and may measure: not the kinematic plant (no
+    tensions at all: the block would cost 12 % of the paper's Fig. 5 run for nothing).
+    Where a sensor reads NaN (`tension_sensor: none`, a reel bridge that sends no torque)
+    the block passes the command through unchanged, bit for bit."""
+    return not isinstance(cfg, SimulatedReelsConfig) and plant.HasOutputPort(TENSION_PORT)
+
+
+def _sensor_lag(cfg) -> float:
+    """The tension sensor's lag, s: the dynamic plant's current filter or load cell
+    bandwidth; 0 for real reels (their drives' filters are not known here)."""
+    if isinstance(cfg, DynamicReelsConfig):
+        if cfg.tension_sensor == "load_cell":
+            return 1.0 / (2.0 * np.pi * cfg.load_cell.bandwidth)
+        return float(cfg.drive_torque.filter_time_constant)
+    return 0.0
+
+
+def _add_tension_damping(builder, blocks, resolved, command, lengths, tensions, T):
+    """The tension damping block between the mapping's reel command and the reels
+    (systems/tension_damping.py); returns its reel command."""
+    from cdpm_drake.systems.tension_damping import build_tension_damping, tension_damping_gains
+
+    scenario, robot = resolved.scenario, resolved.robot
+    cfg = scenario.controller.tension_damping
+    kd, tau = tension_damping_gains(
+        robot, np.asarray(scenario.initial_position, dtype=float), time_step=T,
+        sensor_lag=_sensor_lag(scenario.plant), gain_scale=float(cfg.gain_scale))
+    block = blocks["tension_damping"] = FlatBlock(
+        builder, "tension_damping", KERNEL_BLOCK_MAIN, lambda b: build_tension_damping(
+            b, robot, kd=kd, tau=tau, max_reel_speed=resolved.max_reel_speed,
+            estimate="tension_distribution" in blocks, time_step=T))
+    block.connect_input(command, "reel_velocity_desired")
+    block.connect_input(tensions, "tension_measured")
+    block.connect_input(lengths, "cable_lengths")
+    # No estimate (no tension control): the slot takes the lengths, which the kernel then
+    # ignores (estimate=False; a source of zeros would cost a system).
+    estimate = "tension_distribution" in blocks
+    block.connect_input(blocks["tension_distribution"].GetOutputPort("tension_estimate")
+                        if estimate else lengths, "tension_expected")
+    return block.GetOutputPort("reel_velocity_command")
 
 
 def _add_model_monitor(builder, blocks, resolved, lengths, p_WP, R_WP, F_H, T):
@@ -517,6 +579,10 @@ def build_simulated_plant(scenario: Scenario | ResolvedScenario, robot=None) -> 
     builder.ExportOutput(world["cable_lengths"], "cable_lengths")
     force = world["hand_force"]
     add_measured_force(builder, force, scenario, T)
+    # Kinematic reels have no tensions: the sensor reads NaN.
+    none = builder.AddNamedSystem("tension_sensor", ConstantVectorSource(
+        np.full(robot.num_cables, np.nan)))
+    builder.ExportOutput(none.get_output_port(), TENSION_PORT)
     plant = builder.Build()
     plant.set_name("reels")
     return plant

@@ -24,6 +24,15 @@ def format_vector(v, digits=3) -> str:
     return "[" + ", ".join(f"{x:.{digits}f}" for x in np.asarray(v, dtype=float)) + "]"
 
 
+def format_number(x, digits=2, sign=False) -> str:
+    """x with `digits` decimals (`sign`: a + before positives), never "-0.00": a value that
+    rounds to zero prints as zero (a distance 1.5 nm below d_l is not "-0.00 mm" below it)."""
+    x = float(x)
+    if round(x, digits) == 0.0:
+        x = 0.0
+    return f"{x:+.{digits}f}" if sign else f"{x:.{digits}f}"
+
+
 class _LevelPrefix(logging.Formatter):
     def format(self, record):
         return f"{record.levelname.lower()}: {record.getMessage()}"
@@ -79,3 +88,37 @@ def yaml_line(keys, *, filename=None, data=None) -> int | None:
         else:
             return None
     return line
+
+
+def duplicate_yaml_keys(*, filename=None, data=None) -> list[str]:
+    """Each key written twice in one mapping of a YAML file or text, as `'key' (path) on lines
+    A and B`; [] when there is none or the YAML does not parse (the loader says why). YAML
+    loaders keep the last one silently, so a value the user wrote is lost."""
+    import yaml
+
+    try:
+        text = data if data is not None else open(filename, encoding="utf-8").read()
+        root = yaml.compose(text, Loader=yaml.SafeLoader)
+    except (OSError, yaml.YAMLError, UnicodeDecodeError):
+        return []
+    found = []
+
+    def walk(node, path):
+        if isinstance(node, yaml.MappingNode):
+            seen = {}
+            for k, v in node.value:
+                key = str(k.value)
+                where = f"{path}.{key}" if path else key
+                if key in seen:
+                    found.append(f"{key!r} ({where}) on lines {seen[key]} and "
+                                 f"{k.start_mark.line + 1}")
+                else:
+                    seen[key] = k.start_mark.line + 1
+                walk(v, where)
+        elif isinstance(node, yaml.SequenceNode):
+            for i, v in enumerate(node.value):
+                walk(v, f"{path}[{i}]")
+
+    if root is not None:
+        walk(root, "")
+    return found

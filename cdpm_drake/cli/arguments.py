@@ -15,7 +15,8 @@ def load_scenario_arg(args):
     from cdpm_drake.config import load_resolved_scenario
 
     # Resolved once here; the run, its view and its log all take this object.
-    return load_resolved_scenario(args.scenario, overlay_text=args.scenario_text)
+    return load_resolved_scenario(args.scenario, overlay_text=args.scenario_text,
+                                  method=getattr(args, "method", None))
 
 
 def run_folder_step(action):

@@ -112,6 +112,9 @@ def build_parser() -> argparse.ArgumentParser:
                    help="show the robot live in Meshcat (prints the URL to open)")
     p.add_argument("--force", action="store_true",
                    help="empty a non-empty --out that holds an earlier run, then write there")
+    p.add_argument("--plot", action="store_true",
+                   help="after the run, write the paper's figures (PNG) into its folder, as "
+                        "cdpm simulate --plot")
 
     p = sub.add_parser("emulate", help="play the reel bridge on loopback (cdpm-reel-emulator)",
                        description="Same as cdpm-reel-emulator; `cdpm emulate --help` lists "
@@ -193,25 +196,39 @@ def _scenario_args(p, default="exp2_interaction"):
     p.add_argument("--scenario-text", default=None, metavar="YAML",
                    help="YAML overlay for one-off changes, e.g. "
                         "'{duration: 5, interference: {default: {F_u: 4.0}}}'")
+    p.add_argument("--method", choices=("promise", "paper"), default=None,
+                   help="which controller: promise, the paper's Fig. 5 with the safety filter "
+                        "that keeps every cable pair at or above d_min (the default); paper, "
+                        "the paper's method exactly (no safety filter). Overrides the "
+                        "scenario's `method:`")
 
 
 def _export_parser(sub) -> None:
     p = sub.add_parser(
-        "export", help="write a log as CSV: one row per tick, named columns with units",
-        description="Write a log.npz as CSV for spreadsheets and other tools: one row per "
-                    "tick, one column per value, named with its unit (p_x [m], F_H_z [N], "
-                    "lengths_1 [m], pair_distances_1-3 [m], active_1-3 [0/1], "
-                    "rpy_true_roll [rad]), cables numbered from 1 and pairs by their cables "
-                    "(docs/LOG_FORMAT.md). The per-run constants (robot, logistic parameters, "
-                    "how the run ended) stay in log.npz.")
+        "export", help="write a log as CSV, a MATLAB .mat file or a ROS 2 bag (.mcap)",
+        description="Write a log.npz for other tools, in one of three formats: --csv (the "
+                    "default) one row per tick, one column per value, named with its unit "
+                    "(p_x [m], lengths_1 [m], pair_distances_1-3 [m], active_1-3 [0/1]); "
+                    "--mat a MATLAB .mat file (v5) with every key of the log, a struct "
+                    "`units` and a vector `cables` 1..m; --mcap a ROS 2 bag in MCAP storage "
+                    "for Foxglove and ros2 bag (joint states of the reels, the platform pose "
+                    "estimated and true, the forces as wrenches, the cables as line markers; "
+                    "frame 'base', stamps from 0 s). Cables are numbered from 1 and pairs by "
+                    "their cables (docs/LOG_FORMAT.md). --mat needs scipy and --mcap rosbags: "
+                    "pip install 'cdpm_drake[export]'.")
     p.add_argument("log", type=Path,
                    help="a log.npz, the run folder holding it (or only ticks.bin: recovered "
                         "first), or runs/<name> (its latest run)")
-    # CSV is the only format, so the default; --csv stays accepted (scripts written for it).
-    p.add_argument("--csv", action="store_true",
-                   help="comma-separated values (the default and only format)")
+    formats = p.add_mutually_exclusive_group()
+    formats.add_argument("--csv", action="store_true",
+                         help="comma-separated values, log.csv (the default)")
+    formats.add_argument("--mat", action="store_true",
+                         help="MATLAB .mat (v5), log.mat: every log key, its unit in `units`")
+    formats.add_argument("--mcap", action="store_true",
+                         help="a ROS 2 bag in MCAP storage, log.mcap (Foxglove, ros2 bag)")
     p.add_argument("--out", type=Path, metavar="FILE",
-                   help="output file (default: log.csv beside the log; - for stdout)")
+                   help="output file (default: log.csv, log.mat or log.mcap beside the log; "
+                        "- for stdout, CSV only)")
 
 
 def _sweep_parser(sub) -> None:
@@ -278,6 +295,17 @@ def _command(name: str):
 
 
 def main(argv=None) -> int:
+    """Run `cdpm` on argv (default: sys.argv[1:]); the exit code (EXIT_CODES)."""
+    try:
+        return _main(argv)
+    except KeyboardInterrupt:
+        # Ctrl-C before a command's own handler is in place (while pydrake and the kernels
+        # import, about a second): no traceback, the code of an interrupt.
+        print("cdpm: interrupted (Ctrl-C)", file=sys.stderr)
+        return 130
+
+
+def _main(argv) -> int:
     from cdpm_drake.hardware.tick_log import TickLogError
     from cdpm_drake.runs.interrupt import Terminated, exit_code, terminate_raises
     from cdpm_drake.kernels.kinematics import KinematicsError

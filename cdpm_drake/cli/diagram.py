@@ -3,7 +3,7 @@ plant and as a full-pose controller, at full depth and as an overview."""
 
 import sys
 
-from cdpm_drake.cli.arguments import load_scenario_arg
+from cdpm_drake.cli.arguments import check_writable_dir, load_scenario_arg
 from cdpm_drake.cli.errors import CliError
 
 
@@ -52,14 +52,43 @@ def diagram_main(*, scenario, out_dir, depth=None, svg=True, out=None) -> int:
         diagrams["controller_full_pose"] = build_diagram(full, options)
     except ScenarioError as e:
         print(f"skipped controller_full_pose: {e}", file=out)
-    for path in write_diagrams(diagrams, out_dir, svg=svg, max_depth=depth):
+    for path in write_diagrams(diagrams, out_dir, svg=svg, max_depth=depth,
+                               caption=diagram_caption(scenario)):
         print(f"wrote {path}", file=out)
     return 0
+
+
+def diagram_caption(scenario) -> str:
+    """The line under each overview: the scenario and robot it was built for (the blocks are
+    the same for many scenarios; their parameters are not drawn)."""
+    from cdpm_drake.config import scenario_robot
+
+    robot = scenario_robot(scenario)
+    swaps = ", ".join(f"{i}-{j}" for i, j in scenario.swaps)
+    return (f"scenario {scenario.name}: robot {robot.name}, {robot.num_cables} cables"
+            + (f", swapped {swaps}" if swaps else "") + f", method {scenario.method}")
+
+
+def _scenario_or_robot(args):
+    """The scenario argument's scenario, or for a robot's name (or robot file) a scenario of
+    that robot with the defaults (the diagram of a robot alone)."""
+    from cdpm_drake.config import Scenario, resolve_scenario, scenario_names
+    from cdpm_drake.robot import robot_names
+
+    if args.scenario in robot_names() and args.scenario not in scenario_names():
+        if args.scenario_text:
+            raise CliError("--scenario-text overlays a scenario; give a scenario, not the "
+                           f"robot {args.scenario!r}")
+        return resolve_scenario(Scenario(name=args.scenario, robot=args.scenario,
+                                         method=args.method or "promise")).scenario
+    return load_scenario_arg(args).scenario
 
 
 def cmd_diagram(args) -> int:
     """`cdpm diagram`: --depth checked, then diagram_main."""
     if args.depth is not None and args.depth < 1:
         raise CliError(f"--depth must be an integer >= 1, got {args.depth!r}")
-    return diagram_main(scenario=load_scenario_arg(args).scenario, out_dir=args.out,
+    scenario = _scenario_or_robot(args)  # a bad scenario leaves no folder behind
+    check_writable_dir(args.out, "--out")  # before the diagrams are built, not after
+    return diagram_main(scenario=scenario, out_dir=args.out,
                         depth=args.depth, svg=not args.no_svg)

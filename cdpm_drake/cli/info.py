@@ -170,10 +170,22 @@ INFO_FLOOR = 5.0
 INFO_D_U = 0.062
 
 
+def _robot_only_fields() -> set:
+    """The top-level fields of a robot file that no scenario has (reels, attachments, ...)."""
+    import dataclasses
+
+    from cdpm_drake.config import Scenario
+    from cdpm_drake.robot.schema import RobotSchema
+
+    return ({f.name for f in dataclasses.fields(RobotSchema)}
+            - {f.name for f in dataclasses.fields(Scenario)})
+
+
 def _info_target(name):
     """(robot, None, None) for a robot, (its robot, the Scenario, the refusal of its run or
-    None) for a scenario: a built-in name of either, or a YAML file (a robot file has
-    `reels`)."""
+    None) for a scenario: a built-in name of either, or a YAML file (a robot file is one with
+    a field no scenario has, e.g. `reels`; any other mapping is a scenario, as `cdpm
+    simulate` reads it)."""
     from cdpm_drake.robot import RobotError, is_path_like, load_robot, robot_names
     from cdpm_drake.config import scenario_names, scenario_robot
 
@@ -192,8 +204,8 @@ def _info_target(name):
                 raw = yaml_load(filename=str(path))
             except Exception:
                 raw = None
-            if isinstance(raw, dict) and "reels" not in raw and (
-                    "robot" in raw or "initial_position" in raw or "operator" in raw):
+            if isinstance(raw, dict) and not set(raw) & _robot_only_fields():
+                # As `cdpm simulate` reads it: a scenario, its robot paper_7cable unless named.
                 scenario, refused = _load_reporting_refusal(str(path))
                 return scenario_robot(scenario), scenario, refused
         return load_robot(text), None, None
@@ -362,5 +374,24 @@ def cmd_info(args) -> int:
         raise CliError(f"--grid must be a step in m > 0, got {step!r}")
     if args.plot is not None:  # before the report: a folder found wanting after it is a waste
         check_writable_dir(args.plot, "--plot")
+    if args.swaps is not None:
+        _check_swaps_option(args.robot, args.swaps)
     info(robot=args.robot, swaps=args.swaps, plot_dir=args.plot, grid_step=args.grid)
     return 0
+
+
+def _check_swaps_option(name, swaps) -> None:
+    """--swaps is an option value: one that swaps nothing, undoes itself or names a cable the
+    robot lacks is bad usage (exit 2), found before the report."""
+    from cdpm_drake.config import ScenarioError
+    from cdpm_drake.config.resolve import check_swaps
+    from cdpm_drake.robot import RobotError
+
+    try:
+        check_swaps([list(s) for s in swaps])
+        r = _info_target(name)[0]
+        for i, j in swaps:
+            r = r.with_swapped_attachments(i, j)
+    except (ScenarioError, RobotError) as e:
+        text = str(e).replace("swaps[", "--swaps[")
+        raise CliError(text) from None

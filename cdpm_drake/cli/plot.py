@@ -32,6 +32,9 @@ def cmd_plot(args) -> int:
         kept = len(figures_of(log)) - len(only)
         if kept:
             print(f"plot: {kept} figure(s) already drawn from this log kept in {out_dir}")
+    from cdpm_drake.runs.log import nan_rows
+    for warning in nan_rows(log):
+        print(f"cdpm plot: warning: {warning}", file=sys.stderr)
     for png in plot_log(log, out_dir, only=only):
         print(f"plot: {png}")
     if args.html is not None:

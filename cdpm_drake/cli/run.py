@@ -12,13 +12,15 @@ from cdpm_drake.cli.summaries import (model_monitor_summary, print_pair_summary,
 
 
 def run_main(*, scenario, duration=None, out_dir=None, out=None, on_status=None,
-             on_view=None, force=False, runs_root=None) -> int:
+             on_view=None, force=False, runs_root=None, overlay_text=None,
+             plots=False) -> int:
     """Run on the reels in real time; print live status and the end report. The folder
     policy is simulate_main's. Exit code 0 when the run completed, 1 on a fault or when it
-    never enabled the reels, 130 / 143 when Ctrl-C / SIGTERM stopped it."""
+    never enabled the reels, 130 / 143 when Ctrl-C / SIGTERM stopped it. `plots`: the
+    log's figures into the run folder afterwards, as `cdpm simulate --plot`."""
     from cdpm_drake.runs.interrupt import exit_code
     from cdpm_drake.runs.realtime import report_lines, run
-    from cdpm_drake.runs.run_folder import RUNS_DIR, RunFolder
+    from cdpm_drake.runs.run_folder import RUNS_DIR, RunFolder, overlay_tag
     from cdpm_drake.config import resolve_scenario
     from cdpm_drake.runs.simulate import run_variant
 
@@ -26,6 +28,7 @@ def run_main(*, scenario, duration=None, out_dir=None, out=None, on_status=None,
     resolved = resolve_scenario(scenario)
     scenario = resolved.scenario
     variant, tag = run_variant(resolved)
+    tag = "-".join(t for t in (tag, overlay_tag(overlay_text)) if t)
     folder = RunFolder(scenario.name, out_dir, force=force,
                        root=RUNS_DIR if runs_root is None else runs_root, variant=tag)
     run_folder_step(folder.plan)
@@ -61,6 +64,8 @@ def run_main(*, scenario, duration=None, out_dir=None, out=None, on_status=None,
             print(safety_filter_summary(result.log), file=out)
         if "model_status" in result.log:
             print(model_monitor_summary(result.log, scenario.model_monitor), file=out)
+        if plots and result.log_path is not None:
+            _plot(result.log, out_dir, out)
     if result.ending == "fault":
         print(f"cdpm run: error: {result.error}", file=sys.stderr)
         if not result.enabled and any(why in str(result.error) for why in (
@@ -81,6 +86,19 @@ def run_main(*, scenario, duration=None, out_dir=None, out=None, on_status=None,
     return 0
 
 
+def _plot(log, out_dir, out) -> None:
+    """The log's figures beside it; a log the figures cannot read is said, not raised (the
+    run's exit code is the run's)."""
+    from cdpm_drake.runs.log import LogError
+    from cdpm_drake.views.plots import plot_log
+
+    try:
+        for png in plot_log(log, out_dir):
+            print(f"plot: {png}", file=out)
+    except LogError as e:
+        print(f"cdpm run: error: plots: {e}", file=sys.stderr)
+
+
 def cmd_run(args) -> int:
     """`cdpm run`: the options checked (and the priority set) before the run, then
     run_main."""
@@ -96,4 +114,5 @@ def cmd_run(args) -> int:
     on_view = live_meshcat(scenario) if args.meshcat else None
     with duration_flag(args.duration):
         return run_main(scenario=scenario, duration=args.duration, out_dir=args.out,
-                        on_view=on_view, force=args.force)
+                        on_view=on_view, force=args.force,
+                        overlay_text=args.scenario_text, plots=args.plot)

@@ -16,13 +16,13 @@ from cdpm_drake.cli.summaries import (model_monitor_summary, print_clipped,
 
 def simulate_main(*, scenario, duration=None, out_dir=None, progress=True, out=None,
                   on_chunk=None, html=None, plots=False, realtime_rate=None,
-                  chunk=0.5, force=False, runs_root=None) -> int:
+                  chunk=0.5, force=False, runs_root=None, overlay_text=None) -> int:
     """Simulate, write DIR/log.npz and DIR/scenario.yaml, print a summary. DIR is `out_dir`
     if given (it must be empty, or hold a run and `force` be set), else a new
     runs/<name>/<UTC timestamp>/ (run_folder.py). Returns an exit code: 0; 1 when the run
     ended on an error; 130 / 143 after Ctrl-C / SIGTERM (the log up to then is written all the
     same, and the plots and replay asked for)."""
-    from cdpm_drake.runs.run_folder import RUNS_DIR, RunFolder
+    from cdpm_drake.runs.run_folder import RUNS_DIR, RunFolder, overlay_tag
     from cdpm_drake.config import resolve_scenario
     from cdpm_drake.runs.log import save_log
     from cdpm_drake.runs.simulate import run_variant, simulate
@@ -31,6 +31,7 @@ def simulate_main(*, scenario, duration=None, out_dir=None, progress=True, out=N
     resolved = resolve_scenario(scenario)
     scenario = resolved.scenario
     variant, tag = run_variant(resolved)
+    tag = "-".join(t for t in (tag, overlay_tag(overlay_text)) if t)
     folder = RunFolder(scenario.name, out_dir, force=force,
                        root=RUNS_DIR if runs_root is None else runs_root, variant=tag)
     run_folder_step(folder.plan)
@@ -127,7 +128,8 @@ def cmd_simulate(args) -> int:
         code = simulate_main(scenario=scenario, duration=args.duration, out_dir=args.out,
                              progress=not args.no_progress, on_chunk=on_chunk,
                              html=args.html, plots=args.plot, realtime_rate=realtime,
-                             chunk=0.04 if args.meshcat else 0.5, force=args.force)
+                             chunk=0.04 if args.meshcat else 0.5, force=args.force,
+                             overlay_text=args.scenario_text)
     if args.meshcat and not args.no_wait and sys.stdin.isatty():
         try:
             input("Meshcat is still serving the last frame; press Enter to quit. ")

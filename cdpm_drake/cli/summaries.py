@@ -5,7 +5,7 @@ the dynamic plant's ground truth. Distances in mm, forces in N, times in s."""
 
 import numpy as np
 
-from cdpm_drake.text import format_table, format_vector
+from cdpm_drake.text import format_number, format_table, format_vector
 
 
 def _named_cables(cable, ticks) -> str:
@@ -58,36 +58,88 @@ def tension_control_summary(log) -> str:
     return text + (f"; estimated tensions {estimate.min():.2f} to {estimate.max():.1f} N")
 
 
+def _spans(mask, time) -> list[tuple[float, float]]:
+    """The (start, end) times (s) of each run of True ticks in `mask`."""
+    m = np.concatenate([[False], np.asarray(mask, dtype=bool), [False]])
+    edges = np.flatnonzero(np.diff(m.astype(int)))
+    return [(float(time[a]), float(time[b - 1])) for a, b in zip(edges[::2], edges[1::2])]
+
+
+def lost_margin_text(mask, time, depth, what, unit, scale=1.0) -> str:
+    """`what lost (below 0) on N ticks (x s in k spans, first from a to b s), down to -d unit`,
+    or "" when no tick of `mask` is True."""
+    n = int(np.sum(mask))
+    if not n:
+        return ""
+    spans = _spans(mask, time)
+    dt = float(np.median(np.diff(time))) if len(time) > 1 else 0.0
+    first = f"from {spans[0][0]:.3f} to {spans[0][1]:.3f} s"
+    where = (first if len(spans) == 1
+             else f"{n * dt:.3f} s in {len(spans)} spans, the first {first}")
+    return (f"{what} LOST on {n} tick{'s' if n != 1 else ''} ({where}), down to "
+            f"{format_number(scale * float(np.min(depth[mask])))} {unit}")
+
+
 def safety_filter_summary(log) -> str:
-    """One line on the safety filter of a log (safety_filter.enabled): on how many ticks it
-    passed the command, changed it (and which constraints bound, safety_filter.BIND_TEXT),
-    held a lost margin, braked to a hold; the smallest pair margin above d_min, by the
-    controller's estimate and, with a true pose logged, the truth's; the smallest
-    kinetostatic margin kappa (N)."""
-    from cdpm_drake.kernels.safety_filter import (BIND_TEXT, STATUS_HOLD, STATUS_MODIFIED,
+    """The safety filter of a log (safety_filter.enabled): on how many ticks it passed the
+    command, changed it (and which constraints bound, safety_filter.BIND_TEXT, the speed
+    limit told apart from the lost-margin cap below it), held a lost margin, braked to a hold;
+    when and how long a margin was lost (the pair margin or kinetostatic kappa below 0); the
+    smallest pair margin above d_min, by the controller's estimate and, with a true pose
+    logged, the truth's; the smallest kinetostatic margin kappa (N)."""
+    from cdpm_drake.kernels.safety_filter import (BIND_SPEED, BIND_TEXT, LOST_SPEED,
+                                                  STATUS_HOLD, STATUS_MODIFIED,
                                                   STATUS_NO_RETURN, STATUS_PASS)
 
     status = np.asarray(log["filter_status"]).reshape(-1).astype(int)
     binding = np.asarray(log["filter_binding"]).reshape(-1).astype(int)
+    time = np.asarray(log["time"], dtype=float).reshape(-1)
     T = status.size
-    bound = [f"{what} {int(np.sum((binding & bit) != 0))}" for bit, what in BIND_TEXT
-             if np.any((binding & bit) != 0)]
+    # The speed ball binds at max_velocity, or below it at the cap that slows the platform
+    # while a margin is lost: two different causes, two labels.
+    speed = np.linalg.norm(np.asarray(log["velocity"], dtype=float).reshape(T, -1), axis=1)
+    v_max = float(log["max_velocity"]) if "max_velocity" in log else float(speed.max(initial=0))
+    at_speed = (binding & BIND_SPEED) != 0
+    capped = at_speed & (speed < v_max * (1.0 - 1e-6))
+    bound = []
+    for bit, what in BIND_TEXT:
+        n = int(np.sum((binding & bit) != 0))
+        if bit == BIND_SPEED:
+            if np.any(at_speed & ~capped):
+                bound.append(f"{what} {int(np.sum(at_speed & ~capped))}")
+            if np.any(capped):
+                bound.append(f"lost-margin speed cap (towards {LOST_SPEED:g} m/s) "
+                             f"{int(np.sum(capped))}")
+        elif n:
+            bound.append(f"{what} {n}")
+    changed = int(np.sum(status == STATUS_MODIFIED))
+    counts = sum(int(b.rsplit(" ", 1)[1]) for b in bound)
+    several = ("; a tick can bind several ways, so these add up to more than the ticks "
+               "changed" if counts > changed + int(np.sum(status >= STATUS_NO_RETURN))
+               else "")
     text = (f"safety filter: passed {int(np.sum(status == STATUS_PASS))} of {T} ticks, "
-            f"changed {int(np.sum(status == STATUS_MODIFIED))}"
-            + (f" (bound: {', '.join(bound)})" if bound else ""))
-    for code, what in ((STATUS_NO_RETURN, "held a lost margin"),
+            f"changed {changed}"
+            + (f" (bound: {', '.join(bound)}{several})" if bound else ""))
+    for code, what in ((STATUS_NO_RETURN, "held a lost margin (not restored)"),
                        (STATUS_HOLD, "braked to a hold")):
         n = int(np.sum(status == code))
         if n:
             text += f", {what} on {n}"
     margin = np.asarray(log["pair_margin"], dtype=float).reshape(-1)
+    kappa = np.asarray(log["kappa"], dtype=float).reshape(-1)
+    # Round-off at a barrier is not a loss (runs.sweep.metrics.D_L_TOLERANCE: 1 um).
+    for mask, depth, what, unit, scale in (
+            (margin < -1e-6, margin, "pair margin", "mm", 1000.0),
+            (kappa < -1e-6, kappa, "kinetostatic margin", "N", 1.0)):
+        lost = lost_margin_text(mask, time, depth, what, unit, scale)
+        if lost:
+            text += "; " + lost
     if np.isfinite(margin).any():
-        text += f"; smallest pair margin above d_min {1000 * margin.min():.2f} mm"
+        text += f"; smallest pair margin above d_min {format_number(1000 * margin.min())} mm"
         if "pair_distances_true" in log and "d_min" in log:
             true = (np.asarray(log["pair_distances_true"], dtype=float)
                     - np.asarray(log["d_min"], dtype=float)).min(axis=1)
-            text += f" (true {1000 * true.min():.2f} mm)"
-    kappa = np.asarray(log["kappa"], dtype=float).reshape(-1)
+            text += f" (true {format_number(1000 * true.min())} mm)"
     if np.isfinite(kappa).any():
         text += f"; smallest kinetostatic margin {kappa[np.isfinite(kappa)].min():.2f} N"
     return text
@@ -116,8 +168,8 @@ def model_monitor_summary(log, monitor=None) -> str:
     if residual.size and np.isfinite(residual).any():
         flat = np.nanargmax(np.abs(np.where(np.isfinite(residual), residual, 0.0)))
         cable = int(flat % residual.shape[1]) + 1
-        text += (f"; largest length residual {1000 * residual.reshape(-1)[flat]:+.2f} mm "
-                 f"(cable {cable})")
+        worst = format_number(1000 * residual.reshape(-1)[flat], sign=True)
+        text += f"; largest length residual {worst} mm (cable {cable})"
     if not bad.size:  # "fitted" says only as much as what it watches
         slack_by = (f"a tension estimate below -{monitor.slack_tension:g} N" if
                     "tension_estimate" in log else f"a cable over "

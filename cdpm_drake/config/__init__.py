@@ -21,21 +21,24 @@ from cdpm_drake.config.load import (load_resolved_scenario, load_scenario, resol
                                     scenario_names)
 from cdpm_drake.config.load_warnings import (sensor_range_text, warn_reel_saturation,
                                              warn_unreachable_d_u)
-from cdpm_drake.config.plants import DynamicReels, PlantConfig, SimulatedReels
+from cdpm_drake.config.plants import (DriveTorqueSensor, DynamicReels, LoadCellSensor,
+                                      PlantConfig, SimulatedReels)
 from cdpm_drake.config.resolve import (ResolvedScenario, check_scenario, interference_params,
                                        resolve_scenario, scenario_operator, scenario_robot)
 from cdpm_drake.config.scenario import (Admittance, Controller, Interference, KinetostaticForce,
                                         Limits, Logistic, ModelMonitor, OperatorConfig,
                                         PairLogistic, SafetyFilter, Scenario, ScenarioError,
-                                        Sensor, WallForce)
+                                        Sensor, TensionDamping, WallForce)
 from cdpm_drake.config.yaml_io import (INTERNAL_FIELDS, check_yaml, explain_load_error,
                                        scenario_to_yaml, with_line)
 
 __all__ = [
     # The schema (scenario.py, plants.py).
     "Scenario", "Admittance", "Logistic", "PairLogistic", "Interference", "Limits",
-    "WallForce", "Sensor", "Controller", "KinetostaticForce", "SafetyFilter", "ModelMonitor",
-    "OperatorConfig", "SimulatedReels", "DynamicReels", "PlantConfig", "ScenarioError",
+    "WallForce", "Sensor", "Controller", "TensionDamping", "KinetostaticForce", "SafetyFilter",
+    "ModelMonitor",
+    "OperatorConfig", "SimulatedReels", "DynamicReels", "DriveTorqueSensor", "LoadCellSensor",
+    "PlantConfig", "ScenarioError",
     # Loading and resolving (load.py, resolve.py).
     "scenario_names", "resolve_scenario_path", "load_scenario", "load_resolved_scenario",
     "ResolvedScenario", "resolve_scenario", "check_scenario", "scenario_robot",

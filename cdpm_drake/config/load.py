@@ -27,9 +27,11 @@ def load_scenario(name_or_path="exp2_interaction", overlay_text: str | None = No
 
 
 def load_resolved_scenario(name_or_path="exp2_interaction",
-                           overlay_text: str | None = None) -> "ResolvedScenario":
+                           overlay_text: str | None = None,
+                           method: str | None = None) -> "ResolvedScenario":
     """`load_scenario`, returning the check's `resolve_scenario` result, so that a caller that
-    goes on to build and run it resolves it only once."""
+    goes on to build and run it resolves it only once. `method` (the command line's
+    --method) replaces the scenario's Scenario.method after the overlay."""
     from pydrake.common.yaml import yaml_load, yaml_load_typed
 
     path = resolve_scenario_path(name_or_path)
@@ -58,12 +60,40 @@ def load_resolved_scenario(name_or_path="exp2_interaction",
     # Absolute, so the resolved scenario written beside a log (which records base_dir) finds
     # the same robot and CSV files when loaded back from elsewhere.
     scenario.base_dir = str((path.parent / scenario.base_dir).resolve())
-    resolved = resolve_scenario(scenario, source=str(path))
+    if method is not None:
+        scenario.method = method
+    try:
+        resolved = resolve_scenario(scenario, source=str(path))
+    except ScenarioError as e:
+        # The same error (a refusal's own class kept), its message with where it is written.
+        e.args = (_where_written(str(e), path, overlay_text, raw),) + e.args[1:]
+        raise
     if resolved.interference is not None:
         warn_unreachable_d_u(resolved.robot, resolved.interference)
     warn_reel_saturation(scenario, resolved.robot)
     warn_sensor_range(resolved)
     return resolved
+
+
+def _where_written(message: str, path: Path, overlay_text, raw: dict) -> str:
+    """A value error of the resolution (`admittance.mass must be ... > 0, got -1.0`) prefixed,
+    as a typo's is, with where that field is written: the overlay's line when the overlay
+    sets it, else the file's line; the message unchanged when it names no field written."""
+    import re
+
+    from cdpm_drake.config.yaml_io import field_keys
+    from cdpm_drake.text import yaml_line
+
+    m = re.match(r"([A-Za-z_][\w.\[\]]*) must ", message)
+    if not m:
+        return message
+    keys = field_keys(m.group(1))
+    if overlay_text and keys and keys[0] in raw:
+        line = yaml_line(keys, data=overlay_text)
+        if line is not None:
+            return f"--scenario-text {overlay_text!r}: line {line}: {message}"
+    line = yaml_line(keys, filename=str(path))
+    return f"{path}: line {line}: {message}" if line is not None else message
 
 
 def _resolve_paths(scenario: Scenario, base: Path, source: str, base_what: str, *,
@@ -77,6 +107,12 @@ def _resolve_paths(scenario: Scenario, base: Path, source: str, base_what: str, 
         ref = scenario.robot
         if is_path_like(ref):
             full = Path(ref) if Path(ref).is_absolute() else base / ref
+            if full.is_dir():
+                inside = sorted(q.name for q in full.glob("*.yaml"))[:5]
+                raise ScenarioError(
+                    f"{source}: robot {ref!r} is a folder, not a robot file: give the .yaml "
+                    f"file itself" + (f" (it holds {inside})" if inside else
+                                      " (it holds no .yaml file)"))
             if not full.is_file():
                 raise ScenarioError(
                     f"{source}: robot file {ref!r} does not exist: tried {str(full)!r}"

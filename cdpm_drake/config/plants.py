@@ -21,6 +21,45 @@ class SimulatedReels:
 
 
 @dataclasses.dataclass
+class DriveTorqueSensor:
+    """The reel drives' force as a tension sensor (DynamicReels.tension_sensor:
+    drive_torque): each drive's current, filtered, noisy and quantised, turned into its
+    cable's tension with the controller's model of the drive (kernels/drive_torque.py). The
+    model is the robot file's reel_drives; the plant's true drives differ from it by the
+    errors below."""
+
+    # Current noise, N at the cable (standard deviation per tick).
+    noise_std: float = 0.3
+    # Current quantisation, N at the cable (0: none).
+    quantum: float = 0.02
+    # The drive's current filter, a first-order lag, s (0: none).
+    filter_time_constant: float = 0.002
+    # The true drives' reel inertia and friction (viscous and Coulomb) over the robot file's,
+    # less one: 0.2 is 20 % more than the controller's model takes.
+    inertia_error: float = 0.2
+    friction_error: float = 0.3
+    # The model's Coulomb friction is linear in the speed within this band, m/s (a reel at
+    # rest sticks with any friction in [-F_c, F_c]: the model takes the middle).
+    friction_band: float = 0.002
+
+
+@dataclasses.dataclass
+class LoadCellSensor:
+    """A load cell on each cable (DynamicReels.tension_sensor: load_cell)."""
+
+    # Noise, N (standard deviation per tick).
+    noise_std: float = 0.2
+    # Each cell's offset is drawn once per run (seeded by the scenario's random_seed) with
+    # this standard deviation, N.
+    bias_std: float = 0.5
+    # The cell's bandwidth (first-order), Hz.
+    bandwidth: float = 200.0
+
+
+TENSION_SENSORS = ("drive_torque", "load_cell", "none")
+
+
+@dataclasses.dataclass
 class DynamicReels:
     """A dynamic plant (systems/dynamic_plant.py): the platform as a rigid body on elastic,
     tension-only cables paid out by reel drives with friction. Mass, inertia, cable and drive
@@ -45,6 +84,12 @@ class DynamicReels:
     # cables stretch and the platform rotates, so the lengths never fit a translating rigid
     # platform exactly. Above it the controller stops the run, as on the robot.
     max_length_residual: float = 0.02
+    # What the plant tells the controller about the cables' tensions (its tension_measured
+    # output, sampled at the control tick): drive_torque (the reel drives' force), load_cell
+    # (a cell per cable), none (encoders and the handle's sensor only: NaN).
+    tension_sensor: str = "drive_torque"
+    drive_torque: DriveTorqueSensor = dataclasses.field(default_factory=DriveTorqueSensor)
+    load_cell: LoadCellSensor = dataclasses.field(default_factory=LoadCellSensor)
 
 
 def _plant_types():
@@ -61,3 +106,27 @@ def _plant_types():
 
 PLANT_TYPES = _plant_types()
 PlantConfig = typing.Union[PLANT_TYPES] if len(PLANT_TYPES) > 1 else SimulatedReels
+
+
+def check_tension_sensor(plant: DynamicReels) -> None:
+    """ValueError naming the field and value of a bad tension sensor setting."""
+    import math
+
+    if plant.tension_sensor not in TENSION_SENSORS:
+        raise ValueError(f"plant.tension_sensor must be one of {list(TENSION_SENSORS)}, got "
+                         f"{plant.tension_sensor!r}")
+    for group, fields in (("drive_torque", ("noise_std", "quantum", "filter_time_constant",
+                                            "friction_band")),
+                          ("load_cell", ("noise_std", "bias_std"))):
+        for name in fields:
+            value = getattr(getattr(plant, group), name)
+            if not (isinstance(value, (int, float)) and math.isfinite(value) and value >= 0):
+                raise ValueError(f"plant.{group}.{name} must be a number >= 0, got {value!r}")
+    for name in ("inertia_error", "friction_error"):
+        value = getattr(plant.drive_torque, name)
+        if not (isinstance(value, (int, float)) and math.isfinite(value) and value > -1):
+            raise ValueError(f"plant.drive_torque.{name} must be a number > -1 (the true "
+                             f"drive over the model's, less one), got {value!r}")
+    value = plant.load_cell.bandwidth
+    if not (isinstance(value, (int, float)) and math.isfinite(value) and value > 0):
+        raise ValueError(f"plant.load_cell.bandwidth must be a number > 0 Hz, got {value!r}")

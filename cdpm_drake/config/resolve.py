@@ -12,7 +12,7 @@ import numpy as np
 from cdpm_drake.config.checks import (check_controller, check_duration, check_dynamic_reels,
                                       check_finite, check_logistic_set, check_positive,
                                       check_safety, default_start)
-from cdpm_drake.config.plants import DynamicReels, SimulatedReels
+from cdpm_drake.config.plants import DynamicReels, SimulatedReels, check_tension_sensor
 from cdpm_drake.config.scenario import PairLogistic, Scenario, ScenarioError
 from cdpm_drake.config.yaml_io import is_number
 from cdpm_drake.kernels.plant.operators import CsvOperator, OperatorError, make_operator
@@ -75,7 +75,18 @@ def check_scenario(scenario: Scenario, source: str = "<scenario>") -> Robot:
     return resolve_scenario(scenario, source).robot
 
 
+# Scenario.method's values: the hard promise (the default), the paper's method.
+METHODS = ("promise", "paper")
+
+
 def _resolve(scenario: Scenario, source: str) -> ResolvedScenario:
+    if scenario.method not in METHODS:
+        raise ScenarioError(f"method must be one of {list(METHODS)} (promise: the paper's "
+                            f"Fig. 5 with the safety filter; paper: without it), got "
+                            f"{scenario.method!r}")
+    if scenario.method == "paper":
+        scenario = dataclasses.replace(scenario, safety_filter=dataclasses.replace(
+            scenario.safety_filter, enabled=False))
     robot = scenario_robot(scenario)
     check_positive(scenario.duration, "duration")
     check_positive(scenario.time_step, "time_step")
@@ -118,10 +129,18 @@ def _resolve(scenario: Scenario, source: str) -> ResolvedScenario:
             f"controller.length_gain must be a number >= 0 1/s and below 1 / time_step = "
             f"{1.0 / scenario.time_step:g} 1/s (0: the paper's open loop), got {gain!r}")
     check_controller(scenario.controller, robot, scenario.plant)
+    scale = scenario.controller.tension_damping.gain_scale
+    if not (is_number(scale) and math.isfinite(float(scale)) and float(scale) >= 0):
+        raise ScenarioError(f"controller.tension_damping.gain_scale must be a number >= 0 "
+                            f"(1: the derived gain), got {scale!r}")
     if scenario.wall_force.enabled:
         check_positive(scenario.wall_force.margin, "wall_force.margin")
         check_positive(scenario.wall_force.max_force, "wall_force.max_force")
     if isinstance(scenario.plant, DynamicReels):
+        try:
+            check_tension_sensor(scenario.plant)
+        except ValueError as e:
+            raise ScenarioError(str(e)) from None
         check_dynamic_reels(scenario, robot, defaulted=defaulted)
     elif not isinstance(scenario.plant, SimulatedReels):
         from cdpm_drake.hardware.canopen_config import CanopenReels, check_canopen_reels
@@ -185,14 +204,38 @@ def scenario_robot(scenario: Scenario) -> Robot:
         robot = load_robot(ref)
     except RobotError as e:
         raise ScenarioError(f"robot: {e}") from None
+    check_swaps(scenario.swaps)
     for k, swap in enumerate(scenario.swaps):
-        if len(swap) != 2:
-            raise ScenarioError(f"swaps[{k}] must be two cable numbers [i, j], got {swap!r}")
         try:
             robot = robot.with_swapped_attachments(int(swap[0]), int(swap[1]))
         except RobotError as e:
             raise ScenarioError(f"swaps[{k}] = {swap!r}: {e}") from None
     return robot
+
+
+def check_swaps(swaps) -> None:
+    """ScenarioError for swaps that do not swap: a cable with itself ([1, 1]), or a list whose
+    swaps undo each other for some cable ([[1, 3], [3, 1]]: the run would be unswapped while
+    the file says 1-3 is). Cable numbers 1-based; their range is the robot's to check."""
+    where = list(range(1 + max((int(c) for s in swaps if len(s) == 2 for c in s), default=0)))
+    named = {}
+    for k, swap in enumerate(swaps):
+        if len(swap) != 2:
+            raise ScenarioError(f"swaps[{k}] must be two cable numbers [i, j], got {swap!r}")
+        i, j = (int(c) for c in swap)
+        if i == j:
+            raise ScenarioError(f"swaps[{k}] = {list(swap)!r} swaps cable {i} with itself; "
+                                "give two different cables")
+        for c in (i, j):
+            named.setdefault(c, []).append(k)
+        if min(i, j) >= 1:
+            where[i], where[j] = where[j], where[i]
+    back = sorted(c for c in named if c >= 1 and where[c] == c)
+    if back:
+        ks = sorted({k for c in back for k in named[c]})
+        listed = ", ".join(f"swaps[{k}] = {list(swaps[k])!r}" for k in ks)
+        raise ScenarioError(f"{listed} undo each other: cable(s) {back} end where they "
+                            "started, so the run would not swap them; list each swap once")
 
 
 def scenario_operator(scenario: Scenario):

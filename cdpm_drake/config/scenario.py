@@ -125,6 +125,20 @@ class Sensor:
 
 
 @dataclasses.dataclass
+class TensionDamping:
+    """The tension damping block between the Jacobian mapping and the reels (issue 31): each
+    reel pays out cable in proportion to its measured tension's high-passed part, a damper in
+    series with its cable. Its gain and filter come from the robot's stiffness and mass and
+    the loop's delays (kernels/tension_damping.damping_gains), not from this file."""
+
+    # Off: the mapping's command goes to the reels unchanged.
+    enabled: bool = True
+    # The derived gain times this (1: the derivation's; a margin test raises it until the
+    # tensions diverge).
+    gain_scale: float = 1.0
+
+
+@dataclasses.dataclass
 class Controller:
     """Beyond the paper's Fig. 5: how the controller drives the reels."""
 
@@ -180,6 +194,9 @@ class Controller:
     # ticks at 5 N, 7 at 3-4 N; scripts/bench/adversarial_benchmark.py). 0 < tension_floor <=
     # min_tension.
     tension_floor: float = 4.0
+    # Damp the cables' ringing through the reels with the plant's measured tensions
+    # (systems/tension_damping.py; a plant without a tension sensor: nothing changes).
+    tension_damping: TensionDamping = dataclasses.field(default_factory=TensionDamping)
 
 
 # --- The promise made hard (beyond the paper) ---------------------------------------------
@@ -290,6 +307,12 @@ class Scenario:
     name: str = "unnamed"
     # What the run shows.
     description: str = ""
+    # Which controller runs: "promise" (the default), the paper's Fig. 5 with the safety filter
+    # that keeps every cable pair at or above d_min whatever the hand does (safety_filter:,
+    # with its kinetostatic force); "paper", the paper's method exactly: Fig. 5 without the
+    # filter, the logistic interference force alone keeping the pairs apart (it overrides
+    # safety_filter.enabled). The model monitor only watches and stays as configured.
+    method: str = "promise"
     # A built-in robot's name or a path to a robot YAML (relative to the scenario file).
     robot: str = "paper_7cable"
     # Cable pairs whose platform attachment points are swapped, 1-based (the paper swaps

@@ -21,8 +21,21 @@ def check_yaml_text(source: str, **where) -> None:
         raw = yaml_load(**where)
     except Exception as e:
         raise ScenarioError(f"{source}: not valid YAML: {e}") from None
+    if raw is None and "filename" in where:
+        raise ScenarioError(f"{source}: the file is empty (or only comments); a scenario is a "
+                            "mapping of fields, e.g. `robot: paper_7cable` "
+                            "(docs/scenario_reference.md lists them)")
     if raw is None:
         return
+    if not isinstance(raw, dict):
+        raise ScenarioError(f"{source}: a scenario is a mapping of fields (`field: value` "
+                            f"lines), got a YAML {type(raw).__name__}: {raw!r:.80}")
+    from cdpm_drake.text import duplicate_yaml_keys
+
+    twice = duplicate_yaml_keys(filename=where.get("filename"), data=where.get("data"))
+    if twice:
+        raise ScenarioError(f"{source}: the key {twice[0]}: write each key once (YAML would "
+                            "keep the last one and drop the first without a word)")
     try:
         check_yaml(raw, Scenario, "")
     except ScenarioError as e:

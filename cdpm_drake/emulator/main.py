@@ -54,6 +54,19 @@ from cdpm_drake.hardware.priority import set_realtime_priority
 from cdpm_drake.kernels.kinematics import cable_lengths
 
 
+def _port_number(text: str) -> int:
+    """--port's type: a UDP port, 0-65535, 0 picking a free one (argparse turns the error
+    into exit code 2)."""
+    try:
+        port = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"must be an integer 0-65535, got {text!r}") from None
+    if not 0 <= port <= 65535:
+        raise argparse.ArgumentTypeError(f"must be a UDP port 0-65535 (0: any free one), "
+                                         f"got {port}")
+    return port
+
+
 def build_parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(prog="cdpm-reel-emulator", description=__doc__,
                                 formatter_class=argparse.RawDescriptionHelpFormatter,
@@ -94,7 +107,7 @@ def build_parser() -> argparse.ArgumentParser:
     n = p.add_argument_group("network")
     n.add_argument("--address", default=None,
                    help="address to listen on (default: 127.0.0.1, or the scenario's)")
-    n.add_argument("--port", type=int, default=None,
+    n.add_argument("--port", type=_port_number, default=None,
                    help=f"UDP port to listen on (default: {DEFAULT_BRIDGE_PORT}, or the "
                    "scenario's)")
     n.add_argument("--controller", metavar="ADDRESS:PORT",

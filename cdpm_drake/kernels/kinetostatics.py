@@ -38,6 +38,25 @@ _jit = numba.njit(cache=True, error_model="numpy")
 FD_STEP_P = 1e-4
 
 
+def ringing_deceleration(robot, p, rows: int, swing: float) -> float:
+    """The largest step of the platform's acceleration (m/s^2) after which no cable's tension
+    swings by more than `swing` (N), at the level platform at p: a step of the acceleration
+    by da changes the cables' force by m da, which the tensions take up as W^+ m da
+    (the wrench matrix's first `rows` rows, minimum-norm) and, the platform's modes being
+    lightly damped, overshoot to twice that. Hence swing / (2 m max_i |W^+_i|) over the
+    directions (the rows of W^+'s force columns). Measured on paper_7cable's exp2 (dynamic
+    plant, no tension sensor): a braking onset of 1.1 m/s^2 took cable 2 from 6.6 to 0.53 N,
+    as this predicts (5.6 N per m/s^2); inf for a robot without mass."""
+    from cdpm_drake.kernels.tension import wrench_matrix
+
+    mass = float(robot.dynamics.mass)
+    W = wrench_matrix(robot, np.asarray(p, dtype=float))[:rows]
+    share = float(np.linalg.norm(np.linalg.pinv(W)[:, :3], axis=1).max())
+    if not (mass > 0.0 and share > 0.0):
+        return math.inf
+    return swing / (2.0 * mass * share)
+
+
 def wrench_rows(robot) -> int:
     """6 when the robot's wrench matrix at its workspace centre (level platform) has rank 6,
     else 3 (a platform the cables can only translate: its statics on the forces alone)."""

@@ -17,6 +17,7 @@ import numpy as np
 
 from cdpm_drake.config import ResolvedScenario, Scenario, ScenarioError, resolve_scenario
 from cdpm_drake.runs.run_scenario import write_run_scenario
+from cdpm_drake.text import format_number
 
 # Keys every log holds (load_log checks them).
 LOG_KEYS = ("time", "p", "F_H", "F_int", "F_wall", "F_d", "velocity_admittance", "velocity",
@@ -68,7 +69,34 @@ def load_log(path) -> dict:
     if missing:
         raise LogError(f"{str(path)!r} lacks the key(s) {missing!r} of docs/LOG_FORMAT.md; "
                        f"it holds {sorted(log)!r}")
+    # Every reader needs the rows to line up: a log cut or edited by hand is refused here,
+    # once, with its name, not by the first figure that reads the short key.
+    T = len(log["time"])
+    for key in PER_TICK_KEYS:
+        arr = np.asarray(log[key]) if key in log else None
+        if arr is not None and (arr.ndim == 0 or arr.shape[0] != T):
+            raise LogError(f"{str(path)!r}: log key {key!r} has shape {arr.shape!r}; expected "
+                           f"one row per tick ({T} rows, as 'time')")
     return log
+
+
+def nan_rows(log: Mapping, keys=("p", "F_H", "lengths")) -> list[str]:
+    """For each key of `keys` the log holds with NaN in some rows: a sentence naming the
+    key, how many rows and the first time (s). A reader that draws the log warns with them:
+    the rows are gaps in its figures, not data."""
+    out = []
+    t = np.asarray(log["time"], dtype=float).reshape(-1)
+    for key in keys:
+        if key not in log:
+            continue
+        arr = np.asarray(log[key], dtype=float)
+        bad = np.isnan(arr.reshape(arr.shape[0], -1)).any(axis=1) if arr.ndim else []
+        if np.any(bad):
+            first = int(np.argmax(bad))
+            when = f" (first at t = {t[first]:.3f} s)" if first < len(t) else ""
+            out.append(f"log key {key!r} is NaN on {int(np.sum(bad))} of {len(bad)} rows"
+                       f"{when}: those rows are gaps in the figures")
+    return out
 
 
 def check_keys(log: Mapping, needs, may_use=(), reader: str = "this reader") -> None:
@@ -171,6 +199,9 @@ def assemble_log(time_column, signals: dict, scenario: Scenario | ResolvedScenar
     if "tension_target" in log:  # tension control: its target's floor and ceiling
         log["controller_min_tension"] = np.array(float(scenario.controller.min_tension))
         log["controller_max_tension"] = np.array(float(scenario.controller.max_tension))
+    # The speed limit, m/s (the robot's or the scenario's): the summary tells a command held
+    # at it from one slowed below it while a margin is lost.
+    log["max_velocity"] = np.array(float(resolved.max_velocity))
     # The hard floor the safety filter keeps each pair at (d_min; logged whether or
     # not the filter ran, like d_l and d_u).
     if resolved.d_min is not None and len(resolved.d_min) == P:
@@ -280,7 +311,7 @@ def summary_rows(log: dict):
     T = len(log["time"])
 
     def mm(x):
-        return f"{1000 * float(x):.2f}" if np.isfinite(x) else "-"
+        return format_number(1000 * float(x)) if np.isfinite(x) else "-"
 
     for k, (i, j) in enumerate(log["pairs"]):
         active = log["active"][:, k]

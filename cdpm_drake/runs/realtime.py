@@ -292,6 +292,10 @@ def recover(run_dir) -> tuple[Path, dict]:
     run_dir = Path(run_dir)
     tick_path = run_dir / "ticks.bin"
     scenario_path = run_dir / "scenario.yaml"
+    if not run_dir.is_dir():
+        raise RecoverError(f"{str(run_dir)!r} " + ("is a file" if run_dir.exists() else
+                                                   "does not exist")
+                           + ": give a `cdpm run` folder (it holds ticks.bin and scenario.yaml)")
     for path in (tick_path, scenario_path):
         if not path.is_file():
             raise RecoverError(f"{str(run_dir)!r} has no {path.name} (a `cdpm run` folder "

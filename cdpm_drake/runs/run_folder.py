@@ -171,3 +171,14 @@ def _listing(p: Path, limit: int = 4) -> str:
     names = sorted(c.name for c in p.iterdir())
     shown = ", ".join(names[:limit]) + (", ..." if len(names) > limit else "")
     return f"holds {shown}"
+
+
+def overlay_tag(overlay_text) -> str:
+    """A run folder's tag for a --scenario-text overlay: "text-" and 6 hex digits of its
+    hash ("" without one), so runs of one scenario under different overlays are told apart
+    in runs/<name>/ (the overlay itself is in the folder's scenario.yaml)."""
+    import hashlib
+
+    if not overlay_text or overlay_text.strip() in ("", "{}"):  # an overlay changing nothing
+        return ""
+    return "text-" + hashlib.sha1(overlay_text.encode("utf-8")).hexdigest()[:6]

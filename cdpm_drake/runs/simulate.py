@@ -105,7 +105,13 @@ def run_variant(scenario: Scenario | ResolvedScenario) -> tuple[list[str], str]:
     kinematic plant and the paper's translating controller)."""
     scenario = scenario.scenario if isinstance(scenario, ResolvedScenario) else scenario
     plant = scenario.plant
-    words, tags = [], []
+    # First: which controller, the paper's method or the hard promise (Scenario.method).
+    if scenario.method == "paper":
+        words, tags = ["the paper's method: no safety filter"], ["paper"]
+    elif scenario.safety_filter.enabled:
+        words, tags = ["the hard promise: safety filter on"], []
+    else:
+        words, tags = ["safety filter off"], ["no-filter"]
     if isinstance(plant, DynamicReels):
         words.append("dynamic plant")
         tags.append("dynamic")

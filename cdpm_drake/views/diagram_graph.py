@@ -48,7 +48,7 @@ def render_svg(dot_text: str) -> str:
 
 
 def write_diagrams(diagrams: dict, out_dir, *, svg: bool = True,
-                   max_depth: int | None = None) -> list[Path]:
+                   max_depth: int | None = None, caption: str | None = None) -> list[Path]:
     """Write NAME.dot and NAME_overview.dot (and their .svg) for each {NAME: diagram}: Drake's
     graphviz at full depth (every sub-diagram expanded, the plant's too; `max_depth` levels
     when given) and the readable top level (overview_graphviz); returns the paths."""
@@ -57,7 +57,7 @@ def write_diagrams(diagrams: dict, out_dir, *, svg: bool = True,
     paths = []
     for name, diagram in diagrams.items():
         for stem, dot in ((name, stable_graphviz(diagram, max_depth=max_depth)),
-                          (f"{name}_overview", overview_graphviz(diagram))):
+                          (f"{name}_overview", overview_graphviz(diagram, caption=caption))):
             path = out / f"{stem}.dot"
             path.write_text(dot)
             paths.append(path)
@@ -127,7 +127,7 @@ def _port_row(names, prefix: str, used=None) -> str:
             f'CELLSPACING="0" CELLPADDING="2"><TR>{cells}</TR></TABLE></TD></TR>')
 
 
-def overview_graphviz(diagram, title: str | None = None) -> str:
+def overview_graphviz(diagram, title: str | None = None, caption: str | None = None) -> str:
     """A readable graphviz of a diagram's top level, derived from the built diagram: one node
     per top-level system (its name, its class without the module; a sub-diagram such as the
     simulated plant collapsed into one node, and so is a block whose systems were added flat,
@@ -137,7 +137,8 @@ def overview_graphviz(diagram, title: str | None = None) -> str:
     ones in use. A diagram's fused wiring (`diagram.fused_wiring`: one Selector that routes
     pieces of signals) is drawn as the connections it makes (with `label_edges`, an edge
     carrying a piece of one signal is labelled with the piece's name). Laid out top to
-    bottom so that it fits a page's width."""
+    bottom so that it fits a page's width. `caption`: a line drawn under the graph (which
+    scenario and robot it was built for: the blocks do not show the parameters)."""
     systems = list(diagram.GetSystems())
     by_name = {s.get_name(): k for k, s in enumerate(systems)}
     flat = getattr(diagram, "flat_blocks", {})
@@ -264,7 +265,8 @@ def overview_graphviz(diagram, title: str | None = None) -> str:
 
     lines = [f'digraph "{_html(title or diagram.get_name())}" {{',
              '  graph [rankdir=TB, nodesep=0.25, ranksep=0.35, fontname="Helvetica", '
-             'fontsize=11];',
+             'fontsize=11' + (f', label="{_html(caption)}", labelloc=b' if caption else "")
+             + '];',
              '  node [shape=plaintext, fontname="Helvetica", fontsize=10, margin=0];',
              '  edge [fontname="Helvetica", fontsize=9, arrowsize=0.6, color="#444444"];']
     for j, (name, kind, inputs, outputs, shaded) in enumerate(nodes):

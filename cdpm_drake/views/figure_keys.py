@@ -28,8 +28,10 @@ _NEEDS = {
 # tension-controlled run on the robot (no plant's truth there) are the controller's estimate.
 _OR_NEEDS = {"tensions": ("time", "tension_estimate")}
 # Keys a figure draws when the log holds them (a full-pose or tension-controlled run's).
-_MAY_USE = {"pose_error": ("rpy",), "tensions": ("tensions", "slack", "tension_estimate", "t_star"),
-            "safety": ("kappa", "t_star_hand", "pair_margin")}
+_MAY_USE = {"pose_error": ("rpy",), "trajectory": ("p_true",),
+            "tensions": ("tensions", "slack", "tension_estimate", "tension_target", "t_star"),
+            "safety": ("kappa", "t_star_hand", "pair_margin", "pair_distances_true",
+                       "crossed_true")}
 # Figures drawn only for logs that hold their keys.
 OPTIONAL = ("timing", "tensions", "pose_error", "safety")
 

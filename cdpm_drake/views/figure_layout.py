@@ -3,7 +3,8 @@ figure's width) and the mark of a run that did not complete.
 
 A run that ended on a fault (log keys `ending`, `fault_time`, `fault_message`) has the fault
 marked in every figure: a vertical line with its label on every time axis (mark_fault_time),
-a marker on the trajectory, its message as the title's last lines (suptitle). An interrupted
+a marker on the trajectory, its message as the title's last lines (suptitle). Stretches of
+ticks (a lost margin, an infinite t*) are shaded with their times (shade_spans). An interrupted
 run is marked the same way in grey. Logs without those keys (older logs) read as completed.
 """
 
@@ -103,6 +104,31 @@ def _free_top(ax, when: float, text) -> float:
         if not np.any((taken <= top + pad) & (taken >= top - height - pad)):
             return float(top)
     return 0.97
+
+
+def spans(mask, t) -> list[tuple[float, float]]:
+    """(first, last) time (s) of each run of True ticks in `mask`."""
+    m = np.concatenate([[False], np.asarray(mask, dtype=bool), [False]])
+    edges = np.flatnonzero(np.diff(m.astype(int)))
+    return [(float(t[a]), float(t[b - 1])) for a, b in zip(edges[::2], edges[1::2])]
+
+
+def spans_text(runs, n: int) -> str:
+    """'10.26-11.56 s' (one span), '0.10-0.20 s, 0.50-0.52 s' (two), '... and k more'."""
+    shown = ", ".join(f"{a:.2f}-{b:.2f} s" for a, b in runs[:2])
+    more = f" and {len(runs) - 2} more" if len(runs) > 2 else ""
+    return f"{shown}{more} ({n} tick{'s' if n != 1 else ''})"
+
+
+def shade_spans(ax, mask, t, label: str, gid: str, color: str, ymin=0.0, ymax=1.0,
+                **style) -> None:
+    """An axvspan over each run of True ticks of `mask` (half a tick wider on each side, so a
+    single tick shows), the first one labelled `label`, each with `gid`."""
+    half = 0.5 * float(np.median(np.diff(t))) if len(t) > 1 else 0.0
+    for k, (a, b) in enumerate(spans(mask, t)):
+        patch = ax.axvspan(a - half, b + half, ymin=ymin, ymax=ymax, color=color,
+                           linewidth=0, label=label if k == 0 else "_", **style)
+        patch.set_gid(gid)
 
 
 def suptitle(fig: Figure, log: Mapping, text: str) -> None:

@@ -113,7 +113,8 @@ def motion_limits(p, min_span: float = 0.05, margin: float = 0.15) -> np.ndarray
 
 def figure_trajectory(log: Mapping) -> Figure:
     """Platform path p (m) in 3D (Figs. 9, 15), two panels: the motion, zoomed to the path,
-    with the ticks where a pair was within d_u (dots, under the path) or crossed (crosses); and
+    with the ticks where a pair was within d_u (dots, under the path) or crossed (crosses), and
+    a dynamic plant's true path p_true (dashed) beside the controller's estimate; and
     the robot as context: reels A_i, workspace box, the path, the zoomed region and the cables
     at the first interference tick, those of the active pairs in red. One legend below the
     panels lists only what was drawn."""
@@ -151,8 +152,18 @@ def figure_trajectory(log: Mapping) -> Figure:
         proxy = Line2D([], [], linestyle="none", marker="o", markersize=6, color="tab:orange",
                        markeredgewidth=0, label=dots.get_label())
         keep(proxy.get_label(), proxy)
-    path, = zoom.plot(*p.T, color="tab:blue", linewidth=1.8, zorder=3, label="platform path p")
+    truth = (np.asarray(log["p_true"], dtype=float).reshape(-1, 3) if "p_true" in log
+             else None)
+    path, = zoom.plot(*p.T, color="tab:blue", linewidth=1.8, zorder=3,
+                      label="platform path p" if truth is None else
+                      "platform path p (controller's estimate)")
+    path.set_gid("path")
     keep(path.get_label(), path)
+    if truth is not None:  # a dynamic plant's: where the platform really went
+        true_path, = zoom.plot(*truth.T, color="black", linewidth=1.0, linestyle="--",
+                               zorder=3.5, label="true path p_true (dynamic plant)")
+        true_path.set_gid("true path")
+        keep(true_path.get_label(), true_path)
     if cross.any():
         marks, = zoom.plot(*p[cross].T, linestyle="none", marker="x", markersize=7,
                            color="tab:red", zorder=4, label="a pair crossed")
@@ -172,10 +183,15 @@ def figure_trajectory(log: Mapping) -> Figure:
                           color=color, zorder=6, label=f"{gid} (t = {t[k_fault]:.3f} s)")
             at.set_gid(gid)
         keep(at.get_label(), at)
-    limits = motion_limits(p)
+    limits = motion_limits(p if truth is None else np.vstack([p, truth]))
     zoom.set(xlim=limits[0], ylim=limits[1], zlim=limits[2])
     zoom.set_box_aspect((1, 1, 1))
-    zoom.set_title(f"The motion ({1000 * (limits[0, 1] - limits[0, 0]):.0f} mm cube)",
+    apart = ""
+    if truth is not None and len(p):
+        error = np.linalg.norm(p - truth, axis=1)
+        if np.isfinite(error).any():
+            apart = f"; the estimate at most {1000 * np.nanmax(error):.2f} mm from the truth"
+    zoom.set_title(f"The motion ({1000 * (limits[0, 1] - limits[0, 0]):.0f} mm cube{apart})",
                    fontsize="medium")
 
     # The robot panel: the whole robot as context.

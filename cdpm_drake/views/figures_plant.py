@@ -4,16 +4,24 @@ run's estimate, target and t*); the controller's pose estimate against the true 
 dynamic plant's log). Lengths in m, speeds in m/s, tensions in N, time in s; cables 1..m.
 """
 
+import textwrap
 from collections.abc import Mapping
 
 import numpy as np
 from matplotlib.figure import Figure
+from matplotlib.lines import Line2D
 
 from cdpm_drake.views.figure_keys import check_figure
-from cdpm_drake.views.figure_layout import log_title, mark_fault_time, suptitle
+from cdpm_drake.views.figure_layout import (log_title, mark_fault_time, shade_spans, spans,
+                                           spans_text, suptitle)
 
 # The tension target's floor and ceiling: neither a cable's colour nor the estimate's grey.
 LIMIT_COLOR = "darkgoldenrod"
+# The ceiling is drawn when a tension reaches this share of it, else named in a note: a line
+# far above the tensions would squash them to the panels' bottoms.
+SHOW_CEILING_FROM = 0.9
+# Legend labels beside an axis are wrapped to this many characters (the axis keeps its width).
+LEGEND_WIDTH = 40
 
 
 # --- cable lengths and reel speeds ----------------------------------------------------------------
@@ -60,84 +68,173 @@ def figure_cables(log: Mapping) -> Figure:
 
 
 def figure_tensions(log: Mapping) -> Figure:
-    """Each cable's tension (N) vs time (s): the dynamic plant's true tensions, and below one
-    row per cable (1..m) with a mark at every tick where it was slack, so that cables slack at
-    the same time never hide each other. A tension-controlled run's log adds, in the same
-    colours, the controller's estimate of each tension (dashed; alone on the robot, where the
-    log has no truth), the target's floor and ceiling (controller.min_tension, max_tension:
-    log keys controller_min_tension, controller_max_tension) and t*, the largest achievable
-    minimum tension at the estimated pose (where it is below the floor, the floor is
-    lowered to it; where it is +inf, not drawn)."""
+    """Each cable's tension (N) vs time (s). A dynamic plant's log without tension control:
+    the true tensions on one axis, and below one row per cable (1..m) with a mark at every
+    tick where it was slack, so that cables slack at the same time never hide each other. A
+    tension-controlled run's log: one panel per cable (tensions_per_cable)."""
     check_figure(log, "tensions")
+    if "tension_estimate" in log:
+        return tensions_per_cable(log)
     t = np.asarray(log["time"], dtype=float)
-    truth = "tensions" in log and "slack" in log
-    estimate = (np.asarray(log["tension_estimate"], dtype=float).reshape(len(t), -1)
-                if "tension_estimate" in log else None)
-    tensions = (np.asarray(log["tensions"], dtype=float).reshape(len(t), -1) if truth
-                else estimate)
+    tensions = np.asarray(log["tensions"], dtype=float).reshape(len(t), -1)
     m = tensions.shape[1]
     fig = Figure(figsize=(9, 5.5 + 0.12 * m), layout="constrained")
-    if truth:
-        ax, rows = fig.subplots(2, 1, sharex=True,
-                                gridspec_kw={"height_ratios": [3.0, 0.6 + 0.12 * m]})
-    else:
-        ax, rows = fig.subplots(), None
+    ax, rows = fig.subplots(2, 1, sharex=True,
+                            gridspec_kw={"height_ratios": [3.0, 0.6 + 0.12 * m]})
     for i in range(1, m + 1):
-        style = cable_style(i)
-        if truth:
-            ax.plot(t, tensions[:, i - 1], linewidth=1.0, label=f"cable {i}", **style)
-        if estimate is not None:
-            line, = ax.plot(t, estimate[:, i - 1], color=style["color"],
-                            linewidth=0.9 if truth else 1.0,
-                            linestyle="--" if truth else style["linestyle"],
-                            label="_" if truth else f"cable {i} (estimate)")
-            line.set_gid(f"estimate cable {i}")
-    if estimate is not None:
-        if truth:  # one legend entry for the dashes of every cable
-            ax.plot([], [], color="0.3", linestyle="--", linewidth=0.9,
-                    label="controller's estimate (dashed)")
-        for key, style, what in (("controller_min_tension", "--", "floor min_tension"),
-                                 ("controller_max_tension", "-.", "ceiling max_tension")):
-            if key in log and np.isfinite(float(log[key])):
-                value = float(log[key])
-                ax.axhline(value, color=LIMIT_COLOR, linestyle=style, linewidth=1.4,
-                           label=f"{what} = {value:g} N").set_gid(key)
-        if "t_star" in log:
-            t_star = np.asarray(log["t_star"], dtype=float).reshape(len(t), -1)[:, 0]
+        ax.plot(t, tensions[:, i - 1], linewidth=1.0, label=f"cable {i}", **cable_style(i))
+    ax.set_ylabel("tension (N)")
+    _slack_rows(rows, log, t, m)
+    for a in (ax, rows):
+        a.grid(True, alpha=0.3)
+        mark_fault_time(a, log)
+    ax.legend(loc="upper left", bbox_to_anchor=(1.01, 1.0), fontsize="small")
+    suptitle(fig, log, f"{log_title(log)}\nCable tensions (dynamic plant)")
+    return fig
+
+
+def _slack_rows(rows, log: Mapping, t, m: int) -> None:
+    """One row per cable (1 on top) with a mark at each tick it was slack."""
+    slack = np.asarray(log["slack"]).reshape(len(t), -1) > 0.5
+    for i in range(1, m + 1):
+        n = int(slack[:, i - 1].sum())
+        if n:
+            ticks, = rows.plot(t[slack[:, i - 1]], np.full(n, i), "|",
+                               color=cable_style(i)["color"], markersize=7,
+                               label=f"cable {i} slack ({n} ticks)")
+            ticks.set_gid(f"slack cable {i}")
+    rows.set_yticks(range(1, m + 1), [str(i) for i in range(1, m + 1)])
+    rows.set_ylim(m + 0.5, 0.5)  # cable 1 on top, as in the legend
+    rows.set_ylabel("slack\n(cable)")
+    if not slack.any():
+        rows.text(0.5, 0.5, "no cable went slack", ha="center", va="center",
+                  transform=rows.transAxes, color="0.4")
+
+
+def floor_used(log: Mapping, T: int) -> np.ndarray | None:
+    """The target's floor each tick (N): its weakest cable's target, `tension_target`'s
+    smallest (controller.min_tension where the floor held, lower where the pose or the
+    ceiling allow no more, never below controller.tension_floor); None without a target."""
+    if "tension_target" not in log:
+        return None
+    return np.asarray(log["tension_target"], dtype=float).reshape(T, -1).min(axis=1)
+
+
+def tensions_per_cable(log: Mapping) -> Figure:
+    """A tension-controlled run (docs/LOG_FORMAT.md): one panel per cable (1..m), in that
+    cable's colour, with the plant's true tension (solid, a dynamic plant's), the
+    controller's estimate (dashed) and its target (dotted), and the target's floor as used
+    each tick; below, the floor beside t*, the largest achievable minimum tension at the
+    estimated pose (shaded where +inf), and on a dynamic plant the slack rows."""
+    t = np.asarray(log["time"], dtype=float)
+    T = len(t)
+    estimate = np.asarray(log["tension_estimate"], dtype=float).reshape(T, -1)
+    m = estimate.shape[1]
+    series = {"true tension (plant)": (np.asarray(log["tensions"], dtype=float).reshape(T, -1)
+                                       if "tensions" in log else None, "-", 1.3),
+              "controller's estimate": (estimate, "--", 1.0),
+              "target": (np.asarray(log["tension_target"], dtype=float).reshape(T, -1)
+                         if "tension_target" in log else None, ":", 1.2)}
+    floor = floor_used(log, T)
+    grid_rows = (m + 1) // 2
+    truth = "slack" in log and series["true tension (plant)"][0] is not None
+    fig = Figure(figsize=(11, 2.0 * grid_rows + 2.6 + (0.8 + 0.1 * m if truth else 0.0)),
+                 layout="constrained")
+    ratios = [1.0] * grid_rows + [1.1] + ([0.4 + 0.06 * m] if truth else [])
+    gs = fig.add_gridspec(len(ratios), 2, height_ratios=ratios)
+    first = fig.add_subplot(gs[0, 0])
+    panels = [first] + [fig.add_subplot(gs[k // 2, k % 2], sharex=first, sharey=first)
+                        for k in range(1, m)]
+    below = fig.add_subplot(gs[grid_rows, :], sharex=first)
+    rows = fig.add_subplot(gs[grid_rows + 1, :], sharex=first) if truth else None
+    ceiling = _ceiling(log, [v for v, _, _ in series.values() if v is not None])
+    for i, ax in enumerate(panels, start=1):
+        color = cable_style(i)["color"]
+        for what, (values, style, width) in series.items():
+            if values is not None:
+                line, = ax.plot(t, values[:, i - 1], color=color, linestyle=style,
+                                linewidth=width, label=what)
+                line.set_gid(f"{what} cable {i}")
+        if floor is not None:
+            ax.plot(t, floor, color=LIMIT_COLOR, linewidth=1.0, gid="floor used")
+        if ceiling is not None:
+            ax.axhline(ceiling, color=LIMIT_COLOR, linestyle="-.", linewidth=1.0,
+                       gid="controller_max_tension")
+        ax.set_title(f"cable {i}", fontsize="small", pad=2)
+        ax.tick_params(labelbottom=False)
+    for ax in panels[::2]:
+        ax.set_ylabel("tension (N)")
+    _floor_and_t_star(below, log, t, floor, ceiling)
+    if rows is not None:
+        _slack_rows(rows, log, t, m)
+    (rows or below).set_xlabel("time (s)")
+    for a in panels + [below] + ([rows] if rows is not None else []):
+        a.grid(True, alpha=0.3)
+        mark_fault_time(a, log)
+    _tension_legend(fig, series, floor is not None, ceiling)
+    what = ("the plant's (solid), the controller's estimate (dashed) and target (dotted)"
+            if truth else "the controller's estimate (dashed) and target (dotted)")
+    suptitle(fig, log, f"{log_title(log)}\nCable tensions per cable: {what}; the target's "
+             "floor as used and t*")
+    return fig
+
+
+def _ceiling(log: Mapping, values) -> float | None:
+    """controller.max_tension when the tensions come near it (SHOW_CEILING_FROM of it), else
+    None."""
+    if "controller_max_tension" not in log:
+        return None
+    ceiling = float(log["controller_max_tension"])
+    finite = [v[np.isfinite(v)] for v in values]
+    top = max((float(v.max()) for v in finite if v.size), default=0.0)
+    return ceiling if np.isfinite(ceiling) and top >= SHOW_CEILING_FROM * ceiling else None
+
+
+def _floor_and_t_star(ax, log: Mapping, t, floor, ceiling) -> None:
+    """The target's floor as used each tick beside t* at the estimated pose (N), with what
+    the floor was set to (controller.min_tension) and the ceiling named."""
+    lo = float(log["controller_min_tension"]) if "controller_min_tension" in log else None
+    if floor is not None:
+        text = f"target's floor as used (its weakest cable): lowest {floor.min():.2f} N"
+        if lo is not None and np.isfinite(lo):
+            text += f", set to min_tension = {lo:g} N"
+        ax.plot(t, floor, color=LIMIT_COLOR, linewidth=1.4, label=text, gid="floor used")
+    if "t_star" in log:
+        t_star = np.asarray(log["t_star"], dtype=float).reshape(len(t), -1)[:, 0]
+        if np.isfinite(t_star).any():
             shown = np.where(np.isfinite(t_star), t_star, np.nan)
-            line, = ax.plot(t, shown, color="black", linewidth=1.6, alpha=0.8,
+            line, = ax.plot(t, shown, color="black", linewidth=1.2,
                             label="t* at the estimated pose")
             line.set_gid("t_star")
+        inf = t_star == np.inf
+        if inf.any():
+            shade_spans(ax, inf, t, "t* = +inf (an internal force raises every tension): "
+                        + spans_text(spans(inf, t), int(inf.sum())), "t_star +inf", "0.5",
+                        ymin=0.88, ymax=1.0, alpha=0.35, hatch="//")
+    if "controller_max_tension" in log and ceiling is None:
+        ax.set_title(f"ceiling max_tension = {float(log['controller_max_tension']):g} N: "
+                     "above the cables' panels", loc="right", fontsize="small",
+                     color=LIMIT_COLOR).set_gid("controller_max_tension")
     ax.set_ylabel("tension (N)")
-    if rows is not None:
-        slack = np.asarray(log["slack"]).reshape(len(t), -1) > 0.5
-        for i in range(1, m + 1):
-            n = int(slack[:, i - 1].sum())
-            if n:
-                ticks, = rows.plot(t[slack[:, i - 1]], np.full(n, i), "|",
-                                   color=cable_style(i)["color"], markersize=7,
-                                   label=f"cable {i} slack ({n} ticks)")
-                ticks.set_gid(f"slack cable {i}")
-        rows.set_yticks(range(1, m + 1), [str(i) for i in range(1, m + 1)])
-        rows.set_ylim(m + 0.5, 0.5)  # cable 1 on top, as in the legend
-        rows.set_ylabel("slack\n(cable)")
-        rows.set_xlabel("time (s)")
-        if not slack.any():
-            rows.text(0.5, 0.5, "no cable went slack", ha="center", va="center",
-                      transform=rows.transAxes, color="0.4")
-    else:
-        ax.set_xlabel("time (s)")
-    for a in (ax, rows):
-        if a is not None:
-            a.grid(True, alpha=0.3)
-            mark_fault_time(a, log)
-    ax.legend(loc="upper left", bbox_to_anchor=(1.01, 1.0), fontsize="small")
-    what = ("Cable tensions (dynamic plant)" if estimate is None else
-            "Cable tensions: the plant's (solid) and the controller's estimate (dashed), the "
-            "target's floor and ceiling, t*" if truth else
-            "Cable tensions as the controller estimates them, the target's floor and ceiling, t*")
-    suptitle(fig, log, f"{log_title(log)}\n{what}")
-    return fig
+    handles, labels = ax.get_legend_handles_labels()
+    if handles:
+        ax.legend(handles, [textwrap.fill(text, LEGEND_WIDTH) for text in labels],
+                  loc="upper left", bbox_to_anchor=(1.01, 1.0), fontsize="small")
+
+
+def _tension_legend(fig, series, floor: bool, ceiling) -> None:
+    """One legend for the cable panels: each series' style, in grey (every cable has its own
+    colour), only for what is drawn."""
+    handles = [Line2D([], [], color="0.3", linestyle=style, linewidth=width, label=what)
+               for what, (values, style, width) in series.items() if values is not None]
+    if floor:
+        handles.append(Line2D([], [], color=LIMIT_COLOR, linewidth=1.0,
+                              label="target's floor as used"))
+    if ceiling is not None:
+        handles.append(Line2D([], [], color=LIMIT_COLOR, linestyle="-.", linewidth=1.0,
+                              label=f"ceiling max_tension = {ceiling:g} N"))
+    fig.legend(handles=handles, loc="outside lower center", ncol=len(handles),
+               fontsize="small")
 
 
 def pose_model(log: Mapping) -> str:

@@ -8,7 +8,8 @@ pitch and yaw of an orientation (`rpy_true_roll [rad]`); a key with one value pe
 one column (`t_star [N]`). Flags are 0 or 1 (`[0/1]`), status codes integers labelled with
 their meaning, NaN an empty cell, floats in the shortest form that reads back exactly. The
 per-run constants (robot geometry, logistic parameters, how the run ended) stay in log.npz.
-No Drake.
+COLUMNS and RUN_CONSTANTS are the one table of every key's unit (unit_of), which the MATLAB
+and MCAP exports read too. No Drake.
 """
 
 import csv
@@ -36,12 +37,14 @@ COLUMNS = {
     "p": ("m", "xyz"),
     "F_H": ("N", "xyz"),
     "F_measured": ("N", "xyz"),
+    "tension_measured": ("N", "cables"),
     "F_int": ("N", "xyz"),
     "F_wall": ("N", "xyz"),
     "F_d": ("N", "xyz"),
     "velocity_admittance": ("m/s", "xyz"),
     "velocity": ("m/s", "xyz"),
     "reel_velocity": ("m/s", "cables"),
+    "reel_velocity_damping": ("m/s", "cables"),
     "lengths": ("m", "cables"),
     "lengths_commanded": ("m", "cables"),
     "pair_distances": ("m", "pairs"),
@@ -76,10 +79,31 @@ COLUMNS = {
     "rpy_true": ("rad", "rpy"),
     "pair_distances_true": ("m", "pairs"),
     "crossed_true": ("0/1", "pairs"),
+    # Issue 31: the sensed tensions (NaN where the plant has no sensor) and the tension
+    # damping's part of reel_velocity.
+    "tension_measured": ("N", "cables"),
+    "reel_velocity_damping": ("m/s", "cables"),
+}
+# The per-run constants (docs/LOG_FORMAT.md), their units: "-" a number without one (cable
+# numbers) or text.
+RUN_CONSTANTS = {
+    "pairs": "-", "d_l": "m", "d_u": "m", "F_u": "N", "eps": "N", "d_min": "m",
+    "F_max": "N", "max_velocity": "m/s", "reels": "m", "attachments": "m",
+    "workspace_lower": "m", "workspace_upper": "m", "robot_name": "-", "scenario_name": "-",
+    "ending": "-", "fault_time": "s", "fault_message": "-", "watchdog_limit": "s",
+    "controller_min_tension": "N", "controller_max_tension": "N",
 }
 _PARTS = {"xyz": ("x", "y", "z"), "rpy": ("roll", "pitch", "yaw")}
 _INTEGERS = ("0/1", TENSION_STATUS, CABLE_NUMBER, FILTER_STATUS, FILTER_BINDING,
              MODEL_STATUS)
+
+
+def unit_of(key: str) -> str | None:
+    """The unit of a log key as the exports write it (a status code's meaning, 0/1 for a
+    flag); None for a key docs/LOG_FORMAT.md does not list."""
+    if key in COLUMNS:
+        return COLUMNS[key][0]
+    return RUN_CONSTANTS.get(key)
 
 
 def csv_columns(log: Mapping) -> list[tuple[str, np.ndarray]]:

@@ -18,7 +18,8 @@ from matplotlib.figure import Figure
 
 from cdpm_drake.runs.sweep import METRICS, UNIT_SCALE, field_axis, metric_value, swept_fields
 
-# What each metric is, for its axis (METRICS has the unit).
+# What each metric is, for its axis and title (METRICS has the unit); every numeric metric
+# has one, so no title shows a raw column name.
 METRIC_NAMES = {
     "min_distance": "closest approach of any pair",
     "time_below_d_l": "time any pair was below d_l",
@@ -28,10 +29,25 @@ METRIC_NAMES = {
     "peak_speed": "peak platform speed",
     "operator_effort": "operator effort, integral of |F_H|",
     "limit_time": "time the limits acted",
+    "min_distance_true": "true closest approach of any pair",
+    "crossings_true": "pairs that truly crossed",
+    "slack_ticks": "ticks with a slack cable",
+    "min_tension": "smallest cable tension",
+    "max_rotation": "largest platform rotation",
     "sim_s": "simulated time",
     "wall_s": "wall time",
     "rtf": "real-time factor",
 }
+# The lines of the metric against a field, one per value of the other field, often lie on
+# top of each other (F_u = 1..4 N give the same distance at every d_u): each its own marker
+# and dash, hollow, the first drawn widest and largest so that the later ones on top leave it
+# seen (coinciding points read as rings inside each other).
+GROUP_MARKERS = ("o", "s", "^", "D", "v", "P", "X", "*")
+GROUP_STYLES = ("-", "--", "-.", ":")
+# The largest marker (pt) and the step down per line.
+GROUP_MARKER_SIZE, GROUP_MARKER_STEP = 10.0, 1.0
+# At most this many Pareto points are listed in the key beside the plot.
+KEY_LINES = 25
 
 def _short(field: str) -> str:
     """A field's label without its unit or "every pair", for legends and annotations."""
@@ -170,7 +186,12 @@ def figure_metric_vs_axis(columns, rows, metric, field) -> Figure:
                 hi.append(float(np.max(vals)))
         if not px:
             continue
-        line, = ax.plot(px, mean, marker="o",
+        k = groups.index(g)
+        line, = ax.plot(px, mean, marker=GROUP_MARKERS[k % len(GROUP_MARKERS)],
+                        linestyle=GROUP_STYLES[k % len(GROUP_STYLES)],
+                        markersize=max(GROUP_MARKER_SIZE - GROUP_MARKER_STEP * k, 3.0),
+                        linewidth=max(2.4 - 0.3 * k, 1.0), zorder=2.0 + 0.01 * k,
+                        markerfacecolor="none", markeredgewidth=1.5,
                         label=f"{_short(group)} = {_value_text(group, g)}" if group else "mean")
         if any(h > low for h, low in zip(hi, lo)):
             ax.fill_between(px, lo, hi, alpha=0.2, color=line.get_color(), linewidth=0)
@@ -179,8 +200,8 @@ def figure_metric_vs_axis(columns, rows, metric, field) -> Figure:
     ax.set_xlabel(x_label)
     ax.set_ylabel(label)
     seeds = len({r["random_seed"] for r in rows})
-    ax.set_title(f"{label.split(' (')[0]} against {_short(field)}"
-                 + (f" (band: min to max over {seeds} seeds)" if seeds > 1 else ""))
+    ax.set_title(f"{label} against {x_label}"
+                 + (f"\n(band: min to max over {seeds} seeds)" if seeds > 1 else ""))
     if group:
         ax.legend(loc="center left", bbox_to_anchor=(1.01, 0.5), fontsize=8)
     ax.grid(True, alpha=0.3)
@@ -201,12 +222,15 @@ def pareto_front(rows, x="operator_effort", y="min_distance"):
 
 
 def figure_pareto(columns, rows) -> Figure:
-    """min_distance (larger is better) against operator_effort (smaller is better)."""
+    """min_distance (larger is better) against operator_effort (smaller is better): every run
+    a grey dot, the Pareto front a red line whose points are numbered 1.. from the least
+    effort, each number placed where it overlaps no other number, point or the frame
+    (place_labels), and what each number's run swept listed beside the plot."""
     x, y = "operator_effort", "min_distance"
     sx, lx = _scaled(x)
     sy, ly = _scaled(y)
     fields = swept_fields(columns)
-    fig = Figure(figsize=(7.5, 5.0), layout="constrained")
+    fig = Figure(figsize=(9.5, 5.0), layout="constrained")
     ax = fig.add_subplot()
     pts = _ok(_ok(rows, x), y)
     ax.scatter([sx * metric_value(r, x) for r in pts], [sy * metric_value(r, y) for r in pts],
@@ -215,42 +239,63 @@ def figure_pareto(columns, rows) -> Figure:
     fx = [sx * metric_value(r, x) for r in front]
     fy = [sy * metric_value(r, y) for r in front]
     ax.plot(fx, fy, color="tab:red", marker="o", label="Pareto front")
-    labels = []
-    for k, (r, px, py) in enumerate(zip(front, fx, fy)):
-        text = ", ".join(f"{_short(f)} {_value_text(f, r[f])}" for f in fields) or r["run"]
-        # Alternate above and below: neighbours on the front often sit close together.
-        labels.append(ax.annotate(text, (px, py), textcoords="offset points", fontsize=7,
-                                  xytext=(6, 6) if k % 2 == 0 else (6, -12),
-                                  annotation_clip=False))
+    labels = [ax.annotate(str(k), (px, py), textcoords="offset points", fontsize=8,
+                          xytext=(5, 5), annotation_clip=False, gid="front label")
+              for k, (px, py) in enumerate(zip(fx, fy), start=1)]
+    key = [f"{k}: " + (", ".join(f"{_short(f)} {_value_text(f, r[f])}" for f in fields)
+                       or r["run"]) for k, r in enumerate(front, start=1)]
+    if len(key) > KEY_LINES:
+        key = key[:KEY_LINES - 1] + [f"... and {len(key) - KEY_LINES + 1} more"]
+    if key:
+        ax.text(1.02, 1.0, "The front's runs\n" + "\n".join(key), transform=ax.transAxes,
+                va="top", ha="left", fontsize=7, gid="front key")
     ax.set_xlabel(f"{lx}, smaller is better")
     ax.set_ylabel(f"{ly}, larger is better")
     ax.set_title("Keeping the cables apart against fighting the operator")
     ax.legend(loc="lower right")
     ax.grid(True, alpha=0.3)
-    _keep_inside(fig, ax, labels)
+    place_labels(fig, ax, labels)
     return fig
 
 
-def _keep_inside(fig, ax, labels) -> None:
-    """Move each point's label to the other side of its point where it would run over the
-    axes' frame (the front's last point is often the rightmost run, its best the topmost)."""
+# Where a point's number may go, in points from the point: the nearest first.
+LABEL_OFFSETS = [(dx, dy) for r in (5, 10, 16) for dx, dy in
+                 ((r, r), (r, -r - 7), (-r - 5, r), (-r - 5, -r - 7), (r + 2, -3),
+                  (-r - 7, -3), (-3, r + 2), (-3, -r - 9))]
+
+
+def place_labels(fig, ax, labels) -> None:
+    """Move each label (an annotation of a point) to the first of LABEL_OFFSETS where its box
+    lies inside the axes' frame and overlaps neither a label placed before it nor a marker
+    of the front (the neighbours of a dense front sit a few points apart); where none is
+    free, the nearest inside the frame."""
     from matplotlib.backends.backend_agg import FigureCanvasAgg
+    from matplotlib.transforms import Bbox
 
     canvas = FigureCanvasAgg(fig)
-    canvas.draw()  # the layout: where the frame and the labels are
+    canvas.draw()  # the layout: where the frame and the points are
     renderer = canvas.get_renderer()
     frame = ax.get_window_extent(renderer)
+    radius = 4.0 * fig.dpi / 72.0  # a marker's half width, px
+    marks = [Bbox.from_extents(*(c - radius), *(c + radius))
+             for c in ax.transData.transform([label.xy for label in labels])] \
+        if labels else []
+    placed = []
     for label in labels:
-        box = label.get_window_extent(renderer)
-        dx, dy = label.xyann
-        if box.x1 > frame.x1:
-            label.set_horizontalalignment("right")
-            dx = -abs(dx)
-        if box.y1 > frame.y1:
-            dy = -12
-        elif box.y0 < frame.y0:
-            dy = 6
-        label.xyann = (dx, dy)
+        fallback = None
+        for offset in LABEL_OFFSETS:
+            label.xyann = offset
+            box = label.get_window_extent(renderer)
+            inside = (frame.x0 <= box.x0 and box.x1 <= frame.x1 and frame.y0 <= box.y0
+                      and box.y1 <= frame.y1)
+            if not inside:
+                continue
+            fallback = fallback or offset
+            if not any(box.overlaps(other) for other in placed + marks):
+                break
+        else:
+            label.xyann = fallback or LABEL_OFFSETS[0]
+        placed.append(label.get_window_extent(renderer))
 
 
 def _file_part(field: str) -> str:
@@ -258,14 +303,16 @@ def _file_part(field: str) -> str:
 
 
 def plot_sweep(columns, rows, out_dir, metric="min_distance", dpi: int = 110) -> list[Path]:
-    """Write heatmap.png (two or more swept fields), <metric>_vs_<field>.png per field and
-    pareto.png into out_dir; returns the paths."""
+    """Write <metric>_heatmap.png (two or more swept fields), <metric>_vs_<field>.png per field
+    and pareto.png (min_distance against operator_effort, whatever the metric) into out_dir;
+    returns the paths. Each metric's pictures carry its name: plotting a second metric into
+    the same folder keeps the first one's."""
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     fields = swept_fields(columns)
     figures = []
     if len(fields) >= 2:
-        figures.append(("heatmap.png", figure_heatmap(columns, rows, metric)))
+        figures.append((f"{metric}_heatmap.png", figure_heatmap(columns, rows, metric)))
     for f in fields:
         figures.append((f"{metric}_vs_{_file_part(f)}.png",
                         figure_metric_vs_axis(columns, rows, metric, f)))

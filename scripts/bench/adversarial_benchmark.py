@@ -27,6 +27,12 @@ command.
     python scripts/bench/adversarial_benchmark.py              # the whole table (~2 min, 2 cores)
     python scripts/bench/adversarial_benchmark.py --quick      # a subset (~30 s)
     python scripts/bench/adversarial_benchmark.py --json out.json --jobs 2
+    python scripts/bench/adversarial_benchmark.py --sensors none,drive_torque,load_cell
+
+The dynamic plant's tension sensor (`plant: !DynamicReels {tension_sensor: ...}`,
+which the tension damping block uses) is a column: the default controller's dynamic rows are
+run once per sensor of --sensors (default: drive_torque, the plant's default); the paper's
+method runs without one (none: the paper's robot, and no damping).
 """
 
 import argparse
@@ -53,6 +59,10 @@ ROBOTS = (
     ("own_7cable, 5-7 swapped", str(SCENARIOS / "own_5_7.yaml"), [(5, 7)]),
 )
 FULL = "controller: {pose: full, tension_control: true}, plant: !DynamicReels {}, "
+# The same with the plant's tension sensor named.
+FULL_SENSOR = ("controller: {pose: full, tension_control: true}, plant: !DynamicReels "
+               "{tension_sensor: %s}, ")
+SENSORS = ("drive_torque",)
 PAPER = "safety_filter: {enabled: false}, model_monitor: {enabled: false}, "
 DURATION = 10.0
 HOLDABLE = 2.0  # N: t* at the true pose with the measured hand, above which no slack is allowed
@@ -66,6 +76,7 @@ class Case:
     plant: str       # "dynamic" (full pose, tension control) or "kinematic" (default)
     method: str      # "paper" or "default"
     overlay: str
+    sensor: str = "-"  # the dynamic plant's tension sensor
 
 
 def _direction(resolved, pair):
@@ -102,7 +113,7 @@ def _noisy(seed):
             % (np.round(t, 4).tolist(), np.round(F, 4).tolist()))
 
 
-def cases(quick: bool = False) -> list:
+def cases(quick: bool = False, sensors=SENSORS) -> list:
     from cdpm_drake.config import load_resolved_scenario
 
     out = []
@@ -136,10 +147,13 @@ def cases(quick: bool = False) -> list:
             plants = ("dynamic", "kinematic") if kinematic_too else ("dynamic",)
             for plant in plants:
                 for method in ("paper", "default"):
-                    text = "{duration: %g, %s%s%s}" % (
-                        DURATION, FULL if plant == "dynamic" else "",
-                        PAPER if method == "paper" else "", overlay)
-                    out.append(Case(label, scenario, hand, plant, method, text))
+                    # The paper's robot has no tension sensor (nor its method a damping).
+                    for sensor in (sensors if plant == "dynamic" and method == "default"
+                                   else ("none" if plant == "dynamic" else "-",)):
+                        text = "{duration: %g, %s%s%s}" % (
+                            DURATION, FULL_SENSOR % sensor if plant == "dynamic" else "",
+                            PAPER if method == "paper" else "", overlay)
+                        out.append(Case(label, scenario, hand, plant, method, text, sensor))
     return out
 
 
@@ -218,9 +232,9 @@ def _run_all(todo, jobs):
 
 def table(rows) -> str:
     """The markdown table of the benchmark's rows."""
-    head = ("| robot | hand | plant | method | closest vs d_l (mm) | crossed | slack ticks "
-            "(holdable) | min tension (N) | max tilt (deg) | fault | modified / held (%) |")
-    lines = [head, "|" + " --- |" * 11]
+    head = ("| robot | hand | plant | method | sensor | closest vs d_l (mm) | crossed | slack "
+            "ticks (holdable) | min tension (N) | max tilt (deg) | fault | modified / held (%) |")
+    lines = [head, "|" + " --- |" * 12]
     for r in rows:
         fault = "-"
         if r["fault"]:
@@ -232,11 +246,12 @@ def table(rows) -> str:
                  else f"{r['slack_ticks']} ({r['slack_holdable']})")
         held = ("-" if r["modified_share"] is None
                 else f"{100 * r['modified_share']:.0f} / {100 * r['held_share']:.1f}")
-        lines.append("| {} | {} | {} | {} | {:+.2f} ({}) | {} | {} | {} | {} | {} | {} |".format(
-            r["robot"], r["hand"], r["plant"], r["method"], r["closest_vs_d_l_mm"],
-            r["closest_pair"], "yes" if r["crossed"] else "no", slack,
-            "-" if r["min_tension"] is None else f"{r['min_tension']:.2f}",
-            "-" if r["max_tilt_deg"] is None else f"{r['max_tilt_deg']:.2f}", fault, held))
+        cells = (r["robot"], r["hand"], r["plant"], r["method"], r.get("sensor", "-"),
+                 f"{r['closest_vs_d_l_mm']:+.2f} ({r['closest_pair']})",
+                 "yes" if r["crossed"] else "no", slack,
+                 "-" if r["min_tension"] is None else f"{r['min_tension']:.2f}",
+                 "-" if r["max_tilt_deg"] is None else f"{r['max_tilt_deg']:.2f}", fault, held)
+        lines.append("| " + " | ".join(str(c) for c in cells) + " |")
     return "\n".join(lines)
 
 
@@ -249,9 +264,12 @@ def main(argv=None) -> int:
     parser.add_argument("--json", metavar="PATH", help="also write every row as JSON")
     parser.add_argument("--only", metavar="TEXT", help="only the cases whose robot or hand "
                         "contains TEXT")
+    parser.add_argument("--sensors", default=",".join(SENSORS),
+                        help="the dynamic plant's tension sensors of the default controller's "
+                        "rows, comma-separated (none, drive_torque, load_cell)")
     args = parser.parse_args(argv)
     logging.disable(logging.WARNING)
-    todo = cases(args.quick)
+    todo = cases(args.quick, tuple(args.sensors.split(",")))
     if args.only:
         todo = [c for c in todo if args.only in c.robot or args.only in c.hand]
     print(f"{len(todo)} runs of {DURATION:g} s on {args.jobs} processes ...", file=sys.stderr)

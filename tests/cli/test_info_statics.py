@@ -107,8 +107,10 @@ def test_info_rejects_a_malformed_swap(capsys, swaps, message):
 
 
 def test_info_rejects_a_cable_the_robot_does_not_have(capsys):
+    # An option value out of range is bad usage, exit 2 (docs/running.md's exit codes; issue
+    # 32: it was 1, as for a bad file).
     code, out, err = run_info(capsys, "paper_7cable", "--swaps", "1-9")
-    assert code == 1 and "cannot swap cable 9" in err and "1..7" in err
+    assert code == 2 and "cannot swap cable 9" in err and "1..7" in err
 
 
 def test_info_of_an_unknown_name_lists_robots_and_scenarios(capsys):

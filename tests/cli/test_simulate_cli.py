@@ -133,8 +133,8 @@ def test_a_run_folder_moves_and_reruns_bit_for_bit(capsys, tmp_path, write_robot
 
 def test_summary_reports_ticks_and_the_logged_minimum_distances(exp1_run):
     _, out, out_dir = exp1_run
-    assert re.search(r"scenario 'exp1_no_interaction' \(kinematic plant, translation only\): "
-                     r"101 ticks, 0\.200 s simulated", out), out
+    assert re.search(r"scenario 'exp1_no_interaction' \(the hard promise: safety filter on, "
+                     r"kinematic plant, translation only\): 101 ticks, 0\.200 s simulated", out), out
     assert f"log: {out_dir / 'log.npz'}" in out
     with np.load(out_dir / "log.npz") as log:
         pairs = [f"({i},{j})" for i, j in log["pairs"]]
@@ -162,7 +162,8 @@ def test_every_shipped_scenario_runs_through_the_cli(capsys, tmp_path, name):
                                   "--no-progress")
     assert code == 0, err
     assert (tmp_path / "log.npz").is_file() and (tmp_path / "scenario.yaml").is_file()
-    assert f"scenario {name!r} (kinematic plant, translation only): 51 ticks" in out
+    assert (f"scenario {name!r} (the hard promise: safety filter on, kinematic plant, "
+            "translation only): 51 ticks") in out
 
 
 def test_scenario_text_overlay_reaches_the_run(capsys, tmp_path):
@@ -365,12 +366,19 @@ def test_latest_points_at_a_run_as_it_starts_and_back_if_it_writes_nothing(tmp_p
 
 
 @pytest.mark.parametrize("overlay, words, tag", [
-    ("{}", "kinematic plant, translation only", ""),
-    ("plant: !DynamicReels {}", "dynamic plant, translation only", "-dynamic"),
-    ("{plant: !DynamicReels {}, controller: {pose: full}}", "dynamic plant, full pose",
-     "-dynamic-full-pose"),
+    ("{}", "the hard promise: safety filter on, kinematic plant, translation only", ""),
+    # Issue 32: the paper's method in one word, named first and in the folder.
+    ("method: paper", "the paper's method: no safety filter, kinematic plant, translation only",
+     "-paper"),
+    ("safety_filter: {enabled: false}", "safety filter off, kinematic plant, translation only",
+     "-no-filter"),
+    ("plant: !DynamicReels {}", "the hard promise: safety filter on, dynamic plant, "
+     "translation only", "-dynamic"),
+    ("{plant: !DynamicReels {}, controller: {pose: full}}", "the hard promise: safety filter "
+     "on, dynamic plant, full pose", "-dynamic-full-pose"),
     ("{plant: !DynamicReels {}, controller: {pose: full, tension_control: true}}",
-     "dynamic plant, full pose, tension control", "-dynamic-full-pose-tension-control")])
+     "the hard promise: safety filter on, dynamic plant, full pose, tension control",
+     "-dynamic-full-pose-tension-control")])
 def test_a_runs_variant_is_named_in_its_summary_and_its_folder(capsys, tmp_path, monkeypatch,
                                                               overlay, words, tag):
     # Issue 27: runs of the dynamic plant or the full pose were indistinguishable from the
@@ -382,6 +390,11 @@ def test_a_runs_variant_is_named_in_its_summary_and_its_folder(capsys, tmp_path,
     assert out.startswith(f"scenario 'exp2_interaction' ({words}): 6 ticks"), out
     (folder,) = [p for p in (tmp_path / "runs" / "exp2_interaction").iterdir()
                  if p.name != "latest"]
+    # Issue 32: an overlay shows in the name too (its hash: the overlay is in scenario.yaml).
+    from cdpm_drake.runs.run_folder import overlay_tag
+    text = overlay_tag(overlay)
+    assert (text == "") == (overlay == "{}")
+    tag = tag + (f"-{text}" if text else "")
     assert re.fullmatch(r"\d{8}T\d{6}\.\d{3}Z" + re.escape(tag), folder.name), folder.name
     latest = tmp_path / "runs" / "exp2_interaction" / "latest"
     assert latest.resolve() == folder.resolve()
@@ -488,13 +501,16 @@ def test_safety_filter_and_model_monitor_summaries_count_each_code():
            "pair_margin": np.array([[0.01], [0.002], [-0.0005], [0.0], [0.001], [0.003]]),
            "kappa": np.array([[5.0], [2.0], [-0.25], [np.nan], [1.0], [3.0]]),
            "d_min": np.array([0.05, 0.06]),
-           "pair_distances_true": np.full((6, 2), 0.1)}
+           "pair_distances_true": np.full((6, 2), 0.1),
+           # At the speed limit on the tick that binds it (a cap below it is named apart).
+           "velocity": np.tile([0.5, 0.0, 0.0], (6, 1)), "max_velocity": np.array(0.5)}
     log["pair_distances_true"][2, 1] = 0.06 - 0.00125
     assert safety_filter_summary(log) == (
         "safety filter: passed 2 of 6 ticks, changed 2 (bound: cable pairs 2, kinetostatic "
-        "limit 1, speed limit 1), held a lost margin on 1, braked to a hold on 1; smallest "
-        "pair margin above d_min -0.50 mm (true -1.25 mm); smallest kinetostatic margin "
-        "-0.25 N")
+        "limit 1, speed limit 1), held a lost margin (not restored) on 1, braked to a hold on "
+        "1; pair margin LOST on 1 tick (from 0.004 to 0.004 s), down to -0.50 mm; kinetostatic "
+        "margin LOST on 1 tick (from 0.004 to 0.004 s), down to -0.25 N; smallest pair margin "
+        "above d_min -0.50 mm (true -1.25 mm); smallest kinetostatic margin -0.25 N")
     residual = np.zeros((6, 3))
     residual[3, 1] = -0.003
     residual[1, 2] = 0.001

@@ -144,6 +144,20 @@ def test_simulate_scenario_text_overlays_the_run(tmp_path):
     assert load_scenario(out / "scenario.yaml").admittance.damping == 3.7
 
 
+@covers("simulate --method", "diagram --method")
+def test_method_paper_runs_and_draws_fig_5_without_the_filter(tmp_path):
+    out = tmp_path / "o"
+    assert cdpm("simulate", _scenario_file(tmp_path), "--method", "paper", "--out", out,
+                "--no-progress") == 0
+    assert "filter_status" not in run_log(out)
+    assert cdpm("diagram", _scenario_file(tmp_path), "--method", "paper", "--out",
+                tmp_path / "d", "--no-svg") == 0
+    assert cdpm("diagram", _scenario_file(tmp_path), "--out", tmp_path / "p", "--no-svg") == 0
+    paper = (tmp_path / "d" / "controller_simulated.dot").read_text()
+    promise = (tmp_path / "p" / "controller_simulated.dot").read_text()
+    assert "safety_filter" not in paper and "safety_filter" in promise
+
+
 @covers("simulate --duration")
 def test_simulate_duration_sets_the_log_length(tmp_path):
     # The scenario says 0.1 s; --duration 0.046 s gives 0.046 / 0.002 + 1 = 24 rows.
@@ -345,6 +359,25 @@ def test_run_out_is_the_folder_and_force_overwrites_it(tmp_path, monkeypatch, br
     assert cdpm("run", scenario, "--scenario-text", bridge.overlay, "--out", out,
                 "--duration", 0.06, "--force") == 0
     assert len(run_log(out)["time"]) == 31
+
+
+@covers("run --method")
+def test_run_method_paper_runs_without_the_filter(tmp_path, bridge):
+    out = tmp_path / "o"
+    assert cdpm("run", _scenario_file(tmp_path, duration=0.02), "--scenario-text",
+                bridge.overlay, "--method", "paper", "--out", out) == 0
+    log = run_log(out)
+    assert "filter_status" not in log and len(log["time"]) == 11
+
+
+@covers("run --plot")
+def test_run_plot_writes_the_figures_beside_the_log(tmp_path, bridge):
+    out = tmp_path / "o"
+    assert cdpm("run", _scenario_file(tmp_path, duration=0.04), "--scenario-text",
+                bridge.overlay, "--plot", "--out", out) == 0
+    from cdpm_drake.views.plots import FIGURE_FILES, figures_of
+    expected = {FIGURE_FILES[name] for name in figures_of(run_log(out))}
+    assert expected and expected <= {p.name for p in out.glob("*.png")}
 
 
 @covers("run --rt-priority")
@@ -637,6 +670,18 @@ def test_export_out_is_where_the_csv_goes(tmp_path, logged):
     out = tmp_path / "elsewhere" / "table.csv"
     assert cdpm("export", logged, "--csv", "--out", out) == 0
     assert out.read_text().startswith("time [s],") and not (logged / "log.csv").exists()
+
+
+@covers("export --mat", "export --mcap")
+def test_export_mat_and_mcap_write_their_files(tmp_path, logged):
+    # Issue 32: the format flags choose the writer (the files' contents: tests/views/
+    # test_export_mat.py and test_export_mcap.py). The .mat's magic text and the .mcap's.
+    pytest.importorskip("scipy")
+    pytest.importorskip("rosbags")
+    assert cdpm("export", logged, "--mat", "--out", tmp_path / "a.mat") == 0
+    assert (tmp_path / "a.mat").read_bytes().startswith(b"MATLAB 5.0 MAT-file")
+    assert cdpm("export", logged, "--mcap", "--out", tmp_path / "a.mcap") == 0
+    assert (tmp_path / "a.mcap").read_bytes().startswith(b"\x89MCAP0\r\n")
 
 
 def test_plot_logistic_curve_spans_the_band_and_never_negative_distances(logged):

@@ -173,6 +173,13 @@ def test_a_robot_file_relative_to_base_dir_reaches_the_geometry(tmp_path, valid_
                                atol=1e-9)
 
 
+@covers("Scenario.method")
+def test_method_paper_removes_the_safety_filter_and_promise_keeps_it():
+    # The default is the promise: the filter's columns are logged; the paper's method has none.
+    assert "filter_status" in sim(base(), 0.01)
+    assert "filter_status" not in sim(base(method="paper"), 0.01)
+
+
 @covers("Scenario.swaps")
 def test_swaps_trade_the_two_cables_attachment_points():
     robot = load_robot("paper_7cable")
@@ -666,11 +673,14 @@ def test_friction_compensation_makes_up_the_drives_dead_band():
                             initial_position=list(P_EXP2))
     robot = scenario_robot(s)
     on = sim(s, 0.2)
+    # The mapping's command: the reels' less the tension damping's part (its own block).
+    on["reel_velocity"] = on["reel_velocity"] - on["reel_velocity_damping"]
     np.testing.assert_allclose(on["reel_velocity"], reproduce(on, robot,
                                                              robot.dynamics.dead_band),
                                rtol=0, atol=1e-12)
     off = sim(dataclasses.replace(
         s, controller=scenario_module.Controller(friction_compensation=False)), 0.2)
+    off["reel_velocity"] = off["reel_velocity"] - off["reel_velocity_damping"]
     np.testing.assert_allclose(off["reel_velocity"], reproduce(off, robot, 0.0), rtol=0,
                                atol=1e-12)
     assert np.abs(on["reel_velocity"] - off["reel_velocity"]).max() > 1e-3  # it acts
@@ -1605,3 +1615,112 @@ def test_the_monitor_s_slack_and_fit_thresholds_reach_it():
     est, _ = run(ModelMonitor(slack_tension=1e6, unholdable=1e9, fit_tolerance=1.0),
                  pose="full", tension_control=True, length_gain=40.0)
     assert est is None or "is slack" not in str(est)
+
+
+# --- the dynamic plant's tension sensor and the damping block ----------------------------------
+
+
+def _sensed(duration=0.1, damping=False, **plant):
+    """exp2's start on the dynamic plant under a hand, full pose and tension control, the
+    damping off unless asked (then the sensor cannot change the motion: runs compare)."""
+    c = scenario_module.Controller(
+        pose="full", tension_control=True,
+        tension_damping=scenario_module.TensionDamping(enabled=damping))
+    return sim(dataclasses.replace(
+        _dynamic(**plant), controller=c,
+        operator=ScriptedOperator(times=[0.0, 0.05], forces=[[0.0, 0.0, 0.0], [6.0, -4.0, 3.0]])),
+        duration)
+
+
+EXACT_DRIVE = dict(noise_std=0.0, quantum=0.0, filter_time_constant=0.0, inertia_error=0.0,
+                   friction_error=0.0, friction_band=0.002)
+
+
+@covers("Scenario.plant!DynamicReels.tension_sensor",
+        "Scenario.plant!DynamicReels.drive_torque.noise_std",
+        "Scenario.plant!DynamicReels.drive_torque.quantum",
+        "Scenario.plant!DynamicReels.drive_torque.filter_time_constant",
+        "Scenario.plant!DynamicReels.drive_torque.inertia_error",
+        "Scenario.plant!DynamicReels.drive_torque.friction_error",
+        "Scenario.plant!DynamicReels.drive_torque.friction_band")
+def test_the_drive_torque_sensor_settings_reach_the_measured_tensions():
+    """Each setting against the exact sensor (no noise, quantum, lag or model error) on the
+    same motion: the noise's std, the quantum's bound, the filter's smoothing, the model
+    errors and the friction band each change tension_measured, and only it."""
+    from cdpm_drake.config import DriveTorqueSensor
+
+    def run(**changes):
+        return _sensed(tension_sensor="drive_torque",
+                       drive_torque=DriveTorqueSensor(**(EXACT_DRIVE | changes)))
+
+    exact = run()
+    none = _sensed(tension_sensor="none")
+    assert np.isnan(none["tension_measured"]).all()
+    np.testing.assert_array_equal(none["tensions"], exact["tensions"])
+    # The exact sensor is the true tension of the tick before within the drives' static
+    # friction (0.125 N: a stuck reel's friction is anywhere in [-F_c, F_c]) and the reel's
+    # inertia times its acceleration's change within the tick (two 1 ms plant steps; the
+    # sensor takes the tick's mean): 0.2 N (tests/systems/test_tension_sensor.py has the
+    # exact case to round-off).
+    assert np.abs(exact["tension_measured"][1:] - exact["tensions"][:-1]).max() <= 0.2
+    noisy = run(noise_std=0.8)["tension_measured"] - exact["tension_measured"]
+    assert 0.6 < noisy[1:].std() < 1.0  # 49 x 7 samples of std 0.8 N
+    coarse = run(quantum=0.5)["tension_measured"] - exact["tension_measured"]
+    assert np.abs(coarse).max() <= 0.25 + 1e-9 and np.abs(coarse).max() > 0.1
+    lagged = run(filter_time_constant=0.05)["tension_measured"]
+    # A 50 ms lag follows the hand's rise (from 50 ms on) slower than the exact sensor.
+    assert np.abs(np.diff(lagged[25:], axis=0)).sum() < 0.5 * np.abs(
+        np.diff(exact["tension_measured"][25:], axis=0)).sum()
+    for changes in ({"inertia_error": 1.0}, {"friction_error": 1.0}, {"friction_band": 0.2}):
+        other = run(**changes)
+        np.testing.assert_array_equal(other["tensions"], exact["tensions"])
+        assert np.abs(other["tension_measured"] - exact["tension_measured"]).max() > 1e-3, changes
+
+
+@covers("Scenario.plant!DynamicReels.load_cell.bandwidth",
+        "Scenario.plant!DynamicReels.load_cell.bias_std",
+        "Scenario.plant!DynamicReels.load_cell.noise_std")
+def test_the_load_cell_settings_reach_the_measured_tensions():
+    """A cell of bandwidth f is the first-order filter y_k = y_(k-1) + a (T_k - y_(k-1)),
+    a = 1 - exp(-2 pi f T), on the true tensions, logged a tick later (recomputed here from
+    the logged truth); its bias a constant offset per cable; its noise of the std asked."""
+    from cdpm_drake.config import LoadCellSensor
+
+    def run(**changes):
+        cell = dict(noise_std=0.0, bias_std=0.0, bandwidth=3.0) | changes
+        return _sensed(tension_sensor="load_cell", load_cell=LoadCellSensor(**cell))
+
+    log = run()
+    truth, measured = log["tensions"], log["tension_measured"]
+    a = 1.0 - np.exp(-2.0 * np.pi * 3.0 * T)
+    y = truth[0].copy()  # the cell starts at the start tensions
+    expected = [y.copy()]
+    for k in range(len(truth) - 1):
+        y = y + a * (truth[k] - y)
+        expected.append(y.copy())
+    np.testing.assert_allclose(measured, np.array(expected), rtol=0, atol=1e-9)
+    biased = run(bias_std=1.5)["tension_measured"] - measured
+    np.testing.assert_allclose(biased, np.repeat(biased[:1], len(biased), axis=0), atol=1e-9)
+    assert 0.3 < biased[0].std() and np.abs(biased[0]).max() < 6.0
+    noisy = run(noise_std=0.4)["tension_measured"] - measured
+    assert 0.3 < noisy[1:].std() < 0.5
+
+
+@covers("Scenario.controller.tension_damping.enabled",
+        "Scenario.controller.tension_damping.gain_scale")
+def test_the_tension_damping_settings_reach_its_block():
+    """Off: no block, no damping logged. The damping is linear in its gain until it changes
+    the motion: its first two ticks (before the damped command reaches the sensor, a tick
+    later and sampled a tick after that) at 2.5 x the gain are 2.5 x the damping at 1 x."""
+    off = _sensed(duration=0.02)
+    assert "reel_velocity_damping" not in off
+    one = _sensed(duration=0.02, damping=True)
+    c = scenario_module.Controller(
+        pose="full", tension_control=True,
+        tension_damping=scenario_module.TensionDamping(enabled=True, gain_scale=2.5))
+    scaled = sim(dataclasses.replace(
+        _dynamic(), controller=c, operator=ScriptedOperator(
+            times=[0.0, 0.05], forces=[[0.0, 0.0, 0.0], [6.0, -4.0, 3.0]])), 0.02)
+    first, second = one["reel_velocity_damping"][:2], scaled["reel_velocity_damping"][:2]
+    assert np.abs(first).max() > 1e-6
+    np.testing.assert_allclose(second, 2.5 * first, rtol=1e-9, atol=1e-15)

@@ -253,8 +253,11 @@ def _run_against_dynamic_emulator(tmp_path, extra=()):
         line = emulator.stdout.readline()
         port = int(re.search(r"on 127\.0\.0\.1:(\d+), period 2 ms", line).group(1))
         code = main(["run", "exp2_interaction", "--duration", "2", "--out", str(out_dir),
-                     "--scenario-text", f"plant: !HardwareReels {{port: {port}, "
-                     "watchdog_ticks: 500, ramp_time: 0.0, max_length_residual: 0.02}"])
+                     "--scenario-text", f"{{plant: !HardwareReels {{port: {port}, "
+                     "watchdog_ticks: 500, ramp_time: 0.0, max_length_residual: 0.02}, "
+                     # The sensor measured here, not damped: with the damping the truth
+                     # moves too little for the comparison to say anything.
+                     "controller: {tension_damping: {enabled: false}}}"])
     finally:
         emulator.send_signal(signal.SIGINT)
         out, err = emulator.communicate(timeout=120)
@@ -344,7 +347,9 @@ def test_cdpm_run_logs_tension_measured_that_follows_the_emulators_truth(tmp_pat
     # after a silence of the bridge longer than 0.1 s (a host stall: no acceleration then).
     matched, finite = _conversions_matched(log, truth, robot)
     silences = int(np.sum(np.diff(truth["time"]) > 0.1))
-    assert matched == finite >= len(log["time"]) - 1 - silences
+    # On a loaded host a status can come too late for its tick (the tick then reads none:
+    # NaN); most ticks read one.
+    assert matched == finite >= 0.9 * (len(log["time"]) - 1 - silences)
     pt, T = truth["plant_time"], truth["tensions"]
     run = (pt > 0.05) & (pt < 1.9)
     assert T[run].std(axis=0).min() > 0.3  # the truth moves

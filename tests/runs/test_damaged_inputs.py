@@ -156,17 +156,18 @@ def test_the_smallest_grid_step_suggested_fits(capsys, valid_spec, write_robot):
 # lengths; per watched pair (21) pair_distances, active, crossed; and the time.
 # The safety filter, the kinetostatic limit and the model monitor add velocity_limited and
 # F_kin (3 each), filter_status, filter_binding, pair_margin, kappa, t_c, model_status and
-# t_star_hand (1 each) and model_residual per cable (7).
-EXP2_VALUES = 7 * 3 + 3 * 7 + 3 * 21 + 1 + (2 * 3 + 7 + 7)
+# t_star_hand (1 each) and model_residual per cable (7); the plant's measured tensions (7,
+# NaN on this plant).
+EXP2_VALUES = 7 * 3 + 3 * 7 + 3 * 21 + 1 + (2 * 3 + 7 + 7) + 7
 # The dynamic plant's ground truth adds tensions and slack per cable, p_true and rpy_true,
-# logged with their own time.
-EXP2_DYNAMIC_VALUES = EXP2_VALUES + 2 * 7 + 3 + 3 + 1
+# logged with their own time; its tension damping its part of the reel command (7).
+EXP2_DYNAMIC_VALUES = EXP2_VALUES + 2 * 7 + 3 + 3 + 1 + 7
 
 
 @pytest.mark.parametrize("overlay, values, size", [
-    # 5e11 ticks x 2,016 bytes (126 values, twice) = 1.008e15 bytes; x 2,352 = 1.18e15.
-    ("{duration: 1e9}", EXP2_VALUES, "1.01 PB"),
-    ("{duration: 1e9, plant: !DynamicReels {}}", EXP2_DYNAMIC_VALUES, "1.18 PB")])
+    # 5e11 ticks x 2,128 bytes (133 values, twice) = 1.06e15 bytes; x 2,576 = 1.29e15.
+    ("{duration: 1e9}", EXP2_VALUES, "1.06 PB"),
+    ("{duration: 1e9, plant: !DynamicReels {}}", EXP2_DYNAMIC_VALUES, "1.29 PB")])
 def test_a_duration_whose_log_cannot_fit_is_refused_naming_the_size(tmp_path, capsys,
                                                                     monkeypatch, overlay,
                                                                     values, size):
@@ -207,7 +208,15 @@ def test_cdpm_run_refuses_such_a_duration_before_it_greets_the_bridge(tmp_path, 
                              f"{{duration: 1e9, plant: !HardwareReels {{port: {port}, "
                              "startup_timeout: 0.2}}")
     assert code == 1
-    row = 8 * (EXP2_VALUES - 1 + 4)  # 129 values, 2,064 bytes held twice: 1.03e15 bytes
+    # The real reels log tension_measured and the tension damping's part (7 each) where
+    # their protocol carries the drives' torques (HardwareReels.tension_sensor), else
+    # neither: EXP2_VALUES (with the kinematic plant's NaN tension_measured) + 7 or - 7.
+    import dataclasses
+
+    from cdpm_drake.hardware.config import HardwareReels
+
+    measured = "tension_sensor" in {f.name for f in dataclasses.fields(HardwareReels)}
+    row = 8 * (EXP2_VALUES + (7 if measured else -7) - 1 + 4)
     assert (f"cdpm run: error: duration 1e+09 s is 500,000,000,001 ticks, whose log needs "
             f"{2 * row * 500_000_000_001 / 1e15:.3g} PB ({2 * row:,} bytes a tick") in err, err
     assert "no valid status" not in err

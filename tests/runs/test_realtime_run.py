@@ -385,8 +385,8 @@ def test_cdpm_run_cli_reports_timing_and_packets(tmp_path, capsys):
     # Issue 27: the report names the variant first and ends with simulate's pair table: exp1's
     # pair (1,3) within d_u from the start (56 mm at the start, d_u 61 mm), its closest approach
     # from the log, d_l and d_u of the scenario's interference defaults.
-    assert out.startswith("scenario 'exp1_no_interaction' (hardware reels, translation only "
-                          "at 127.0.0.1:"), out
+    assert out.startswith("scenario 'exp1_no_interaction' (the hard promise: safety filter "
+                          "on, hardware reels, translation only at 127.0.0.1:"), out
     with np.load(tmp_path / "log.npz") as log:
         k13 = [tuple(p) for p in log["pairs"]].index((1, 3))
         closest = 1000 * log["pair_distances"][:, k13].min()

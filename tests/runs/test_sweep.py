@@ -512,13 +512,16 @@ def test_cli_sweep_plot_and_best_table(tmp_path, capsys):
     table = text.split("smallest first):")[1]
     assert table.splitlines()[3].startswith(best["run"])  # header, rule, then the best
     assert len([ln for ln in table.splitlines() if re.match(r"r[0-9a-f]{10} ", ln)]) == 2
-    for name in ("heatmap.png", "pareto.png", "operator_effort_vs_admittance_damping.png"):
+    for name in ("operator_effort_heatmap.png", "pareto.png",
+                 "operator_effort_vs_admittance_damping.png"):
         assert (out / name).stat().st_size > 1000
-    for png in out.glob("*.png"):
-        png.unlink()
+    drawn = {png.name: png.read_bytes() for png in out.glob("*.png")}
+    # Issue 32: a second metric's pictures go beside the first one's, not over them.
     assert main(["plot", str(out)]) == 0
-    assert (out / "heatmap.png").is_file() and "best runs by min_distance" in \
+    assert (out / "min_distance_heatmap.png").is_file() and "best runs by min_distance" in \
         capsys.readouterr().out
+    assert (out / "operator_effort_heatmap.png").read_bytes() == \
+        drawn["operator_effort_heatmap.png"]
 
 
 def test_cli_errors(tmp_path, capsys):
@@ -580,7 +583,7 @@ def test_a_run_that_stops_part_way_is_a_fault_row_with_its_metrics(tmp_path, mon
 ALL_FAULT = """\
 name: all_fault
 base: exp2_interaction
-overlay: {duration: 1.0, plant: !DynamicReels {}, controller: {length_gain: 0}}
+overlay: {duration: 1.0, plant: !DynamicReels {tension_sensor: none}, controller: {length_gain: 0}}
 axes:
   - {field: plant.max_length_residual, values: [1.1e-3, 1.2e-3]}
 """

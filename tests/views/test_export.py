@@ -150,7 +150,9 @@ def _full_pose_dynamic_log():
     for key, width in (("lengths_commanded", m), ("rpy", 3), ("omega", 3),
                        ("tension_estimate", m), ("tension_target", m), ("tension_command", m),
                        ("t_star", 1), ("tensions", m), ("p_true", 3), ("rpy_true", 3),
-                       ("pair_distances_true", P)):
+                       ("pair_distances_true", P),
+                       # issue 31: the plant's measured tensions and the damping's part.
+                       ("tension_measured", m), ("reel_velocity_damping", m)):
         log[key] = rng.uniform(-1.0, 1.0, (T, width))
     for key, width in (("velocity_limited", 3), ("pair_margin", 1), ("F_kin", 3),
                        ("kappa", 1), ("t_c", 1), ("t_star_hand", 1), ("model_residual", m)):
@@ -200,13 +202,13 @@ def test_every_column_holds_the_log_value_its_name_says():
         if values.dtype == bool:
             assert unit == "0/1", name
         seen.add(key)
-    # Every per-tick key is exported: 221 columns for 7 cables and 21 pairs (25 of time and
-    # the eight 3-vectors, 8 x 7 per cable, 5 x 21 per pair, 4 x 3 orientations and vectors,
+    # Every per-tick key is exported: 235 columns for 7 cables and 21 pairs (25 of time and
+    # the eight 3-vectors, 10 x 7 per cable, 5 x 21 per pair, 4 x 3 orientations and vectors,
     # t_star and tension_status; and the safety filter's and the monitor's: tension_cable,
     # velocity_limited and F_kin (2 x 3), filter_status, filter_binding, pair_margin, kappa,
     # t_c, t_star_hand, model_status (7 x 1), model_residual (7)).
     assert seen == set(_documented_per_tick_keys()) - {"tick", "wall", "compute"}
-    assert len(header) == 25 + 8 * 7 + 5 * 21 + 4 * 3 + 2 + 1 + 6 + 7 + 7 == 221
+    assert len(header) == 25 + 10 * 7 + 5 * 21 + 4 * 3 + 2 + 1 + 6 + 7 + 7 == 235
     # The names the issue asked for, verbatim.
     for name in ("pair_distances_true_1-3 [m]", "crossed_true_5-7 [0/1]", "rpy_roll [rad]",
                  "rpy_true_yaw [rad]", "omega_z [rad/s]", "tensions_7 [N]", "slack_1 [0/1]",
@@ -221,7 +223,7 @@ def test_every_column_holds_the_log_value_its_name_says():
 
 def test_cdpm_export_of_a_full_pose_dynamic_run_names_every_column(tmp_path, capsys):
     # A real log of the full pose with tension control on the dynamic plant, exported without
-    # --csv (CSV is the default and only format): the 221 columns counted in the synthetic
+    # --csv (CSV is the default and only format): the 235 columns counted in the synthetic
     # test above (a full-pose dynamic run logs every per-tick key), each with its unit.
     run = tmp_path / "run"
     assert main(["simulate", "exp2_interaction", "--duration", "0.01", "--out", str(run),
@@ -230,9 +232,9 @@ def test_cdpm_export_of_a_full_pose_dynamic_run_names_every_column(tmp_path, cap
                 ) == 0
     capsys.readouterr()
     assert main(["export", str(run)]) == 0
-    assert "(6 rows, one per tick; 221 columns)" in capsys.readouterr().out
+    assert "(6 rows, one per tick; 235 columns)" in capsys.readouterr().out
     header, rows = _read((run / "log.csv").read_text())
-    assert len(header) == 221
+    assert len(header) == 235
     # The summary counts columns from the header line, so no name may hold a comma.
     assert not [name for name in header if "," in name]
     assert all(re.search(r" \[[^\]]+\]$", name) for name in header), header

@@ -491,8 +491,9 @@ def test_an_interrupted_run_is_marked_like_a_fault():
             star = [line for line in fig.axes[0].get_lines()
                     if line.get_gid() == "interrupted"][0]
             np.testing.assert_allclose(np.array(star.get_data_3d()).ravel(), log["p"][-1])
-    # distances 1, forces 3, cables 2, timing 2, tensions 2, pose error 2, safety 4.
-    assert time_axes == 16
+    # distances 1, forces 3, cables 2, timing 2, tensions 2, pose error 2, safety 5 (the
+    # bands, the speeds, what the filter changed, the tensions, the pair margin).
+    assert time_axes == 17
 
 
 def test_cables_slack_at_the_same_time_each_have_their_row():
@@ -579,43 +580,6 @@ def test_pose_error_is_titled_by_the_run_s_controller_and_draws_its_orientation_
     # A misshapen estimate is named, as the figure's other keys are.
     with pytest.raises(LogError, match="'rpy' has shape"):
         figure_pose_error(dict(log, rpy=log["rpy"][:5]))
-
-
-def test_tensions_of_a_tension_controlled_run_draw_the_estimate_floor_ceiling_and_t_star():
-    # Issue 27: the log has the controller's estimate and t*, the run's controller.min_tension
-    # and max_tension (log keys controller_min_tension, controller_max_tension); draw them.
-    log = _full_pose(synthetic_log(0.1))
-    T = len(log["time"])
-    log["tension_estimate"] = 10.0 + np.arange(T * 7).reshape(T, 7) * 1e-3
-    log["t_star"] = np.linspace(3.0, 30.0, T)[:, None]
-    log["t_star"][:4] = np.inf  # an internal force raises every tension: nothing to draw
-    log["controller_min_tension"] = np.array(7.5)
-    log["controller_max_tension"] = np.array(80.0)
-    ax = figure_tensions(log).axes[0]
-    by_gid = {line.get_gid(): line for line in ax.get_lines() if line.get_gid()}
-    truth = {line.get_label(): line for line in ax.get_lines()}
-    for i in range(1, 8):
-        estimate = by_gid[f"estimate cable {i}"]
-        np.testing.assert_array_equal(estimate.get_ydata(), log["tension_estimate"][:, i - 1])
-        assert estimate.get_linestyle() == "--"
-        assert estimate.get_color() == truth[f"cable {i}"].get_color()  # cable i's colour
-    assert list(by_gid["controller_min_tension"].get_ydata()) == [7.5, 7.5]
-    assert list(by_gid["controller_max_tension"].get_ydata()) == [80.0, 80.0]
-    t_star = np.asarray(by_gid["t_star"].get_ydata())
-    assert np.all(np.isnan(t_star[:4]))
-    np.testing.assert_array_equal(t_star[4:], log["t_star"][4:, 0])
-    labels = [text.get_text() for text in ax.get_legend().get_texts()]
-    assert {"floor min_tension = 7.5 N", "ceiling max_tension = 80 N",
-            "controller's estimate (dashed)"} <= set(labels)
-    # On the robot (no plant's truth) the estimate is the figure, and plot_log writes it.
-    robot = {k: v for k, v in log.items() if k not in ("tensions", "slack", "p_true",
-                                                       "rpy_true")}
-    fig = figure_tensions(robot)
-    assert len(fig.axes) == 1
-    lines = {line.get_label(): line for line in fig.axes[0].get_lines()}
-    np.testing.assert_array_equal(lines["cable 3 (estimate)"].get_ydata(),
-                                  log["tension_estimate"][:, 2])
-    assert has_keys(robot, "tensions") and not has_keys(robot, "pose_error")
 
 
 def test_a_tension_controlled_log_holds_the_target_s_floor_and_ceiling(tmp_path, capsys):

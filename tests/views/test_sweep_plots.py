@@ -4,6 +4,7 @@ artists and compared with means, spreads and the Pareto front worked out by hand
 import numpy as np
 import pytest
 
+from cdpm_drake.runs.sweep import METRICS, NUMERIC_METRICS
 from cdpm_drake.views import sweep_plots as sp
 
 COLUMNS = ["run", "a", "b", "random_seed", "status", "error", "min_distance",
@@ -60,7 +61,7 @@ def test_pareto_front_keeps_the_non_dominated_runs():
 
 def test_plot_sweep_writes_the_pictures(tmp_path):
     paths = sp.plot_sweep(COLUMNS, ROWS, tmp_path, metric="operator_effort")
-    assert [p.name for p in paths] == ["heatmap.png", "operator_effort_vs_a.png",
+    assert [p.name for p in paths] == ["operator_effort_heatmap.png", "operator_effort_vs_a.png",
                                        "operator_effort_vs_b.png", "pareto.png"]
     assert all(p.stat().st_size > 1000 for p in paths)
 
@@ -119,9 +120,12 @@ def test_the_metric_against_a_field_and_the_pareto_front_speak_in_units():
     fig = sp.figure_pareto(UNITS_COLUMNS, UNIT_ROWS)
     ax = fig.axes[0]
     assert ax.get_xlabel() == "operator effort, integral of |F_H| (N s), smaller is better"
-    notes = sorted(t.get_text() for t in ax.texts)
-    # The front: r1 (10 N s, 58.4 mm) and r2 (30 N s, 59.8 mm); r3, r4 are dominated.
-    assert notes == ["d_u 60.5 mm, F_u 1 N", "d_u 60.5 mm, F_u 5 N"]
+    # The front: r1 (10 N s, 58.4 mm) and r2 (30 N s, 59.8 mm); r3, r4 are dominated. Its
+    # points are numbered from the least effort, the key beside the plot says what each swept.
+    assert sorted(t.get_text() for t in ax.texts if t.get_gid() == "front label") == ["1", "2"]
+    key, = [t for t in ax.texts if t.get_gid() == "front key"]
+    assert key.get_text().split("\n") == ["The front's runs", "1: d_u 60.5 mm, F_u 1 N",
+                                           "2: d_u 60.5 mm, F_u 5 N"]
 
 
 def test_a_cell_without_an_ok_run_says_how_its_runs_ended():
@@ -146,9 +150,70 @@ def test_every_pareto_label_stays_inside_the_frame(dpi):
     canvas.draw()
     ax = fig.axes[0]
     frame = ax.get_window_extent(canvas.get_renderer())
-    labels = [t for t in ax.texts if t.get_text() == "a 1, b 1"]
-    assert len(labels) == 3  # A, B, D: the front
+    labels = [t for t in ax.texts if t.get_gid() == "front label"]
+    assert [t.get_text() for t in labels] == ["1", "2", "3"]  # A, B, D: the front
     for label in labels:
         box = label.get_window_extent(canvas.get_renderer())
         assert frame.x0 <= box.x0 and box.x1 <= frame.x1, (box, frame)
         assert frame.y0 <= box.y0 and box.y1 <= frame.y1, (box, frame)
+
+
+def _boxes(fig, texts):
+    from matplotlib.backends.backend_agg import FigureCanvasAgg
+
+    canvas = FigureCanvasAgg(fig)
+    canvas.draw()
+    return [t.get_window_extent(canvas.get_renderer()) for t in texts]
+
+
+def test_the_pareto_front_s_numbers_never_overlap_on_a_dense_front():
+    # Issue 32: exp2_du_Fu's front starts with two runs 0.4 N s apart at 58.42 mm (d_u 60.5
+    # and 61 mm at F_u 1 N), and their labels were written over each other. Here eight front
+    # points, each 0.2 N s and 0.01 mm from the next, on an axis spanning 40 N s: their
+    # numbers' boxes, as drawn, overlap neither each other nor the frame.
+    pts = {f"F{k}": (10.0 + 0.2 * k, 0.05842 + 1e-5 * k) for k in range(8)}
+    pts["far"] = (50.0, 0.0600)
+    rows = [row(k, "1", "1", 0, d, e) for k, (e, d) in pts.items()]
+    assert len(sp.pareto_front(rows)) == 9
+    fig = sp.figure_pareto(COLUMNS, rows)
+    ax = fig.axes[0]
+    labels = [t for t in ax.texts if t.get_gid() == "front label"]
+    assert [t.get_text() for t in labels] == [str(k) for k in range(1, 10)]
+    boxes = _boxes(fig, labels)
+    for i, a in enumerate(boxes):
+        for b in boxes[i + 1:]:
+            assert not a.overlaps(b), (a, b)
+
+
+def test_lines_against_a_field_that_coincide_stay_distinguishable():
+    # F_u = 1..4 N give the same distance at every d_u in exp2_du_Fu: their lines lay exactly
+    # on top of each other. Each line its own marker and dash; drawn in order, each later
+    # one above (zorder) and smaller than the one before, hollow, so those below stay seen.
+    rows = [unit_row(f"r{k}{j}", d_u, f"{F_u:.1f}", 0.0584, 10.0)
+            for k, F_u in enumerate((1.0, 2.0, 3.0, 4.0)) for j, d_u in
+            enumerate(("0.0605", "0.061", "0.062"))]
+    fig = sp.figure_metric_vs_axis(UNITS_COLUMNS, rows, "min_distance", DU)
+    lines = [ln for ln in fig.axes[0].get_lines() if ln.get_label().startswith("F_u")]
+    assert len(lines) == 4
+    assert len({(ln.get_marker(), ln.get_linestyle()) for ln in lines}) == 4
+    sizes = [ln.get_markersize() for ln in lines]
+    assert sizes == sorted(sizes, reverse=True) and len(set(sizes)) == 4
+    orders = [ln.get_zorder() for ln in lines]
+    assert orders == sorted(orders) and len(set(orders)) == 4
+    assert all(ln.get_markerfacecolor() == "none" for ln in lines)
+
+
+@pytest.mark.parametrize("metric", NUMERIC_METRICS)
+def test_every_metric_has_a_readable_name_and_its_unit_in_titles(metric):
+    # No raw column name in a title: every metric that ranks runs is named (METRIC_NAMES),
+    # with its unit from METRICS (m drawn as mm), and the field swept with its unit.
+    assert metric in sp.METRIC_NAMES
+    rows = [dict(r, **{metric: "0.5"}) for r in UNIT_ROWS]
+    fig = sp.figure_metric_vs_axis(UNITS_COLUMNS + [metric], rows, metric, FU)
+    title = fig.axes[0].get_title()
+    unit = METRICS[metric][0]
+    shown = {"m": "mm"}.get(unit, unit)
+    name = sp.METRIC_NAMES[metric]
+    assert title.startswith(f"{name} ({shown})" if shown != "-" else name), title
+    assert "against F_u, every pair (N)" in title
+    assert metric not in title.replace(name, "")

@@ -75,9 +75,12 @@ def step_layout(m: int, nv: int) -> dict:
     for a free platform: moment about its centre, then force, base frame; 3 with the rotation
     locked: the force): the generalized force on the platform for this step, the drives' next
     state (state_layout), and the ground truth now (tensions N, slack: 1.0 where a cable
-    carries no tension, p_WP m, rpy rad) with the hand force (N, base frame) on entry."""
+    carries no tension, p_WP m, rpy rad) with the hand force (N, base frame) on entry; last
+    the force each reel drive supplies in this step (N at the cable, as drive_torque.py:
+    what its current measures)."""
     return _layout((("generalized_force", nv), ("next_reels", 2 * m), ("tensions", m),
-                    ("slack", m), ("p_WP_true", 3), ("rpy_true", 3), ("hand_force", 3)))
+                    ("slack", m), ("p_WP_true", 3), ("rpy_true", 3), ("hand_force", 3),
+                    ("drive_force", m)))
 
 
 def input_layout(m: int, nx: int) -> dict:
@@ -101,14 +104,22 @@ def cable_net_step(reels, attachments, handle, params, R, inputs, out):
 
     reels (m, 3) a_i and attachments (m, 3) b_i, m; handle (3,) m, platform frame;
     params [EA N, damping N s/m, h s, bandwidth rad/s, reel inertia kg, viscous N s/m,
-    Coulomb N, reel speed limit m/s, locked (1.0: rotation locked)]; R (3, 3): R_WB when
+    Coulomb N, reel speed limit m/s, locked (1.0: rotation locked), the drives' true inertia
+    and friction over those (the drive force's scales)]; R (3, 3): R_WB when
     locked, else scratch (R_WB of the state is written there); inputs as input_layout; out's
     hand force (N, base frame) must be set on entry.
 
     On the platform's state and the drives' present L0 and speeds, the cables' tensions and
     the generalized force they and the hand put on the platform (`_cable_forces`), with the
     ground truth; then the drives' step: the command scaled to the speed limit (all reels
-    alike), one `_reel_speed` step of h s, L0 += h w.
+    alike), one `_reel_speed` step of h s, L0 += h w; and each drive's force.
+
+    The drive force: the velocity loop is stiff against its load (the reel moves as
+    `_reel_speed` says, whatever the cable pulls), so the drive supplies what that motion
+    takes against the cable: F = J a + b w + f - T (drive_torque.py), a = (w_next - w) / h,
+    w = w_next, f the Coulomb force of the step (in [-F_c, F_c] while stuck), T the tension
+    now; with true inertia and friction scaled by params[9], params[10] from the ones that
+    move the reel (1, 1: F = K (u - w_next) - T exactly).
     """
     m = reels.shape[0]
     locked = params[8] > 0.5
@@ -119,6 +130,7 @@ def cable_net_step(reels, attachments, handle, params, R, inputs, out):
     oT = nv + 2 * m
     o_slack, o_p, o_rpy = oT + m, oT + 2 * m, oT + 2 * m + 3
     o_hand = o_rpy + 3
+    o_drive = o_hand + 3
     if not locked:
         _rotation_into(inputs, R)
     _cable_forces(reels, attachments, handle, params, R, inputs, iL0, iw, out, o_hand, 0, oT,
@@ -135,11 +147,17 @@ def cable_net_step(reels, attachments, handle, params, R, inputs, out):
     for i in range(m):
         peak = max(peak, abs(inputs[iu + i]))
     scale = params[7] / peak if peak > params[7] else 1.0
+    J, b = params[4], params[5]
+    K = params[3] * J
     for i in range(m):
         u = inputs[iu + i] * scale if scale != 1.0 else inputs[iu + i]
-        w = _reel_speed(inputs[iw + i], u, h, params[3], params[4], params[5], params[6])
+        w = _reel_speed(inputs[iw + i], u, h, params[3], J, b, params[6])
         out[o_next + m + i] = w
         out[o_next + i] = inputs[iL0 + i] + h * w
+        a = (w - inputs[iw + i]) / h
+        coulomb = K * (u - w) - J * a - b * w
+        out[o_drive + i] = (params[9] * J * a + params[10] * (b * w + coulomb)
+                            - out[oT + i])
 
 
 @_jit
@@ -217,9 +235,14 @@ def _rotation_into(x, R):
 
 
 def cable_net_params(dynamics, *, time_step: float, max_reel_speed: float,
-                     locked: bool) -> np.ndarray:
-    """cable_net_step's params from a robot's dynamics (robot.Dynamics)."""
+                     locked: bool, inertia_error: float = 0.0,
+                     friction_error: float = 0.0) -> np.ndarray:
+    """cable_net_step's params from a robot's dynamics (robot.Dynamics). The errors are the
+    drives' true inertia and friction over the robot file's, less one (0.2: 20 % more): the
+    force the drives supply is the true drives'; the robot file's values (what the
+    controller's model takes) move the reels."""
     d = dynamics
     return np.array([d.EA, d.damping, time_step, d.bandwidth, d.reel_inertia,
                      d.viscous_friction, d.coulomb_friction, max_reel_speed,
-                     1.0 if locked else 0.0], dtype=float)
+                     1.0 if locked else 0.0, 1.0 + inertia_error, 1.0 + friction_error],
+                    dtype=float)

@@ -12,7 +12,8 @@ from cdpm_drake.config import Scenario, interference_params, scenario_robot
 METRICS = {
     "min_distance": ("m", "max", "smallest distance of any watched cable pair over the run"),
     "min_distance_pair": ("-", None, "the pair where min_distance occurred, e.g. 1-3"),
-    "time_below_d_l": ("s", "min", "time during which any pair was below its d_l"),
+    "time_below_d_l": ("s", "min", "time during which any pair was below its d_l (by more "
+                                      "than 1 um: round-off at the barrier is not below)"),
     "crossings": ("-", "min", "number of pairs that crossed at least once"),
     "peak_F_int": ("N", "min", "largest |F_int| (interference force)"),
     "peak_F_d": ("N", "min", "largest |F_d| (desired force F_H + F_int + F_wall)"),
@@ -37,6 +38,10 @@ NUMERIC_METRICS = [m for m in METRICS if not m.endswith("_pair")]
 # A limit "acts" when the commanded velocity differs from the admittance's by more than this,
 # m/s: the limits pass an unlimited velocity through exactly, so this only absorbs round-off.
 LIMIT_TOLERANCE = 1e-9
+# A pair is "below d_l" when it is closer than d_l by more than this, m: the safety filter
+# holds a pair at d_l exactly, and its solve lands within round-off (nm) on either side of
+# it; 1 um is a thousandth of a cable's diameter, far below anything physical.
+D_L_TOLERANCE = 1e-6
 
 
 def better_direction(metric: str) -> str:
@@ -70,7 +75,7 @@ def run_metrics(log: dict, scenario: Scenario) -> dict:
         d_l = np.asarray(log["d_l"], dtype=float)
         if not np.all(np.isfinite(d_l)):  # interference off: the log has no d_l, the config does
             d_l = np.asarray(interference_params(scenario, scenario_robot(scenario)).d_l)
-        out["time_below_d_l"] = held(np.any(d < d_l[None, :], axis=1))
+        out["time_below_d_l"] = held(np.any(d < d_l[None, :] - D_L_TOLERANCE, axis=1))
     else:
         out.update(min_distance=math.nan, min_distance_pair="", time_below_d_l=0.0)
     # The crossing flags come from the interference block; without it (the log's logistic

@@ -21,7 +21,7 @@ from pydrake.multibody.plant import DiscreteContactApproximation, MultibodyPlant
 from pydrake.multibody.tree import (FixedOffsetFrame, PrismaticJoint, RotationalInertia,
                                     SpatialInertia)
 from pydrake.systems.framework import DiagramBuilder, LeafSystem
-from pydrake.systems.primitives import VectorLogSink
+from pydrake.systems.primitives import ConstantVectorSource, VectorLogSink
 
 from cdpm_drake.kernels.plant.cable_net import (cable_net_params, cable_net_step, cable_tensions, input_layout,
                       reel_step, state_layout, step_layout)
@@ -29,6 +29,9 @@ from cdpm_drake.kernels.call import bind, owned
 from cdpm_drake.kernels.plant.operators import ForceProfile, NoForce, SpringHand, operator_force_at
 from cdpm_drake.kernels.rotation import rotation_from_rpy
 from cdpm_drake.kernels.tension import unstretched_lengths
+from cdpm_drake.kernels.plant.tension_sensor import (DRIVE_TORQUE, LOAD_CELL, sensor_layout,
+                                                     sensor_params, tension_sensor_tick)
+from cdpm_drake.systems.kernel_system import KernelSystem
 from cdpm_drake.systems.wiring import unit_delay, wiring
 from cdpm_drake.systems.plants.simulated_reels import add_measured_force
 
@@ -62,10 +65,11 @@ class CableNet(LeafSystem):
         output_ports:
         - step ([generalized force (N m, N), next L0 (m), next reel speeds (m/s), tensions
           (N), slack (1 where a cable carries no tension), p_WP_true (m), rpy_true (rad),
-          hand force (N)]: cables.step_layout)
+          hand force (N), drive force (N)]: cables.step_layout)
     """
 
-    def __init__(self, robot, operator, *, time_step, max_reel_speed, locked_rotation=None):
+    def __init__(self, robot, operator, *, time_step, max_reel_speed, locked_rotation=None,
+                 inertia_error=0.0, friction_error=0.0):
         super().__init__()
         m = robot.num_cables
         locked = locked_rotation is not None
@@ -79,7 +83,8 @@ class CableNet(LeafSystem):
         reels, attachments = owned(robot.reels), owned(robot.attachments)
         handle = owned(d.handle)
         params = owned(cable_net_params(d, time_step=time_step, max_reel_speed=max_reel_speed,
-                                        locked=locked))
+                                        locked=locked, inertia_error=inertia_error,
+                                        friction_error=friction_error))
         # R_WB when locked; else the kernel's scratch for the state's rotation.
         R = owned(np.eye(3) if locked_rotation is None else locked_rotation)
         self._inputs = self.DeclareVectorInputPort("inputs", n_in)
@@ -175,9 +180,15 @@ def build_dynamic_plant(scenario, robot, operator, start_tensions, *, log_truth=
     m = robot.num_cables
     vmax = (cfg.max_reel_speed if cfg.max_reel_speed is not None
             else robot.limits.max_reel_speed)
+    sensor = cfg.tension_sensor
+    if sensor not in ("drive_torque", "load_cell", "none"):
+        raise ValueError(f"plant.tension_sensor must be drive_torque, load_cell or none, got "
+                         f"{sensor!r}")
+    drive = cfg.drive_torque
     cables = builder.AddNamedSystem("cables", CableNet(
         robot, operator, time_step=h, max_reel_speed=vmax,
-        locked_rotation=R0 if cfg.lock_rotation else None))
+        locked_rotation=R0 if cfg.lock_rotation else None,
+        inertia_error=float(drive.inertia_error), friction_error=float(drive.friction_error)))
     # The drives' state [L0, reel speeds] in C++, fed back from the cables' step at the
     # plant's rate; the encoders: L0 sampled at each control tick and held (the controller
     # reads them at its own rate).
@@ -188,16 +199,28 @@ def build_dynamic_plant(scenario, robot, operator, start_tensions, *, log_truth=
     # and of the cables' step (one evaluation of the Python step per plant step, whoever reads
     # which piece).
     step = cables.layout
+    # The tension sensor (none: a constant NaN): a compiled tick on the drives' force and
+    # speeds or the true tensions, its state held by a delay sampled at the control tick as
+    # the encoders are.
+    sensing = sensor != "none"
+    sensed = sensor_layout(m)
+    n_sensed = sum(size for _, size in sensed.values())
+    speeds_at = step["next_reels"][0] + m
     route = builder.AddNamedSystem("wiring", wiring(
         [("platform_state", cables.nx), ("reels", 2 * m), ("reel_velocity_command", m),
-         ("step", sum(size for _, size in step.values()))],
+         ("step", sum(size for _, size in step.values()))]
+        + ([("sensor_state", n_sensed)] if sensing else []),
         [("inputs", [("platform_state", 0, cables.nx), ("reels", 0, 2 * m),
                      ("reel_velocity_command", 0, m)]),
          ("generalized_force", [("step", *step["generalized_force"])]),
          ("next_reels", [("step", *step["next_reels"])]),
          ("unstretched_lengths", [("reels", *cables.state_layout["L0"])]),
          ("measured_force", [("step", *step["hand_force"])]),
-         ("truth", [("step", *step[_TRUTH_PIECES[key]]) for key in GROUND_TRUTH])]))
+         ("truth", [("step", *step[_TRUTH_PIECES[key]]) for key in GROUND_TRUTH])]
+        + ([("sensor_inputs", [("step", *step["drive_force"]), ("step", speeds_at, m),
+                               ("step", *step["tensions"]), ("sensor_state", 0, n_sensed)]),
+            ("tension_measured", [("sensor_state", *sensed["tension_measured"])])]
+           if sensing else [])))
     builder.Connect(mbp.get_state_output_port(), route.GetInputPort("platform_state"))
     builder.Connect(drives.get_output_port(), route.GetInputPort("reels"))
     builder.Connect(cables.GetOutputPort("step"), route.GetInputPort("step"))
@@ -210,6 +233,18 @@ def build_dynamic_plant(scenario, robot, operator, start_tensions, *, log_truth=
     builder.ExportInput(route.GetInputPort("reel_velocity_command"), "reel_velocity_command")
     builder.ExportOutput(encoders.get_output_port(), "cable_lengths")
     add_measured_force(builder, route.GetOutputPort("measured_force"), scenario, T)
+    # After measured_force: the plants' ports in one order (the real reels' too).
+    if sensing:
+        system, start = tension_sensor(scenario, robot, tensions0)
+        tick = builder.AddNamedSystem("tension_sensor", system)
+        held = builder.AddNamedSystem("tension_sensor_state", unit_delay(n_sensed, T, start))
+        builder.Connect(route.GetOutputPort("sensor_inputs"), tick.get_input_port())
+        builder.Connect(tick.get_output_port(), held.get_input_port())
+        builder.Connect(held.get_output_port(), route.GetInputPort("sensor_state"))
+        builder.ExportOutput(route.GetOutputPort("tension_measured"), "tension_measured")
+    else:
+        nan = builder.AddNamedSystem("tension_sensor", ConstantVectorSource(np.full(m, np.nan)))
+        builder.ExportOutput(nan.get_output_port(), "tension_measured")
     if log_truth:
         source = route.GetOutputPort("truth")
         logger = builder.AddNamedSystem(TRUTH_LOG, VectorLogSink(source.size(), T))
@@ -224,6 +259,42 @@ def build_dynamic_plant(scenario, robot, operator, start_tensions, *, log_truth=
                           "reads": {k: sorted({index[src] for src, _, _ in pieces})
                                     for k, (_, pieces) in enumerate(outputs)}}
     return plant
+
+
+def tension_sensor(scenario, robot, tensions0):
+    """The dynamic plant's tension sensor tick (a KernelSystem over
+    tension_sensor.tension_sensor_tick) and its start state, for the scenario's
+    plant.tension_sensor (drive_torque or load_cell), at start tensions (m,) N."""
+    cfg = scenario.plant
+    m = robot.num_cables
+    T = scenario.time_step
+    d = robot.dynamics
+    seed = int(scenario.random_seed)
+    if cfg.tension_sensor == "drive_torque":
+        s = cfg.drive_torque
+        params = sensor_params(DRIVE_TORQUE, time_step=T, seed=seed, noise_std=s.noise_std,
+                               quantum=s.quantum, time_constant=s.filter_time_constant,
+                               inertia=d.reel_inertia, viscous=d.viscous_friction,
+                               coulomb=d.coulomb_friction, band=s.friction_band)
+        bias = np.zeros(m)
+        filtered = -np.asarray(tensions0, dtype=float)  # a drive holding a taut cable pulls in
+    else:
+        s = cfg.load_cell
+        params = sensor_params(LOAD_CELL, time_step=T, seed=seed, noise_std=s.noise_std,
+                               time_constant=1.0 / (2.0 * np.pi * s.bandwidth))
+        # Each cell's offset, drawn once per run from the scenario's seed (not the noise's
+        # stream: a stream of its own).
+        bias = s.bias_std * np.random.default_rng([seed, 31]).standard_normal(m)
+        filtered = np.asarray(tensions0, dtype=float)
+    layout = sensor_layout(m)
+    n = sum(size for _, size in layout.values())
+    # The first reading (logged at t = 0): the start tensions as the sensor reads them.
+    start = np.concatenate([np.asarray(tensions0, dtype=float) + bias, filtered, np.zeros(m),
+                            [0.0]])
+    params, bias = owned(params), owned(bias)
+    kernel = bind(tension_sensor_tick, params, bias, np.zeros(3 * m + n),
+                  np.empty(n))
+    return KernelSystem(3 * m + n, n, kernel, (params, bias)), start
 
 
 def _plant_of(diagram):
