@@ -555,6 +555,10 @@ def make_plant(scenario: Scenario | ResolvedScenario, robot=None):
 
     if isinstance(cfg, HardwareReels):
         return HardwareReelsSystem(resolved.robot, cfg, time_step=resolved.time_step)
+    from cdpm_drake.hardware.canopen_config import CanopenReels
+    if isinstance(cfg, CanopenReels):
+        from cdpm_drake.hardware.canopen_reels import CanopenReelsSystem
+        return CanopenReelsSystem(resolved.robot, cfg, time_step=resolved.time_step)
     raise TypeError(f"unknown plant {type(cfg).__name__!r}")
 
 

@@ -93,7 +93,9 @@ def build_parser() -> argparse.ArgumentParser:
     p = sub.add_parser("run", help="run a scenario in real time against the reels",
                        description="Build the same diagram with the scenario's !HardwareReels "
                                    "plant and run it at 500 Hz in real time against the reel "
-                                   "bridge (or cdpm-reel-emulator). Ctrl-C or SIGTERM stop it "
+                                   "bridge (or cdpm-reel-emulator), or with !CanopenReels "
+                                   "against CiA 402 drives on a CAN bus (or cdpm emulate "
+                                   "--canopen; hardware/CANOPEN.md). Ctrl-C or SIGTERM stop it "
                                    "cleanly (zero reel velocity is sent first); every tick is "
                                    "logged to disk as it goes.")
     _scenario_args(p, default=None)
@@ -116,7 +118,8 @@ def build_parser() -> argparse.ArgumentParser:
 
     p = sub.add_parser("emulate", help="play the reel bridge on loopback (cdpm-reel-emulator)",
                        description="Same as cdpm-reel-emulator; `cdpm emulate --help` lists "
-                                   "its options.", add_help=False)
+                                   "its options; `cdpm emulate --canopen` plays CiA 402 drives "
+                                   "on a CAN bus instead.", add_help=False)
     p.add_argument("emulator_args", nargs="*",
                    help="options of cdpm-reel-emulator, e.g. --scenario exp2_interaction")
 

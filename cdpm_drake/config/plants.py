@@ -1,5 +1,6 @@
 """The plant configs of a scenario (its `plant:` field, a tagged union): the simulated
-reels, the dynamic plant, and the real reels where the hardware package is installed.
+reels, the dynamic plant, and the real reels where the hardware package is installed (over
+the UDP reel bridge, or CiA 402 drives over CANopen).
 
 YAML tags are the class names (`plant: !DynamicReels {...}`); an untagged mapping is the
 first member, SimulatedReels.
@@ -96,7 +97,11 @@ def _plant_types():
         from cdpm_drake.hardware.config import HardwareReels
     except ImportError:  # the hardware package is optional for pure simulation
         return (SimulatedReels, DynamicReels)
-    return (SimulatedReels, HardwareReels, DynamicReels)
+    try:
+        from cdpm_drake.hardware.canopen_config import CanopenReels
+    except ImportError:  # pragma: no cover - shipped with the hardware package
+        return (SimulatedReels, HardwareReels, DynamicReels)
+    return (SimulatedReels, HardwareReels, DynamicReels, CanopenReels)
 
 
 PLANT_TYPES = _plant_types()

@@ -143,9 +143,13 @@ def _resolve(scenario: Scenario, source: str) -> ResolvedScenario:
             raise ScenarioError(str(e)) from None
         check_dynamic_reels(scenario, robot, defaulted=defaulted)
     elif not isinstance(scenario.plant, SimulatedReels):
+        from cdpm_drake.hardware.canopen_config import CanopenReels, check_canopen_reels
         from cdpm_drake.hardware.config import check_hardware_reels
         try:
-            check_hardware_reels(scenario.plant)
+            if isinstance(scenario.plant, CanopenReels):
+                check_canopen_reels(scenario.plant, robot.num_cables, scenario.time_step)
+            else:
+                check_hardware_reels(scenario.plant)
         except ValueError as e:
             raise ScenarioError(str(e)) from None
     else:

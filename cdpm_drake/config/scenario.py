@@ -335,7 +335,8 @@ class Scenario:
     # The person at the handle (simulation and the emulator; on the robot, a real person).
     operator: OperatorConfig = dataclasses.field(default_factory=NoOperator)
     sensor: Sensor = dataclasses.field(default_factory=Sensor)
-    # The reel plant: `!SimulatedReels {...}`, `!DynamicReels {...}` or `!HardwareReels {...}`.
+    # The reel plant: `!SimulatedReels {...}`, `!DynamicReels {...}`, `!HardwareReels {...}`
+    # (the UDP reel bridge) or `!CanopenReels {...}` (CiA 402 drives, hardware/CANOPEN.md).
     plant: PlantConfig = dataclasses.field(default_factory=SimulatedReels)
     # Seed of every random number generator (sensor noise), for repeatable runs.
     random_seed: int = 0

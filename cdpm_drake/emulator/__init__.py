@@ -4,6 +4,7 @@ loopback, to rehearse a run before the robot. The protocol is hardware/PROTOCOL.
     server.py   ReelBridgeServer: the bridge on a UDP socket, its sessions and record
     bridges.py  the two plants behind it: ReelBridge (kinematic), DynamicBridge (dynamic)
     faults.py   FaultPlan: what the emulator breaks, and from when
+    canopen_drives.py  `cdpm emulate --canopen`: CiA 402 drives on a CAN bus, same plants
     main.py     the command line: its parser, build_server, main
 
 The names below are the emulator's API, re-exported so that `cdpm_drake.emulator:main` stays

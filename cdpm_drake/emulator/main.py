@@ -33,6 +33,9 @@ Examples:
   cdpm-reel-emulator --scenario exp2_interaction --plant dynamic --truth-log truth.npz
   cdpm-reel-emulator --scenario exp2_interaction --protocol-version 1
   cdpm-reel-emulator --stop --fault-after 2.0
+
+`--canopen` plays CiA 402 drives on a CAN bus instead (emulator/canopen_drives.py; `cdpm
+emulate --canopen --help` lists its options).
 """
 
 import argparse
@@ -193,7 +196,7 @@ def build_server(args, log=None) -> ReelBridgeServer:
         if args.time_constant is not None:
             raise ValueError("--time-constant sets the kinematic plant's lag; the dynamic "
                              "plant's drives come from the robot file's reel_drives section")
-        bridge = DynamicBridge(_dynamic_scenario(args, robot, start),
+        bridge = DynamicBridge(dynamic_scenario(args, robot, start),
                                length_offset=lengths - cable_lengths(robot, np.asarray(
                                    start, dtype=float)), load_cells=args.load_cells)
     else:
@@ -229,7 +232,7 @@ def write_truth_log(server, path) -> int:
     return len(rows)
 
 
-def _dynamic_scenario(args, robot, start):
+def dynamic_scenario(args, robot, start):
     """The resolved scenario of `--plant dynamic`: the scenario's (or, with --robot, a
     scenario of that robot), at `start`, with --force as its operator, and a !DynamicReels
     plant (the scenario's own when it has one)."""
@@ -260,6 +263,11 @@ def main(argv=None) -> int:
     2 bad usage, 130 / 143 after Ctrl-C / SIGTERM (the summary is printed first)."""
     from cdpm_drake.text import prefixed_log_records
 
+    argv = list(sys.argv[1:] if argv is None else argv)
+    if "--canopen" in argv:  # CiA 402 drives on a CAN bus instead of the UDP bridge
+        from cdpm_drake.emulator.canopen_drives import main as canopen_main
+        argv.remove("--canopen")
+        return canopen_main(argv)
     with prefixed_log_records():
         return _main(argv)
 

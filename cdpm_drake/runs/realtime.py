@@ -1,6 +1,7 @@
 """Running the same diagram in real time against the reels (`cdpm run`).
 
-The scenario's plant must be `!HardwareReels`; the builder is the simulation's. Every tick is
+The scenario's plant must be `!HardwareReels` (or `!CanopenReels`, hardware/CANOPEN.md); the
+builder is the simulation's. Every tick is
 streamed to `DIR/ticks.bin` as the run goes (nothing but the last few unflushed ticks is lost if
 the process is killed); at the end it is converted to `DIR/log.npz` (docs/LOG_FORMAT.md). Any
 way the run ends (its duration, Ctrl-C, SIGTERM, a reel fault, any error) zero reel velocity
@@ -190,7 +191,8 @@ def run(*, scenario: Scenario | ResolvedScenario, out_dir, duration: float | Non
         raise ScenarioError(
             f"scenario {scenario.name!r} has plant: !{type(scenario.plant).__name__}; `cdpm "
             "run` drives real "
-            "reels and needs plant: !HardwareReels {address: ..., port: ...} (use `cdpm "
+            "reels and needs plant: !HardwareReels {address: ..., port: ...} or plant: "
+            "!CanopenReels {interface: ..., channel: ...} (use `cdpm "
             "simulate` for a simulation, or --scenario-text 'plant: !HardwareReels {}')")
     duration = scenario.duration if duration is None else float(duration)
     if not (duration > 0 and np.isfinite(duration)):

@@ -209,10 +209,11 @@ def _resolve_variant(index, base, values, overlay, seed, path) -> Variant:
 
 def _is_hardware(plant) -> bool:
     try:
+        from cdpm_drake.hardware.canopen_config import CanopenReels
         from cdpm_drake.hardware.config import HardwareReels
     except ImportError:
         return False
-    return isinstance(plant, HardwareReels)
+    return isinstance(plant, (HardwareReels, CanopenReels))
 
 
 def _random_samples(r: RandomSamples, base: Scenario) -> list[dict]:

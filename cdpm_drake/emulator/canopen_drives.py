@@ -1,0 +1,529 @@
+"""`cdpm emulate --canopen`: m CiA 402 servo drives on a python-can bus, to rehearse a
+`plant: !CanopenReels` run without the robot (hardware/CANOPEN.md).
+
+Each drive is a CANopen node: NMT (start, stop, pre-operational, reset), an SDO server
+(expedited transfers) over an object dictionary with the communication and mapping objects
+(0x1400/0x1600, 0x1800/0x1A00, 0x1017) and the drive objects (0x6040, 0x6041, 0x6060/0x6061,
+0x6064, 0x6077, 0x606C, 0x60FF), the CiA 402 state machine, mode 9 (cyclic synchronous
+velocity) only, synchronous RPDOs and TPDOs as mapped by the controller (read from 0x1600 /
+0x1A00 when the node is started), a heartbeat producer and EMCY. Until the controller maps
+them, TPDO1 carries statusword and position only: a controller that skips the mapping does
+not get the torque it expects.
+
+On each SYNC the drives act on the RPDOs received since the last one (controlword: the state
+machine; target velocity: followed in operation enabled, 0 otherwise), the plant behind them
+(emulator/bridges.py: ReelBridge kinematic or DynamicBridge dynamic, as `cdpm emulate`) steps
+one control period, and each started drive sends its TPDO: statusword, position actual =
+(cable length - position_offset) x counts_per_metre, torque actual = drive force at the cable /
+force_per_torque_unit (0 when the plant has none). A plant step per SYNC, not per wall-clock
+interval: the lengths are the sum of the commanded velocities times the period, whatever the
+host's timing.
+
+Fault injection (`--fault KIND`, on `--fault-cable`, from `--fault-after` s after the first
+drive reached operation enabled): drive_fault (the drive goes to Fault and sends EMCY 0x2310),
+lost_tpdo (the drive stops sending TPDOs; heartbeats go on), frozen_position (position actual
+stops changing), dead_node (the node sends nothing and ignores the bus; its reel stops),
+bus_off (every node leaves the bus: nothing sent or received; the reels stop).
+"""
+
+import argparse
+import collections
+import gc
+import math
+import struct
+import sys
+import threading
+import time
+
+import numpy as np
+
+from cdpm_drake.hardware.canopen_bus import (COB_EMCY, COB_HEARTBEAT, COB_NMT, COB_SDO_RX,
+                                             COB_SDO_TX, COB_SYNC, MODE_CSV, NMT_PRE_OPERATIONAL,
+                                             NMT_START, NMT_STOP)
+
+FAULT_KINDS = ("drive_fault", "lost_tpdo", "frozen_position", "dead_node", "bus_off")
+# Statuswords of the states (bit 9 remote, bit 4 voltage enabled where it is).
+SW = {"switch on disabled": 0x0250, "ready to switch on": 0x0231, "switched on": 0x0233,
+      "operation enabled": 0x0237, "quick stop active": 0x0217, "fault": 0x0218}
+# (index, sub) -> (struct format, writable)
+OBJECTS = {(0x1000, 0): ("<I", False), (0x1017, 0): ("<H", True),
+           (0x1400, 1): ("<I", True), (0x1400, 2): ("<B", True),
+           (0x1800, 1): ("<I", True), (0x1800, 2): ("<B", True),
+           (0x6040, 0): ("<H", True), (0x6041, 0): ("<H", False), (0x6060, 0): ("<b", True),
+           (0x6061, 0): ("<b", False), (0x6064, 0): ("<i", False), (0x606C, 0): ("<i", False),
+           (0x6077, 0): ("<h", False), (0x60FF, 0): ("<i", True)}
+for _map in (0x1600, 0x1A00):
+    OBJECTS[(_map, 0)] = ("<B", True)
+    for _sub in range(1, 9):
+        OBJECTS[(_map, _sub)] = ("<I", True)
+SDO_NO_OBJECT, SDO_READ_ONLY, SDO_VALUE_RANGE, SDO_BAD_COMMAND = (
+    0x06020000, 0x06010002, 0x06090030, 0x05040001)
+NMT_STATE = {"pre-operational": 0x7F, "operational": 0x05, "stopped": 0x04}
+
+
+class Drive:
+    """One emulated CiA 402 drive (node `node_id`, cable `cable`, 0-based)."""
+
+    def __init__(self, node_id: int, cable: int):
+        self.node_id, self.cable = node_id, cable
+        self.od = {(0x1000, 0): 0x00020192, (0x1017, 0): 0,
+                   (0x1400, 1): 0x200 + node_id, (0x1400, 2): 255,
+                   (0x1800, 1): 0x180 + node_id, (0x1800, 2): 255,
+                   (0x1600, 0): 2, (0x1600, 1): 0x60400010, (0x1600, 2): 0x60FF0020,
+                   (0x1A00, 0): 2, (0x1A00, 1): 0x60410010, (0x1A00, 2): 0x60640020,
+                   (0x6040, 0): 0, (0x6060, 0): 0, (0x60FF, 0): 0}
+        self.nmt = "pre-operational"
+        self.state = "switch on disabled"
+        self.previous_cw = 0
+        self.rpdo, self.tpdo = [], []   # mapped (index, format) lists, fixed at NMT start
+        self.frozen = None              # the position reported while frozen, counts
+        self.lost_tpdo = self.dead = False
+        self.next_heartbeat = 0.0
+
+    def start(self) -> None:
+        """NMT start: the mapping in the dictionary becomes the PDOs'."""
+        self.rpdo = self._mapping(0x1600)
+        self.tpdo = self._mapping(0x1A00)
+        self.nmt = "operational"
+
+    def _mapping(self, index):
+        out = []
+        for sub in range(1, self.od.get((index, 0), 0) + 1):
+            entry = self.od.get((index, sub), 0)
+            key = (entry >> 16, (entry >> 8) & 0xFF)
+            if key in OBJECTS:
+                out.append((key, OBJECTS[key][0]))
+        return out
+
+    def statusword(self) -> int:
+        return SW[self.state]
+
+    def apply_controlword(self, cw: int) -> None:
+        """The CiA 402 state machine on a controlword (device control commands)."""
+        previous, self.previous_cw = self.previous_cw, cw
+        s = self.state
+        if s == "fault":
+            if cw & 0x80 and not previous & 0x80:
+                self.state = "switch on disabled"
+            return
+        if not cw & 0x02:                               # disable voltage
+            self.state = "switch on disabled"
+        elif s == "quick stop active":
+            return                                      # until disable voltage
+        elif cw & 0x06 == 0x02:                         # quick stop
+            self.state = "quick stop active" if s == "operation enabled" else (
+                "switch on disabled")
+        elif cw & 0x87 == 0x06:                         # shutdown
+            if s in ("switch on disabled", "switched on", "operation enabled"):
+                self.state = "ready to switch on"
+        elif cw & 0x8F == 0x07:                         # switch on / disable operation
+            if s in ("ready to switch on", "operation enabled"):
+                self.state = "switched on"
+        elif cw & 0x8F == 0x0F:                         # enable operation
+            if s in ("ready to switch on", "switched on"):
+                self.state = "operation enabled"
+
+
+class EmulatedDrives:
+    """m CiA 402 drives on one python-can bus in front of a bridge plant (ReelBridge or
+    DynamicBridge). `bus`: a python-can Bus (owned: shut down by stop()). Units as
+    CanopenReels: counts_per_metre, position_offset (m per cable), velocity_units (target
+    velocity units per m/s), force_per_torque_unit (N per unit of torque actual); `period`:
+    the plant's step per SYNC, s. `faults`: [(kind, cable 0-based, after s)]."""
+
+    def __init__(self, bridge, bus, node_ids, *, counts_per_metre=1_000_000.0,
+                 position_offset=None, velocity_units=None, force_per_torque_unit=0.1,
+                 period=0.002, faults=(), record=100_000, log=None):
+        m = bridge.robot.num_cables
+        if len(node_ids) != m:
+            raise ValueError(f"node ids must be one per cable ({m}), got {list(node_ids)!r}")
+        self.bridge, self.bus, self.period = bridge, bus, float(period)
+        self.drives = [Drive(int(i), k) for k, i in enumerate(node_ids)]
+        self._by_id = {d.node_id: d for d in self.drives}
+        self.counts = float(counts_per_metre)
+        self.offset = np.zeros(m) if position_offset is None else np.asarray(
+            position_offset, dtype=float)
+        self.velocity_units = float(counts_per_metre if velocity_units is None
+                                    else velocity_units)
+        self.force_unit = float(force_per_torque_unit)
+        self.faults = [(k, int(c), float(a)) for k, c, a in faults]
+        for kind, cable, _ in self.faults:
+            if kind not in FAULT_KINDS:
+                raise ValueError(f"fault kind must be one of {', '.join(FAULT_KINDS)}, got "
+                                 f"{kind!r}")
+            if not 0 <= cable < m:
+                raise ValueError(f"fault cable must be in 1..{m}, got {cable + 1}")
+        self.bus_off = False
+        self.syncs = 0
+        self.tpdo_sent = 0
+        self.first_enable_time = None
+        self.fault_syncs = {}  # kind -> the SYNC count when it was injected
+        # Per SYNC: (sync count, states, controlwords, target velocities m/s) of each drive.
+        self.record = collections.deque(maxlen=record)
+        self._log = log
+        self._stop = threading.Event()
+        self._thread = None
+
+    # --- running -----------------------------------------------------------------------------
+
+    def start(self) -> "EmulatedDrives":
+        for d in self.drives:
+            self._send(COB_HEARTBEAT + d.node_id, b"\x00", d)  # boot-up
+        self._thread = threading.Thread(target=self.run, name="canopen-drives", daemon=True)
+        self._thread.start()
+        return self
+
+    def run(self, duration: float | None = None) -> None:
+        end = None if duration is None else time.monotonic() + duration
+        while not self._stop.is_set() and (end is None or time.monotonic() < end):
+            msg = self.bus.recv(timeout=0.001)
+            now = time.monotonic()
+            if msg is not None and not self.bus_off and not msg.is_error_frame:
+                self._handle(msg.arbitration_id, bytes(msg.data))
+            self._inject(now)
+            if not self.bus_off:
+                self._heartbeats(now)
+
+    def stop(self) -> None:
+        self._stop.set()
+        if self._thread is not None and self._thread is not threading.current_thread():
+            self._thread.join(2.0)
+        try:
+            self.bus.shutdown()
+        except Exception:  # noqa: S110 - already shut
+            pass
+
+    def __enter__(self):
+        return self.start()
+
+    def __exit__(self, *exc):
+        self.stop()
+
+    # --- frames ------------------------------------------------------------------------------
+
+    def _send(self, cob_id: int, data: bytes, drive=None) -> bool:
+        import can
+
+        if self.bus_off or (drive is not None and drive.dead):
+            return False
+        try:
+            self.bus.send(can.Message(arbitration_id=cob_id, data=data, is_extended_id=False))
+            return True
+        except Exception as e:  # a full queue: a frame lost, as on a real bus
+            self._say(f"send failed: {e}")
+            return False
+
+    def _handle(self, cob_id: int, data: bytes) -> None:
+        if cob_id == COB_NMT and len(data) >= 2:
+            for d in self.drives:
+                if data[1] in (0, d.node_id) and not d.dead:
+                    self._nmt(d, data[0])
+        elif cob_id == COB_SYNC:
+            self._sync()
+        elif COB_SDO_RX < cob_id <= COB_SDO_RX + 127:
+            d = self._by_id.get(cob_id - COB_SDO_RX)
+            if d is not None and not d.dead and len(data) == 8:
+                self._sdo(d, data)
+        else:
+            for d in self.drives:
+                if d.nmt == "operational" and not d.dead and cob_id == d.od[(0x1400, 1)]:
+                    at = 0
+                    for key, fmt in d.rpdo:
+                        size = struct.calcsize(fmt)
+                        if at + size <= len(data):
+                            d.od[key] = struct.unpack_from(fmt, data, at)[0]
+                        at += size
+
+    def _nmt(self, d: Drive, command: int) -> None:
+        if command == NMT_START:
+            d.start()
+        elif command == NMT_STOP:
+            d.nmt = "stopped"
+        elif command == NMT_PRE_OPERATIONAL:
+            d.nmt = "pre-operational"
+        elif command in (0x81, 0x82):  # reset node / communication
+            d.nmt = "pre-operational"
+            self._send(COB_HEARTBEAT + d.node_id, b"\x00", d)
+
+    def _sdo(self, d: Drive, data: bytes) -> None:
+        ccs = data[0] >> 5
+        index, sub = struct.unpack_from("<HB", data, 1)
+        key = (index, sub)
+
+        def reply(payload: bytes):
+            self._send(COB_SDO_TX + d.node_id, payload, d)
+
+        def abort(code):
+            reply(struct.pack("<BHBI", 0x80, index, sub, code))
+
+        if key not in OBJECTS:
+            return abort(SDO_NO_OBJECT)
+        fmt, writable = OBJECTS[key]
+        size = struct.calcsize(fmt)
+        if ccs == 1:  # initiate download, expedited only
+            if not data[0] & 0x02:
+                return abort(SDO_BAD_COMMAND)
+            n = 4 - ((data[0] >> 2) & 3) if data[0] & 0x01 else 4
+            if not writable:
+                return abort(SDO_READ_ONLY)
+            value = struct.unpack_from(fmt, bytes(data[4:4 + n]).ljust(size, b"\x00"))[0]
+            if key == (0x6060, 0) and value != MODE_CSV:
+                return abort(SDO_VALUE_RANGE)
+            d.od[key] = value
+            if key == (0x6040, 0):
+                d.apply_controlword(value)
+            reply(struct.pack("<BHB4x", 0x60, index, sub))
+        elif ccs == 2:  # initiate upload
+            value = self._value(d, key)
+            reply(struct.pack("<BHB", 0x43 | ((4 - size) << 2), index, sub)
+                  + struct.pack(fmt, value).ljust(4, b"\x00"))
+        else:
+            abort(SDO_BAD_COMMAND)
+
+    def _value(self, d: Drive, key):
+        if key == (0x6041, 0):
+            return d.statusword()
+        if key == (0x6061, 0):
+            return d.od[(0x6060, 0)]
+        if key == (0x6064, 0):
+            return self._position(d)
+        if key == (0x6077, 0):
+            return self._torque(d)
+        if key == (0x606C, 0):
+            v = self.bridge.speed[d.cable] * self.velocity_units
+            return int(max(-2**31, min(2**31 - 1, round(float(v)))))
+        return d.od.get(key, 0)
+
+    def _position(self, d: Drive) -> int:
+        if d.frozen is not None:
+            return d.frozen
+        x = (self.bridge.lengths[d.cable] - self.offset[d.cable]) * self.counts
+        return int(max(-2**31, min(2**31 - 1, round(float(x)))))
+
+    def _torque(self, d: Drive) -> int:
+        f = float(self.bridge.drive_force()[d.cable]) / self.force_unit
+        return 0 if not math.isfinite(f) else int(max(-32768, min(32767, round(f))))
+
+    # --- the cycle ---------------------------------------------------------------------------
+
+    def _sync(self) -> None:
+        m = len(self.drives)
+        velocity = np.zeros(m)
+        cws, targets = [], []
+        for d in self.drives:
+            cw, target = d.od[(0x6040, 0)], d.od[(0x60FF, 0)] / self.velocity_units
+            if d.nmt == "operational" and not d.dead:
+                d.apply_controlword(cw)
+            if d.state == "operation enabled" and d.od[(0x6060, 0)] == MODE_CSV:
+                velocity[d.cable] = target
+            cws.append(cw)
+            targets.append(target)
+        enabled = bool(np.any([d.state == "operation enabled" for d in self.drives]))
+        if enabled and self.first_enable_time is None:
+            self.first_enable_time = time.monotonic()
+        before = self.bridge.faults
+        self.bridge.set_command(velocity, enable=enabled)
+        if self.bridge.faults and not before:  # the plant's own fault (overspeed)
+            for d in self.drives:
+                self._drive_fault(d, 0x8400)
+        self.bridge.step(self.period)
+        self.record.append((self.syncs + 1, [d.state for d in self.drives], cws, targets))
+        for d in self.drives:
+            if d.nmt == "operational" and not d.lost_tpdo:
+                payload = b"".join(struct.pack(fmt, self._value(d, key)) for key, fmt in d.tpdo)
+                if self._send(d.od[(0x1800, 1)] & 0x7FF, payload, d):
+                    self.tpdo_sent += 1
+        self.syncs += 1  # last: a SYNC counted is one fully answered
+
+    def _drive_fault(self, d: Drive, code: int) -> None:
+        d.state = "fault"
+        self._send(COB_EMCY + d.node_id, struct.pack("<HB5x", code, 0x03), d)
+
+    def _heartbeats(self, now: float) -> None:
+        for d in self.drives:
+            ms = d.od[(0x1017, 0)]
+            if ms and now >= d.next_heartbeat:
+                d.next_heartbeat = now + ms / 1000.0
+                self._send(COB_HEARTBEAT + d.node_id, bytes([NMT_STATE[d.nmt]]), d)
+
+    def inject(self, kind: str, cable: int) -> None:
+        """Break drive `cable` (0-based) or the bus now (see the module docstring)."""
+        d = self.drives[cable]
+        self.fault_syncs[kind] = self.syncs
+        if kind == "drive_fault":
+            self._drive_fault(d, 0x2310)
+        elif kind == "lost_tpdo":
+            d.lost_tpdo = True
+        elif kind == "frozen_position":
+            d.frozen = self._position(d)
+        elif kind == "dead_node":
+            d.dead = True
+            d.state = "switch on disabled"  # a dead drive's power stage is off
+        elif kind == "bus_off":
+            self.bus_off = True
+            for d in self.drives:  # CiA 301 error behaviour: every drive stops
+                d.state = "switch on disabled" if d.state != "fault" else d.state
+        if kind in ("dead_node", "bus_off"):
+            velocity = np.zeros(len(self.drives))
+            for other in self.drives:
+                if other.state == "operation enabled" and not other.dead:
+                    velocity[other.cable] = self.bridge.command[other.cable]
+            self.bridge.set_command(velocity, enable=bool(np.any(velocity)))
+        self._say(f"injected {kind} on cable {cable + 1} (node {d.node_id}) at SYNC "
+                  f"{self.syncs}")
+
+    def _inject(self, now: float) -> None:
+        if self.first_enable_time is None or not self.faults:
+            return
+        due = [f for f in self.faults if now - self.first_enable_time >= f[2]]
+        for f in due:
+            self.faults.remove(f)
+            self.inject(f[0], f[1])
+
+    def fault_report(self) -> list[str]:
+        """For each injected fault: the SYNCs after it until every live drive had target
+        velocity 0, and until every live drive was out of operation enabled."""
+        lines = []
+        for kind, at in self.fault_syncs.items():
+            dead = {d.cable for d in self.drives if d.dead}
+            live = [k for k in range(len(self.drives)) if k not in dead]
+            after = [r for r in self.record if r[0] > at]
+            zero = next((r[0] - at for r in after if all(r[3][k] == 0 for k in live)), None)
+            off = next((r[0] - at for r in after
+                        if all(r[1][k] != "operation enabled" for k in live)), None)
+            lines.append(f"{kind} after SYNC {at}: target velocity 0 on every live drive "
+                         f"{zero} SYNC(s) later, none in operation enabled {off} SYNC(s) later "
+                         f"(None: never)")
+        return lines
+
+    def _say(self, text: str) -> None:
+        if self._log is not None:
+            self._log(text)
+
+
+# --- command line ----------------------------------------------------------------------------
+
+def build_parser() -> argparse.ArgumentParser:
+    p = argparse.ArgumentParser(prog="cdpm emulate --canopen", description=__doc__,
+                                formatter_class=argparse.RawDescriptionHelpFormatter)
+    p.add_argument("--scenario", help="robot, start, operator and the bus settings of its "
+                   "plant: !CanopenReels from this scenario (name or path)")
+    p.add_argument("--scenario-text", help="YAML overlay applied to --scenario")
+    p.add_argument("--robot", help="built-in robot name or robot YAML path")
+    p.add_argument("--start", nargs=3, type=float, metavar=("X", "Y", "Z"),
+                   help="platform start, base frame, m (default: the scenario's or the centre)")
+    p.add_argument("--plant", choices=("kinematic", "dynamic"), default="kinematic")
+    p.add_argument("--time-constant", type=float, default=0.02,
+                   help="reel velocity lag of the kinematic plant, s (default 0.02)")
+    p.add_argument("--interface", help="python-can interface (default: the scenario's, or "
+                   "virtual)")
+    p.add_argument("--channel", help="python-can channel (default: the scenario's)")
+    p.add_argument("--period", type=float, default=None,
+                   help="plant step per SYNC, s (default: the scenario's time_step, 0.002)")
+    p.add_argument("--duration", type=float, default=None, help="stop after this long, s")
+    p.add_argument("--rt-priority", type=int, default=0, metavar="N",
+                   help="run under SCHED_FIFO at priority N (1..99; needs root or "
+                   "CAP_SYS_NICE), as a drive's firmware would; default 0: normal")
+    p.add_argument("--fault", choices=FAULT_KINDS, action="append", default=[],
+                   help="inject this fault (repeatable)")
+    p.add_argument("--fault-cable", type=int, default=1, help="cable of the fault (1-based)")
+    p.add_argument("--fault-after", type=float, default=0.0,
+                   help="seconds after the first drive was enabled")
+    return p
+
+
+def build_drives(args, log=None) -> EmulatedDrives:
+    """The drives described by parsed arguments, on a bus opened here."""
+    import can
+
+    from cdpm_drake.emulator.bridges import DynamicBridge, ReelBridge
+    from cdpm_drake.emulator.main import dynamic_scenario
+    from cdpm_drake.hardware.canopen_config import (CanopenReels, resolved_node_ids,
+                                                    resolved_offsets, velocity_units)
+    from cdpm_drake.kernels.kinematics import cable_lengths, jacobian
+    from cdpm_drake.robot import load_robot
+
+    config, force, period = CanopenReels(interface="virtual"), None, 0.002
+    if args.scenario:
+        from cdpm_drake.config import load_scenario, scenario_operator, scenario_robot
+
+        scenario = load_scenario(args.scenario, args.scenario_text)
+        robot, start = scenario_robot(scenario), scenario.initial_position
+        force, period = scenario_operator(scenario).force, scenario.time_step
+        if isinstance(scenario.plant, CanopenReels):
+            config = scenario.plant
+    else:
+        robot = load_robot(args.robot or "paper_7cable")
+        start = robot.workspace.center
+    if args.start is not None:
+        start = args.start
+    start = np.asarray(start, dtype=float)
+    m = robot.num_cables
+    if args.plant == "dynamic":
+        args.force = None
+        bridge = DynamicBridge(dynamic_scenario(args, robot, start))
+    else:
+        bridge = ReelBridge(robot, cable_lengths(robot, start), force=force,
+                            time_constant=args.time_constant)
+    # Compile (or load) the kinematics a SYNC uses now, not on the first SYNC enabled: a
+    # first call takes tens of ms, which the controller would see as silent drives.
+    jacobian(robot, bridge.platform())
+    interface = args.interface or config.interface
+    channel = args.channel or config.channel
+    kwargs = dict(interface=interface, channel=channel)
+    if interface == "virtual":
+        kwargs["receive_own_messages"] = False
+    bus = can.Bus(**kwargs)
+    cable = args.fault_cable - 1
+    return EmulatedDrives(bridge, bus, resolved_node_ids(config, m),
+                          counts_per_metre=config.counts_per_metre,
+                          position_offset=resolved_offsets(config, m),
+                          velocity_units=velocity_units(config),
+                          force_per_torque_unit=config.force_per_torque_unit,
+                          period=args.period or period,
+                          faults=[(k, cable, args.fault_after) for k in args.fault], log=log)
+
+
+def main(argv=None) -> int:
+    """Exit codes: 0 done (--duration), 1 error, 2 bad usage, 130 / 143 after Ctrl-C /
+    SIGTERM."""
+    from cdpm_drake.runs.interrupt import exit_code, terminate_raises
+
+    args = build_parser().parse_args(argv)
+
+    def say(text):
+        print(f"cdpm emulate --canopen: {text}", flush=True)
+
+    try:
+        from cdpm_drake.hardware.priority import set_realtime_priority
+
+        set_realtime_priority(args.rt_priority)
+        drives = build_drives(args, log=say)
+    except Exception as e:  # a robot, a scenario, a bus that will not open: say which
+        print(f"cdpm emulate --canopen: error: {e}", file=sys.stderr)
+        return 1
+    # What exists now lives for the whole run: out of the collector's sight, as in the UDP
+    # emulator (a full collection with pydrake loaded takes ~20 ms, ten SYNCs unanswered).
+    gc.collect()
+    gc.freeze()
+    robot = drives.bridge.robot
+    say(f"robot {robot.name!r}: {len(drives.drives)} CiA 402 drives, nodes "
+        f"{[d.node_id for d in drives.drives]}, on {args.interface or 'the scenario bus'}, "
+        f"{drives.bridge.describe()}" + (f", faults {args.fault} on cable {args.fault_cable} "
+                                         f"after {args.fault_after:g} s" if args.fault else ""))
+    for d in drives.drives:
+        drives._send(COB_HEARTBEAT + d.node_id, b"\x00", d)  # boot-up
+    code = 0
+    with terminate_raises():
+        try:
+            drives.run(duration=args.duration)
+        except KeyboardInterrupt as e:
+            code = exit_code(e)
+        finally:
+            drives.stop()
+            states = ", ".join(f"{d.node_id}: {d.state}" for d in drives.drives)
+            say(f"{drives.syncs} SYNCs; drive states {states}; lengths "
+                f"{np.round(drives.bridge.lengths, 4).tolist()} m")
+            for line in drives.fault_report():
+                say(line)
+    return code

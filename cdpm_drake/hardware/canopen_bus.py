@@ -1,0 +1,290 @@
+"""The controller's side of a CANopen bus of CiA 402 drives (no Drake): SDO configuration of
+the PDO mapping and the mode, NMT, the cyclic RPDOs and SYNC, and what the drives send back
+(TPDOs, EMCY, heartbeats), read into arrays by python-can's notifier thread while the drives
+are configured, then by the control loop itself, without blocking (poll).
+
+The CiA 402 words (controlword commands, statusword states) are here too: the emulated
+drives (emulator/canopen_drives.py) speak the same ones.
+"""
+
+import logging
+import struct
+import threading
+import time
+
+import numpy as np
+
+from cdpm_drake.hardware.canopen_config import (NO_BITRATE_INTERFACES, RPDO_OBJECTS,
+                                                TPDO_OBJECTS)
+
+# Controlword commands (CiA 402, 0x6040).
+CW_DISABLE_VOLTAGE = 0x0000
+CW_QUICK_STOP = 0x0002
+CW_SHUTDOWN = 0x0006
+CW_SWITCH_ON = 0x0007
+CW_ENABLE_OPERATION = 0x000F
+CW_FAULT_RESET = 0x0080
+
+# Statusword states: (mask, value, name).
+STATES = ((0x4F, 0x00, "not ready to switch on"), (0x4F, 0x40, "switch on disabled"),
+          (0x6F, 0x21, "ready to switch on"), (0x6F, 0x23, "switched on"),
+          (0x6F, 0x27, "operation enabled"), (0x6F, 0x07, "quick stop active"),
+          (0x4F, 0x0F, "fault reaction active"), (0x4F, 0x08, "fault"))
+SW_FAULT_BIT = 0x0008
+MODE_CSV = 9
+
+COB_NMT, COB_SYNC, COB_EMCY, COB_TPDO1, COB_RPDO1 = 0x000, 0x080, 0x080, 0x180, 0x200
+COB_SDO_TX, COB_SDO_RX, COB_HEARTBEAT = 0x580, 0x600, 0x700
+NMT_START, NMT_STOP, NMT_PRE_OPERATIONAL = 0x01, 0x02, 0x80
+HEARTBEAT_OPERATIONAL = 0x05
+_log = logging.getLogger(__name__)
+
+
+def state_name(statusword: int) -> str:
+    """The CiA 402 state a statusword shows."""
+    for mask, value, name in STATES:
+        if statusword & mask == value:
+            return name
+    return "unknown"
+
+
+def is_state(statusword: int, name: str) -> bool:
+    return state_name(statusword) == name
+
+
+class CanopenError(RuntimeError):
+    """The bus or a drive refused what the controller needs; the message names the node."""
+
+
+class CanopenMaster:
+    """The controller's end of the bus: `node_ids` drives, one per cable (0-based inside).
+
+    Arrays updated by the notifier thread until stop_notifier(), then by poll() (read them
+with snapshot()): statusword, position
+    (counts), torque (per mille), tpdo_count (TPDOs received per drive), heartbeat_wall
+    (time.monotonic() of the last heartbeat, NaN: none), heartbeat_state, and `emcy`, a list
+    of (cable, error code, error register) of the EMCY frames with a non-zero code.
+    """
+
+    def __init__(self, interface: str, channel: str, bitrate: int, node_ids):
+        self.interface, self.channel, self.bitrate = interface, channel, int(bitrate)
+        self.node_ids = [int(i) for i in node_ids]
+        m = len(self.node_ids)
+        self._cable = {i: k for k, i in enumerate(self.node_ids)}
+        self.lock = threading.Lock()
+        self.statusword = np.zeros(m, dtype=np.int64)
+        self.position = np.zeros(m, dtype=np.int64)
+        self.torque = np.zeros(m, dtype=np.int64)
+        self.tpdo_count = np.zeros(m, dtype=np.int64)
+        self.heartbeat_wall = np.full(m, np.nan)
+        self.heartbeat_state = np.full(m, -1, dtype=np.int64)
+        self.emcy: list[tuple[int, int, int]] = []
+        self.sent = 0          # RPDO frames sent
+        self.syncs = 0         # SYNC frames sent
+        self.send_errors = 0
+        self.last_send_error = ""
+        self.network = None
+        self.heartbeat_watched = np.zeros(m, dtype=bool)
+        self.notes: list[str] = []  # what a drive refused that the run does without
+        self.polling = False
+        self._handlers = {}
+        for node_id in self.node_ids:
+            self._handlers[COB_TPDO1 + node_id] = self._on_tpdo
+            self._handlers[COB_EMCY + node_id] = self._on_emcy
+            self._handlers[COB_HEARTBEAT + node_id] = self._on_heartbeat
+
+    # --- connection and configuration -----------------------------------------------------
+
+    def open(self) -> None:
+        try:
+            import canopen
+        except ImportError:
+            raise CanopenError("plant: !CanopenReels needs the canopen and python-can "
+                               "packages: pip install 'cdpm_drake[canopen]'") from None
+        if self.network is not None:
+            return
+        kwargs = dict(interface=self.interface, channel=self.channel)
+        if self.interface not in NO_BITRATE_INTERFACES:
+            kwargs["bitrate"] = self.bitrate
+        if self.interface == "virtual":
+            kwargs["receive_own_messages"] = False
+        network = canopen.Network()
+        try:
+            network.connect(**kwargs)
+        except Exception as e:
+            raise CanopenError(f"cannot open CAN interface {self.interface!r} channel "
+                               f"{self.channel!r}: {type(e).__name__}: {e}") from None
+        self.network = network
+        for k, node_id in enumerate(self.node_ids):
+            network.add_node(canopen.RemoteNode(node_id, canopen.ObjectDictionary()))
+            network.subscribe(COB_TPDO1 + node_id, self._on_tpdo)
+            network.subscribe(COB_EMCY + node_id, self._on_emcy)
+            network.subscribe(COB_HEARTBEAT + node_id, self._on_heartbeat)
+
+    def close(self) -> None:
+        network, self.network = self.network, None
+        if network is not None:
+            try:
+                network.disconnect()
+            except Exception:  # noqa: S110 - a bus already gone has nothing to release
+                pass
+
+    def configure(self, heartbeat_period: float) -> None:
+        """Each drive to pre-operational, then over SDO: mode 9 (cyclic synchronous velocity),
+        RPDO1 = controlword + target velocity and TPDO1 = statusword + position actual +
+        torque actual, both synchronous (every SYNC), and the heartbeat producer time
+        (`heartbeat_watched` says for which drives it was accepted; a refusal, like one of
+        reading back 0x6061, goes to `notes`)."""
+        for node_id in self.node_ids:
+            self.nmt(NMT_PRE_OPERATIONAL, node_id)
+        for k, node_id in enumerate(self.node_ids):
+            write = self._writer(k, node_id)
+            write(0x6060, 0, struct.pack("<b", MODE_CSV), "modes of operation")
+            self._map(write, 0x1400, 0x1600, COB_RPDO1 + node_id, RPDO_OBJECTS, "RPDO1")
+            self._map(write, 0x1800, 0x1A00, COB_TPDO1 + node_id, TPDO_OBJECTS, "TPDO1")
+            if heartbeat_period > 0:
+                try:
+                    write(0x1017, 0, struct.pack("<H", int(round(heartbeat_period * 1000))),
+                          "producer heartbeat time")
+                    self.heartbeat_watched[k] = True
+                except CanopenError as e:
+                    # A drive without a heartbeat producer is watched by its TPDOs alone.
+                    self.notes.append(str(e))
+                    _log.warning("%s; its heartbeat is not watched", e)
+            try:
+                mode = self._read(k, node_id, 0x6061, 0, "modes of operation display")
+            except CanopenError as e:  # no read-back: the write of 0x6060 was accepted
+                self.notes.append(str(e))
+                _log.warning("%s; mode 9 written to 0x6060 is not confirmed", e)
+                continue
+            if len(mode) < 1 or struct.unpack_from("<b", mode)[0] != MODE_CSV:
+                raise CanopenError(f"drive of cable {k + 1} (node {node_id}) reports mode "
+                                   f"{mode.hex()} in 0x6061 after mode {MODE_CSV} (cyclic "
+                                   f"synchronous velocity) was written to 0x6060: it does "
+                                   f"not support CSV")
+
+    @staticmethod
+    def _map(write, comm, mapping, cob_id, objects, name) -> None:
+        write(comm, 1, struct.pack("<I", 0x80000000 | cob_id), f"{name} COB-ID (disable)")
+        write(comm, 2, bytes([1]), f"{name} transmission type (synchronous)")
+        write(mapping, 0, bytes([0]), f"{name} mapping count (clear)")
+        for n, (index, bits) in enumerate(objects, start=1):
+            write(mapping, n, struct.pack("<I", (index << 16) | bits),
+                  f"{name} mapping entry {n} ({index:#06x})")
+        write(mapping, 0, bytes([len(objects)]), f"{name} mapping count")
+        write(comm, 1, struct.pack("<I", cob_id), f"{name} COB-ID (enable)")
+
+    def _writer(self, k, node_id):
+        def write(index, sub, data, what):
+            try:
+                self.network[node_id].sdo.download(index, sub, data)
+            except Exception as e:
+                raise CanopenError(
+                    f"drive of cable {k + 1} (node {node_id}) refused the SDO write of "
+                    f"{what} ({index:#06x}:{sub}): {type(e).__name__}: {e}") from None
+        return write
+
+    def _read(self, k, node_id, index, sub, what) -> bytes:
+        try:
+            return bytes(self.network[node_id].sdo.upload(index, sub))
+        except Exception as e:
+            raise CanopenError(f"drive of cable {k + 1} (node {node_id}) refused the SDO read "
+                               f"of {what} ({index:#06x}:{sub}): {type(e).__name__}: "
+                               f"{e}") from None
+
+    # --- cyclic traffic ----------------------------------------------------------------------
+
+    def nmt(self, command: int, node_id: int = 0) -> None:
+        self._send(COB_NMT, bytes([command, node_id]))
+
+    def send_cycle(self, controlwords, velocities) -> None:
+        """One RPDO per drive (controlword, target velocity in drive units), then the SYNC
+        on which the drives act on them and answer with their TPDOs."""
+        for node_id, cw, v in zip(self.node_ids, controlwords, velocities):
+            v = int(max(-2**31, min(2**31 - 1, round(float(v)))))
+            if self._send(COB_RPDO1 + node_id, struct.pack("<Hi", int(cw), v)):
+                self.sent += 1
+        if self._send(COB_SYNC, b""):
+            self.syncs += 1
+
+    def _send(self, cob_id: int, data: bytes) -> bool:
+        network = self.network
+        if network is None:
+            return False
+        try:
+            network.send_message(cob_id, data)
+            return True
+        except Exception as e:  # bus-off, a full transmit queue: counted, the watchdog judges
+            self.send_errors += 1
+            self.last_send_error = f"{type(e).__name__}: {e}"
+            return False
+
+    def stop_notifier(self) -> None:
+        """From now on the frames are read by poll() in the caller's thread (snapshot() does):
+        a notifier thread waits for the interpreter's lock while the control loop's Python
+        runs (up to the 5 ms switch interval), longer than a tick. SDO needs the notifier:
+        call this after configure()."""
+        network = self.network
+        if network is not None and network.notifier is not None:
+            network.notifier.stop(1.5)
+            network.notifier = None
+            self.polling = True
+
+    def poll(self) -> int:
+        """Read every frame waiting on the bus (without blocking) into the arrays; returns
+        how many were read. Nothing to do while the notifier thread reads them."""
+        if not self.polling or self.network is None:
+            return 0
+        bus, handlers, n = self.network.bus, self._handlers, 0
+        while True:
+            try:
+                msg = bus.recv(0.0)
+            except Exception as e:  # a bus gone bad: the silence it makes is judged
+                self.last_send_error = f"receive: {type(e).__name__}: {e}"
+                return n
+            if msg is None:
+                return n
+            n += 1
+            handler = handlers.get(msg.arbitration_id)
+            if handler is not None and not msg.is_error_frame and not msg.is_remote_frame:
+                handler(msg.arbitration_id, msg.data, msg.timestamp)
+
+    def snapshot(self, drain_emcy: bool = True):
+        """(statusword, position, torque, tpdo_count, heartbeat_wall, heartbeat_state,
+        new EMCY list) after poll(), copied under the lock; the EMCY list is emptied if
+        `drain_emcy`."""
+        self.poll()
+        with self.lock:
+            emcy = self.emcy
+            self.emcy = [] if drain_emcy else list(emcy)
+            return (self.statusword.copy(), self.position.copy(), self.torque.copy(),
+                    self.tpdo_count.copy(), self.heartbeat_wall.copy(),
+                    self.heartbeat_state.copy(), emcy)
+
+    # --- notifier thread ---------------------------------------------------------------------
+
+    def _on_tpdo(self, can_id, data, timestamp) -> None:
+        k = self._cable.get(can_id - COB_TPDO1)
+        if k is None or len(data) < 8:
+            return
+        sw, pos, torque = struct.unpack_from("<Hih", bytes(data))
+        with self.lock:
+            self.statusword[k], self.position[k], self.torque[k] = sw, pos, torque
+            self.tpdo_count[k] += 1
+
+    def _on_emcy(self, can_id, data, timestamp) -> None:
+        k = self._cable.get(can_id - COB_EMCY)
+        if k is None or len(data) < 3:
+            return
+        code, register = struct.unpack_from("<HB", bytes(data))
+        if code:  # 0x0000: error reset / no error
+            with self.lock:
+                self.emcy.append((k, code, register))
+
+    def _on_heartbeat(self, can_id, data, timestamp) -> None:
+        k = self._cable.get(can_id - COB_HEARTBEAT)
+        if k is None or len(data) < 1:
+            return
+        with self.lock:
+            self.heartbeat_wall[k] = time.monotonic()
+            self.heartbeat_state[k] = data[0] & 0x7F

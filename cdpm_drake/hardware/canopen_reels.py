@@ -1,0 +1,453 @@
+"""CanopenReelsSystem: CiA 402 servo drives on a CANopen bus as a Drake plant, with the ports
+of the other plants (the diagram does not change). hardware/CANOPEN.md describes the bus.
+
+Events at the control rate (period `time_step`), as HardwareReelsSystem's:
+
+* initialisation (inside Simulator.Initialize): SDO configuration of each drive (mode 9,
+  cyclic synchronous velocity; RPDO1 = controlword 0x6040 + target velocity 0x60FF; TPDO1 =
+  statusword 0x6041 + position actual 0x6064 + torque actual 0x6077; heartbeat 0x1017), NMT
+  start, the first TPDO of every drive within `startup_timeout`, the measured lengths checked
+  against the robot file, then the enable sequence (shutdown, switch on, enable operation)
+  with a deadline of `enable_timeout` per drive; a drive that misses it is named with its
+  statusword. A drive in Fault is refused unless `fault_reset: true`.
+* discrete update at t_k: reads the drives' latest TPDOs, EMCY and heartbeats (kept by
+  python-can's notifier thread) into the lengths and tensions, and judges them: a drive's
+  fault bit or any state but operation enabled, an EMCY with an error code, no TPDO for
+  `missed_tpdo_ticks` ticks (and as many periods less one of wall time, as HardwareReels's
+  watchdog: a catch-up burst after a stall of this process must not trip it), a heartbeat older than `heartbeat_timeout` or not operational,
+  a frozen position (unchanged over `frozen_ticks` TPDOs, or as many as 3 counts take at
+  `frozen_speed`, 10 mm/s, while commanded at least `frozen_speed` the same way for 10 ticks more),
+  a CAN send error (bus-off). Any of them latches the fault and stops every
+  drive at once: target velocity 0 with quick stop and a SYNC, then target velocity 0 with
+  disable voltage (to switch on disabled) and a SYNC.
+* publish at t_k: judges the TPDOs received since the last update the same way (Drake runs
+  the update at t_k right after this publish: without it a fault would stop the drives a
+  tick later) and on a fault stops the drives as above and raises ReelFault; otherwise one
+  RPDO per drive (enable operation, ramp x reel_velocity_command in drive units) and a SYNC.
+  A fault latched by the update raises ReelFault at the next publish, ending the run.
+
+The bus (CanopenMaster) is a resource held as an attribute; after the SDO configuration it
+is read in the events themselves, without blocking, as HardwareReelsSystem reads its socket; what the
+system outputs and judges lives in the Context, except the count of consecutive commands
+above `frozen_speed` that publish keeps (a publish cannot write the Context), a fact about
+the commands sent like HardwareReelsSystem's `_stopped_at`.
+"""
+
+import logging
+import time
+
+import numpy as np
+from pydrake.systems.framework import LeafSystem
+
+from cdpm_drake.hardware.canopen_bus import (CW_DISABLE_VOLTAGE, CW_ENABLE_OPERATION,
+                                             CW_FAULT_RESET, CW_QUICK_STOP, CW_SHUTDOWN,
+                                             CW_SWITCH_ON, HEARTBEAT_OPERATIONAL, NMT_START,
+                                             SW_FAULT_BIT, CanopenError, CanopenMaster,
+                                             state_name)
+from cdpm_drake.hardware.canopen_config import (CanopenReels, check_canopen_reels,
+                                                resolved_node_ids, resolved_offsets,
+                                                velocity_units)
+from cdpm_drake.hardware.reels import ReelFault, start_pose_problem
+from cdpm_drake.kernels.drive_torque import tension_from_drive
+from cdpm_drake.kernels.kinematics import KinematicsError, cable_lengths, forward_kinematics
+
+_log = logging.getLogger(__name__)
+
+# A frozen encoder: its position unchanged while the commands would have moved it at least
+# this many counts, after FROZEN_LAG_TICKS ticks of commands of the same sign (20 ms at 2 ms:
+# a drive with a 20 ms velocity lag that reverses has caught up by then).
+FROZEN_COUNTS = 3
+FROZEN_LAG_TICKS = 10
+# Book-keeping state vector.
+ENABLED, RAMP, FAULT, FAULT_CABLE, FAULT_DETAIL, FAULT_TIME, TICKS, LOST = range(8)
+BOOK_SIZE = 8
+# Why the run stops.
+(FAULT_NONE, FAULT_STATUS, FAULT_EMCY, FAULT_SILENT, FAULT_HEARTBEAT, FAULT_FROZEN,
+ FAULT_SEND) = range(7)
+FAULT_NAMES = {FAULT_STATUS: "drive fault or state", FAULT_EMCY: "EMCY",
+               FAULT_SILENT: "missing TPDOs", FAULT_HEARTBEAT: "heartbeat lost",
+               FAULT_FROZEN: "frozen position", FAULT_SEND: "CAN send error"}
+
+
+class _Counters:
+    """The bus's counters in the shape realtime.py reports for the UDP link."""
+
+    def __init__(self, master: CanopenMaster, lost: int):
+        self.sent, self.received = master.sent, int(master.tpdo_count.sum())
+        self.accepted, self.lost = self.received, lost
+        self.rejected, self.foreign = {}, 0
+        self.send_errors = master.send_errors
+
+    def as_dict(self) -> dict:
+        return dict(sent=self.sent, received=self.received, accepted=self.accepted,
+                    lost=self.lost, rejected={}, foreign=0, send_errors=self.send_errors)
+
+
+class _LinkView:
+    def __init__(self, system):
+        self._system = system
+
+    @property
+    def counters(self) -> _Counters:
+        return _Counters(self._system.master, self._system.lost_tpdos)
+
+
+class CanopenReelsSystem(LeafSystem):
+    """The reels' CiA 402 drives over CANopen.
+
+    .. pydrake_system::
+
+        name: reels
+        input_ports:
+        - reel_velocity_command (m/s of cable, one per cable, + pays out)
+        output_ports:
+        - cable_lengths (m, one per cable, from position actual)
+        - measured_force (N, base frame; zero: the drives carry no handle force sensor)
+        - tension_measured (N, one per cable, from torque actual; NaN where unknown)
+    """
+
+    def __init__(self, robot, config: CanopenReels, time_step: float = 0.002):
+        super().__init__()
+        if not (isinstance(time_step, (int, float)) and np.isfinite(time_step)
+                and time_step > 0):
+            raise ValueError(f"time_step must be a finite number > 0 s, got {time_step!r}")
+        self._m = m = robot.num_cables
+        self.bus_load = check_canopen_reels(config, m, float(time_step))
+        self._robot, self._config, self._T = robot, config, float(time_step)
+        self._vmax = float(robot.limits.max_reel_speed)
+        self._ids = resolved_node_ids(config, m)
+        self._offset = np.array(resolved_offsets(config, m))
+        self._counts = float(config.counts_per_metre)
+        self._vel_units = velocity_units(config)
+        d = robot.dynamics
+        self._drive_model = (float(d.reel_inertia), float(d.viscous_friction),
+                             float(d.coulomb_friction), float(d.dead_band))
+        # Compile the kernel now: a first call on the real-time path would take seconds.
+        tension_from_drive(np.zeros(m), np.zeros(m), np.zeros(m), *self._drive_model,
+                           np.empty(m))
+        self._ramp_step = 1.0 if config.ramp_time == 0 else self._T / config.ramp_time
+        self._silence = (config.missed_tpdo_ticks - 1) * self._T
+        self.master = CanopenMaster(config.interface, config.channel, config.bitrate,
+                                    self._ids)
+        self._moving = np.zeros(m)  # consecutive commands >= frozen_speed, same sign
+        # TPDOs of an unchanged position that make a frozen encoder: frozen_ticks, or more
+        # where frozen_speed moves less than FROZEN_COUNTS counts in frozen_ticks (coarse
+        # counts leave a slow drive's position unchanged for several ticks).
+        per_tick = config.frozen_speed * self._T * abs(self._counts)
+        self._frozen_ticks = max(config.frozen_ticks, int(np.ceil(FROZEN_COUNTS / per_tick)))
+        self._last_sign = np.zeros(m)
+        self._stopped = self._quick_stopped = False
+        self.lost_tpdos = 0
+
+        self._command = self.DeclareVectorInputPort("reel_velocity_command", m)
+        self._lengths = self.DeclareDiscreteState(cable_lengths(robot, robot.workspace.center))
+        self._force = self.DeclareDiscreteState(3)
+        self._tension = self.DeclareDiscreteState(np.full(m, np.nan))
+        self._book = self.DeclareDiscreteState(np.zeros(BOOK_SIZE))
+        # Per drive: TPDOs counted, ticks without one, position (counts), ticks unchanged,
+        # reel speed from the last two positions (m/s), time.monotonic() of the last new TPDO.
+        self._drives = self.DeclareDiscreteState(np.zeros(6 * m))
+        self.DeclareStateOutputPort("cable_lengths", self._lengths)
+        self.DeclareStateOutputPort("measured_force", self._force)
+        self.DeclareStateOutputPort("tension_measured", self._tension)
+        self.DeclareInitializationUnrestrictedUpdateEvent(self._initialize)
+        self.DeclarePeriodicDiscreteUpdateEvent(self._T, 0.0, self._update)
+        self.DeclarePeriodicPublishEvent(self._T, 0.0, self._publish)
+
+    # --- resources ---------------------------------------------------------------------------
+
+    @property
+    def link(self):
+        """The bus's counters (`link.counters`), as realtime.py reads the UDP link's."""
+        return _LinkView(self) if self.master.network is not None else None
+
+    def quick_stop(self) -> None:
+        """Every drive: target velocity 0 with quick stop, and a SYNC to act on it."""
+        self.master.send_cycle([CW_QUICK_STOP] * self._m, np.zeros(self._m))
+        self._quick_stopped = True
+
+    def shutdown(self) -> None:
+        """Every drive: target velocity 0 with disable voltage (to switch on disabled), and a
+        SYNC. Safe at any time and more than once (the CLI's Ctrl-C and SIGTERM)."""
+        if self.master.network is None:
+            return
+        if not self._quick_stopped:
+            self.quick_stop()
+        self.master.send_cycle([CW_DISABLE_VOLTAGE] * self._m, np.zeros(self._m))
+        self._stopped = True
+
+    def close(self) -> None:
+        """shutdown(), then release the bus."""
+        self.shutdown()
+        self.master.close()
+
+    def book(self, context) -> dict:
+        """The book-keeping state as a dict, with the keys realtime.py reports."""
+        b = context.get_discrete_state(self._book).get_value()
+        return dict(enabled=float(b[ENABLED]), ramp=float(b[RAMP]), fault=float(b[FAULT]),
+                    fault_cable=float(b[FAULT_CABLE]), fault_detail=float(b[FAULT_DETAIL]),
+                    fault_time=float(b[FAULT_TIME]), ticks=float(b[TICKS]),
+                    commands_lost=0.0, holds=0.0, longest_hold=0.0)
+
+    # --- start-up ----------------------------------------------------------------------------
+
+    def _fail(self, message, t):
+        self.shutdown()
+        return ReelFault(message, t)
+
+    def _initialize(self, context, state):
+        c, m, t = self._config, self._m, context.get_time()
+        try:
+            self.master.open()
+            self.master.configure(c.heartbeat_period)
+            self.master.stop_notifier()
+        except CanopenError as e:
+            raise self._fail(f"refusing to enable the drives: {e}", t) from None
+        self.master.nmt(NMT_START, 0)
+        zero = np.zeros(m)
+        deadline = time.monotonic() + c.startup_timeout
+        all_tpdos = None  # time.monotonic() when every drive had sent a TPDO
+        while True:
+            self.master.send_cycle([CW_DISABLE_VOLTAGE] * m, zero)
+            time.sleep(self._T)
+            sw, pos, torque, count, _, hb_state, _ = self.master.snapshot()
+            now = time.monotonic()
+            silent = [k for k in range(m) if count[k] == 0]
+            # A heartbeat that says operational: the one before NMT start says otherwise.
+            hb_waiting = [k for k in range(m) if self.master.heartbeat_watched[k]
+                          and hb_state[k] != HEARTBEAT_OPERATIONAL]
+            if not silent and all_tpdos is None:
+                all_tpdos = now
+            if not silent and (not hb_waiting or now - all_tpdos > c.heartbeat_timeout):
+                break
+            if now > deadline:
+                raise self._fail(
+                    f"no TPDO within startup_timeout = {c.startup_timeout:g} s from the "
+                    f"drive(s) of " + ", ".join(f"cable {k + 1} (node {self._ids[k]})"
+                                                for k in silent)
+                    + f" on {c.interface} {c.channel!r}; are they powered, on this bus, with "
+                    f"these node ids?", t)
+        for k in hb_waiting:
+            if hb_state[k] >= 0:  # it speaks, but not as operational
+                raise self._fail(
+                    f"refusing to enable the drives: the drive of cable {k + 1} (node "
+                    f"{self._ids[k]}) sends TPDOs but its heartbeat reports NMT state "
+                    f"{int(hb_state[k])}, not operational (5)", t)
+            # A drive that took 0x1017 but sends no heartbeat: watched by its TPDOs alone.
+            self.master.heartbeat_watched[k] = False
+            self.master.notes.append(f"no heartbeat from the drive of cable {k + 1} (node "
+                                     f"{self._ids[k]}) within heartbeat_timeout")
+            _log.warning("%s; its heartbeat is not watched", self.master.notes[-1])
+        faulted = [k for k in range(m) if sw[k] & SW_FAULT_BIT]
+        if faulted and not c.fault_reset:
+            raise self._fail(
+                "refusing to enable the drives: " + ", ".join(
+                    f"cable {k + 1} (node {self._ids[k]}) is in fault, statusword "
+                    f"{int(sw[k]):#06x}" for k in faulted)
+                + "; clear the cause and set fault_reset: true to reset it", t)
+        lengths = self._offset + pos / self._counts
+        try:
+            p = forward_kinematics(self._robot, lengths, max_residual=c.max_length_residual)
+        except KinematicsError as e:
+            raise self._fail(
+                f"refusing to enable the drives: the measured cable lengths "
+                f"{np.round(lengths, 4).tolist()} m do not fit robot {self._robot.name!r} "
+                f"within max_length_residual = {c.max_length_residual:g} m: {e}. Check "
+                f"position_offset, counts_per_metre and the node ids' order.", t) from None
+        problem = start_pose_problem(self._robot, p)
+        if problem:
+            raise self._fail(f"refusing to enable the drives: {problem}", t)
+        self._enable(t)
+        sw, pos, torque, count, _, _, _ = self.master.snapshot()  # drops start-up EMCY
+        lengths = self._offset + pos / self._counts
+        state.get_mutable_discrete_state(self._lengths).SetFromVector(lengths)
+        state.get_mutable_discrete_state(self._force).SetFromVector(np.zeros(3))
+        drives = np.zeros(6 * m)
+        drives[0:m], drives[2 * m:3 * m] = count, pos
+        drives[4 * m:5 * m] = np.nan
+        drives[5 * m:] = time.monotonic()
+        state.get_mutable_discrete_state(self._drives).SetFromVector(drives)
+        book = np.zeros(BOOK_SIZE)
+        book[ENABLED] = 1.0
+        state.get_mutable_discrete_state(self._book).SetFromVector(book)
+        self._stopped = self._quick_stopped = False
+
+    def _enable(self, t) -> None:
+        """Shutdown, switch on, enable operation, each drive from the state its statusword
+        shows, until all are in operation enabled or one's enable_timeout runs out."""
+        c, m = self._config, self._m
+        start = time.monotonic()
+        reset_edge = np.zeros(m, dtype=bool)
+        while True:
+            sw = self.master.snapshot()[0]
+            states = [state_name(int(s)) for s in sw]
+            if all(s == "operation enabled" for s in states):
+                return
+            if time.monotonic() - start > c.enable_timeout:
+                late = [k for k in range(m) if states[k] != "operation enabled"]
+                raise self._fail(
+                    "enable sequence timed out: " + "; ".join(
+                        f"cable {k + 1} (node {self._ids[k]}) not in operation enabled within "
+                        f"enable_timeout = {c.enable_timeout:g} s, statusword "
+                        f"{int(sw[k]):#06x} ({states[k]})" for k in late), t)
+            words = []
+            for k, s in enumerate(states):
+                if s in ("fault", "fault reaction active"):
+                    # A reset takes a rising edge of bit 7: 0 then 0x80.
+                    words.append(CW_FAULT_RESET if reset_edge[k] else CW_DISABLE_VOLTAGE)
+                    reset_edge[k] = not reset_edge[k]
+                    continue
+                words.append({"switch on disabled": CW_SHUTDOWN,
+                              "ready to switch on": CW_SWITCH_ON,
+                              "switched on": CW_ENABLE_OPERATION,
+                              "operation enabled": CW_ENABLE_OPERATION,
+                              "quick stop active": CW_DISABLE_VOLTAGE}.get(s, CW_DISABLE_VOLTAGE))
+            self.master.send_cycle(words, np.zeros(m))
+            time.sleep(self._T)
+
+    # --- the tick ----------------------------------------------------------------------------
+
+    def _advance(self, context, snap, now):
+        """The per-drive state after the bus snapshot `snap` (CanopenMaster.snapshot) read at
+        `now` (time.monotonic()), the speeds before it, which drives sent a new TPDO, and
+        the verdict (reason, cable, detail) on them."""
+        m, T = self._m, self._T
+        drives = context.get_discrete_state(self._drives).get_value().copy()
+        count0, missed, pos0 = drives[0:m], drives[m:2 * m], drives[2 * m:3 * m]
+        still, speed0, heard = drives[3 * m:4 * m], drives[4 * m:5 * m], drives[5 * m:]
+        speed0 = speed0.copy()
+        sw, pos, torque, count, hb_wall, hb_state, emcy = snap
+        new = count != count0
+        missed[:] = np.where(new, 0.0, missed + 1.0)
+        heard[:] = np.where(new, now, heard)
+        still[:] = np.where(new, np.where(pos == pos0, still + 1.0, 0.0), still)
+        speed = np.where(new, (pos - pos0) / self._counts / T, speed0)
+        drives[0:m], drives[2 * m:3 * m], drives[4 * m:5 * m] = count, pos, speed
+        # Silent for missed_tpdo_ticks ticks and (missed_tpdo_ticks - 1) periods of wall time:
+        # the catch-up ticks after a stall of this process come faster than drives answer.
+        silent = np.where(now - heard >= self._silence, missed, 0.0)
+        verdict = self._judge(sw, silent, still, hb_wall, hb_state, emcy, now)
+        return drives, speed0, new, verdict
+
+    def _update(self, context, state):
+        book = context.get_discrete_state(self._book).get_value().copy()
+        if book[FAULT] != FAULT_NONE:
+            return  # latched; the next publish ends the run
+        c, m, T = self._config, self._m, self._T
+        snap = self.master.snapshot()
+        drives, speed0, new, (reason, cable, detail) = self._advance(
+            context, snap, time.monotonic())
+        self.lost_tpdos += int(np.count_nonzero(~new))
+        pos, torque = snap[1], snap[2]
+        speed = drives[4 * m:5 * m]
+        lengths = self._offset + pos / self._counts
+        tension = state.get_mutable_vector(self._tension).get_mutable_value()
+        if c.tension_sensor == "drive_torque":
+            accel = (speed - speed0) / T  # NaN while a speed is unknown
+            tension_from_drive(torque * c.force_per_torque_unit, speed, accel,
+                               *self._drive_model, tension)
+        else:
+            tension[:] = np.nan
+        book[TICKS] += 1.0
+        book[LOST] = self.lost_tpdos
+        if reason != FAULT_NONE:
+            book[FAULT], book[FAULT_CABLE], book[FAULT_DETAIL] = reason, cable, detail
+            book[FAULT_TIME] = context.get_time()
+            book[ENABLED] = book[RAMP] = 0.0
+            self.shutdown()  # now, not at the next publish
+        else:
+            book[RAMP] = min(1.0, book[RAMP] + self._ramp_step)
+        state.get_mutable_vector(self._lengths).SetFromVector(lengths)
+        state.get_mutable_vector(self._drives).SetFromVector(drives)
+        state.get_mutable_vector(self._book).SetFromVector(book)
+
+    def _judge(self, sw, missed, still, hb_wall, hb_state, emcy, now):
+        """(reason, cable (0-based), detail) of the first fault found, or FAULT_NONE."""
+        c = self._config
+        if emcy:
+            k, code, _ = emcy[0]
+            return FAULT_EMCY, k, code
+        for k, s in enumerate(sw):
+            if s & SW_FAULT_BIT or state_name(int(s)) != "operation enabled":
+                return FAULT_STATUS, k, int(s)
+        k = int(np.argmax(missed))
+        if missed[k] >= c.missed_tpdo_ticks:
+            return FAULT_SILENT, k, missed[k]
+        if c.heartbeat_period > 0:
+            age = now - hb_wall
+            for k in np.flatnonzero(self.master.heartbeat_watched):
+                if not age[k] <= c.heartbeat_timeout:
+                    return FAULT_HEARTBEAT, k, age[k]
+                if hb_state[k] != HEARTBEAT_OPERATIONAL:
+                    return FAULT_HEARTBEAT, k, -float(hb_state[k])
+        # Commanded the same way long enough that a lagging drive (tens of ms) moves too.
+        frozen = ((still >= self._frozen_ticks)
+                  & (self._moving >= self._frozen_ticks + FROZEN_LAG_TICKS))
+        if frozen.any():
+            return FAULT_FROZEN, int(np.argmax(frozen)), still[int(np.argmax(frozen))]
+        if self.master.send_errors:
+            return FAULT_SEND, -1, self.master.send_errors
+        return FAULT_NONE, -1, 0.0
+
+    def _publish(self, context):
+        book = context.get_discrete_state(self._book).get_value()
+        if book[FAULT] != FAULT_NONE:
+            self.shutdown()
+            raise ReelFault(self._fault_message(book), float(book[FAULT_TIME]))
+        # Drake runs this tick's update right after this publish, so the update has not
+        # seen the TPDOs that came in during the period just ended: judge them here too, so
+        # that a fault stops the drives in place of this tick's command, not the next one's.
+        t = context.get_time()
+        _, _, _, (reason, cable, detail) = self._advance(
+            context, self.master.snapshot(drain_emcy=False), time.monotonic())
+        if reason != FAULT_NONE:
+            fault = book.copy()
+            fault[FAULT], fault[FAULT_CABLE], fault[FAULT_DETAIL] = reason, cable, detail
+            fault[FAULT_TIME] = t
+            self.shutdown()
+            raise ReelFault(self._fault_message(fault), t)
+        u = self._command.Eval(context)
+        bad = ~np.isfinite(u)
+        if bad.any():
+            self.shutdown()
+            k = int(np.argmax(bad))
+            raise ReelFault(
+                f"reel fault at t = {context.get_time():.3f} s: reel_velocity_command of cable "
+                f"{k + 1} is {float(u[k])!r} m/s; every drive sent target velocity 0, quick "
+                f"stop, then disabled", context.get_time())
+        v = book[RAMP] * u if book[ENABLED] else np.zeros(self._m)
+        peak = float(np.max(np.abs(v)))
+        if peak > self._vmax:
+            v = v * (self._vmax / peak)
+        sign = np.sign(v) * (np.abs(v) >= self._config.frozen_speed)
+        self._moving = np.where((sign != 0) & (sign == self._last_sign), self._moving + 1,
+                                (sign != 0).astype(float))
+        self._last_sign = sign
+        self.master.send_cycle([CW_ENABLE_OPERATION] * self._m, v * self._vel_units)
+
+    def _fault_message(self, book) -> str:
+        reason, k = int(book[FAULT]), int(book[FAULT_CABLE])
+        detail = float(book[FAULT_DETAIL])
+        who = f"the drive of cable {k + 1} (node {self._ids[k]})" if k >= 0 else "the bus"
+        if reason == FAULT_STATUS:
+            why = (f"{who} reports statusword {int(detail):#06x} "
+                   f"({state_name(int(detail))})")
+        elif reason == FAULT_EMCY:
+            why = f"{who} sent EMCY error code {int(detail):#06x}"
+        elif reason == FAULT_SILENT:
+            why = (f"no TPDO from {who} for {int(detail)} ticks (missed_tpdo_ticks = "
+                   f"{self._config.missed_tpdo_ticks})")
+        elif reason == FAULT_HEARTBEAT:
+            why = (f"{who}'s heartbeat reports NMT state {int(-detail)}, not operational"
+                   if detail < 0 else
+                   f"{who}'s heartbeat is {detail * 1e3:.0f} ms old (heartbeat_timeout = "
+                   f"{self._config.heartbeat_timeout * 1e3:g} ms)")
+        elif reason == FAULT_FROZEN:
+            why = (f"{who}'s position actual has not changed for {int(detail)} TPDOs while "
+                   f"commanded at least frozen_speed = {self._config.frozen_speed:g} m/s "
+                   f"(a frozen encoder)")
+        else:
+            why = (f"{int(detail)} CAN frame(s) could not be sent (bus-off?): "
+                   f"{self.master.last_send_error}")
+        return (f"reel fault at t = {float(book[FAULT_TIME]):.3f} s: {why}; every drive sent "
+                f"target velocity 0 with quick stop, then disabled")
