@@ -29,6 +29,22 @@ def run_folder_step(action):
         raise CliError(str(e)) from None
 
 
+def new_run_folder(resolved, out_dir, *, force, runs_root, overlay_text):
+    """(words naming the run's variant, its RunFolder planned and created, the folder's path):
+    `cdpm simulate`'s and `cdpm run`'s folder, `out_dir` or runs/<name>/<stamp>-<variant>
+    (the variant's tag and the overlay's hash in the name)."""
+    from cdpm_drake.runs.run_folder import RUNS_DIR, RunFolder, overlay_tag
+    from cdpm_drake.runs.simulate import run_variant
+
+    variant, tag = run_variant(resolved)
+    tag = "-".join(t for t in (tag, overlay_tag(overlay_text)) if t)
+    folder = RunFolder(resolved.scenario.name, out_dir, force=force,
+                       root=RUNS_DIR if runs_root is None else runs_root, variant=tag)
+    run_folder_step(folder.plan)
+    # Before the run: a long run's log needs a place.
+    return variant, folder, run_folder_step(folder.create)
+
+
 def check_writable_dir(path: Path, field: str, keep: bool = True) -> None:
     """CliError unless `path` is (or can be made) a writable folder; `keep=False` removes the
     folders the check made (a dry run writes nothing)."""

@@ -4,7 +4,7 @@ live status on stderr and the end report: timing, packets, and the cables' summa
 import sys
 
 from cdpm_drake.cli.arguments import (check_duration_arg, check_duration_tick, duration_flag,
-                                      load_scenario_arg, run_folder_step)
+                                      load_scenario_arg, new_run_folder)
 from cdpm_drake.cli.errors import CliError
 from cdpm_drake.cli.meshcat import live_meshcat
 from cdpm_drake.cli.summaries import (model_monitor_summary, print_pair_summary,
@@ -20,19 +20,13 @@ def run_main(*, scenario, duration=None, out_dir=None, out=None, on_status=None,
     log's figures into the run folder afterwards, as `cdpm simulate --plot`."""
     from cdpm_drake.runs.interrupt import exit_code
     from cdpm_drake.runs.realtime import report_lines, run
-    from cdpm_drake.runs.run_folder import RUNS_DIR, RunFolder, overlay_tag
     from cdpm_drake.config import resolve_scenario
-    from cdpm_drake.runs.simulate import run_variant
 
     out = sys.stdout if out is None else out
     resolved = resolve_scenario(scenario)
     scenario = resolved.scenario
-    variant, tag = run_variant(resolved)
-    tag = "-".join(t for t in (tag, overlay_tag(overlay_text)) if t)
-    folder = RunFolder(scenario.name, out_dir, force=force,
-                       root=RUNS_DIR if runs_root is None else runs_root, variant=tag)
-    run_folder_step(folder.plan)
-    out_dir = run_folder_step(folder.create)
+    variant, folder, out_dir = new_run_folder(resolved, out_dir, force=force,
+                                              runs_root=runs_root, overlay_text=overlay_text)
     tty = sys.stderr.isatty()
 
     def status(line):

@@ -6,7 +6,7 @@ import sys
 import numpy as np
 
 from cdpm_drake.cli.arguments import (check_duration_arg, check_duration_tick, check_html,
-                                      duration_flag, load_scenario_arg, run_folder_step)
+                                      duration_flag, load_scenario_arg, new_run_folder)
 from cdpm_drake.cli.errors import CliError
 from cdpm_drake.cli.meshcat import live_meshcat, save_replay
 from cdpm_drake.cli.summaries import (model_monitor_summary, print_clipped,
@@ -22,20 +22,15 @@ def simulate_main(*, scenario, duration=None, out_dir=None, progress=True, out=N
     runs/<name>/<UTC timestamp>/ (run_folder.py). Returns an exit code: 0; 1 when the run
     ended on an error; 130 / 143 after Ctrl-C / SIGTERM (the log up to then is written all the
     same, and the plots and replay asked for)."""
-    from cdpm_drake.runs.run_folder import RUNS_DIR, RunFolder, overlay_tag
     from cdpm_drake.config import resolve_scenario
     from cdpm_drake.runs.log import save_log
-    from cdpm_drake.runs.simulate import run_variant, simulate
+    from cdpm_drake.runs.simulate import simulate
 
     out = sys.stdout if out is None else out
     resolved = resolve_scenario(scenario)
     scenario = resolved.scenario
-    variant, tag = run_variant(resolved)
-    tag = "-".join(t for t in (tag, overlay_tag(overlay_text)) if t)
-    folder = RunFolder(scenario.name, out_dir, force=force,
-                       root=RUNS_DIR if runs_root is None else runs_root, variant=tag)
-    run_folder_step(folder.plan)
-    out_dir = run_folder_step(folder.create)  # before the run: a long run's log needs a place
+    variant, folder, out_dir = new_run_folder(resolved, out_dir, force=force,
+                                              runs_root=runs_root, overlay_text=overlay_text)
     try:
         result = simulate(scenario=resolved, duration=duration, progress=progress,
                           on_chunk=on_chunk, realtime_rate=realtime_rate, chunk=chunk)
