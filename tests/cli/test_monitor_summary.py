@@ -76,7 +76,7 @@ def test_no_truth_no_claim():
 
 
 def test_a_locked_readme_robot_run_says_the_slack_it_did_not_see(tmp_path, capsys):
-    # The README's four-cable robot, rotation locked (the refusal's way out), pushed 5 N
+    # docs/robots.md's four-cable robot, rotation locked (the refusal's way out), pushed 5 N
     # sideways: on the dynamic plant a cable goes slack (its truth), and the translating
     # monitor, watching lengths alone, passes those ticks.
     import re
@@ -87,7 +87,7 @@ def test_a_locked_readme_robot_run_says_the_slack_it_did_not_see(tmp_path, capsy
 
     blocks = re.findall(r"```yaml\n(.*?)```", guide_text(), re.DOTALL)
     robot = tmp_path / "my_robot.yaml"
-    robot.write_text(next(b for b in blocks if b.startswith("name: my_robot")))
+    robot.write_text(next(b for b in blocks if b.startswith("name: my_4cable")))
     text = (f"{{robot: {robot}, swaps: [], initial_position: null, duration: 3, plant: "
             "!DynamicReels {lock_rotation: true}, operator: !ScriptedOperator {times: [0, 1, "
             "3], forces: [[0, 0, 0], [5, 3, 0], [5, 3, 0]]}}")

@@ -20,12 +20,12 @@ OVERLAY = ("{{robot: {robot}, swaps: [], initial_position: null, interference: {
 
 
 def readme_robot(tmp_path):
-    """The README's "Describe your own robot" block, verbatim, as a file."""
+    """docs/robots.md's four-cable robot ("A robot that can only translate"), verbatim, as a file."""
     from helpers_docs import guide_text
 
     blocks = re.findall(r"```yaml\n(.*?)```", guide_text(), re.DOTALL)
     path = tmp_path / "my_robot.yaml"
-    path.write_text(next(b for b in blocks if b.startswith("name: my_robot")))
+    path.write_text(next(b for b in blocks if b.startswith("name: my_4cable")))
     return path
 
 
@@ -121,7 +121,7 @@ def test_the_readme_robot_is_refused_on_the_free_plant_naming_all_three_moments(
     W = wrench_matrix_here(reels, attachments, [2.0, 1.5, 1.25])  # the box centre: the start
     rank, N, E = assert_names_the_missing_wrenches(message, W)
     assert rank == 3
-    assert message.startswith("robot 'my_robot' (4 cables) cannot hold a platform that turns "
+    assert message.startswith("robot 'my_4cable' (4 cables) cannot hold a platform that turns "
                               "freely: its wrench matrix has rank 3 < 6 (4 cables: below 6 at "
                               "every pose) at the start, initial_position [2.0, 1.5, 1.25] m")
     # The three pure moments: the cables' lines meet (rank 3), so W's range is the forces
