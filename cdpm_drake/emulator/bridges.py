@@ -19,7 +19,7 @@ import math
 import numpy as np
 
 from cdpm_drake.hardware.protocol import FAULT_OVERSPEED, MAX_FORCE
-from cdpm_drake.kernels.drive_torque import drive_force_for_tension
+from cdpm_drake.kernels.drive_torque import drive_force_for_tension, drive_model
 from cdpm_drake.kernels.kinematics import KinematicsError, forward_kinematics, jacobian
 
 
@@ -179,12 +179,7 @@ class DynamicBridge:
         self._context = self._simulator.get_mutable_context()
         self._command_port = self._diagram.get_input_port(0)
         self._force_port = self._plant.GetOutputPort("measured_force")
-        # The plant's own drive forces where it models them (issue 31), else computed here.
-        self._drive_port = (self._plant.GetOutputPort("drive_force")
-                            if self._plant.HasOutputPort("drive_force") else None)
-        d = robot.dynamics
-        self._drive_model = (float(d.reel_inertia), float(d.viscous_friction),
-                             float(d.coulomb_friction), float(d.dead_band))
+        self._drive_model = drive_model(robot.dynamics)
         self.load_cells = bool(load_cells)
         self._plant_context = self._plant.GetMyContextFromRoot(self._context)
         self.max_reel_speed = float(scenario.plant.max_reel_speed
@@ -350,13 +345,11 @@ class DynamicBridge:
         return self._true_tensions.copy()
 
     def drive_force(self) -> np.ndarray:
-        """Each reel drive's force at the cable now, N, + pays out: the plant's `drive_force`
-        output if it has one; else what the drive's velocity loop supplies to move its reel at
-        its speed and acceleration (over the last plant step) against its cable's true
-        tension, with the plant's reel inertia and friction (a drive holding a taut cable
-        at rest: -T)."""
-        if self._drive_port is not None:
-            return np.array(self._drive_port.Eval(self._plant_context))
+        """Each reel drive's force at the cable now, N, + pays out: what the drive's velocity
+        loop supplies to move its reel at its speed and acceleration (over the last plant
+        step) against its cable's true tension, with the robot file's reel inertia and
+        friction (a drive holding a taut cable at rest: -T). (The dynamic plant keeps its own
+        drive force inside its step and exports no port for it.)"""
         return drive_force_for_tension(self._true_tensions, self.speed, self._accel,
                                        *self._drive_model)
 

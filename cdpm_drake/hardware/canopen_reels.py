@@ -48,7 +48,7 @@ from cdpm_drake.hardware.canopen_config import (CanopenReels, check_canopen_reel
                                                 resolved_node_ids, resolved_offsets,
                                                 velocity_units)
 from cdpm_drake.hardware.reels import ReelFault, start_pose_problem
-from cdpm_drake.kernels.drive_torque import tension_from_drive
+from cdpm_drake.kernels.drive_torque import drive_model, tension_from_drive
 from cdpm_drake.kernels.kinematics import KinematicsError, cable_lengths, forward_kinematics
 
 _log = logging.getLogger(__name__)
@@ -119,12 +119,8 @@ class CanopenReelsSystem(LeafSystem):
         self._offset = np.array(resolved_offsets(config, m))
         self._counts = float(config.counts_per_metre)
         self._vel_units = velocity_units(config)
-        d = robot.dynamics
-        self._drive_model = (float(d.reel_inertia), float(d.viscous_friction),
-                             float(d.coulomb_friction), float(d.dead_band))
-        # Compile the kernel now: a first call on the real-time path would take seconds.
-        tension_from_drive(np.zeros(m), np.zeros(m), np.zeros(m), *self._drive_model,
-                           np.empty(m))
+        # Compiled now: a first call on the real-time path would take seconds.
+        self._drive_model = drive_model(robot.dynamics, m)
         self._ramp_step = 1.0 if config.ramp_time == 0 else self._T / config.ramp_time
         self._silence = (config.missed_tpdo_ticks - 1) * self._T
         self.master = CanopenMaster(config.interface, config.channel, config.bitrate,

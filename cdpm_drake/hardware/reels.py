@@ -51,7 +51,7 @@ import time
 import numpy as np
 from pydrake.systems.framework import LeafSystem
 
-from cdpm_drake.kernels.drive_torque import tension_from_drive
+from cdpm_drake.kernels.drive_torque import drive_model, tension_from_drive
 from cdpm_drake.kernels.kinematics import KinematicsError, cable_lengths, forward_kinematics
 from cdpm_drake.hardware.config import HardwareReels, check_hardware_reels
 from cdpm_drake.hardware.link import ReelLink
@@ -130,14 +130,10 @@ class HardwareReelsSystem(LeafSystem):
         self._T = float(time_step)
         self._m = m = robot.num_cables
         self._vmax = float(robot.limits.max_reel_speed)
-        d = robot.dynamics
-        # The controller's model of its reel drives (robot file reel_drives), at the cable.
-        self._drive_model = (float(d.reel_inertia), float(d.viscous_friction),
-                             float(d.coulomb_friction), float(d.dead_band))
+        # The controller's model of its reel drives (robot file reel_drives), at the cable,
+        # its kernel compiled now (not on the real-time path).
+        self._drive_model = drive_model(robot.dynamics, m)
         self._sensor = config.tension_sensor
-        # Compile the kernel now: a first call on the real-time path would take seconds.
-        tension_from_drive(np.zeros(m), np.zeros(m), np.zeros(m), *self._drive_model,
-                           np.empty(m))
         self._ramp_step = 1.0 if config.ramp_time == 0 else self._T / config.ramp_time
         # A catch-up burst of ticks after a stall of this process runs faster than the bridge
         # sends; the watchdog also waits this much wall-clock time so such a burst cannot

@@ -40,6 +40,19 @@ def tension_from_drive(force, speed, accel, inertia, viscous, coulomb, band, out
                   - force[i])
 
 
+def drive_model(dynamics, cables: int | None = None) -> tuple:
+    """The controller's model of its reel drives, tension_from_drive's (inertia kg, viscous
+    N s/m, Coulomb N, band m/s) at the cable, from a robot's dynamics (robot file
+    reel_drives; the band its dead band). With `cables`, tension_from_drive is compiled now
+    for that many: a first call on a real-time path would take seconds."""
+    model = (float(dynamics.reel_inertia), float(dynamics.viscous_friction),
+             float(dynamics.coulomb_friction), float(dynamics.dead_band))
+    if cables is not None:
+        zeros = np.zeros(cables)
+        tension_from_drive(zeros, zeros, zeros, *model, np.empty(cables))
+    return model
+
+
 def drive_force_for_tension(tension, speed, accel, inertia, viscous, coulomb, band):
     """The inverse: the drive force (N) that moves reels of speed and acceleration against
     cables of these tensions (N), as the drive's velocity loop supplies it. numpy arrays."""
