@@ -56,6 +56,30 @@ class Feasibility:
         return float(np.mean(self.feasible)) if self.feasible.size else 0.0
 
 
+def posed_holding_tension(robot, p, rpy, hand_force) -> np.ndarray:
+    """t* (N) of each posed platform: positions p (T, 3) m, orientations rpy (T, 3) rad,
+    the platform's weight and the hand force (T, 3) N at its handle, moments about the
+    centre (kinetostatics.margin without floor or ceiling: the statics' one measure; +inf
+    where an internal force raises every tension). The ground truth's counterpart of the
+    monitor's t*: a dynamic log's p_true, rpy_true and F_H give whether the cables could
+    hold the hand where the platform truly was."""
+    import math
+
+    from cdpm_drake.kernels.kinetostatics import margin, margin_scratch, wrench_rows
+    from cdpm_drake.kernels.rotation import rotations_from_rpy
+
+    rows, scratch = wrench_rows(robot), margin_scratch(robot.num_cables)
+    Rs = rotations_from_rpy(np.asarray(rpy, dtype=float))
+    p, F = np.asarray(p, dtype=float), np.asarray(hand_force, dtype=float)
+    out = np.empty(len(p))
+    for k in range(out.size):
+        R = np.ascontiguousarray(Rs[k])
+        w = gravity_wrench(robot.dynamics.mass, F[k], R @ robot.dynamics.handle)
+        out[k] = margin(robot.reels, robot.attachments, rows, np.ascontiguousarray(p[k]), R,
+                        w, 0.0, math.inf, scratch)[1]
+    return out
+
+
 def wrench_feasibility(robot, *, mass: float, hand_force: float = 0.0, handle=(0.0, 0.0, 0.0),
                        min_tension: float = 0.0, n: int = 5, directions=None,
                        points=None) -> Feasibility:

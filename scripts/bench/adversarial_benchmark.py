@@ -39,7 +39,6 @@ import argparse
 import dataclasses
 import json
 import logging
-import math
 import multiprocessing
 import sys
 import time
@@ -157,32 +156,13 @@ def cases(quick: bool = False, sensors=SENSORS) -> list:
     return out
 
 
-def _t_star_true(robot, log) -> np.ndarray:
-    """t* at the plant's true pose with the measured (filtered) hand force at the handle,
-    per tick (kinetostatics.margin, the statics' one measure)."""
-    from cdpm_drake.kernels.kinetostatics import margin, margin_scratch, wrench_rows
-    from cdpm_drake.kernels.rotation import rotations_from_rpy
-    from cdpm_drake.kernels.tension import gravity_wrench
-
-    rows = wrench_rows(robot)
-    scratch = margin_scratch(robot.num_cables)
-    Rs = rotations_from_rpy(log["rpy_true"])
-    out = np.empty(len(log["time"]))
-    for k in range(out.size):
-        R = np.ascontiguousarray(Rs[k])
-        w = gravity_wrench(robot.dynamics.mass, log["F_H"][k], R @ robot.dynamics.handle)
-        out[k] = margin(robot.reels, robot.attachments, rows,
-                        np.ascontiguousarray(log["p_true"][k]), R, w, 0.0, math.inf,
-                        scratch)[1]
-    return out
-
-
 def measure(case: Case) -> dict:
     """Run one case and measure it (module docstring)."""
     logging.disable(logging.WARNING)
     from cdpm_drake.kernels.interference import posed_pair_distances
     from cdpm_drake.kernels.rotation import rotations_from_rpy
     from cdpm_drake.config import load_resolved_scenario
+    from cdpm_drake.robot.statics import posed_holding_tension
     from cdpm_drake.runs.simulate import simulate
 
     resolved = load_resolved_scenario(case.scenario, case.overlay)
@@ -197,7 +177,7 @@ def measure(case: Case) -> dict:
         d, crossed = posed_pair_distances(robot, log["p_true"],
                                           rotations_from_rpy(log["rpy_true"]),
                                           np.asarray(log["d_u"], dtype=float))
-        t_star = _t_star_true(robot, log)
+        t_star = posed_holding_tension(robot, log["p_true"], log["rpy_true"], log["F_H"])
         slack = log["slack"].any(axis=1)
         row |= {"slack_holdable": int(np.sum(slack & (t_star >= HOLDABLE))),
                 "slack_ticks": int(slack.sum()),
@@ -223,11 +203,13 @@ def measure(case: Case) -> dict:
     return row
 
 
-def _run_all(todo, jobs):
+def run_parallel(fn, todo, jobs):
+    """[fn(x) for x in todo], on `jobs` spawned processes when more than one (fn a module's
+    top-level function: the benchmark's measure, or the damping benchmark's)."""
     if jobs <= 1:
-        return [measure(c) for c in todo]
+        return [fn(c) for c in todo]
     with multiprocessing.get_context("spawn").Pool(jobs) as pool:
-        return pool.map(measure, todo, chunksize=1)
+        return pool.map(fn, todo, chunksize=1)
 
 
 def table(rows) -> str:
@@ -274,7 +256,7 @@ def main(argv=None) -> int:
         todo = [c for c in todo if args.only in c.robot or args.only in c.hand]
     print(f"{len(todo)} runs of {DURATION:g} s on {args.jobs} processes ...", file=sys.stderr)
     start = time.perf_counter()
-    rows = _run_all(todo, args.jobs)
+    rows = run_parallel(measure, todo, args.jobs)
     print(table(rows))
     print(f"\n{len(rows)} runs in {time.perf_counter() - start:.0f} s", file=sys.stderr)
     if args.json:

@@ -70,6 +70,7 @@ def measure(job) -> dict:
     """One run: (label, scenario, overlay) -> its row."""
     logging.disable(logging.WARNING)
     from cdpm_drake.config import load_resolved_scenario
+    from cdpm_drake.robot.statics import posed_holding_tension
     from cdpm_drake.runs.simulate import simulate
 
     label, scenario, text, meta = job
@@ -78,7 +79,8 @@ def measure(job) -> dict:
     result = simulate(scenario=resolved)
     wall = time.perf_counter() - start
     log = result.log
-    t_star = adversarial._t_star_true(resolved.robot, log)
+    t_star = posed_holding_tension(resolved.robot, log["p_true"], log["rpy_true"],
+                                   log["F_H"])
     slack = log["slack"].any(axis=1)
     T = log["tensions"]
     half = T[T.shape[0] // 2:]
@@ -95,13 +97,6 @@ def measure(job) -> dict:
         row["corr"] = float(np.mean([np.corrcoef(a[:, i], b[:, i])[0, 1]
                                      for i in range(T.shape[1])]))
     return row
-
-
-def run_all(jobs, n):
-    if n <= 1:
-        return [measure(j) for j in jobs]
-    with multiprocessing.get_context("spawn").Pool(n) as pool:
-        return pool.map(measure, jobs, chunksize=1)
 
 
 def table(rows) -> str:
@@ -145,7 +140,7 @@ def main(argv=None) -> int:
                                                           duration=args.duration),
                                  {"sensor": sensor, "damping": "on" if damping else "off"}))
     print(f"{len(jobs)} runs ...", file=sys.stderr)
-    rows = run_all(jobs, args.jobs)
+    rows = adversarial.run_parallel(measure, jobs, args.jobs)
     print(table(rows))
     if args.json:
         Path(args.json).write_text(json.dumps(rows, indent=1))

@@ -14,6 +14,7 @@ import pytest
 
 from cdpm_drake.config import load_resolved_scenario, load_scenario
 from cdpm_drake.diagram import build_diagram
+from cdpm_drake.robot.statics import posed_holding_tension
 from cdpm_drake.runs.simulate import simulate
 
 OWN_5_7 = str(Path(__file__).resolve().parents[2] / "scripts" / "bench" / "adversarial"
@@ -30,30 +31,13 @@ def _overlay(damping: bool, sensor="drive_torque", duration=4.0) -> str:
             % (duration, "true" if damping else "false", sensor, PUSH))
 
 
-def _t_star_true(robot, log):
-    """t* (N) at the plant's true pose with the measured hand force, per tick."""
-    from cdpm_drake.kernels.kinetostatics import margin, margin_scratch, wrench_rows
-    from cdpm_drake.kernels.rotation import rotations_from_rpy
-    from cdpm_drake.kernels.tension import gravity_wrench
-
-    rows, scratch = wrench_rows(robot), margin_scratch(robot.num_cables)
-    Rs = rotations_from_rpy(log["rpy_true"])
-    out = np.empty(len(log["time"]))
-    for k in range(out.size):
-        R = np.ascontiguousarray(Rs[k])
-        w = gravity_wrench(robot.dynamics.mass, log["F_H"][k], R @ robot.dynamics.handle)
-        out[k] = margin(robot.reels, robot.attachments, rows,
-                        np.ascontiguousarray(log["p_true"][k]), R, w, 0.0, math.inf,
-                        scratch)[1]
-    return out
-
-
 def _holdable_slack(damping: bool, sensor="drive_torque") -> tuple[int, dict]:
     resolved = load_resolved_scenario(OWN_5_7, _overlay(damping, sensor))
     result = simulate(scenario=resolved)
     assert result.error is None, result.error
     log = result.log
-    slack = log["slack"].any(axis=1) & (_t_star_true(resolved.robot, log) >= 2.0)
+    t_star = posed_holding_tension(resolved.robot, log["p_true"], log["rpy_true"], log["F_H"])
+    slack = log["slack"].any(axis=1) & (t_star >= 2.0)
     return int(slack.sum()), log
 
 
