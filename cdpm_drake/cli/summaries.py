@@ -101,25 +101,21 @@ def safety_filter_summary(log) -> str:
     v_max = float(log["max_velocity"]) if "max_velocity" in log else float(speed.max(initial=0))
     at_speed = (binding & BIND_SPEED) != 0
     capped = at_speed & (speed < v_max * (1.0 - 1e-6))
-    bound = []
-    for bit, what in BIND_TEXT:
-        n = int(np.sum((binding & bit) != 0))
-        if bit == BIND_SPEED:
-            if np.any(at_speed & ~capped):
-                bound.append(f"{what} {int(np.sum(at_speed & ~capped))}")
-            if np.any(capped):
-                bound.append(f"lost-margin speed cap (towards {LOST_SPEED:g} m/s) "
-                             f"{int(np.sum(capped))}")
-        elif n:
-            bound.append(f"{what} {n}")
+    # (label, ticks) of each way the command was bound; the speed ball told apart by where.
+    masks = [(what, (binding & bit) != 0) for bit, what in BIND_TEXT if bit != BIND_SPEED]
+    speed_at = [i for i, (bit, _) in enumerate(BIND_TEXT) if bit == BIND_SPEED][0]
+    masks[speed_at:speed_at] = [
+        (BIND_TEXT[speed_at][1], at_speed & ~capped),
+        (f"lost-margin speed cap (towards {LOST_SPEED:g} m/s)", capped)]
+    bound = [(what, int(np.sum(mask))) for what, mask in masks if np.any(mask)]
     changed = int(np.sum(status == STATUS_MODIFIED))
-    counts = sum(int(b.rsplit(" ", 1)[1]) for b in bound)
     several = ("; a tick can bind several ways, so these add up to more than the ticks "
-               "changed" if counts > changed + int(np.sum(status >= STATUS_NO_RETURN))
-               else "")
+               "changed" if sum(n for _, n in bound)
+               > changed + int(np.sum(status >= STATUS_NO_RETURN)) else "")
+    listed = ", ".join(f"{what} {n}" for what, n in bound)
     text = (f"safety filter: passed {int(np.sum(status == STATUS_PASS))} of {T} ticks, "
             f"changed {changed}"
-            + (f" (bound: {', '.join(bound)}{several})" if bound else ""))
+            + (f" (bound: {listed}{several})" if bound else ""))
     for code, what in ((STATUS_NO_RETURN, "held a lost margin (not restored)"),
                        (STATUS_HOLD, "braked to a hold")):
         n = int(np.sum(status == code))
