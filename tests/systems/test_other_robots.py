@@ -47,7 +47,7 @@ def test_a_robot_described_by_someone_else_simulates_plots_and_replays(name, tmp
 
 
 def test_the_readme_examples_load_and_simulate(tmp_path):
-    # The README's "Describe your own robot" and docs/scenarios.md's "Write a scenario" blocks,
+    # docs/robots.md's "Describe your own robot" and docs/scenarios.md's "Write a scenario" blocks,
     # verbatim: a new user copies them first.
     import re
 
