@@ -21,7 +21,9 @@ host's timing.
 
 Fault injection (`--fault KIND`, on `--fault-cable`, from `--fault-after` s after the first
 drive reached operation enabled): drive_fault (the drive goes to Fault and sends EMCY 0x2310),
-lost_tpdo (the drive stops sending TPDOs; heartbeats go on), frozen_position (position actual
+fault_bit (the drive goes to Fault without an EMCY: only its statusword tells), late_tpdo
+(the drive's next TPDO is held back and sent a SYNC late, just before the following one; with
+another kind on the same cable: the first TPDO that shows the fault comes late), lost_tpdo (the drive stops sending TPDOs; heartbeats go on), frozen_position (position actual
 stops changing), dead_node (the node sends nothing and ignores the bus; its reel stops),
 bus_off (every node leaves the bus: nothing sent or received; the reels stop).
 """
@@ -41,7 +43,8 @@ from cdpm_drake.hardware.canopen_bus import (COB_EMCY, COB_HEARTBEAT, COB_NMT, C
                                              COB_SDO_TX, COB_SYNC, MODE_CSV, NMT_PRE_OPERATIONAL,
                                              NMT_START, NMT_STOP)
 
-FAULT_KINDS = ("drive_fault", "lost_tpdo", "frozen_position", "dead_node", "bus_off")
+FAULT_KINDS = ("drive_fault", "fault_bit", "late_tpdo", "lost_tpdo", "frozen_position",
+               "dead_node", "bus_off")
 # Statuswords of the states (bit 9 remote, bit 4 voltage enabled where it is).
 SW = {"switch on disabled": 0x0250, "ready to switch on": 0x0231, "switched on": 0x0233,
       "operation enabled": 0x0237, "quick stop active": 0x0217, "fault": 0x0218}
@@ -78,6 +81,8 @@ class Drive:
         self.rpdo, self.tpdo = [], []   # mapped (index, format) lists, fixed at NMT start
         self.frozen = None              # the position reported while frozen, counts
         self.lost_tpdo = self.dead = False
+        self.late = 0           # TPDOs still to hold back a SYNC
+        self.held = None        # (COB-ID, payload) of the TPDO held back
         self.next_heartbeat = 0.0
 
     def start(self) -> None:
@@ -329,9 +334,15 @@ class EmulatedDrives:
         self.bridge.step(self.period)
         self.record.append((self.syncs + 1, [d.state for d in self.drives], cws, targets))
         for d in self.drives:
+            if d.held is not None:  # last SYNC's TPDO, a SYNC late
+                self._send(*d.held, d)
+                d.held = None
             if d.nmt == "operational" and not d.lost_tpdo:
                 payload = b"".join(struct.pack(fmt, self._value(d, key)) for key, fmt in d.tpdo)
-                if self._send(d.od[(0x1800, 1)] & 0x7FF, payload, d):
+                if d.late:
+                    d.late -= 1
+                    d.held = (d.od[(0x1800, 1)] & 0x7FF, payload)
+                elif self._send(d.od[(0x1800, 1)] & 0x7FF, payload, d):
                     self.tpdo_sent += 1
         self.syncs += 1  # last: a SYNC counted is one fully answered
 
@@ -352,6 +363,10 @@ class EmulatedDrives:
         self.fault_syncs[kind] = self.syncs
         if kind == "drive_fault":
             self._drive_fault(d, 0x2310)
+        elif kind == "fault_bit":
+            d.state = "fault"
+        elif kind == "late_tpdo":
+            d.late = 1
         elif kind == "lost_tpdo":
             d.lost_tpdo = True
         elif kind == "frozen_position":
@@ -380,20 +395,31 @@ class EmulatedDrives:
             self.faults.remove(f)
             self.inject(f[0], f[1])
 
+    def fault_counts(self, kind: str) -> tuple:
+        """(zero, off, disabled) for an injected fault: the SYNCs after the last one before
+        it (the first SYNC after the fault is 1) until every live drive had target velocity
+        0, was out of operation enabled, and was disabled (switch on disabled, or fault);
+        None: never."""
+        at = self.fault_syncs[kind]
+        dead = {d.cable for d in self.drives if d.dead}
+        live = [k for k in range(len(self.drives)) if k not in dead]
+        after = [r for r in self.record if r[0] > at]
+
+        def first(ok):
+            return next((r[0] - at for r in after if all(ok(r, k) for k in live)), None)
+
+        return (first(lambda r, k: r[3][k] == 0),
+                first(lambda r, k: r[1][k] != "operation enabled"),
+                first(lambda r, k: r[1][k] in ("switch on disabled", "fault")))
+
     def fault_report(self) -> list[str]:
-        """For each injected fault: the SYNCs after it until every live drive had target
-        velocity 0, and until every live drive was out of operation enabled."""
+        """For each injected fault, fault_counts() in words."""
         lines = []
         for kind, at in self.fault_syncs.items():
-            dead = {d.cable for d in self.drives if d.dead}
-            live = [k for k in range(len(self.drives)) if k not in dead]
-            after = [r for r in self.record if r[0] > at]
-            zero = next((r[0] - at for r in after if all(r[3][k] == 0 for k in live)), None)
-            off = next((r[0] - at for r in after
-                        if all(r[1][k] != "operation enabled" for k in live)), None)
+            zero, off, disabled = self.fault_counts(kind)
             lines.append(f"{kind} after SYNC {at}: target velocity 0 on every live drive "
-                         f"{zero} SYNC(s) later, none in operation enabled {off} SYNC(s) later "
-                         f"(None: never)")
+                         f"{zero} SYNC(s) later, none in operation enabled {off} SYNC(s) later, "
+                         f"all disabled {disabled} SYNC(s) later (None: never)")
         return lines
 
     def _say(self, text: str) -> None:

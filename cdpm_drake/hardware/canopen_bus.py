@@ -60,10 +60,12 @@ class CanopenMaster:
     """The controller's end of the bus: `node_ids` drives, one per cable (0-based inside).
 
     Arrays updated by the notifier thread until stop_notifier(), then by poll() (read them
-with snapshot()): statusword, position
-    (counts), torque (per mille), tpdo_count (TPDOs received per drive), heartbeat_wall
-    (time.monotonic() of the last heartbeat, NaN: none), heartbeat_state, and `emcy`, a list
-    of (cable, error code, error register) of the EMCY frames with a non-zero code.
+    with snapshot()): statusword, position (counts), torque (per mille), tpdo_count (TPDOs
+    received per drive), still (the drive's latest TPDOs in a row whose position equals the
+    one before: counted per frame, so two TPDOs read on one tick, one of them late, count
+    as two), heartbeat_wall (time.monotonic() of the last heartbeat, NaN: none),
+    heartbeat_state, and `emcy`, a list of (cable, error code, error register) of the EMCY
+    frames with a non-zero code.
     """
 
     def __init__(self, interface: str, channel: str, bitrate: int, node_ids):
@@ -76,6 +78,7 @@ with snapshot()): statusword, position
         self.position = np.zeros(m, dtype=np.int64)
         self.torque = np.zeros(m, dtype=np.int64)
         self.tpdo_count = np.zeros(m, dtype=np.int64)
+        self.still = np.zeros(m, dtype=np.int64)
         self.heartbeat_wall = np.full(m, np.nan)
         self.heartbeat_state = np.full(m, -1, dtype=np.int64)
         self.emcy: list[tuple[int, int, int]] = []
@@ -250,7 +253,7 @@ with snapshot()): statusword, position
                 handler(msg.arbitration_id, msg.data, msg.timestamp)
 
     def snapshot(self, drain_emcy: bool = True):
-        """(statusword, position, torque, tpdo_count, heartbeat_wall, heartbeat_state,
+        """(statusword, position, torque, tpdo_count, still, heartbeat_wall, heartbeat_state,
         new EMCY list) after poll(), copied under the lock; the EMCY list is emptied if
         `drain_emcy`."""
         self.poll()
@@ -258,7 +261,7 @@ with snapshot()): statusword, position
             emcy = self.emcy
             self.emcy = [] if drain_emcy else list(emcy)
             return (self.statusword.copy(), self.position.copy(), self.torque.copy(),
-                    self.tpdo_count.copy(), self.heartbeat_wall.copy(),
+                    self.tpdo_count.copy(), self.still.copy(), self.heartbeat_wall.copy(),
                     self.heartbeat_state.copy(), emcy)
 
     # --- notifier thread ---------------------------------------------------------------------
@@ -269,6 +272,8 @@ with snapshot()): statusword, position
             return
         sw, pos, torque = struct.unpack_from("<Hih", bytes(data))
         with self.lock:
+            same = self.tpdo_count[k] > 0 and pos == self.position[k]
+            self.still[k] = self.still[k] + 1 if same else 0
             self.statusword[k], self.position[k], self.torque[k] = sw, pos, torque
             self.tpdo_count[k] += 1
 

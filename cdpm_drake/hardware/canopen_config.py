@@ -46,9 +46,10 @@ class CanopenReels:
     # tension_measured from the drives' torque (kernels/drive_torque) or none (NaN).
     tension_sensor: str = "drive_torque"
     # Control ticks without a TPDO from a drive after which every drive is stopped (and as
-    # many control periods less one of wall time), as HardwareReels's watchdog_ticks: the
-    # third silent tick stops them. 2 stops a tick sooner and trips on a 4 ms stall.
-    missed_tpdo_ticks: int = 3
+    # many control periods less one of wall time). 2: a TPDO a tick late is waited for, a
+    # drive silent for two SYNCs is stopped (quick stop with the third SYNC of its silence,
+    # disabled with the fourth); 1 would stop the run on every late TPDO.
+    missed_tpdo_ticks: int = 2
     # Heartbeat producer time written to each drive (0x1017), s; 0: no heartbeat watch.
     heartbeat_period: float = 0.1
     # A drive whose heartbeat is older than this is lost, s (wall clock).
@@ -61,12 +62,15 @@ class CanopenReels:
     # False (default): the run refuses to start. A fault during the run always ends it.
     fault_reset: bool = False
     # A drive commanded at least this fast, m/s of cable (the same sign for frozen_ticks + 10
-    # ticks), whose position did not change over `frozen_ticks` TPDOs (or as many as 3
-    # counts take at this speed, if more) has a frozen encoder. Above the drives' dead band
-    # (the robot file's reel_drives: 5 mm/s), where a reel may stick without a fault.
+    # ticks), whose position actual in `frozen_ticks` TPDOs in a row equals that of the one
+    # before (or in as many as 3 counts take at this speed, if more) has a frozen encoder.
+    # Above the drives' dead band (the robot file's reel_drives: 5 mm/s), where a reel may
+    # stick without a fault.
     frozen_speed: float = 0.01
-    # TPDOs with an unchanged position that make a frozen encoder (with frozen_speed).
-    frozen_ticks: int = 2
+    # TPDOs in a row with the position of the one before that make a frozen encoder (with
+    # frozen_speed). 1: at 10 mm/s and 1 um counts a TPDO should have moved 20 counts; each
+    # one more waits a tick longer.
+    frozen_ticks: int = 1
     # Time for the commanded reel velocity to ramp from 0 to full after enabling, s.
     ramp_time: float = 0.5
     # Largest forward-kinematics residual accepted for the first measured lengths, m.

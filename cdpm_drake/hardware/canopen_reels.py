@@ -10,27 +10,32 @@ Events at the control rate (period `time_step`), as HardwareReelsSystem's:
   against the robot file, then the enable sequence (shutdown, switch on, enable operation)
   with a deadline of `enable_timeout` per drive; a drive that misses it is named with its
   statusword. A drive in Fault is refused unless `fault_reset: true`.
-* discrete update at t_k: reads the drives' latest TPDOs, EMCY and heartbeats (kept by
-  python-can's notifier thread) into the lengths and tensions, and judges them: a drive's
-  fault bit or any state but operation enabled, an EMCY with an error code, no TPDO for
-  `missed_tpdo_ticks` ticks (and as many periods less one of wall time, as HardwareReels's
-  watchdog: a catch-up burst after a stall of this process must not trip it), a heartbeat older than `heartbeat_timeout` or not operational,
-  a frozen position (unchanged over `frozen_ticks` TPDOs, or as many as 3 counts take at
-  `frozen_speed`, 10 mm/s, while commanded at least `frozen_speed` the same way for 10 ticks more),
-  a CAN send error (bus-off). Any of them latches the fault and stops every
-  drive at once: target velocity 0 with quick stop and a SYNC, then target velocity 0 with
-  disable voltage (to switch on disabled) and a SYNC.
+* discrete update at t_k: reads the drives' latest TPDOs, EMCY and heartbeats into the
+  lengths and tensions, and judges them: a drive's fault bit or any state but operation
+  enabled, an EMCY with an error code, no TPDO for `missed_tpdo_ticks` ticks (and as many
+  periods less one of wall time, as HardwareReels's watchdog: a catch-up burst after a stall
+  of this process must not trip it), a heartbeat older than `heartbeat_timeout` or not
+  operational, a frozen position (`frozen_ticks` TPDOs in a row with the position of the one
+  before, counted per frame by the bus, or as many as 3 counts take at `frozen_speed`, while
+  commanded at least `frozen_speed` the same way for 10 ticks more), a CAN send error
+  (bus-off). Any of them latches the fault.
 * publish at t_k: judges the TPDOs received since the last update the same way (Drake runs
   the update at t_k right after this publish: without it a fault would stop the drives a
-  tick later) and on a fault stops the drives as above and raises ReelFault; otherwise one
-  RPDO per drive (enable operation, ramp x reel_velocity_command in drive units) and a SYNC.
-  A fault latched by the update raises ReelFault at the next publish, ending the run.
+  tick later). Running: one RPDO per drive (enable operation, ramp x reel_velocity_command
+  in drive units) and a SYNC. After a fault (or a non-finite command), the stop, one SYNC a
+  tick as ever (a CSV drive watches the SYNC period): this tick's RPDOs carry target
+  velocity 0 with quick stop, the next tick's target velocity 0 with disable voltage (to
+  switch on disabled), and that publish raises ReelFault, ending the run with its log. So a
+  fault whose first sign is the TPDO of SYNC s (the drive's onset) has every drive quick
+  stopped at SYNC s + 1 + d and disabled at s + 2 + d, d the ticks its detection waits
+  (0 for a fault bit or frozen position, 1 for a silent drive or a late TPDO).
 
 The bus (CanopenMaster) is a resource held as an attribute; after the SDO configuration it
 is read in the events themselves, without blocking, as HardwareReelsSystem reads its socket; what the
-system outputs and judges lives in the Context, except the count of consecutive commands
-above `frozen_speed` that publish keeps (a publish cannot write the Context), a fact about
-the commands sent like HardwareReelsSystem's `_stopped_at`.
+system outputs and judges lives in the Context, except facts about the commands sent that a
+publish keeps (it cannot write the Context), like HardwareReelsSystem's `_stopped_at`: the
+count of consecutive commands above `frozen_speed`, the stop's stage, and the fault a
+publish found (the update latches it).
 """
 
 import logging
@@ -63,10 +68,11 @@ ENABLED, RAMP, FAULT, FAULT_CABLE, FAULT_DETAIL, FAULT_TIME, TICKS, LOST = range
 BOOK_SIZE = 8
 # Why the run stops.
 (FAULT_NONE, FAULT_STATUS, FAULT_EMCY, FAULT_SILENT, FAULT_HEARTBEAT, FAULT_FROZEN,
- FAULT_SEND) = range(7)
+ FAULT_SEND, FAULT_COMMAND) = range(8)
 FAULT_NAMES = {FAULT_STATUS: "drive fault or state", FAULT_EMCY: "EMCY",
                FAULT_SILENT: "missing TPDOs", FAULT_HEARTBEAT: "heartbeat lost",
-               FAULT_FROZEN: "frozen position", FAULT_SEND: "CAN send error"}
+               FAULT_FROZEN: "frozen position", FAULT_SEND: "CAN send error",
+               FAULT_COMMAND: "non-finite command"}
 
 
 class _Counters:
@@ -133,6 +139,7 @@ class CanopenReelsSystem(LeafSystem):
         self._frozen_ticks = max(config.frozen_ticks, int(np.ceil(FROZEN_COUNTS / per_tick)))
         self._last_sign = np.zeros(m)
         self._stopped = self._quick_stopped = False
+        self._fault = None  # (reason, cable, detail, t) a publish found
         self.lost_tpdos = 0
 
         self._command = self.DeclareVectorInputPort("reel_velocity_command", m)
@@ -140,8 +147,9 @@ class CanopenReelsSystem(LeafSystem):
         self._force = self.DeclareDiscreteState(3)
         self._tension = self.DeclareDiscreteState(np.full(m, np.nan))
         self._book = self.DeclareDiscreteState(np.zeros(BOOK_SIZE))
-        # Per drive: TPDOs counted, ticks without one, position (counts), ticks unchanged,
-        # reel speed from the last two positions (m/s), time.monotonic() of the last new TPDO.
+        # Per drive: TPDOs counted, ticks without one, position (counts), TPDOs in a row
+        # unchanged, reel speed from the last two positions read (m/s), time.monotonic() of
+        # the last new TPDO.
         self._drives = self.DeclareDiscreteState(np.zeros(6 * m))
         self.DeclareStateOutputPort("cable_lengths", self._lengths)
         self.DeclareStateOutputPort("measured_force", self._force)
@@ -164,11 +172,14 @@ class CanopenReelsSystem(LeafSystem):
 
     def shutdown(self) -> None:
         """Every drive: target velocity 0 with disable voltage (to switch on disabled), and a
-        SYNC. Safe at any time and more than once (the CLI's Ctrl-C and SIGTERM)."""
-        if self.master.network is None:
+        SYNC; first, if not sent yet, target velocity 0 with quick stop and a SYNC one period
+        before (a CSV drive watches the SYNC period). Safe at any time and more than once
+        (the CLI's Ctrl-C and SIGTERM): sent once."""
+        if self.master.network is None or self._stopped:
             return
         if not self._quick_stopped:
             self.quick_stop()
+            time.sleep(self._T)
         self.master.send_cycle([CW_DISABLE_VOLTAGE] * self._m, np.zeros(self._m))
         self._stopped = True
 
@@ -206,7 +217,7 @@ class CanopenReelsSystem(LeafSystem):
         while True:
             self.master.send_cycle([CW_DISABLE_VOLTAGE] * m, zero)
             time.sleep(self._T)
-            sw, pos, torque, count, _, hb_state, _ = self.master.snapshot()
+            sw, pos, torque, count, _, _, hb_state, _ = self.master.snapshot()
             now = time.monotonic()
             silent = [k for k in range(m) if count[k] == 0]
             # A heartbeat that says operational: the one before NMT start says otherwise.
@@ -254,12 +265,12 @@ class CanopenReelsSystem(LeafSystem):
         if problem:
             raise self._fail(f"refusing to enable the drives: {problem}", t)
         self._enable(t)
-        sw, pos, torque, count, _, _, _ = self.master.snapshot()  # drops start-up EMCY
+        sw, pos, torque, count, still, _, _, _ = self.master.snapshot()  # drops start-up EMCY
         lengths = self._offset + pos / self._counts
         state.get_mutable_discrete_state(self._lengths).SetFromVector(lengths)
         state.get_mutable_discrete_state(self._force).SetFromVector(np.zeros(3))
         drives = np.zeros(6 * m)
-        drives[0:m], drives[2 * m:3 * m] = count, pos
+        drives[0:m], drives[2 * m:3 * m], drives[3 * m:4 * m] = count, pos, still
         drives[4 * m:5 * m] = np.nan
         drives[5 * m:] = time.monotonic()
         state.get_mutable_discrete_state(self._drives).SetFromVector(drives)
@@ -267,6 +278,7 @@ class CanopenReelsSystem(LeafSystem):
         book[ENABLED] = 1.0
         state.get_mutable_discrete_state(self._book).SetFromVector(book)
         self._stopped = self._quick_stopped = False
+        self._fault = None
 
     def _enable(self, t) -> None:
         """Shutdown, switch on, enable operation, each drive from the state its statusword
@@ -310,15 +322,16 @@ class CanopenReelsSystem(LeafSystem):
         m, T = self._m, self._T
         drives = context.get_discrete_state(self._drives).get_value().copy()
         count0, missed, pos0 = drives[0:m], drives[m:2 * m], drives[2 * m:3 * m]
-        still, speed0, heard = drives[3 * m:4 * m], drives[4 * m:5 * m], drives[5 * m:]
-        speed0 = speed0.copy()
-        sw, pos, torque, count, hb_wall, hb_state, emcy = snap
+        speed0, heard = drives[4 * m:5 * m].copy(), drives[5 * m:]
+        sw, pos, torque, count, still, hb_wall, hb_state, emcy = snap
         new = count != count0
         missed[:] = np.where(new, 0.0, missed + 1.0)
         heard[:] = np.where(new, now, heard)
-        still[:] = np.where(new, np.where(pos == pos0, still + 1.0, 0.0), still)
-        speed = np.where(new, (pos - pos0) / self._counts / T, speed0)
-        drives[0:m], drives[2 * m:3 * m], drives[4 * m:5 * m] = count, pos, speed
+        # Over as many periods as TPDOs came: a late one is read with the next.
+        speed = np.where(new, (pos - pos0) / self._counts / (T * np.maximum(count - count0, 1)),
+                         speed0)
+        drives[0:m], drives[2 * m:3 * m], drives[3 * m:4 * m] = count, pos, still
+        drives[4 * m:5 * m] = speed
         # Silent for missed_tpdo_ticks ticks and (missed_tpdo_ticks - 1) periods of wall time:
         # the catch-up ticks after a stall of this process come faster than drives answer.
         silent = np.where(now - heard >= self._silence, missed, 0.0)
@@ -346,11 +359,15 @@ class CanopenReelsSystem(LeafSystem):
             tension[:] = np.nan
         book[TICKS] += 1.0
         book[LOST] = self.lost_tpdos
+        t = context.get_time()
+        if self._fault is not None:
+            # The publish's, found first: the quick stop it sent may already show here.
+            reason, cable, detail, t = self._fault
         if reason != FAULT_NONE:
+            # The next publish sends the stop's first SYNC (if this tick's publish has not).
             book[FAULT], book[FAULT_CABLE], book[FAULT_DETAIL] = reason, cable, detail
-            book[FAULT_TIME] = context.get_time()
+            book[FAULT_TIME] = t
             book[ENABLED] = book[RAMP] = 0.0
-            self.shutdown()  # now, not at the next publish
         else:
             book[RAMP] = min(1.0, book[RAMP] + self._ramp_step)
         state.get_mutable_vector(self._lengths).SetFromVector(lengths)
@@ -387,30 +404,33 @@ class CanopenReelsSystem(LeafSystem):
 
     def _publish(self, context):
         book = context.get_discrete_state(self._book).get_value()
-        if book[FAULT] != FAULT_NONE:
-            self.shutdown()
-            raise ReelFault(self._fault_message(book), float(book[FAULT_TIME]))
-        # Drake runs this tick's update right after this publish, so the update has not
-        # seen the TPDOs that came in during the period just ended: judge them here too, so
-        # that a fault stops the drives in place of this tick's command, not the next one's.
-        t = context.get_time()
-        _, _, _, (reason, cable, detail) = self._advance(
-            context, self.master.snapshot(drain_emcy=False), time.monotonic())
-        if reason != FAULT_NONE:
-            fault = book.copy()
-            fault[FAULT], fault[FAULT_CABLE], fault[FAULT_DETAIL] = reason, cable, detail
-            fault[FAULT_TIME] = t
-            self.shutdown()
-            raise ReelFault(self._fault_message(fault), t)
-        u = self._command.Eval(context)
-        bad = ~np.isfinite(u)
-        if bad.any():
-            self.shutdown()
-            k = int(np.argmax(bad))
-            raise ReelFault(
-                f"reel fault at t = {context.get_time():.3f} s: reel_velocity_command of cable "
-                f"{k + 1} is {float(u[k])!r} m/s; every drive sent target velocity 0, quick "
-                f"stop, then disabled", context.get_time())
+        if book[FAULT] == FAULT_NONE and self._fault is None:
+            # Drake runs this tick's update right after this publish, so the update has not
+            # seen the TPDOs that came in during the period just ended: judge them here too,
+            # so that a fault stops the drives in place of this tick's command, not the next.
+            t = context.get_time()
+            _, _, _, (reason, cable, detail) = self._advance(
+                context, self.master.snapshot(drain_emcy=False), time.monotonic())
+            u = self._command.Eval(context)
+            bad = ~np.isfinite(u)
+            if reason == FAULT_NONE and bad.any():
+                reason, cable = FAULT_COMMAND, int(np.argmax(bad))
+                detail = float(u[cable])
+            if reason == FAULT_NONE:
+                self._send_command(book, u)
+                return
+            self._fault = (reason, cable, detail, t)
+        if not self._quick_stopped:
+            self.quick_stop()  # this tick's SYNC; disable voltage on the next tick's
+            return
+        self.shutdown()
+        if book[FAULT] == FAULT_NONE:  # a fault the update has not latched (yet)
+            book = book.copy()
+            book[FAULT], book[FAULT_CABLE], book[FAULT_DETAIL], book[FAULT_TIME] = self._fault
+        raise ReelFault(self._fault_message(book), float(book[FAULT_TIME]))
+
+    def _send_command(self, book, u) -> None:
+        """One RPDO per drive (enable operation, the ramped command in drive units), a SYNC."""
         v = book[RAMP] * u if book[ENABLED] else np.zeros(self._m)
         peak = float(np.max(np.abs(v)))
         if peak > self._vmax:
@@ -438,6 +458,8 @@ class CanopenReelsSystem(LeafSystem):
                    if detail < 0 else
                    f"{who}'s heartbeat is {detail * 1e3:.0f} ms old (heartbeat_timeout = "
                    f"{self._config.heartbeat_timeout * 1e3:g} ms)")
+        elif reason == FAULT_COMMAND:
+            why = f"reel_velocity_command of cable {k + 1} is {detail!r} m/s"
         elif reason == FAULT_FROZEN:
             why = (f"{who}'s position actual has not changed for {int(detail)} TPDOs while "
                    f"commanded at least frozen_speed = {self._config.frozen_speed:g} m/s "
@@ -446,4 +468,4 @@ class CanopenReelsSystem(LeafSystem):
             why = (f"{int(detail)} CAN frame(s) could not be sent (bus-off?): "
                    f"{self.master.last_send_error}")
         return (f"reel fault at t = {float(book[FAULT_TIME]):.3f} s: {why}; every drive sent "
-                f"target velocity 0 with quick stop, then disabled")
+                f"target velocity 0 with quick stop, then (a tick later) disable voltage")

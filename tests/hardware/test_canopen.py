@@ -159,17 +159,42 @@ def test_a_drive_in_fault_at_start_is_refused_unless_fault_reset(robot):
             drives.stop()
 
 
-@pytest.mark.parametrize("kind, message", [
-    ("drive_fault", r"the drive of cable 2 \(node 2\) sent EMCY error code 0x2310"),
-    ("lost_tpdo", r"no TPDO from the drive of cable 2 \(node 2\) for 2 ticks"),
-    ("frozen_position", r"the drive of cable 2 \(node 2\)'s position actual has not changed "
-                        r"for 2 TPDOs"),
-    ("dead_node", r"no TPDO from the drive of cable 2 \(node 2\) for 2 ticks"),
-    ("bus_off", r"no TPDO from the drive of cable \d \(node \d\) for 2 ticks"),
-])
-def test_each_fault_ends_in_zero_velocity_and_disabled_drives_within_3_ticks(robot, kind,
-                                                                                message):
-    sim, reels, drives, bridge, _ = _rig(robot, faults=[(kind, 1, 0.3)], missed_tpdo_ticks=2)
+# Each fault: (kinds injected on cable 2, settings, the message, zero, disabled). zero and
+# disabled count SYNCs from the last one before the fault (the first after it is 1, the SYNC
+# s whose TPDO is the first to show it, the drive's onset). In lockstep every TPDO is read
+# on the tick after its SYNC, unless held back a SYNC (late_tpdo): the fault shows on tick
+# s + 1 (s + 2 late), or after missed_tpdo_ticks = 2 ticks of silence (tick s + 2), the
+# quick stop goes with that tick's SYNC, disable voltage with the next. The EMCY of a drive
+# fault comes as it happens: read on tick s (quick stop 1) or, if it comes just after that
+# tick's read, s + 1 (2).
+FAULTS = [
+    (("drive_fault",), {}, r"the drive of cable 2 \(node 2\) sent EMCY error code 0x2310",
+     (1, 2), None),
+    (("fault_bit",), {}, r"cable 2 \(node 2\) reports statusword 0x0218 \(fault\)", 2, 3),
+    (("fault_bit", "late_tpdo"), {}, r"reports statusword 0x0218 \(fault\)", 3, 4),
+    (("frozen_position",), {}, r"the drive of cable 2 \(node 2\)'s position actual has not "
+                               r"changed for 1 TPDOs", 2, 3),
+    (("frozen_position", "late_tpdo"), {}, r"has not changed for 2 TPDOs", 3, 4),
+    # Two unchanged TPDOs read on one tick count as two: stopped as soon as on time.
+    (("frozen_position", "late_tpdo"), {"frozen_ticks": 2}, r"has not changed for 2 TPDOs",
+     3, 4),
+    (("lost_tpdo",), {}, r"no TPDO from the drive of cable 2 \(node 2\) for 2 ticks", 3, 4),
+    (("dead_node",), {}, r"no TPDO from the drive of cable 2 \(node 2\) for 2 ticks", 3, 4),
+    (("bus_off",), {}, r"no TPDO from the drive of cable \d \(node \d\) for 2 ticks", None,
+     None),
+]
+
+
+@pytest.mark.parametrize("kinds, settings, message, zero, disabled", FAULTS,
+                         ids=["+".join(f[0]) + "".join(f"-{k}{v}" for k, v in f[1].items())
+                              for f in FAULTS])
+def test_each_fault_ends_in_zero_velocity_and_disabled_drives_within_3_ticks(
+        robot, kinds, settings, message, zero, disabled):
+    """Quick stop (target velocity 0) with the SYNC of the tick that sees the fault, disable
+    voltage (switch on disabled) with the next: by the drive's record, both within 3 SYNCs of
+    the drive's onset (SYNC 1 here), 4 after the last SYNC before the fault."""
+    sim, reels, drives, bridge, _ = _rig(robot, faults=[(k, 1, 0.3) for k in kinds],
+                                         **settings)
     try:
         start_realtime(sim, 0.0)
         with pytest.raises(ReelFault, match=message):
@@ -177,6 +202,7 @@ def test_each_fault_ends_in_zero_velocity_and_disabled_drives_within_3_ticks(rob
         _close(reels, drives)
     finally:
         drives.stop()
+    kind = kinds[0]
     injected = drives.fault_syncs[kind]  # the last SYNC before the fault
     after = [r for r in drives.record if r[0] > injected]
     live = [k for k in range(7) if not (kind == "dead_node" and k == 1)]
@@ -185,36 +211,54 @@ def test_each_fault_ends_in_zero_velocity_and_disabled_drives_within_3_ticks(rob
         assert after == [] and all(d.state != "operation enabled" for d in drives.drives)
         assert not bridge.command.any()
         return
-    # The first SYNC after the fault is s1 = injected + 1, sent on tick k. The silent kinds
-    # (missed_tpdo_ticks = 2) and the frozen one (frozen_ticks = 2) show on the TPDOs of s1
-    # and s1 + 1, judged in the publish of tick k + 2, a fault bit or EMCY sooner; that
-    # publish sends, in place of its command, target velocity 0 with quick stop (SYNC s1 + 2
-    # at the latest: the third after the fault), then with disable voltage (s1 + 3).
-    stopped = next(r for r in after if all(r[3][k] == 0 for k in live))
-    disabled = after[after.index(stopped) + 1]
-    assert stopped[0] <= injected + 3, (stopped[0], injected)
-    assert disabled[0] == stopped[0] + 1
-    assert all(disabled[3][k] == 0 for k in live) and all(disabled[2][k] == 0 for k in live)
-    expected = {k: "switch on disabled" for k in live}
-    if kind == "drive_fault":
-        expected[1] = "fault"
-    assert {k: disabled[1][k] for k in live} == expected
+    counts = drives.fault_counts(kind)
+    if isinstance(zero, tuple):
+        assert counts[0] in zero and counts[1:] == (counts[0], counts[0] + 1), counts
+    else:
+        assert counts == (zero, zero, disabled), counts
+    stopped, off = after[counts[0] - 1], after[counts[2] - 1]
+    assert all(stopped[2][k] == 0x0002 for k in live)  # quick stop, target velocity 0
     assert {k: stopped[1][k] for k in live if k != 1} == {
         k: "quick stop active" for k in live if k != 1}
+    assert all(off[3][k] == 0 and off[2][k] == 0 for k in live)  # disable voltage
+    expected = {k: "switch on disabled" for k in live}
+    if kind in ("drive_fault", "fault_bit"):
+        expected[1] = "fault"
+    assert {k: off[1][k] for k in live} == expected
     # Before the fault they were driven at U.
     before = [r for r in drives.record if r[0] <= injected][-1]
     assert np.allclose(before[3], U, atol=1e-6)
 
 
+def test_a_late_tpdo_alone_is_no_fault_and_moves_the_speed_by_its_periods(robot):
+    """A TPDO a SYNC late is read with the next one: neither silence (missed_tpdo_ticks 2)
+    nor a frozen position (the two positions differ from the one before), and the reel speed
+    behind the drive-torque tension is the position change over both periods: U exactly
+    (ideal drives, 1 um counts: to a count over 4 ms)."""
+    sim, reels, drives, _, _ = _rig(robot, faults=[("late_tpdo", 1, 0.3)])
+    try:
+        start_realtime(sim, 0.0)
+        _lockstep(sim, reels, drives, 0.4)
+        context = reels.GetMyContextFromRoot(sim.get_context())
+        at = drives.fault_syncs["late_tpdo"]
+        assert drives.syncs > at + 10 and reels.book(context)["fault"] == 0
+        assert drives.drives[1].held is None and reels.lost_tpdos >= 1
+        speed = context.get_discrete_state(reels._drives).get_value()[4 * 7:5 * 7]
+        assert np.abs(speed - U).max() <= 1e-6 / (2 * T)
+    finally:
+        _close(reels, drives)
+
+
 def test_coarse_counts_lengthen_the_frozen_window(robot):
     """A slow drive with coarse counts leaves its position unchanged for ticks on end: the
     window is as many TPDOs as 3 counts take at frozen_speed (closed form: 10 mm/s x 2 ms x
-    10 000 counts/m = 0.2 count per tick -> 15 TPDOs), and frozen_ticks where that is fewer."""
+    10 000 counts/m = 0.2 count per tick -> 15 TPDOs), and frozen_ticks (1) where that is
+    fewer."""
     from cdpm_drake.hardware.canopen_reels import CanopenReelsSystem
 
     coarse = CanopenReelsSystem(robot, CanopenReels(counts_per_metre=10_000.0), time_step=T)
     fine = CanopenReelsSystem(robot, CanopenReels(counts_per_metre=-1_000_000.0), time_step=T)
-    assert coarse._frozen_ticks == 15 and fine._frozen_ticks == 2
+    assert coarse._frozen_ticks == 15 and fine._frozen_ticks == 1
 
 
 def test_a_drive_without_heartbeat_or_mode_read_back_is_watched_by_its_tpdos(robot,
@@ -233,7 +277,7 @@ def test_a_drive_without_heartbeat_or_mode_read_back_is_watched_by_its_tpdos(rob
         assert not reels.master.heartbeat_watched.any()
         assert len(reels.master.notes) == 14 and "0x1017:0" in reels.master.notes[0]
         with pytest.raises(ReelFault, match=r"no TPDO from the drive of cable 1 \(node 1\) "
-                           r"for 3 ticks"):
+                           r"for 2 ticks"):
             _lockstep(sim, reels, drives, 1.0)
     finally:
         _close(reels, drives)
