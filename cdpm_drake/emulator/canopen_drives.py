@@ -54,7 +54,9 @@ OBJECTS = {(0x1000, 0): ("<I", False), (0x1017, 0): ("<H", True),
            (0x1800, 1): ("<I", True), (0x1800, 2): ("<B", True),
            (0x6040, 0): ("<H", True), (0x6041, 0): ("<H", False), (0x6060, 0): ("<b", True),
            (0x6061, 0): ("<b", False), (0x6064, 0): ("<i", False), (0x606C, 0): ("<i", False),
-           (0x6077, 0): ("<h", False), (0x60FF, 0): ("<i", True)}
+           (0x6077, 0): ("<h", False), (0x60FF, 0): ("<i", True),
+           (0x60C2, 1): ("<B", True), (0x60C2, 2): ("<b", True)}  # stored, not used: one
+# plant step of --period per SYNC
 for _map in (0x1600, 0x1A00):
     OBJECTS[(_map, 0)] = ("<B", True)
     for _sub in range(1, 9):
@@ -74,7 +76,8 @@ class Drive:
                    (0x1800, 1): 0x180 + node_id, (0x1800, 2): 255,
                    (0x1600, 0): 2, (0x1600, 1): 0x60400010, (0x1600, 2): 0x60FF0020,
                    (0x1A00, 0): 2, (0x1A00, 1): 0x60410010, (0x1A00, 2): 0x60640020,
-                   (0x6040, 0): 0, (0x6060, 0): 0, (0x60FF, 0): 0}
+                   (0x6040, 0): 0, (0x6060, 0): 0, (0x60FF, 0): 0,
+                   (0x60C2, 1): 1, (0x60C2, 2): -3}
         self.nmt = "pre-operational"
         self.state = "switch on disabled"
         self.previous_cw = 0

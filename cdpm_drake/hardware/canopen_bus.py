@@ -35,6 +35,7 @@ MODE_CSV = 9
 
 COB_NMT, COB_SYNC, COB_EMCY, COB_TPDO1, COB_RPDO1 = 0x000, 0x080, 0x080, 0x180, 0x200
 COB_SDO_TX, COB_SDO_RX, COB_HEARTBEAT = 0x580, 0x600, 0x700
+COB_NO_RTR = 0x40000000  # bit 30 of a PDO's COB-ID entry: no remote request
 NMT_START, NMT_STOP, NMT_PRE_OPERATIONAL = 0x01, 0x02, 0x80
 HEARTBEAT_OPERATIONAL = 0x05
 _log = logging.getLogger(__name__)
@@ -50,6 +51,17 @@ def state_name(statusword: int) -> str:
 
 def is_state(statusword: int, name: str) -> bool:
     return state_name(statusword) == name
+
+
+def interpolation_period(period: float):
+    """0x60C2's (value, index) for a period of `period` s: value x 10^index s, value in
+    1..255, the largest index 0..-9 that is exact to 1e-9 relative (2 ms: (2, -3)); None if
+    there is none."""
+    for exponent in range(0, -10, -1):
+        value = period / 10.0 ** exponent
+        if abs(value - round(value)) <= 1e-9 * value and 1 <= round(value) <= 255:
+            return int(round(value)), exponent
+    return None
 
 
 class CanopenError(RuntimeError):
@@ -132,39 +144,74 @@ class CanopenMaster:
             except Exception:  # noqa: S110 - a bus already gone has nothing to release
                 pass
 
-    def configure(self, heartbeat_period: float) -> None:
+    def configure(self, heartbeat_period: float, period: float = 0.0) -> None:
         """Each drive to pre-operational, then over SDO: mode 9 (cyclic synchronous velocity),
         RPDO1 = controlword + target velocity and TPDO1 = statusword + position actual +
-        torque actual, both synchronous (every SYNC), and the heartbeat producer time
-        (`heartbeat_watched` says for which drives it was accepted; a refusal, like one of
-        reading back 0x6061, goes to `notes`)."""
+        torque actual, both synchronous (every SYNC), the interpolation time period 0x60C2
+        (the SYNC period `period` s, if > 0: a CSV drive integrates each target velocity
+        over it) and the heartbeat producer time (`heartbeat_watched` says for which drives
+        it was accepted; a refusal of 0x60C2 or 0x1017, like one of reading back 0x6061,
+        goes to `notes`: the drive runs without).
+
+        What a drive may do differently, and this does not assume: the objects written in
+        the order CiA 301 asks of a mapping (the PDO invalid, its count 0, the entries, the
+        count, the PDO valid again), TPDO COB-IDs written with bit 30 set (no RTR: a drive
+        without remote frames refuses bit 30 clear), the mode display 0x6061 read until it
+        shows 9 (a drive may switch modes a few cycles after the write)."""
         for node_id in self.node_ids:
             self.nmt(NMT_PRE_OPERATIONAL, node_id)
         for k, node_id in enumerate(self.node_ids):
             write = self._writer(k, node_id)
             write(0x6060, 0, struct.pack("<b", MODE_CSV), "modes of operation")
             self._map(write, 0x1400, 0x1600, COB_RPDO1 + node_id, RPDO_OBJECTS, "RPDO1")
-            self._map(write, 0x1800, 0x1A00, COB_TPDO1 + node_id, TPDO_OBJECTS, "TPDO1")
+            self._map(write, 0x1800, 0x1A00, COB_TPDO1 + node_id | COB_NO_RTR, TPDO_OBJECTS,
+                      "TPDO1")
+            optional = []
+            if period > 0 and interpolation_period(period) is not None:
+                value, exponent = interpolation_period(period)
+                optional.append((0x60C2, 1, struct.pack("<B", value),
+                                 "interpolation time period value", None))
+                optional.append((0x60C2, 2, struct.pack("<b", exponent),
+                                 "interpolation time index", None))
             if heartbeat_period > 0:
+                optional.append((0x1017, 0, struct.pack("<H", int(round(heartbeat_period
+                                                                        * 1000))),
+                                 "producer heartbeat time", "heartbeat"))
+            refused = set()
+            for index, sub, data, what, watched in optional:
+                if index in refused:
+                    continue  # 0x60C2's index is pointless without its value
                 try:
-                    write(0x1017, 0, struct.pack("<H", int(round(heartbeat_period * 1000))),
-                          "producer heartbeat time")
-                    self.heartbeat_watched[k] = True
+                    write(index, sub, data, what)
+                    if watched:
+                        self.heartbeat_watched[k] = True
                 except CanopenError as e:
-                    # A drive without a heartbeat producer is watched by its TPDOs alone.
+                    # Without a heartbeat producer a drive is watched by its TPDOs alone;
+                    # without 0x60C2 it takes the SYNC period from its own settings.
+                    refused.add(index)
                     self.notes.append(str(e))
-                    _log.warning("%s; its heartbeat is not watched", e)
+                    _log.warning("%s; the drive runs without it", e)
+            self._confirm_mode(k, node_id)
+
+    def _confirm_mode(self, k, node_id, timeout: float = 0.5) -> None:
+        """Read 0x6061 until it shows mode 9, for `timeout` s at most; a drive without a
+        0x6061 to read runs on the accepted write of 0x6060 (noted)."""
+        deadline = time.monotonic() + timeout
+        while True:
             try:
                 mode = self._read(k, node_id, 0x6061, 0, "modes of operation display")
             except CanopenError as e:  # no read-back: the write of 0x6060 was accepted
                 self.notes.append(str(e))
                 _log.warning("%s; mode 9 written to 0x6060 is not confirmed", e)
-                continue
-            if len(mode) < 1 or struct.unpack_from("<b", mode)[0] != MODE_CSV:
+                return
+            if len(mode) >= 1 and struct.unpack_from("<b", mode)[0] == MODE_CSV:
+                return
+            if time.monotonic() > deadline:
                 raise CanopenError(f"drive of cable {k + 1} (node {node_id}) reports mode "
-                                   f"{mode.hex()} in 0x6061 after mode {MODE_CSV} (cyclic "
-                                   f"synchronous velocity) was written to 0x6060: it does "
-                                   f"not support CSV")
+                                   f"{mode.hex()} in 0x6061 {timeout:g} s after mode "
+                                   f"{MODE_CSV} (cyclic synchronous velocity) was written to "
+                                   f"0x6060: it does not support CSV")
+            time.sleep(0.01)
 
     @staticmethod
     def _map(write, comm, mapping, cob_id, objects, name) -> None:

@@ -206,7 +206,7 @@ class CanopenReelsSystem(LeafSystem):
         c, m, t = self._config, self._m, context.get_time()
         try:
             self.master.open()
-            self.master.configure(c.heartbeat_period)
+            self.master.configure(c.heartbeat_period, self._T)
             self.master.stop_notifier()
         except CanopenError as e:
             raise self._fail(f"refusing to enable the drives: {e}", t) from None
