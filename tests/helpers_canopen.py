@@ -1,7 +1,10 @@
 """A CanopenReelsSystem against EmulatedDrives on python-can's `virtual` bus, in one process
-(tests/hardware/test_canopen.py, tests/config/test_wiring_canopen.py)."""
+(tests/hardware/test_canopen.py, tests/config/test_wiring_canopen.py), and whether a private
+network namespace can be made for the end-to-end runs over udp_multicast."""
 
 import itertools
+import shutil
+import subprocess
 import time
 
 import numpy as np
@@ -69,3 +72,17 @@ def close(reels, drives):
     while drives.syncs != reels.master.syncs and time.monotonic() < deadline:
         time.sleep(0.001)
     drives.stop()
+
+
+def namespace_problem() -> str:
+    """Why no private network namespace (`unshare -n`) can be made here, or ''."""
+    for tool in ("unshare", "ip"):
+        if shutil.which(tool) is None:
+            return f"no `{tool}` on this machine"
+    try:
+        done = subprocess.run(["unshare", "-n", "true"], capture_output=True, timeout=30)
+    except (OSError, subprocess.TimeoutExpired) as e:
+        return f"unshare -n failed: {e}"
+    if done.returncode != 0:
+        return f"unshare -n refused (needs root): {done.stderr.decode().strip()}"
+    return ""

@@ -11,13 +11,13 @@ stopped (target velocity 0, quick stop) and disabled (switch on disabled) within
 the drive's onset (the first SYNC whose TPDO shows the fault)."""
 
 import re
-import shutil
 import subprocess
 import sys
 from pathlib import Path
 
 import numpy as np
 import pytest
+from helpers_canopen import namespace_problem
 
 REPO = Path(__file__).resolve().parents[2]
 T = 0.002
@@ -32,19 +32,6 @@ PLANT = ("plant: !CanopenReels {interface: udp_multicast, channel: 239.74.163.2,
 # both were held up past 5 ticks: p99 tick 5 ms, 17 overruns in 0.4 s measured).
 FAULT_PLANT = ("plant: !CanopenReels {interface: udp_multicast, channel: 239.74.163.2, "
                "ramp_time: 0.0}")
-
-
-def _namespace_problem() -> str:
-    for tool in ("unshare", "ip"):
-        if shutil.which(tool) is None:
-            return f"no `{tool}` on this machine"
-    try:
-        done = subprocess.run(["unshare", "-n", "true"], capture_output=True, timeout=30)
-    except (OSError, subprocess.TimeoutExpired) as e:
-        return f"unshare -n failed: {e}"
-    if done.returncode != 0:
-        return f"unshare -n refused (needs root): {done.stderr.decode().strip()}"
-    return ""
 
 
 def _script(out: Path, emulate_flags: str, duration: float, plant: str) -> str:
@@ -67,7 +54,7 @@ wait $EMU || true
 
 
 def _run(tmp_path, name, emulate_flags="", duration=2.0, plant=None):
-    problem = _namespace_problem()
+    problem = namespace_problem()
     if problem:
         pytest.skip(f"no private network namespace for udp_multicast: {problem}")
     out = tmp_path / name
