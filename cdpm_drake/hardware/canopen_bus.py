@@ -100,8 +100,12 @@ class CanopenMaster:
         self.last_send_error = ""
         self.network = None
         self.heartbeat_watched = np.zeros(m, dtype=bool)
+        # Each drive's rated torque 0x6076, N m (NaN: not read): torque actual 0x6077 is in
+        # per mille of it, what force_per_torque_unit must carry.
+        self.rated_torque = np.full(m, np.nan)
         self.notes: list[str] = []  # what a drive refused that the run does without
         self.polling = False
+        self._at_sync = None
         self._handlers = {}
         for node_id in self.node_ids:
             self._handlers[COB_TPDO1 + node_id] = self._on_tpdo
@@ -192,6 +196,12 @@ class CanopenMaster:
                     self.notes.append(str(e))
                     _log.warning("%s; the drive runs without it", e)
             self._confirm_mode(k, node_id)
+            try:
+                rated = self._read(k, node_id, 0x6076, 0, "rated torque")
+                if len(rated) >= 4:
+                    self.rated_torque[k] = struct.unpack_from("<I", rated)[0] / 1000.0
+            except CanopenError:  # not every drive has it; the run does not need it
+                pass
 
     def _confirm_mode(self, k, node_id, timeout: float = 0.5) -> None:
         """Read 0x6061 until it shows mode 9, for `timeout` s at most; a drive without a
@@ -250,12 +260,26 @@ class CanopenMaster:
     def send_cycle(self, controlwords, velocities) -> None:
         """One RPDO per drive (controlword, target velocity in drive units), then the SYNC
         on which the drives act on them and answer with their TPDOs."""
+        # What came in before this SYNC, for the tick's update to judge (sync_snapshot): the
+        # drives answer within a fraction of a period, often before the rest of the tick has
+        # run, and a TPDO read on the tick of its own SYNC would make a silence count a tick
+        # early (and a TPDO a tick late look like two missing).
+        self._at_sync = (self.snapshot(drain_emcy=False), time.monotonic())
         for node_id, cw, v in zip(self.node_ids, controlwords, velocities):
             v = int(max(-2**31, min(2**31 - 1, round(float(v)))))
             if self._send(COB_RPDO1 + node_id, struct.pack("<Hi", int(cw), v)):
                 self.sent += 1
         if self._send(COB_SYNC, b""):
             self.syncs += 1
+
+    def sync_snapshot(self):
+        """(snapshot, time.monotonic()) as they were just before the last SYNC was sent, once
+        (then None: take a snapshot() instead); the EMCY frames it lists are drained."""
+        at, self._at_sync = self._at_sync, None
+        if at is not None:
+            with self.lock:
+                del self.emcy[:len(at[0][7])]
+        return at
 
     def _send(self, cob_id: int, data: bytes) -> bool:
         network = self.network

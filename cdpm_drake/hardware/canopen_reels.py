@@ -10,8 +10,10 @@ Events at the control rate (period `time_step`), as HardwareReelsSystem's:
   against the robot file, then the enable sequence (shutdown, switch on, enable operation)
   with a deadline of `enable_timeout` per drive; a drive that misses it is named with its
   statusword. A drive in Fault is refused unless `fault_reset: true`.
-* discrete update at t_k: reads the drives' latest TPDOs, EMCY and heartbeats into the
-  lengths and tensions, and judges them: a drive's fault bit or any state but operation
+* discrete update at t_k: reads the drives' TPDOs, EMCY and heartbeats as they were when
+  the tick's publish sent its SYNC (CanopenMaster.sync_snapshot: what came in over the
+  period just ended, not what this tick's own SYNC brought back meanwhile) into the lengths
+  and tensions, and judges them: a drive's fault bit or any state but operation
   enabled, an EMCY with an error code, no TPDO for `missed_tpdo_ticks` ticks (and as many
   periods less one of wall time, as HardwareReels's watchdog: a catch-up burst after a stall
   of this process must not trip it), a heartbeat older than `heartbeat_timeout` or not
@@ -210,6 +212,12 @@ class CanopenReelsSystem(LeafSystem):
             self.master.stop_notifier()
         except CanopenError as e:
             raise self._fail(f"refusing to enable the drives: {e}", t) from None
+        rated = self.master.rated_torque
+        if np.isfinite(rated).any():
+            # torque actual is per mille of it: force_per_torque_unit should be ~ rated / 1000
+            # x gear ratio / drum radius, which this cannot know; the log says what was read.
+            _log.info("rated torque 0x6076 per cable: %s N m; force_per_torque_unit %g N",
+                      np.round(rated, 4).tolist(), c.force_per_torque_unit)
         self.master.nmt(NMT_START, 0)
         zero = np.zeros(m)
         deadline = time.monotonic() + c.startup_timeout
@@ -343,9 +351,11 @@ class CanopenReelsSystem(LeafSystem):
         if book[FAULT] != FAULT_NONE:
             return  # latched; the next publish ends the run
         c, m, T = self._config, self._m, self._T
-        snap = self.master.snapshot()
-        drives, speed0, new, (reason, cable, detail) = self._advance(
-            context, snap, time.monotonic())
+        # The frames as the tick's publish saw them, before its SYNC: a silence counted in
+        # SYNC periods, whatever this tick's compute time lets arrive meanwhile.
+        at = self.master.sync_snapshot() or (self.master.snapshot(), time.monotonic())
+        snap = at[0]
+        drives, speed0, new, (reason, cable, detail) = self._advance(context, *at)
         self.lost_tpdos += int(np.count_nonzero(~new))
         pos, torque = snap[1], snap[2]
         speed = drives[4 * m:5 * m]

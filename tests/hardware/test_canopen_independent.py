@@ -101,7 +101,8 @@ def _check_stop(summary, kind) -> None:
 
 def _in_process(faults, until=1.0):
     """Run a CanopenReelsSystem (constant command U) against the drive set on a virtual bus;
-    returns (summary, the ReelFault or None, the plant's last lengths, the start lengths)."""
+    returns (summary, the ReelFault or None, the plant's last lengths, the start lengths,
+    the rated torques the master read, N m)."""
     from pydrake.systems.analysis import Simulator
     from pydrake.systems.framework import DiagramBuilder
     from pydrake.systems.primitives import ConstantVectorSource
@@ -138,12 +139,13 @@ def _in_process(faults, until=1.0):
         drives.stop = True
         thread.join(2.0)
         bus.shutdown()
-    return drives.summary(), error, lengths, L0
+    return drives.summary(), error, lengths, L0, reels.master.rated_torque.copy()
 
 
 def test_configuration_enable_sequence_and_lengths_in_one_process():
-    summary, error, lengths, L0 = _in_process([], until=0.6)
+    summary, error, lengths, L0, rated = _in_process([], until=0.6)
     assert error is None
+    assert rated.tolist() == [0.5] * 7  # 0x6076 = 500 mNm, read for the operator
     for node in range(1, 8):
         mine = [r for r in summary["requests"] if r[1] == node]
         writes = [(r[2], r[3], r[4]) for r in mine if r[0] == "write"]
@@ -192,7 +194,7 @@ def test_configuration_enable_sequence_and_lengths_in_one_process():
     ([("fault_bit", 2, 100), ("late", 2, 100)], r"reports statusword 0x02"),
 ], ids=["fault", "fault_bit", "silent", "frozen", "frozen_late", "fault_bit_late"])
 def test_each_fault_in_one_process_stops_and_disables_within_3_syncs(faults, message):
-    summary, error, _, _ = _in_process(faults)
+    summary, error, _, _, _ = _in_process(faults)
     assert error is not None and re.search(message, str(error)), error
     _check_stop(summary, faults[0][0])
 
