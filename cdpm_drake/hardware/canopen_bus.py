@@ -159,17 +159,24 @@ class CanopenMaster:
 
         What a drive may do differently, and this does not assume: the objects written in
         the order CiA 301 asks of a mapping (the PDO invalid, its count 0, the entries, the
-        count, the PDO valid again), TPDO COB-IDs written with bit 30 set (no RTR: a drive
-        without remote frames refuses bit 30 clear), the mode display 0x6061 read until it
+        count, the PDO valid again), the COB-IDs written with bit 30 (RTR) as the drive has it
+        (read first: a drive without remote frames refuses it clear, a simple one may take
+        the whole entry for its CAN-ID), the mode display 0x6061 read until it
         shows 9 (a drive may switch modes a few cycles after the write)."""
         for node_id in self.node_ids:
             self.nmt(NMT_PRE_OPERATIONAL, node_id)
         for k, node_id in enumerate(self.node_ids):
             write = self._writer(k, node_id)
             write(0x6060, 0, struct.pack("<b", MODE_CSV), "modes of operation")
-            self._map(write, 0x1400, 0x1600, COB_RPDO1 + node_id, RPDO_OBJECTS, "RPDO1")
-            self._map(write, 0x1800, 0x1A00, COB_TPDO1 + node_id | COB_NO_RTR, TPDO_OBJECTS,
-                      "TPDO1")
+            for comm, mapping, cob_id, objects, name in (
+                    (0x1400, 0x1600, COB_RPDO1 + node_id, RPDO_OBJECTS, "RPDO1"),
+                    (0x1800, 0x1A00, COB_TPDO1 + node_id, TPDO_OBJECTS, "TPDO1")):
+                try:
+                    entry = self._read(k, node_id, comm, 1, f"{name} COB-ID")
+                    cob_id |= struct.unpack_from("<I", entry.ljust(4, b"\0"))[0] & COB_NO_RTR
+                except CanopenError as e:
+                    self.notes.append(str(e))  # written with bit 30 clear
+                self._map(write, comm, mapping, cob_id, objects, name)
             optional = []
             if period > 0 and interpolation_period(period) is not None:
                 value, exponent = interpolation_period(period)

@@ -119,8 +119,14 @@ def test_life_cycle_mapping_and_lengths_follow_the_commands(robot):
     assert np.abs(moving - U).max() <= 0.5e-6
     # Ideal drives: each SYNC in operation enabled moves a cable by its target x T.
     np.testing.assert_allclose(bridge.lengths - L0, targets.sum(axis=0) * T, atol=1e-12)
-    # The controller's lengths: position actual (1 um counts) of the SYNC before the last.
-    assert np.abs(measured - bridge.lengths).max() <= np.abs(U).max() * T * 2 + 1e-6
+    # The controller's lengths: position actual (1 um counts) after one of the SYNCs (the
+    # last it had read when the run stopped; this in-process bus shares the GIL with the
+    # drives, so which one depends on the host's load: within missed_tpdo_ticks of the end).
+    moved = np.cumsum([np.asarray(r[3]) * T * (np.array(r[1]) == "operation enabled")
+                       for r in drives.record], axis=0)
+    off = np.abs(measured - L0 - moved).max(axis=1)
+    assert off.min() <= 1e-6 and np.argmin(off) >= len(moved) - 25 - 3, (off.min(),
+                                                                         np.argmin(off))
     assert len(moving) >= 0.9 * 500  # at most a few ticks of 500 lost to the host
 
 
@@ -237,20 +243,24 @@ def test_each_fault_ends_in_zero_velocity_and_disabled_drives_within_3_ticks(
 def test_a_late_tpdo_alone_is_no_fault_and_moves_the_speed_by_its_periods(robot):
     """A TPDO a SYNC late is read with the next one: neither silence (missed_tpdo_ticks 2)
     nor a frozen position (the two positions differ from the one before), and the reel speed
-    behind the drive-torque tension is the position change over both periods: U exactly
-    (ideal drives, 1 um counts: to a count over 4 ms)."""
+    behind the drive-torque tension is the position change over both periods: U on every
+    tick (ideal drives, 1 um counts: to a count a period), not 2 U on the late one."""
     sim, reels, drives, _, _ = _rig(robot, faults=[("late_tpdo", 1, 0.3)])
+    speeds = []
     try:
         start_realtime(sim, 0.0)
-        _lockstep(sim, reels, drives, 0.4)
-        context = reels.GetMyContextFromRoot(sim.get_context())
-        at = drives.fault_syncs["late_tpdo"]
-        assert drives.syncs > at + 10 and reels.book(context)["fault"] == 0
-        assert drives.drives[1].held is None and reels.lost_tpdos >= 1
-        speed = context.get_discrete_state(reels._drives).get_value()[4 * 7:5 * 7]
-        assert np.abs(speed - U).max() <= 1e-6 / (2 * T)
+        t = 0.0
+        while "late_tpdo" not in drives.fault_syncs or drives.syncs < (
+                drives.fault_syncs["late_tpdo"] + 10):
+            t += T
+            _lockstep(sim, reels, drives, t)
+            context = reels.GetMyContextFromRoot(sim.get_context())
+            speeds.append(context.get_discrete_state(reels._drives).get_value()[4 * 7 + 1])
+        assert reels.book(context)["fault"] == 0 and drives.drives[1].held is None
+        assert reels.lost_tpdos >= 1
     finally:
         _close(reels, drives)
+    assert np.abs(np.array(speeds[-20:]) - U[1]).max() <= 1e-6 / T
 
 
 def test_coarse_counts_lengthen_the_frozen_window(robot):
