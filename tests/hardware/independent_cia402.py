@@ -100,16 +100,18 @@ for _index in (0x1600, 0x1A00):
         DICTIONARY[(_index, _sub)] = ("<I", "rw", "")
 
 
-def defaults(node: int) -> dict:
+def defaults(node: int, period_ms: int = 1, rtr: bool = False) -> dict:
     """The dictionary at power-on: PDO1s as CiA 402's predefined mapping (controlword in,
-    statusword out), event-driven, heartbeat off, SYNC period 1 ms."""
+    statusword out), event-driven, heartbeat off, SYNC period `period_ms`, TPDO1 with
+    remote requests (`rtr`) or not (COB-ID bit 30)."""
     od = {key: 0 for key in DICTIONARY}
     od.update({(0x1000, 0): 0x00020192, (0x1018, 0): 1, (0x1018, 1): 0x00C1A402,
                (0x1400, 0): 2, (0x1400, 1): RPDO1 + node, (0x1400, 2): 255,
-               (0x1800, 0): 5, (0x1800, 1): 0x40000000 | (TPDO1 + node), (0x1800, 2): 255,
+               (0x1800, 0): 5, (0x1800, 1): (0 if rtr else 0x40000000) | (TPDO1 + node),
+               (0x1800, 2): 255,
                (0x1600, 0): 1, (0x1600, 1): 0x60400010,
                (0x1A00, 0): 1, (0x1A00, 1): 0x60410010,
-               (0x605A, 0): 6, (0x6076, 0): 500, (0x60C2, 0): 2, (0x60C2, 1): 1,
+               (0x605A, 0): 6, (0x6076, 0): 500, (0x60C2, 0): 2, (0x60C2, 1): period_ms,
                (0x60C2, 2): -3, (0x6502, 0): (1 << 2) | (1 << 7) | (1 << 8)})
     return od
 
@@ -117,8 +119,10 @@ def defaults(node: int) -> dict:
 class Node:
     """One drive: node id, dictionary, NMT and CiA 402 state, an ideal motor."""
 
-    def __init__(self, node: int, start_counts: int, counts_per_rev: int, torque: int):
+    def __init__(self, node: int, start_counts: int, counts_per_rev: int, torque: int,
+                 period_ms: int = 1, rtr: bool = False):
         self.node, self.counts_per_rev, self.torque = node, counts_per_rev, torque
+        self.period_ms, self.rtr = period_ms, rtr
         self.start_counts = start_counts
         self.reset()
         self.position = float(start_counts)  # counts; the motor keeps turning across resets
@@ -130,7 +134,7 @@ class Node:
         self.reported = start_counts
 
     def reset(self) -> None:
-        self.od = defaults(self.node)
+        self.od = defaults(self.node, self.period_ms, self.rtr)
         self.nmt = PRE_OPERATIONAL
         self.state = DISABLED   # transitions 0 and 1 are automatic
         self.rpdo_buffer = None
@@ -235,9 +239,15 @@ class Node:
 class DriveSet:
     """The nodes on one bus, served from one loop (run())."""
 
-    def __init__(self, bus, nodes, start_counts, counts_per_rev, torque, faults):
+    def __init__(self, bus, nodes, start_counts, counts_per_rev, torque, faults, *,
+                 mute=(), period_ms=1, rtr=False):
+        """`mute`: ("read" | "write", index) SDO requests left unanswered (a simple drive
+        that neither serves nor aborts them); `period_ms`: the default 0x60C2; `rtr`: the
+        TPDOs take remote requests (COB-ID bit 30 clear accepted)."""
         self.bus = bus
-        self.nodes = [Node(n, c, counts_per_rev, torque) for n, c in zip(nodes, start_counts)]
+        self.mute = set(mute)
+        self.nodes = [Node(n, c, counts_per_rev, torque, period_ms, rtr)
+                      for n, c in zip(nodes, start_counts)]
         self.by_id = {d.node: d for d in self.nodes}
         self.faults = list(faults)   # (kind, node, SYNCs after the first all-enabled one)
         self.syncs = 0
@@ -327,6 +337,9 @@ class DriveSet:
             return  # the client aborted: nothing to answer
         if ccs not in (1, 2):
             return abort("command")  # segments, blocks: not served
+        if (("read" if ccs == 2 else "write"), index) in self.mute:
+            self.requests.append(["unanswered", d.node, index, sub])
+            return
         if key not in DICTIONARY:
             return abort("no_object" if all(k[0] != index for k in DICTIONARY) else "no_sub")
         fmt, access, _ = DICTIONARY[key]
@@ -362,7 +375,7 @@ class DriveSet:
             old = d.od[key]
             if value & 0x20000000:
                 return "value"  # 29-bit ids: not on this drive
-            if index == 0x1800 and not value & 0x40000000:
+            if index == 0x1800 and not value & 0x40000000 and not d.rtr:
                 return "value"  # remote frames: not on this drive
             if not old & 0x80000000 and not value & 0x80000000 and (
                     old & 0x7FF) != (value & 0x7FF):

@@ -99,10 +99,10 @@ def _check_stop(summary, kind) -> None:
 
 # --- in one process --------------------------------------------------------------------------
 
-def _in_process(faults, until=1.0):
+def _in_process(faults, until=1.0, **drive_args):
     """Run a CanopenReelsSystem (constant command U) against the drive set on a virtual bus;
     returns (summary, the ReelFault or None, the plant's last lengths, the start lengths,
-    the rated torques the master read, N m)."""
+    the master's rated torques (N m) and notes)."""
     from pydrake.systems.analysis import Simulator
     from pydrake.systems.framework import DiagramBuilder
     from pydrake.systems.primitives import ConstantVectorSource
@@ -115,7 +115,8 @@ def _in_process(faults, until=1.0):
     channel = fresh_channel()
     config = CanopenReels(interface="virtual", channel=channel, **_plant_fields(L0))
     bus = can.Bus(interface="virtual", channel=channel, receive_own_messages=False)
-    drives = DriveSet(bus, list(range(1, 8)), START_COUNTS, COUNTS_PER_REV, 100, faults)
+    drives = DriveSet(bus, list(range(1, 8)), START_COUNTS, COUNTS_PER_REV, 100, faults,
+                      **drive_args)
     thread = threading.Thread(target=drives.run, args=(60.0,), daemon=True)
     thread.start()
     b = DiagramBuilder()
@@ -139,11 +140,13 @@ def _in_process(faults, until=1.0):
         drives.stop = True
         thread.join(2.0)
         bus.shutdown()
-    return drives.summary(), error, lengths, L0, reels.master.rated_torque.copy()
+    return (drives.summary(), error, lengths, L0, reels.master.rated_torque.copy(),
+            list(reels.master.notes))
 
 
 def test_configuration_enable_sequence_and_lengths_in_one_process():
-    summary, error, lengths, L0, rated = _in_process([], until=0.6)
+    summary, error, lengths, L0, rated, notes = _in_process([], until=0.6)
+    assert notes == []
     assert error is None
     assert rated.tolist() == [0.5] * 7  # 0x6076 = 500 mNm, read for the operator
     for node in range(1, 8):
@@ -184,6 +187,29 @@ def test_configuration_enable_sequence_and_lengths_in_one_process():
     assert np.abs(lengths - L0 - U * 0.6).max() < 0.05 * np.abs(U).max() * 0.6
 
 
+def test_a_drive_that_leaves_optional_requests_unanswered_runs_without_them():
+    """A simple drive that neither serves nor aborts the reads of its PDO COB-IDs and rated
+    torque and the write of 0x60C2 (its own SYNC period set to 2 ms, its TPDO answering
+    remote requests, COB-ID bit 30 clear, as many a drive's): the master waits 0.1 s
+    twice for each (OPTIONAL_SDO_TIMEOUT, with canopen's retry), notes them,
+    writes the COB-IDs with bit 30 clear, and the run follows the commands."""
+    mute = {("read", 0x1400), ("read", 0x1800), ("write", 0x60C2), ("read", 0x6076)}
+    summary, error, lengths, L0, rated, notes = _in_process([], until=0.3, mute=mute,
+                                                            period_ms=2, rtr=True)
+    assert error is None and np.isnan(rated).all()
+    # Noted: the two COB-ID reads and 0x60C2 (the rated torque is only logged when read).
+    assert len(notes) == 3 * 7 and all("SdoCommunicationError" in n for n in notes)
+    for node in range(1, 8):
+        writes = [(r[2], r[3], r[4]) for r in summary["requests"]
+                  if r[0] == "write" and r[1] == node]
+        assert (0x1800, 1, 0x180 + node) in writes and (0x1400, 1, 0x200 + node) in writes
+    targets = np.array([[x[2] for x in r] for r in summary["records"]], dtype=float)
+    final = np.array(summary["positions"]) - START_COUNTS
+    assert np.abs(final - targets.sum(axis=0) / 60000.0 * COUNTS_PER_REV * T).max() <= 1.0
+    assert np.abs((lengths - L0) - final / COUNTS_PER_METRE).max() <= (
+        2 * np.abs(U).max() * T + 1 / COUNTS_PER_METRE)
+
+
 @pytest.mark.parametrize("faults, message", [
     ([("fault", 2, 100)], r"cable 2 \(node 2\) sent EMCY error code 0x2310"),
     ([("fault_bit", 2, 100)], r"cable 2 \(node 2\) reports statusword 0x021f \(fault "
@@ -194,7 +220,7 @@ def test_configuration_enable_sequence_and_lengths_in_one_process():
     ([("fault_bit", 2, 100), ("late", 2, 100)], r"reports statusword 0x02"),
 ], ids=["fault", "fault_bit", "silent", "frozen", "frozen_late", "fault_bit_late"])
 def test_each_fault_in_one_process_stops_and_disables_within_3_syncs(faults, message):
-    summary, error, _, _, _ = _in_process(faults)
+    summary, error = _in_process(faults)[:2]
     assert error is not None and re.search(message, str(error)), error
     _check_stop(summary, faults[0][0])
 
