@@ -3,7 +3,7 @@
 (lockstep) and end to end (`cdpm run` and the drive set in two processes over udp_multicast in
 `unshare -n`, both under SCHED_FIFO), the SYNCs after the onset (the SYNC whose TPDO first
 shows the fault) on which every live drive had target velocity 0, was quick stopped, and was
-disabled. hardware/CANOPEN.md and the issue 34 notes quote its table.
+disabled. hardware/CANOPEN.md quotes its table.
 
     python scripts/bench/canopen_fault_syncs.py [--repeats 3] [--no-e2e]
 """
