@@ -279,6 +279,9 @@ class CanopenReelsSystem(LeafSystem):
         state.get_mutable_discrete_state(self._force).SetFromVector(np.zeros(3))
         drives = np.zeros(6 * m)
         drives[0:m], drives[2 * m:3 * m], drives[3 * m:4 * m] = count, pos, still
+        # Tick 0 follows no SYNC of the run (the enable sequence's were answered above): its
+        # lack of a new TPDO is not a miss.
+        drives[m:2 * m] = -1.0
         drives[4 * m:5 * m] = np.nan
         drives[5 * m:] = time.monotonic()
         state.get_mutable_discrete_state(self._drives).SetFromVector(drives)
