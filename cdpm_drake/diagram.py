@@ -389,6 +389,11 @@ def _sensor_lag(cfg) -> float:
     return 0.0
 
 
+# The damper's payout held against the length loop (kernels/tension_damping.damping_tick): 1,
+# or 0 for the loop to reel it back.
+DAMPING_HOLD = 1.0
+
+
 def _add_tension_damping(builder, blocks, resolved, command, lengths, tensions, T):
     """The tension damping block between the mapping's reel command and the reels
     (systems/tension_damping.py); returns its reel command."""
@@ -402,7 +407,8 @@ def _add_tension_damping(builder, blocks, resolved, command, lengths, tensions, 
     block = blocks["tension_damping"] = FlatBlock(
         builder, "tension_damping", KERNEL_BLOCK_MAIN, lambda b: build_tension_damping(
             b, robot, kd=kd, tau=tau, max_reel_speed=resolved.max_reel_speed,
-            estimate="tension_distribution" in blocks, time_step=T))
+            estimate="tension_distribution" in blocks, time_step=T,
+            loop_gain=float(scenario.controller.length_gain) * DAMPING_HOLD))
     block.connect_input(command, "reel_velocity_desired")
     block.connect_input(tensions, "tension_measured")
     block.connect_input(lengths, "cable_lengths")
