@@ -284,8 +284,16 @@ def build_diagram(scenario: Scenario | ResolvedScenario,
 
 
 # How fast the commanded tensions may rise and fall, N/s per cable (pose_control.tension_tick
-# says why they differ).
-TENSION_SLEW_RATE = 500.0
+# says why they differ). Up: a hand ramped to 40 N in 0.1 s from the start takes the weak
+# cable of paper_7cable down at ~0.5 N per N, and the internal force that keeps it taut
+# loads the others 2-15 times that; at 500 N/s three such hands of the adversarial
+# benchmark slackened a cable in their first 0.1 s (exp2's 40 N push across 1-3, exp3's 40 N
+# push across 5-7, exp3's 20 N corner pull; none at 2000; drive torque sensor).
+TENSION_SLEW_RATE = 2000.0
+# Ticks the tension command follows the estimate before it slews: the estimate is fitted at
+# the first tick (0.4^5 of its first error left after 5), and a hand that comes at once must
+# not find the internal force frozen for the pose blocks' 50 ms warm-up (WARMUP_TICKS).
+TENSION_WARMUP_TICKS = 5
 TENSION_FALL_RATE = 50.0
 RIPPLE = 0.1
 # The full-pose length loop's integral gain, 1/s^2 (pose_control.pose_rates_tick).
@@ -485,7 +493,7 @@ def _add_pose_blocks(builder, blocks, resolved, fk, force_sensor, lengths, veloc
             b, robot, min_tension=controller.min_tension,
             max_tension=controller.max_tension, tension_floor=controller.tension_floor,
             slew_rate=TENSION_SLEW_RATE, fall_rate=TENSION_FALL_RATE,
-            initial_tensions=start, time_step=T))
+            initial_tensions=start, time_step=T, warmup_ticks=TENSION_WARMUP_TICKS))
     for name, port in (("p_WP", fk.GetOutputPort("p_WP")), ("R_WP", R_WP),
                        ("F_H", force_sensor.GetOutputPort("F_H")),
                        ("velocity_command", velocity_command),

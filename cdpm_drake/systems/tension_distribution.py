@@ -14,7 +14,8 @@ class TensionSolve(KernelSystem):
 
 
 def build_tension_distribution(builder, robot, *, min_tension, max_tension, tension_floor,
-                               slew_rate, initial_tensions, time_step, fall_rate=None):
+                               slew_rate, initial_tensions, time_step, fall_rate=None,
+                               warmup_ticks=WARMUP_TICKS):
     """The tension estimate and the target tensions at the estimated pose
     (full_pose.tension_tick). Inputs p_WP, R_WP, F_H (N), velocity_command (m/s),
     residual (m), cable_lengths (m), tension_assumed (N: the forward kinematics'); outputs
@@ -26,14 +27,15 @@ def build_tension_distribution(builder, robot, *, min_tension, max_tension, tens
     for the hard floor, 4: the hard floor unreachable, weak cables raised to it), cable (the
     1-based cable the status names: the weakest for 1, the one above the ceiling for 3, the
     one raised most for 2 and 4; 0: none), and tension_estimate_previous (the memory's, for
-    the forward kinematics)."""
+    the forward kinematics). The command follows the estimate for `warmup_ticks`, then
+    slews from it."""
     m = robot.num_cables
     s = sizes(m)
     d = robot.dynamics
     reels, attachments = owned_geometry(robot)
     fall_rate = slew_rate if fall_rate is None else fall_rate
     params = owned(np.array([d.mass, *d.handle, d.EA, float(min_tension), float(max_tension),
-                             float(time_step), float(slew_rate), float(WARMUP_TICKS),
+                             float(time_step), float(slew_rate), float(warmup_ticks),
                              float(tension_floor), float(fall_rate)]))
     example = np.zeros(s["tension_x"])
     example[:3] = robot.workspace.center
