@@ -93,8 +93,8 @@ def damping_tick(params, x, out):
     tensions the controller expects (its estimate from the weight, the measured hand force,
     the commanded acceleration and the lengths; ignored without one, params[4] = 0), L (m) m
     cable lengths,
-    memory: low-passed T - E (m) N, started (1), payout (m) m]; out = [u + damping (m) m/s,
-    damping (m) m/s, next memory (2 m + 1)].
+    memory: low-passed T - E (m) N, started (1), payout (m) m, ringing (m) N^2]; out = [u +
+    damping (m) m/s, damping (m) m/s, next memory (3 m + 1)].
 
     What is damped is the measured tension's part the controller does not expect, T - E: a
     hand that pushes raises the tensions as the statics say (E follows it, from the force
@@ -111,11 +111,15 @@ def damping_tick(params, x, out):
     high-passed part, whose sum is tau times the low-passed one (no drift); the loop's
     integral takes up what lasts.
 
+    The ringing is the variance of the high-passed T - E (the part damped), low-passed with
+    the same filter: how far the tension swings about what the controller expects, which
+    the tension target's floor must clear (full_pose.tension_tick).
+
     A cable whose tension is not finite (no sensor, a missing reading) gets no damping, its
     filter held and its payout let go over the filter's time; a command already beyond the
     reel speed limit passes unchanged (the plant scales it); else the sum is clipped to the
     limit. The filter starts at the first finite reading (no kick at the start)."""
-    m = (x.shape[0] - 1) // 6
+    m = (x.shape[0] - 1) // 7
     kd, alpha, EA, vmax = params[0], params[1], params[2], params[3]
     expected = params[4] > 0.5
     loop_gain, step = params[5], params[6]
@@ -126,11 +130,13 @@ def damping_tick(params, x, out):
         T = x[m + i] - x[2 * m + i] if expected else x[m + i]
         lp = x[4 * m + i]
         paid = x[5 * m + 1 + i]
+        ringing = x[6 * m + 1 + i]
         d = 0.0
         if math.isfinite(T):
             if not (started and math.isfinite(lp)):
                 lp = T
             lp += alpha * (T - lp)
+            ringing += alpha * ((T - lp) * (T - lp) - ringing)
             if abs(u) <= vmax:
                 damper = kd * (T - lp) * x[3 * m + i] / EA
                 v = u + damper + loop_gain * paid
@@ -144,3 +150,4 @@ def damping_tick(params, x, out):
         out[m + i] = d
         out[2 * m + i] = lp
         out[3 * m + 1 + i] = paid
+        out[4 * m + 1 + i] = ringing
