@@ -411,7 +411,9 @@ def _sensor_lag(cfg) -> float:
 
 
 # The damper's payout held against the length loop (kernels/tension_damping.damping_tick): 1,
-# or 0 for the loop to reel it back.
+# or 0 for the loop to reel it back. With tension control only (where it was measured: the
+# translating controller damps the whole tension, T - 0, and its reels would follow the
+# sensor's noise uncorrected).
 DAMPING_HOLD = 1.0
 
 
@@ -429,7 +431,8 @@ def _add_tension_damping(builder, blocks, resolved, command, lengths, tensions, 
         builder, "tension_damping", KERNEL_BLOCK_MAIN, lambda b: build_tension_damping(
             b, robot, kd=kd, tau=tau, max_reel_speed=resolved.max_reel_speed,
             estimate="tension_distribution" in blocks, time_step=T,
-            loop_gain=float(scenario.controller.length_gain) * DAMPING_HOLD))
+            loop_gain=float(scenario.controller.length_gain) * DAMPING_HOLD
+            if "tension_distribution" in blocks else 0.0))
     block.connect_input(command, "reel_velocity_desired")
     block.connect_input(tensions, "tension_measured")
     block.connect_input(lengths, "cable_lengths")
@@ -457,8 +460,12 @@ def _add_model_monitor(builder, blocks, resolved, lengths, p_WP, R_WP, F_H, T,
         unholdable=mon.unholdable, ticks=mon.ticks, estimate=estimate,
         full_pose=R_WP is not None, rows=wrench_rows(robot),
         holdable=float(mon.holdable), slack_ticks=mon.slack_ticks,
-        measured_slack=float(mon.measured_slack) if tensions is not None else 0.0)
-    measured = tensions is not None and mon.measured_slack > 0.0
+        measured_slack=float(mon.measured_slack) if tensions is not None and estimate
+        else 0.0)
+    # With tension control only: its target keeps every cable at tension_floor (4 N) or
+    # more, so a reading under measured_slack (1 N) is a slack cable; the translating
+    # controller keeps no floor (a cable may hold 0.6 N, taut).
+    measured = tensions is not None and estimate and mon.measured_slack > 0.0
     block = blocks["model_monitor"] = FlatBlock(
         builder, "model_monitor", KERNEL_BLOCK_MAIN, lambda b: build_model_monitor(
             b, robot, params=params, full_pose=R_WP is not None, estimate=estimate,
