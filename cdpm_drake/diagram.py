@@ -227,9 +227,10 @@ def build_diagram(scenario: Scenario | ResolvedScenario,
             kinetostatic if kinetostatic_on else None, T)
     # Anti-windup: the admittance integrates from the velocity actually commanded.
     admittance.connect_input(velocity_command, "velocity_command")
+    damped = controller.tension_damping.enabled and _senses_tensions(scenario.plant, plant)
     if full:
         mapping = _add_pose_blocks(builder, blocks, resolved, fk, force_sensor, lengths,
-                                   velocity_command, omega_command, hold, T)
+                                   velocity_command, omega_command, hold, T, damped)
     else:
         mapping = blocks["jacobian_mapping"] = FlatBlock(
             builder, "jacobian_mapping", JACOBIAN_MAPPING_MAIN,
@@ -239,13 +240,20 @@ def build_diagram(scenario: Scenario | ResolvedScenario,
     mapping.connect_input(p_WP, "p_WP")
     mapping.connect_input(velocity_command, "velocity_command")
     command = mapping.GetOutputPort("reel_velocity_command")
-    if controller.tension_damping.enabled and _senses_tensions(scenario.plant, plant):
+    if damped:
         command = _add_tension_damping(builder, blocks, resolved, command, lengths,
                                        plant.GetOutputPort("tension_measured"), T)
+    if "tension_distribution" in blocks:
+        # The floor clears the ringing the damping measures; without it, the lengths fill
+        # the ignored slot (its factor 0).
+        blocks["tension_distribution"].connect_input(
+            blocks["tension_damping"].GetOutputPort("ringing") if damped else lengths,
+            "tension_ringing")
     builder.Connect(command, plant.GetInputPort("reel_velocity_command"))
     if monitor_on:
         _add_model_monitor(builder, blocks, resolved, lengths, p_WP, R_WP if full else None,
-                           force_sensor.GetOutputPort("F_H"), T)
+                           force_sensor.GetOutputPort("F_H"), T,
+                           plant.GetOutputPort(TENSION_PORT) if damped else None)
 
     wirings = {}
     if options.loggers:
@@ -284,8 +292,21 @@ def build_diagram(scenario: Scenario | ResolvedScenario,
 
 
 # How fast the commanded tensions may rise and fall, N/s per cable (pose_control.tension_tick
-# says why they differ).
-TENSION_SLEW_RATE = 500.0
+# says why they differ). Up: a hand ramped to 40 N in 0.1 s from the start takes the weak
+# cable of paper_7cable down at ~0.5 N per N, and the internal force that keeps it taut
+# loads the others 2-15 times that; at 500 N/s three such hands of the adversarial
+# benchmark slackened a cable in their first 0.1 s (exp2's 40 N push across 1-3, exp3's 40 N
+# push across 5-7, exp3's 20 N corner pull; none at 2000; drive torque sensor).
+TENSION_SLEW_RATE = 2000.0
+# Ticks the tension command follows the estimate before it slews: the estimate is fitted at
+# the first tick (0.4^5 of its first error left after 5), and a hand that comes at once must
+# not find the internal force frozen for the pose blocks' 50 ms warm-up (WARMUP_TICKS).
+TENSION_WARMUP_TICKS = 5
+# The tension target's hard floor is at least this many standard deviations of the ringing
+# the tension sensors measure (full_pose.tension_tick): 2.5 sigma of a swing about the
+# target stays above zero 99.4 % of the time; the sensor's own noise (0.3 N) alone asks for
+# ~1 N, below the 4 N floor.
+RINGING_FLOOR = 2.5
 TENSION_FALL_RATE = 50.0
 RIPPLE = 0.1
 # The full-pose length loop's integral gain, 1/s^2 (pose_control.pose_rates_tick).
@@ -389,6 +410,13 @@ def _sensor_lag(cfg) -> float:
     return 0.0
 
 
+# The damper's payout held against the length loop (kernels/tension_damping.damping_tick): 1,
+# or 0 for the loop to reel it back. With tension control only (where it was measured: the
+# translating controller damps the whole tension, T - 0, and its reels would follow the
+# sensor's noise uncorrected).
+DAMPING_HOLD = 1.0
+
+
 def _add_tension_damping(builder, blocks, resolved, command, lengths, tensions, T):
     """The tension damping block between the mapping's reel command and the reels
     (systems/tension_damping.py); returns its reel command."""
@@ -402,7 +430,9 @@ def _add_tension_damping(builder, blocks, resolved, command, lengths, tensions, 
     block = blocks["tension_damping"] = FlatBlock(
         builder, "tension_damping", KERNEL_BLOCK_MAIN, lambda b: build_tension_damping(
             b, robot, kd=kd, tau=tau, max_reel_speed=resolved.max_reel_speed,
-            estimate="tension_distribution" in blocks, time_step=T))
+            estimate="tension_distribution" in blocks, time_step=T,
+            loop_gain=float(scenario.controller.length_gain) * DAMPING_HOLD
+            if "tension_distribution" in blocks else 0.0))
     block.connect_input(command, "reel_velocity_desired")
     block.connect_input(tensions, "tension_measured")
     block.connect_input(lengths, "cable_lengths")
@@ -414,8 +444,10 @@ def _add_tension_damping(builder, blocks, resolved, command, lengths, tensions, 
     return block.GetOutputPort("reel_velocity_command")
 
 
-def _add_model_monitor(builder, blocks, resolved, lengths, p_WP, R_WP, F_H, T):
-    """The model monitor (model_monitor.py) on the measurements and the estimates."""
+def _add_model_monitor(builder, blocks, resolved, lengths, p_WP, R_WP, F_H, T,
+                       tensions=None):
+    """The model monitor (model_monitor.py) on the measurements and the estimates; tensions:
+    the plant's measured tensions, where it may have some."""
     from cdpm_drake.kernels.kinetostatics import wrench_rows
     from cdpm_drake.kernels.model_monitor import monitor_params
 
@@ -427,11 +459,17 @@ def _add_model_monitor(builder, blocks, resolved, lengths, p_WP, R_WP, F_H, T):
         slack_length=mon.slack_length, fit_tolerance=mon.fit_tolerance,
         unholdable=mon.unholdable, ticks=mon.ticks, estimate=estimate,
         full_pose=R_WP is not None, rows=wrench_rows(robot),
-        holdable=float(mon.holdable), slack_ticks=mon.slack_ticks)
+        holdable=float(mon.holdable), slack_ticks=mon.slack_ticks,
+        measured_slack=float(mon.measured_slack) if tensions is not None and estimate
+        else 0.0)
+    # With tension control only: its target keeps every cable at tension_floor (4 N) or
+    # more, so a reading under measured_slack (1 N) is a slack cable; the translating
+    # controller keeps no floor (a cable may hold 0.6 N, taut).
+    measured = tensions is not None and estimate and mon.measured_slack > 0.0
     block = blocks["model_monitor"] = FlatBlock(
         builder, "model_monitor", KERNEL_BLOCK_MAIN, lambda b: build_model_monitor(
             b, robot, params=params, full_pose=R_WP is not None, estimate=estimate,
-            time_step=T))
+            time_step=T, measured=measured))
     block.connect_input(lengths, "cable_lengths")
     block.connect_input(p_WP, "p_WP")
     block.connect_input(F_H, "F_H")
@@ -440,10 +478,12 @@ def _add_model_monitor(builder, blocks, resolved, lengths, p_WP, R_WP, F_H, T):
     if estimate:
         block.connect_input(blocks["tension_distribution"].GetOutputPort("tension_estimate"),
                             "tension_estimate")
+    if measured:
+        block.connect_input(tensions, "tension_measured")
 
 
 def _add_pose_blocks(builder, blocks, resolved, fk, force_sensor, lengths, velocity_command,
-                     omega_command, hold, T):
+                     omega_command, hold, T, damped=False):
     """controller.pose: full: the tension distribution (with tension_control) and the
     Jacobian mapping of the pose, fed the orientation hold's reference and the (filtered)
     angular velocity command; returns the mapping (its p_WP and velocity_command inputs still
@@ -479,7 +519,8 @@ def _add_pose_blocks(builder, blocks, resolved, fk, force_sensor, lengths, veloc
             b, robot, min_tension=controller.min_tension,
             max_tension=controller.max_tension, tension_floor=controller.tension_floor,
             slew_rate=TENSION_SLEW_RATE, fall_rate=TENSION_FALL_RATE,
-            initial_tensions=start, time_step=T))
+            initial_tensions=start, time_step=T, warmup_ticks=TENSION_WARMUP_TICKS,
+            ringing_factor=RINGING_FLOOR if damped else 0.0))
     for name, port in (("p_WP", fk.GetOutputPort("p_WP")), ("R_WP", R_WP),
                        ("F_H", force_sensor.GetOutputPort("F_H")),
                        ("velocity_command", velocity_command),

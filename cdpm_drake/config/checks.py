@@ -75,7 +75,7 @@ def check_safety(scenario: Scenario) -> None:
                                 f"lie in (0, F_u/2) = (0, {cue.F_u / 2!r}) N")
     mon = scenario.model_monitor
     check_finite(mon.holdable, "model_monitor.holdable")
-    for name in ("slack_tension", "unholdable"):
+    for name in ("slack_tension", "unholdable", "measured_slack"):
         check_finite(getattr(mon, name), f"model_monitor.{name}")
         if float(getattr(mon, name)) < 0:
             raise ScenarioError(f"model_monitor.{name} must be >= 0 N, got "

@@ -293,6 +293,13 @@ class ModelMonitor:
     holdable: float = 2.0
     # How long a slack cable must last to be a fault where t* >= holdable, ticks.
     slack_ticks: int = 25
+    # With tension control, where the plant measures a cable's tension (plant
+    # tension_sensor: drive_torque, load_cell; the real reels' drive torque), the cable is
+    # slack when its measured tension is below this, N, whatever the estimate from the
+    # lengths says (it cannot see a cable ringing slack); 0 reads no measured tensions. 1 N:
+    # three times the drive-torque sensor's noise (0.3 N) above a slack cable's zero, and
+    # below the target's hard floor (controller.tension_floor).
+    measured_slack: float = 1.0
 
 
 OperatorConfig = typing.Union[NoOperator, ScriptedOperator, CsvOperator, SpringHandOperator]

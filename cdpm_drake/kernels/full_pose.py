@@ -64,7 +64,7 @@ def sizes(m: int) -> dict:
     """Input (x) and output (out) sizes of the kernels for m cables, and their memories."""
     return {
         "fk_x": 2 * m + 13, "fk_out": 2 * m + 16, "fk_memory": 13,
-        "tension_x": 5 * m + 22, "tension_out": 5 * m + 7, "tension_memory": 2 * m + 4,
+        "tension_x": 6 * m + 22, "tension_out": 5 * m + 7, "tension_memory": 2 * m + 4,
         "orientation_x": 19, "orientation_out": 22, "orientation_memory": 10,
         "rates_x": 4 * m + 31, "rates_out": 4 * m + 4, "rates_memory": 2 * m + 4,
     }
@@ -455,11 +455,14 @@ ACCELERATION_TIME = 0.1
 @_jit
 def tension_tick(reels, attachments, params, x, out):
     """params = [mass kg, handle (3, m, platform frame), EA N, floor N, ceiling N, time step
-    s, slew rate N/s, warm-up ticks, hard floor N, fall rate N/s]. x = [p (3), R (9), F_H
-    (3), v (3),
+    s, slew rate N/s, warm-up ticks, hard floor N, fall rate N/s, ringing factor (0: off)].
+    x = [p (3), R (9), F_H (3), v (3),
     residual (m), L0 (m), T_assumed (m: the tensions the forward kinematics corrected the
-    lengths for), memory: T_estimate (m), v_slow (3: the command low-passed), ticks (1),
-    T_command_previous (m)].
+    lengths for), ringing (m, N^2: the variance of each measured tension about the
+    estimate, tension_damping.damping_tick; ignored with the factor 0), memory: T_estimate
+    (m), v_slow (3: the command low-passed), ticks (1), T_command_previous (m)]. The hard
+    floor is at least the ringing factor times the largest ringing's standard deviation
+    (never above the floor).
     out = [T_command (m), T_estimate (m), T_target (m), t* (1), status (1), cable (1), next
     memory (2 m + 4)]: T_target the distribution at the pose (rules (a)-(d) of
     `distribution_1d_bounded`: closed form for one redundant cable, `distribution_bounded`
@@ -487,7 +490,17 @@ def tension_tick(reels, attachments, params, x, out):
     r = x[18:18 + m]
     L0 = x[18 + m:18 + 2 * m]
     T_assumed = x[18 + 2 * m:18 + 3 * m]
-    mem = 18 + 3 * m
+    mem = 18 + 4 * m
+    # The hard floor clears the ringing the tension sensors measure (params[12] standard
+    # deviations of the largest; 0 where there is none): the encoders do not see it, and a
+    # cable targeted at the floor rings below zero when it swings wider than the floor.
+    if params[12] > 0.0:
+        swing = 0.0
+        for i in range(m):
+            if x[18 + 3 * m + i] > swing:
+                swing = x[18 + 3 * m + i]
+        hard_floor = min(max(hard_floor, params[12] * math.sqrt(swing)), max(floor,
+                                                                             hard_floor))
     v_slow = x[mem + m:mem + m + 3]
     ticks = x[mem + m + 3]
     T_before = x[mem + m + 4:mem + 2 * m + 4]

@@ -8,8 +8,11 @@ describing the platform, and everything computed from them (the pose, the distan
 cables, the tensions) becomes fiction. The monitor watches, each tick, with what the
 controller already has:
 
-- the tension estimate (full pose with tension control: the pose fit's residual along the
-  wrench matrix's nullspace, pose_control.py): a cable whose estimate is below
+- the measured tension, where the plant has one (a drive's torque, a load cell): a cable
+  measured below measured_slack is slack (the estimate from the lengths cannot see a cable
+  ringing slack);
+- else the tension estimate (full pose with tension control: the pose fit's residual along
+  the wrench matrix's nullspace, pose_control.py): a cable whose estimate is below
   -slack_tension is slack;
 - without one, the length residual r_i = |a_i - B_i| - l_i of the estimated pose: a slack
   cable is longer than the geometry, r_i < -slack_length (a taut one is stretched, r_i > 0);
@@ -44,7 +47,8 @@ REASONS = ("ok", "slack cable", "lengths no longer fit the pose", "hand force ca
 
 # Parameters (a flat array, `monitor_params`).
 (M_EA, M_SLACK_TENSION, M_SLACK_LENGTH, M_FIT, M_UNHOLDABLE, M_TICKS, M_ESTIMATE, M_FULL,
- M_MASS, M_HANDLE, M_ROWS, M_HOLDABLE, M_SLACK_TICKS) = (0, 1, 2, 3, 4, 5, 6, 7, 8, 9, 12, 13, 14)
+ M_MASS, M_HANDLE, M_ROWS, M_HOLDABLE, M_SLACK_TICKS, M_MEASURED) = (
+    0, 1, 2, 3, 4, 5, 6, 7, 8, 9, 12, 13, 14, 15)
 
 
 class ModelFault(RuntimeError):
@@ -54,29 +58,34 @@ class ModelFault(RuntimeError):
 
 def monitor_params(robot, *, EA, slack_tension, slack_length, fit_tolerance, unholdable,
                    ticks, estimate: bool, full_pose: bool, rows: int, holdable: float,
-                   slack_ticks: int) -> np.ndarray:
+                   slack_ticks: int, measured_slack: float = 0.0) -> np.ndarray:
     """The monitor's parameters: EA (N; 0: no modelled stretch), the thresholds (N, m, m, N),
     the ticks a condition must last, whether there is a tension estimate and a full pose,
     the platform's mass (kg) and handle (m, platform frame), the wrench rows (3 or 6), the t*
-    (N) from which the cables hold the hand and the ticks a slack cable must last there."""
+    (N) from which the cables hold the hand and the ticks a slack cable must last there, and
+    the measured tension (N) below which a cable is slack (0: the monitor reads no measured
+    tensions)."""
     d = robot.dynamics
     return np.array([EA, slack_tension, slack_length, fit_tolerance, unholdable, ticks,
                      1.0 if estimate else 0.0, 1.0 if full_pose else 0.0, d.mass, *d.handle,
-                     rows, holdable, slack_ticks], dtype=float)
+                     rows, holdable, slack_ticks, measured_slack], dtype=float)
 
 
-def monitor_sizes(m: int, full_pose: bool, estimate: bool) -> dict:
+def monitor_sizes(m: int, full_pose: bool, estimate: bool, measured: bool = False) -> dict:
     """x: lengths (m), p (3), F_H (3), and R (9) for the full pose, the tension estimate (m)
-    with one, then the memory: counters (3); out: status (1), cable (1, 1-based, 0 none),
-    value (1: the number behind it, N or m), t* (1, N), residual (m, m), next memory (3)."""
-    x = m + 6 + (9 if full_pose else 0) + (m if estimate else 0)
+    with one, the measured tensions (m) with them, then the memory: counters (3); out:
+    status (1), cable (1, 1-based, 0 none), value (1: the number behind it, N or m), t* (1,
+    N), residual (m, m), next memory (3)."""
+    x = m + 6 + (9 if full_pose else 0) + (m if estimate else 0) + (m if measured else 0)
     return {"x": x + 3, "out": m + 7, "memory": 3, "memory_at": m + 4}
 
 
 @_jit
 def monitor_tick(reels, attachments, params, scratch, x, out):
     """One tick (module docstring). x = [l (m) m, p (3) m, F_H (3) N, (full pose:) R (9),
-    (with a tension estimate:) T_est (m) N, memory: ticks of slack, misfit, unholdable (3)];
+    (with a tension estimate:) T_est (m) N, (params[M_MEASURED] > 0:) T_measured (m) N,
+    memory: ticks of slack, misfit, unholdable (3)]; a cable with a finite measured tension
+    is slack below params[M_MEASURED], whatever the estimate says;
     out = [status, cable (1-based), value, t* (N), residual (m) m, next memory (3)];
     scratch: kinetostatics.margin_scratch(m). The status is the condition that has lasted
     its ticks (a fault), OK otherwise; where several have, the first of SLACK, MISFIT,
@@ -99,6 +108,9 @@ def monitor_tick(reels, attachments, params, scratch, x, out):
         k += 9
     estimate = params[M_ESTIMATE] != 0.0
     T = x[k:k + m] if estimate else x[0:m]
+    measured_slack = params[M_MEASURED]
+    measured = measured_slack > 0.0
+    k_measured = k + m if estimate else k
     mem = x[x.shape[0] - 3:]
     EA = params[M_EA]
     w = np.empty(6)
@@ -113,7 +125,14 @@ def monitor_tick(reels, attachments, params, scratch, x, out):
     for i in range(m):
         stretched = l[i] * (1.0 + T[i] / EA) if (estimate and EA > 0.0) else l[i]
         r[i] = L[i] - stretched
-        if estimate:
+        if measured and math.isfinite(x[k_measured + i]):
+            # The cable's measured tension, where it has one: the estimate from the
+            # lengths cannot see a cable ringing slack (nor tell a misfit from one).
+            t_measured = x[k_measured + i]
+            if t_measured < measured_slack and (slack_cable < 0 or
+                                                t_measured < slack_value):
+                slack_cable, slack_value = i, t_measured
+        elif estimate:
             if T[i] < -params[M_SLACK_TENSION] and (slack_cable < 0 or T[i] < slack_value):
                 slack_cable, slack_value = i, T[i]
         elif r[i] < -params[M_SLACK_LENGTH] and (slack_cable < 0 or r[i] < slack_value):
@@ -139,13 +158,15 @@ def monitor_tick(reels, attachments, params, scratch, x, out):
 
 
 def fault_message(status: int, cable: int, value: float, *, ticks: int, time_step: float,
-                  estimate: bool, p, F_H=None) -> str:
+                  estimate: bool, p, F_H=None, measured: bool = False) -> str:
     """The words of a monitor fault: the cable (1-based), the reason, the number and for how
-    many ticks (of time_step s) it lasted."""
+    many ticks (of time_step s) it lasted; measured: the slack cable's value is its
+    measured tension."""
     lasting = f"for {ticks} ticks ({1000 * ticks * time_step:.3g} ms)"
     where = f"at p = {np.round(np.asarray(p, dtype=float), 4).tolist()} m"
     if status == SLACK:
-        what = (f"its tension estimate is {value:.2f} N" if estimate else
+        what = (f"its measured tension is {value:.2f} N" if measured else
+                f"its tension estimate is {value:.2f} N" if estimate else
                 f"it is {1000 * -value:.2f} mm longer than the estimated pose explains")
         return f"cable {cable} is slack: {what} {lasting}, {where}"
     if status == MISFIT:

@@ -75,12 +75,16 @@ def damping_gains(modes, *, time_step, sensor_lag, drive_bandwidth, gain_scale=1
     return gain_scale * kd, 5.0 / w1
 
 
-def damping_params(kd, tau, *, time_step, EA, max_reel_speed, estimate=True) -> np.ndarray:
+def damping_params(kd, tau, *, time_step, EA, max_reel_speed, estimate=True,
+                   loop_gain=0.0) -> np.ndarray:
     """damping_tick's params: [kd 1/s, the low-pass's gain per tick, EA N, reel speed limit
-    m/s, 1 where the expected tensions E are an estimate (0: none, E taken as zero)]."""
+    m/s, 1 where the expected tensions E are an estimate (0: none, E taken as zero), the
+    length loop's proportional gain 1/s downstream of which the damping's payout is held
+    (0: none; damping_tick says why)]."""
     return np.array([kd, 1.0 - math.exp(-time_step / tau) if tau > 0 else 1.0, EA,
                      max_reel_speed,
-                     1.0 if estimate else 0.0], dtype=float)
+                     1.0 if estimate else 0.0, float(loop_gain), float(time_step)],
+                    dtype=float)
 
 
 @_jit
@@ -89,8 +93,8 @@ def damping_tick(params, x, out):
     tensions the controller expects (its estimate from the weight, the measured hand force,
     the commanded acceleration and the lengths; ignored without one, params[4] = 0), L (m) m
     cable lengths,
-    memory: low-passed T - E (m) N, started (1)]; out = [u + damping (m) m/s, damping (m)
-    m/s, next memory (m + 1)].
+    memory: low-passed T - E (m) N, started (1), payout (m) m, ringing (m) N^2]; out = [u +
+    damping (m) m/s, damping (m) m/s, next memory (3 m + 1)].
 
     What is damped is the measured tension's part the controller does not expect, T - E: a
     hand that pushes raises the tensions as the statics say (E follows it, from the force
@@ -98,30 +102,52 @@ def damping_tick(params, x, out):
     a 40 N push across exp2's pair 1-3 went 5.2 mm below d_l with T alone, 1.2 mm without
     damping); the ringing the encoders cannot see is not in E.
 
+    The payout is held against the length loop: the mapping's loop (gain K_l =
+    params[5]) measures the cable the damper paid out, x = sum of its speeds x tick, as a
+    length error and reels it back at K_l x; below K_l (40 1/s: 6 Hz, the lowest modes of
+    the shipped robots are 3.5-4.5 Hz) it cancelled most of the damping (exp2's 20 N lift
+    rang at 3.3 Hz, 4 N, undamped). So the block adds K_l x to the command: the loop's
+    reference moves with the damper. x stays bounded: the damper's speed is the tension's
+    high-passed part, whose sum is tau times the low-passed one (no drift); the loop's
+    integral takes up what lasts.
+
+    The ringing is the variance of the high-passed T - E (the part damped), low-passed with
+    the same filter: how far the tension swings about what the controller expects, which
+    the tension target's floor must clear (full_pose.tension_tick).
+
     A cable whose tension is not finite (no sensor, a missing reading) gets no damping, its
-    filter held; a command already beyond the reel speed limit passes unchanged (the plant
-    scales it); else the sum is clipped to the limit. The filter starts at the first
-    finite reading (no kick at the start)."""
-    m = (x.shape[0] - 1) // 5
+    filter held and its payout let go over the filter's time; a command already beyond the
+    reel speed limit passes unchanged (the plant scales it); else the sum is clipped to the
+    limit. The filter starts at the first finite reading (no kick at the start)."""
+    m = (x.shape[0] - 1) // 7
     kd, alpha, EA, vmax = params[0], params[1], params[2], params[3]
     expected = params[4] > 0.5
+    loop_gain, step = params[5], params[6]
     started = x[5 * m] > 0.5
     out[3 * m] = x[5 * m]
     for i in range(m):
         u = x[i]
         T = x[m + i] - x[2 * m + i] if expected else x[m + i]
         lp = x[4 * m + i]
+        paid = x[5 * m + 1 + i]
+        ringing = x[6 * m + 1 + i]
         d = 0.0
         if math.isfinite(T):
             if not (started and math.isfinite(lp)):
                 lp = T
             lp += alpha * (T - lp)
+            ringing += alpha * ((T - lp) * (T - lp) - ringing)
             if abs(u) <= vmax:
-                d = kd * (T - lp) * x[3 * m + i] / EA
-                v = u + d
+                damper = kd * (T - lp) * x[3 * m + i] / EA
+                v = u + damper + loop_gain * paid
                 v = vmax if v > vmax else (-vmax if v < -vmax else v)
                 d = v - u
+                paid += step * damper
             out[3 * m] = 1.0
+        else:
+            paid -= alpha * paid
         out[i] = u + d
         out[m + i] = d
         out[2 * m + i] = lp
+        out[3 * m + 1 + i] = paid
+        out[4 * m + 1 + i] = ringing

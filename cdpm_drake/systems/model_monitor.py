@@ -5,8 +5,8 @@ import numpy as np
 
 from cdpm_drake.kernels.call import bind, owned
 from cdpm_drake.kernels.kinetostatics import margin_scratch
-from cdpm_drake.kernels.model_monitor import (ModelFault, OK, fault_message, monitor_sizes,
-                                              monitor_tick)
+from cdpm_drake.kernels.model_monitor import (ModelFault, OK, SLACK, fault_message,
+                                              monitor_sizes, monitor_tick)
 from cdpm_drake.systems.kernel_system import KernelSystem, build_kernel_block
 
 
@@ -14,15 +14,18 @@ class ModelMonitorSolve(KernelSystem):
     """model_monitor: slack cables, lengths that no longer fit, unholdable hand forces."""
 
 
-def build_model_monitor(builder, robot, *, params, full_pose, estimate, time_step):
+def build_model_monitor(builder, robot, *, params, full_pose, estimate, time_step,
+                        measured=False):
     """model_monitor.monitor_tick as a block; it raises ModelFault (naming the cable, the
     reason and the numbers) when a condition has lasted its ticks. Inputs cable_lengths (m,
     m), p_WP (3, m), F_H (3, N), and for the full pose R_WP (9), with a tension estimate
     tension_estimate (m, N); outputs status (1), cable (1, 1-based, 0 none), t_star (1, N: at
     the estimated pose with the measured hand force), residual (m, m: each cable's length
-    residual at the estimated pose)."""
+    residual at the estimated pose). measured: an input tension_measured (m, N; NaN where
+    a cable has no reading), read where params says (model_monitor.monitor_params)."""
     m = robot.num_cables
-    s = monitor_sizes(m, full_pose, estimate)
+    s = monitor_sizes(m, full_pose, estimate, measured)
+    measured_at = s["x"] - 3 - m
     reels, attachments = owned(robot.reels), owned(robot.attachments)
     par = owned(params)
     scratch = margin_scratch(m)
@@ -36,15 +39,20 @@ def build_model_monitor(builder, robot, *, params, full_pose, estimate, time_ste
     at = s["memory_at"]
 
     def failed(status, x, out):
+        cable = int(out[1])
+        reading = measured and status == SLACK and np.isfinite(x[measured_at + cable - 1])
         raise ModelFault(fault_message(
-            int(status), int(out[1]), float(out[2]), ticks=int(out[at + int(status) - 1]),
-            time_step=time_step, estimate=estimate, p=x[m:m + 3], F_H=x[m + 3:m + 6]))
+            int(status), cable, float(out[2]), ticks=int(out[at + int(status) - 1]),
+            time_step=time_step, estimate=estimate, p=x[m:m + 3], F_H=x[m + 3:m + 6],
+            measured=bool(reading)))
 
     inputs = [("cable_lengths", m), ("p_WP", 3), ("F_H", 3)]
     if full_pose:
         inputs.append(("R_WP", 9))
     if estimate:
         inputs.append(("tension_estimate", m))
+    if measured:
+        inputs.append(("tension_measured", m))
     build_kernel_block(
         builder, ModelMonitorSolve(s["x"], s["out"], check, (reels, attachments, par, scratch),
                                    ok=OK, failed=failed),

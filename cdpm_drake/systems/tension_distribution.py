@@ -14,7 +14,8 @@ class TensionSolve(KernelSystem):
 
 
 def build_tension_distribution(builder, robot, *, min_tension, max_tension, tension_floor,
-                               slew_rate, initial_tensions, time_step, fall_rate=None):
+                               slew_rate, initial_tensions, time_step, fall_rate=None,
+                               warmup_ticks=WARMUP_TICKS, ringing_factor=0.0):
     """The tension estimate and the target tensions at the estimated pose
     (full_pose.tension_tick). Inputs p_WP, R_WP, F_H (N), velocity_command (m/s),
     residual (m), cable_lengths (m), tension_assumed (N: the forward kinematics'); outputs
@@ -26,15 +27,19 @@ def build_tension_distribution(builder, robot, *, min_tension, max_tension, tens
     for the hard floor, 4: the hard floor unreachable, weak cables raised to it), cable (the
     1-based cable the status names: the weakest for 1, the one above the ceiling for 3, the
     one raised most for 2 and 4; 0: none), and tension_estimate_previous (the memory's, for
-    the forward kinematics)."""
+    the forward kinematics). The command follows the estimate for `warmup_ticks`, then
+    slews from it. Input tension_ringing (m, N^2: the measured tensions' variance about the
+    estimate; with ringing_factor 0 any m-vector, ignored): the hard floor is at least
+    ringing_factor standard deviations of the largest."""
     m = robot.num_cables
     s = sizes(m)
     d = robot.dynamics
     reels, attachments = owned_geometry(robot)
     fall_rate = slew_rate if fall_rate is None else fall_rate
     params = owned(np.array([d.mass, *d.handle, d.EA, float(min_tension), float(max_tension),
-                             float(time_step), float(slew_rate), float(WARMUP_TICKS),
-                             float(tension_floor), float(fall_rate)]))
+                             float(time_step), float(slew_rate), float(warmup_ticks),
+                             float(tension_floor), float(fall_rate),
+                             float(ringing_factor)]))
     example = np.zeros(s["tension_x"])
     example[:3] = robot.workspace.center
     example[3:12] = np.eye(3).ravel()
@@ -49,12 +54,13 @@ def build_tension_distribution(builder, robot, *, min_tension, max_tension, tens
     # filter) rather than through an algebraic loop.
     force = builder.AddNamedSystem("force_memory", unit_delay(3, time_step))
     names = ("p_WP", "R_WP", "velocity_command", "residual", "cable_lengths",
-             "tension_assumed")
+             "tension_assumed", "tension_ringing")
     route = build_kernel_block(
         builder, TensionSolve(s["tension_x"], s["tension_out"], solve,
                               (reels, attachments, params)),
         inputs=[("p_WP", 3), ("R_WP", 9), ("F_H_previous", 3), ("velocity_command", 3),
-                ("residual", m), ("cable_lengths", m), ("tension_assumed", m)],
+                ("residual", m), ("cable_lengths", m), ("tension_assumed", m),
+                ("tension_ringing", m)],
         memory=(s["tension_memory"], start),
         outputs=[("tension_command", 0, m), ("tension_estimate", m, m),
                  ("tension_target", 2 * m, m), ("t_star", 3 * m, 1),

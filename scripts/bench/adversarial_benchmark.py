@@ -28,6 +28,7 @@ command.
     python scripts/bench/adversarial_benchmark.py --quick      # a subset (~30 s)
     python scripts/bench/adversarial_benchmark.py --json out.json --jobs 2
     python scripts/bench/adversarial_benchmark.py --sensors none,drive_torque,load_cell
+    python scripts/bench/adversarial_benchmark.py --methods default --plants dynamic  # one row per hand
 
 The dynamic plant's tension sensor (`plant: !DynamicReels {tension_sensor: ...}`,
 which the tension damping block uses) is a column: the default controller's dynamic rows are
@@ -56,6 +57,7 @@ ROBOTS = (
     ("exp3 (paper_7cable, 1-3 and 5-7 swapped)", "exp3_two_pairs", [(1, 3), (5, 7)]),
     ("cube_8cable, 5-7 swapped", str(SCENARIOS / "cube_5_7.yaml"), [(5, 7)]),
     ("own_7cable, 5-7 swapped", str(SCENARIOS / "own_5_7.yaml"), [(5, 7)]),
+    ("long_8cable (ours, issue 31)", str(SCENARIOS / "long_8cable_start.yaml"), [(6, 7)]),
 )
 FULL = "controller: {pose: full, tension_control: true}, plant: !DynamicReels {}, "
 # The same with the plant's tension sensor named.
@@ -112,7 +114,8 @@ def _noisy(seed):
             % (np.round(t, 4).tolist(), np.round(F, 4).tolist()))
 
 
-def cases(quick: bool = False, sensors=SENSORS) -> list:
+def cases(quick: bool = False, sensors=SENSORS, methods=("paper", "default"),
+          plants=("dynamic", "kinematic")) -> list:
     from cdpm_drake.config import load_resolved_scenario
 
     out = []
@@ -143,9 +146,10 @@ def cases(quick: bool = False, sensors=SENSORS) -> list:
             hands["corner 20 N"] = (_scripted(20 * c / np.linalg.norm(c)), False)
             hands["noisy 2 N rms"] = (_noisy(7), False)
         for hand, (overlay, kinematic_too) in hands.items():
-            plants = ("dynamic", "kinematic") if kinematic_too else ("dynamic",)
-            for plant in plants:
-                for method in ("paper", "default"):
+            for plant in ("dynamic", "kinematic") if kinematic_too else ("dynamic",):
+                if plant not in plants:
+                    continue
+                for method in methods:
                     # The paper's robot has no tension sensor (nor its method a damping).
                     for sensor in (sensors if plant == "dynamic" and method == "default"
                                    else ("none" if plant == "dynamic" else "-",)):
@@ -237,6 +241,23 @@ def table(rows) -> str:
     return "\n".join(lines)
 
 
+def totals(rows) -> str:
+    """Per plant, method and sensor: the holdable slack ticks, the hands with any, the runs
+    that ended early (a fault) and the crossings, over the rows."""
+    groups = {}
+    for r in rows:
+        groups.setdefault((r["plant"], r["method"], r.get("sensor", "-")), []).append(r)
+    lines = ["| plant | method | sensor | runs | holdable slack ticks | hands with any | "
+             "ended early | crossed |", "|" + " --- |" * 8]
+    for (plant, method, sensor), rs in groups.items():
+        slack = [r["slack_holdable"] for r in rs if r["slack_holdable"] is not None]
+        lines.append("| %s | %s | %s | %d | %s | %s | %d | %d |" % (
+            plant, method, sensor, len(rs), sum(slack) if slack else "-",
+            sum(1 for s in slack if s > 0) if slack else "-",
+            sum(1 for r in rs if r["fault"]), sum(1 for r in rs if r["crossed"])))
+    return "\n".join(lines)
+
+
 def main(argv=None) -> int:
     parser = argparse.ArgumentParser(description=__doc__,
                                       formatter_class=argparse.RawDescriptionHelpFormatter)
@@ -249,9 +270,14 @@ def main(argv=None) -> int:
     parser.add_argument("--sensors", default=",".join(SENSORS),
                         help="the dynamic plant's tension sensors of the default controller's "
                         "rows, comma-separated (none, drive_torque, load_cell)")
+    parser.add_argument("--methods", default="paper,default",
+                        help="paper (the filter and the monitor off), default, or both")
+    parser.add_argument("--plants", default="dynamic,kinematic",
+                        help="dynamic, kinematic, or both")
     args = parser.parse_args(argv)
     logging.disable(logging.WARNING)
-    todo = cases(args.quick, tuple(args.sensors.split(",")))
+    todo = cases(args.quick, tuple(args.sensors.split(",")), tuple(args.methods.split(",")),
+                 tuple(args.plants.split(",")))
     if args.only:
         todo = [c for c in todo if args.only in c.robot or args.only in c.hand]
     print(f"{len(todo)} runs of {DURATION:g} s on {args.jobs} processes ...", file=sys.stderr)
@@ -259,6 +285,7 @@ def main(argv=None) -> int:
     rows = run_parallel(measure, todo, args.jobs)
     print(table(rows))
     print(f"\n{len(rows)} runs in {time.perf_counter() - start:.0f} s", file=sys.stderr)
+    print(totals(rows))
     if args.json:
         Path(args.json).write_text(json.dumps(rows, indent=1))
     return 0

@@ -12,16 +12,23 @@ M = 3
 KD, TAU, T, EA, VMAX = 50.0, 0.2, 0.002, 70000.0, 1.0
 
 
-def _tick(u, tensions, lengths, memory):
-    params = damping_params(KD, TAU, time_step=T, EA=EA, max_reel_speed=VMAX)
+def _tick(u, tensions, lengths, memory, loop_gain=0.0):
+    params = damping_params(KD, TAU, time_step=T, EA=EA, max_reel_speed=VMAX,
+                            loop_gain=loop_gain)
     x = np.concatenate([u, tensions, np.zeros(M), lengths, memory])
-    out = np.empty(3 * M + 1)
+    out = np.empty(5 * M + 1)
     damping_tick(params, x, out)
     return out[:M], out[M:2 * M], out[2 * M:]
 
 
+def _memory(lowpassed, started=1.0, paid=None):
+    """The block's memory: low-passed T - E (M), started, payout (M), ringing (M)."""
+    paid = np.zeros(M) if paid is None else paid
+    return np.concatenate([lowpassed, [started], paid, np.zeros(M)])
+
+
 def _run(u, tensions_per_tick, lengths):
-    memory = np.zeros(M + 1)
+    memory = np.zeros(3 * M + 1)
     rows = []
     for tensions in tensions_per_tick:
         command, damping, memory = _tick(u, tensions, lengths, memory)
@@ -36,7 +43,7 @@ def test_nan_tensions_pass_the_command_through_unchanged():
         assert np.array_equal(command, u) and np.all(damping == 0.0)
     # One cable without a reading, the others damped.
     command, damping, _ = _tick(u, np.array([np.nan, 10.0, 10.0]), np.full(M, 2.0),
-                                np.array([0.0, 5.0, 5.0, 1.0]))
+                                _memory(np.array([0.0, 5.0, 5.0])))
     assert damping[0] == 0.0 and command[0] == u[0] and np.all(damping[1:] > 0)
 
 
@@ -65,7 +72,7 @@ def test_the_command_stays_inside_the_reel_speed_limit():
     L = np.full(M, 2.0)
     # A huge tension jump asks for far more than the limit.
     u = np.array([0.9, -0.9, 1.5])
-    memory = np.array([10.0, 10.0, 10.0, 1.0])
+    memory = _memory(np.full(M, 10.0))
     command, damping, _ = _tick(u, np.array([5e4, -5e4, 5e4]), L, memory)
     assert command[0] == VMAX and command[1] == -VMAX
     # A command already beyond the limit (the plant scales all reels alike) passes unchanged.
@@ -98,11 +105,11 @@ def test_a_tension_change_the_controller_expects_is_not_damped():
     # only T - E is damped, so the reels do not yield to the hand.
     params = damping_params(KD, TAU, time_step=T, EA=EA, max_reel_speed=VMAX)
     L = np.full(M, 2.0)
-    memory = np.zeros(M + 1)
+    memory = np.zeros(3 * M + 1)
     for k in range(20):
         tensions = np.array([20.0, 30.0, 10.0]) + 0.5 * k  # rising 250 N/s
         x = np.concatenate([np.zeros(M), tensions, tensions - 3.0, L, memory])
-        out = np.empty(3 * M + 1)
+        out = np.empty(5 * M + 1)
         damping_tick(params, x, out)
         memory = out[2 * M:]
         assert np.all(out[M:2 * M] == 0.0)
@@ -121,3 +128,55 @@ def test_modes_without_stiffness_are_left_out_of_the_band():
     assert damping_gains(np.zeros(6), time_step=0.002, sensor_lag=0.0,
                          drive_bandwidth=100.0) == (0.0, math.inf)
     assert damping_params(0.0, math.inf, time_step=0.002, EA=EA, max_reel_speed=1.0)[1] == 0.0
+
+
+def test_the_payout_is_held_against_the_length_loop():
+    # After a tension step the damper pays out d per tick; the block adds K_l times what it
+    # has paid out (the sum of d x tick), so that the mapping's length loop, which sees that
+    # cable as a length error K_l x, does not reel it back. By hand over three ticks.
+    K_l = 40.0
+    L = np.full(M, 2.0)
+    alpha = 1.0 - math.exp(-T / TAU)
+    memory = _memory(np.zeros(M))
+    step = np.array([6.0, 0.0, -3.0])
+    lp, paid = np.zeros(M), np.zeros(M)
+    for _ in range(3):
+        command, damping, memory = _tick(np.zeros(M), step, L, memory, loop_gain=K_l)
+        lp = lp + alpha * (step - lp)
+        damper = KD * (step - lp) * L / EA
+        np.testing.assert_allclose(damping, damper + K_l * paid, rtol=1e-12, atol=1e-15)
+        paid = paid + T * damper
+        np.testing.assert_allclose(memory[M + 1:2 * M + 1], paid, rtol=1e-12, atol=1e-15)
+    # Held steady, the payout is tau times the low-passed step's share times kd L / EA:
+    # bounded, the sum of a high-passed signal.
+    for _ in range(5000):
+        _, _, memory = _tick(np.zeros(M), step, L, memory, loop_gain=K_l)
+    bound = KD * (TAU + T) * np.abs(step) * L / EA
+    assert np.all(np.abs(memory[M + 1:2 * M + 1]) <= bound)
+
+
+def test_without_a_reading_the_payout_is_let_go():
+    memory = _memory(np.zeros(M), paid=np.full(M, 1e-3))
+    for _ in range(2000):  # 4 s, 20 filter times
+        _, damping, memory = _tick(np.zeros(M), np.full(M, np.nan), np.full(M, 2.0), memory,
+                                   loop_gain=40.0)
+        assert np.all(damping == 0.0)
+    assert np.all(np.abs(memory[M + 1:2 * M + 1]) < 1e-10)
+
+
+def test_the_ringing_is_the_variance_of_the_swing_about_the_estimate():
+    # A tension ringing at 8 Hz about its estimate, amplitudes 4, 1 and 0 N: after 3 s (16
+    # filter times) the block's ringing is the sine's variance a^2 / 2 within 5 % (its
+    # high-pass passes 8 Hz whole: the filter's corner is 0.8 Hz); the estimate's own
+    # change (E follows a hand) is not ringing.
+    memory = np.zeros(3 * M + 1)
+    a = np.array([4.0, 1.0, 0.0])
+    params = damping_params(KD, TAU, time_step=T, EA=EA, max_reel_speed=VMAX)
+    out = np.empty(5 * M + 1)
+    for k in range(1500):
+        E = np.full(M, 20.0) + 0.02 * k
+        tensions = E + a * math.sin(2 * math.pi * 8.0 * k * T)
+        x = np.concatenate([np.zeros(M), tensions, E, np.full(M, 2.0), memory])
+        damping_tick(params, x, out)
+        memory = out[2 * M:]
+    np.testing.assert_allclose(memory[2 * M + 1:], a ** 2 / 2, rtol=0.05, atol=1e-12)

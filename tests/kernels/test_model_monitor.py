@@ -21,22 +21,25 @@ def _robot():
     return load_robot(resolve_robot_path("paper_7cable"))
 
 
-def _run(robot, frames, *, estimate=False, EA=70000.0, F=(0.0, 0.0, 0.0)):
+def _run(robot, frames, *, estimate=False, EA=70000.0, F=(0.0, 0.0, 0.0), measured=None):
     """Feed frames [(lengths, p, T_est)] through the monitor tick by tick (its memory carried
-    as the block's delay does), the hand force F (N) at every tick; returns (status, cable,
-    value, t*) of each tick."""
+    as the block's delay does), the hand force F (N) at every tick; measured: the measured
+    tensions (N, NaN: no reading) of every tick, read below 1 N as slack; returns (status,
+    cable, value, t*) of each tick."""
     m = robot.num_cables
-    s = monitor_sizes(m, False, estimate)
+    s = monitor_sizes(m, False, estimate, measured is not None)
     params = monitor_params(robot, EA=EA, slack_tension=2.0, slack_length=0.003,
                             fit_tolerance=0.01, unholdable=1.0, ticks=TICKS,
                             estimate=estimate, full_pose=False, rows=6, holdable=HOLDABLE,
-                            slack_ticks=SLACK_TICKS)
+                            slack_ticks=SLACK_TICKS,
+                            measured_slack=0.0 if measured is None else 1.0)
     scratch = margin_scratch(m)
     memory = np.zeros(3)
     out = np.empty(s["out"])
     seen = []
     for lengths, p, T_est in frames:
-        x = np.concatenate([lengths, p, F] + ([T_est] if estimate else []) + [memory])
+        x = np.concatenate([lengths, p, F] + ([T_est] if estimate else [])
+                           + ([measured] if measured is not None else []) + [memory])
         status = monitor_tick(robot.reels, robot.attachments, params, scratch, x, out)
         memory = out[s["memory_at"]:s["memory_at"] + 3].copy()
         seen.append((int(status), int(out[1]), float(out[2]), float(out[3])))
@@ -143,3 +146,35 @@ def test_fault_messages_name_the_cable_the_reason_and_the_duration():
     text = fault_message(UNHOLDABLE, 0, -3.2, ticks=5, time_step=0.002, estimate=True,
                          p=[1.0, 2.0, 3.0], F_H=[0.0, 0.0, 40.0])
     assert "cannot be held" in text and "[0.0, 0.0, 40.0] N" in text and "-3.20 N" in text
+
+
+def test_a_measured_tension_decides_where_the_estimate_cannot_see():
+    """With measured tensions, a cable measured below 1 N is slack after its ticks (the
+    estimate says 15 N: it cannot see the cable ring slack), and a cable measured taut is
+    not, though its estimate says -5 N (below -slack_tension); a cable without a reading
+    (NaN) is judged by its estimate. At P the weight alone leaves t* = 16.5 N: a slack cable
+    must last SLACK_TICKS."""
+    robot = _robot()
+    m = robot.num_cables
+    p = P
+    L = pose_lengths(robot, p, np.eye(3)) / (1 + 15.0 / 70000.0)
+    T_est = np.full(m, 15.0)
+    T_meas = np.full(m, 15.0)
+    T_meas[3] = 0.4
+    seen = _run(robot, [(L, p, T_est)] * SLACK_TICKS, estimate=True, measured=T_meas)
+    assert [s[0] for s in seen] == [OK] * (SLACK_TICKS - 1) + [SLACK]
+    assert seen[-1][1] == 4 and seen[-1][2] == pytest.approx(0.4)
+    # The same without measured tensions: the estimate (15 N) sees nothing.
+    assert {s[0] for s in _run(robot, [(L, p, T_est)] * SLACK_TICKS, estimate=True)} == {OK}
+    # A taut measured cable overrides a negative estimate; without its reading the
+    # estimate decides.
+    T_est[5] = -5.0
+    T_meas = np.full(m, 15.0)
+    assert {s[0] for s in _run(robot, [(L, p, T_est)] * SLACK_TICKS, estimate=True,
+                               measured=T_meas)} == {OK}
+    T_meas[5] = np.nan
+    seen = _run(robot, [(L, p, T_est)] * SLACK_TICKS, estimate=True, measured=T_meas)
+    assert seen[-1][0] == SLACK and seen[-1][1] == 6 and seen[-1][2] == pytest.approx(-5.0)
+    message = fault_message(SLACK, 4, 0.4, ticks=25, time_step=0.002, estimate=True, p=p,
+                            measured=True)
+    assert "its measured tension is 0.40 N" in message

@@ -130,11 +130,13 @@ def test_pose_fk_tick_reports_lengths_no_pose_fits():
 
 def _tension(p, R, F, r, L0, T_assumed, v=np.zeros(3), v_prev=np.zeros(3), ticks=0.0,
              floor=10.0, mass=2.5, handle=(0.0, 0.0, -0.15), slew=1e9, T_before=None,
-             ceiling=1e9, warmup=1.0, hard_floor=3.0, fall=None):
+             ceiling=1e9, warmup=1.0, hard_floor=3.0, fall=None, ringing=None, factor=0.0):
     # The fall rate (N/s) is params[11]; it defaults to the slew rate as the block's does.
+    # params[12] the ringing factor (0: no tension sensor), ringing the variance input (N^2).
     params = np.array([mass, *handle, EA, floor, ceiling, 0.002, slew, warmup, hard_floor,
-                       slew if fall is None else fall])
-    x = np.concatenate([p, np.asarray(R).ravel(), F, v, r, L0, T_assumed, np.zeros(M), v_prev,
+                       slew if fall is None else fall, factor])
+    x = np.concatenate([p, np.asarray(R).ravel(), F, v, r, L0, T_assumed,
+                        np.zeros(M) if ringing is None else ringing, np.zeros(M), v_prev,
                         [ticks], T_before if T_before is not None else np.zeros(M)])
     out = np.empty(S["tension_out"])
     status = pc.tension_tick(REELS, ATTACH, params, x, out)

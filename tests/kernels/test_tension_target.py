@@ -109,14 +109,18 @@ def reference_target(W, w, floor, hard, ceiling):
 # --- the kernel -------------------------------------------------------------------------------
 
 
-def target(robot, p, R, F, floor=10.0, ceiling=100.0, hard=3.0):
+def target(robot, p, R, F, floor=10.0, ceiling=100.0, hard=3.0, factor=0.0, ringing=None):
     """tension_tick's (target, t*, status, cable) at pose (p, R) under the hand force F (N,
-    base frame) at the handle, at rest."""
+    base frame) at the handle, at rest; factor and ringing (m, N^2) the measured ringing's
+    floor (0: no tension sensor)."""
     m = robot.num_cables
     d = robot.dynamics
-    params = np.array([d.mass, *d.handle, d.EA, floor, ceiling, 0.002, 1e9, 1.0, hard])
+    # [..., hard floor, fall rate, ringing factor]
+    params = np.array([d.mass, *d.handle, d.EA, floor, ceiling, 0.002, 1e9, 1.0, hard, 1e9,
+                       factor])
     x = np.concatenate([p, R.ravel(), F, np.zeros(3), np.zeros(m), pose_lengths(robot, p, R),
-                        np.full(m, 20.0), np.zeros(m), np.zeros(3), [1.0], np.zeros(m)])
+                        np.full(m, 20.0), np.zeros(m) if ringing is None else ringing,
+                        np.zeros(m), np.zeros(3), [1.0], np.zeros(m)])
     out = np.empty(pc.sizes(m)["tension_out"])
     pc.tension_tick(np.ascontiguousarray(robot.reels), np.ascontiguousarray(robot.attachments),
                     params, x, out)
@@ -230,6 +234,32 @@ def test_a_floor_just_under_t_star_keeps_the_margin_not_a_far_internal_force(sol
     np.testing.assert_allclose(T, [2.9915, 5.0, 5.0], rtol=0, atol=1e-7)
 
 
+def test_the_hard_floor_clears_the_measured_ringing():
+    """Where the ceiling gives way (CEILING_EXCEEDED) the weakest cable sits at the hard
+    floor: 3 N without a sensor; with cable ringing of standard deviations 0.4, 2 and 1 N
+    (variances 0.16, 4, 1 N^2) and the factor 2.5, at 2.5 x 2 = 5 N (the largest); a ringing
+    of 10 N asks 25 N, above the floor (10 N), which caps it. A ringing below the hard
+    floor's share (0.4 N: 1 N) leaves the target bit for bit."""
+    m = PAPER.num_cables
+    for p, R, F, _ in _random_cases(PAPER, 5, 400):
+        T, _, status, _ = target(PAPER, p, R, F, ceiling=20.0)
+        if status == pc.CEILING_EXCEEDED and T.min() > 0.0:
+            break
+    else:
+        pytest.fail("no case exceeds the ceiling")
+    assert T.min() == pytest.approx(3.0, abs=1e-7)
+    ringing = np.zeros(m)
+    ringing[:3] = [0.16, 4.0, 1.0]
+    T5, _, status5, _ = target(PAPER, p, R, F, ceiling=20.0, factor=2.5, ringing=ringing)
+    assert status5 == pc.CEILING_EXCEEDED and T5.min() == pytest.approx(5.0, abs=1e-7)
+    ringing[1] = 100.0
+    T10, _, _, _ = target(PAPER, p, R, F, ceiling=20.0, factor=2.5, ringing=ringing)
+    assert T10.min() == pytest.approx(10.0, abs=1e-6)
+    quiet = np.full(m, 0.16)
+    assert np.array_equal(target(PAPER, p, R, F, ceiling=20.0, factor=2.5, ringing=quiet)[0],
+                          T)
+
+
 def test_a_ceiling_a_floor_can_live_with_is_kept_and_the_floor_lowered():
     """Case (b) with the hard floor below: T(lam) = [1 + lam, 20 + 2 lam, 30 - lam] under a
     ceiling of 28: lam in [2, 4] (cable 3, cable 2); the min is cable 1's, largest at lam = 4:
@@ -258,9 +288,9 @@ def _fk_and_tension(robot, L0, T_assumed, p, R, F):
     fk_params = np.array([d.EA, 0.02, d.mass, *d.handle, 40.0])
     assert pc.pose_fk_tick(reels, attach, fk_params, x, out) == pc.FK_OK
     pe, Re, r = out[:3].copy(), out[3:12].reshape(3, 3).copy(), out[16:16 + m].copy()
-    params = np.array([d.mass, *d.handle, d.EA, 10.0, 100.0, 0.002, 1e9, 1.0, 3.0])
+    params = np.array([d.mass, *d.handle, d.EA, 10.0, 100.0, 0.002, 1e9, 1.0, 3.0, 1e9, 0.0])
     xt = np.concatenate([pe, Re.ravel(), F, np.zeros(3), r, L0, T_assumed, np.zeros(m),
-                         np.zeros(3), [1.0], np.zeros(m)])
+                         np.zeros(m), np.zeros(3), [1.0], np.zeros(m)])
     tout = np.empty(S["tension_out"])
     pc.tension_tick(reels, attach, params, xt, tout)
     return pe, Re, tout[m:2 * m].copy()
