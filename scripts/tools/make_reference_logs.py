@@ -5,6 +5,11 @@ Runs exp1_no_interaction, exp2_interaction and exp3_two_pairs for their full dur
 writes tests/data/reference_logs/<name>.npz with the signals p, F_int, F_d, lengths,
 pair_distances and velocity (m, N, m/s), plus the git commit the code came from.
 
+With --promise: the same three experiments as shipped (the hard promise: the safety filter,
+the kinetostatic force and the model monitor on, issue 33's speed-up pinned by them) into
+tests/data/reference_logs/promise/, with every logged signal of those blocks too
+(PROMISE_SIGNALS); non-finite values (t* = +inf) are stored apart, where they are.
+
 With --dynamic: runs the scenarios of tests/data/dynamic_reference/ (`!DynamicReels` on a frozen
 robot file, see the README there) and writes <name>.npz beside each, with the plant's ground
 truth (tensions, slack, p_true, rpy_true) and, for the runs through the controller, the
@@ -35,6 +40,12 @@ from cdpm_drake.runs.simulate import simulate  # noqa: E402
 EXPERIMENTS = ("exp1_no_interaction", "exp2_interaction", "exp3_two_pairs")
 SIGNALS = ("p", "F_int", "F_d", "lengths", "pair_distances", "velocity")
 QUANTUM = 1e-11  # m, N, m/s per integer step
+# The default diagram's signals (issue 33): Fig. 5's and the safety blocks' outputs.
+PROMISE_SIGNALS = SIGNALS + ("velocity_admittance", "velocity_limited", "F_kin", "kappa", "t_c",
+                             "t_star_hand", "filter_status", "filter_binding", "pair_margin",
+                             "model_status", "model_residual", "reel_velocity",
+                             "lengths_commanded")
+PROMISE_DIR = ROOT / "tests" / "data" / "reference_logs" / "promise"
 
 DYNAMIC_DIR = ROOT / "tests" / "data" / "dynamic_reference"
 # The plant's ground truth (m, rad, N; slack as 0/1), in every dynamic reference log.
@@ -81,7 +92,8 @@ def run_dynamic_reference(name: str, overlay: str | None = None) -> dict:
 
 
 def encode(x: np.ndarray) -> np.ndarray:
-    q = np.round(np.asarray(x, dtype=float) / QUANTUM).astype(np.int64)
+    x = np.asarray(x, dtype=float)
+    q = np.round(np.where(np.isfinite(x), x, 0.0) / QUANTUM).astype(np.int64)
     return np.diff(q, axis=0, prepend=np.zeros((1,) + q.shape[1:], dtype=np.int64))
 
 
@@ -93,7 +105,11 @@ def load_reference_log(path) -> dict:
     """{signal: (T, width) float array, 'time': (T,), 'commit': str} from a stored file."""
     with np.load(path) as f:
         out = {key: decode(f[key]) for key in f.files
-               if key not in ("time", "commit", "quantum")}
+               if key not in ("time", "commit", "quantum") and "@" not in key}
+        for key in f.files:  # the non-finite values: "<signal>@where" (flat indices), "@what"
+            if key.endswith("@where"):
+                name = key[:-len("@where")]
+                out[name].flat[f[key]] = f[name + "@what"]
         out["time"] = f["time"]
         out["commit"] = str(f["commit"])
         out["quantum"] = float(f["quantum"])
@@ -116,6 +132,9 @@ def main():
                         "tests/data/reference_logs, with --dynamic tests/data/dynamic_reference)")
     parser.add_argument("--dynamic", action="store_true",
                         help="the dynamic plant's reference runs (tests/data/dynamic_reference)")
+    parser.add_argument("--promise", action="store_true",
+                        help="the shipped experiments as shipped, every safety signal "
+                        "(tests/data/reference_logs/promise)")
     parser.add_argument("--commit", help="what to record as the code's commit (default: this "
                         "checkout's git HEAD, +dirty when cdpm_drake/ has changes): for a tree "
                         "that is not a git checkout, e.g. an old commit with a patch")
@@ -126,6 +145,15 @@ def main():
         for name in args.names or dynamic_names():
             log = run_dynamic_reference(name)
             store(out / f"{name}.npz", log, commit)
+        return
+    if args.promise:
+        out = Path(args.out or PROMISE_DIR)
+        for name in args.names or EXPERIMENTS:
+            result = simulate(scenario=load_scenario(name))
+            if result.error is not None:
+                raise SystemExit(f"{name}: the run failed: {result.error}")
+            store(out / f"{name}.npz", {k: result.log[k] for k in ("time",) + PROMISE_SIGNALS},
+                  commit)
         return
     out = Path(args.out or ROOT / "tests" / "data" / "reference_logs")
     out.mkdir(parents=True, exist_ok=True)
@@ -150,10 +178,19 @@ def store(path: Path, log: dict, commit: str) -> None:
     round trip."""
     signals = [key for key in log if key != "time"]
     path.parent.mkdir(parents=True, exist_ok=True)
+    apart = {}
+    for key in signals:
+        x = np.asarray(log[key], dtype=float)
+        where = np.flatnonzero(~np.isfinite(x))
+        if where.size:
+            apart[key + "@where"], apart[key + "@what"] = where, x.flat[where]
     np.savez_compressed(path, time=log["time"], commit=np.array(commit),
-                        quantum=np.array(QUANTUM), **{key: encode(log[key]) for key in signals})
+                        quantum=np.array(QUANTUM), **{key: encode(log[key]) for key in signals},
+                        **apart)
     back = load_reference_log(path)
-    worst = max(float(np.max(np.abs(back[k] - log[k]))) for k in signals)
+    worst = max(float(np.max(np.abs(np.nan_to_num(back[k] - log[k])))) for k in signals)
+    same = all(np.array_equal(~np.isfinite(back[k]), ~np.isfinite(log[k])) for k in signals)
+    assert same, "the non-finite values did not round-trip"
     print(f"{path.stem}: {len(log['time'])} ticks, {path.stat().st_size / 1e6:.2f} MB, "
           f"round trip within {worst:.1e}, commit {commit}")
 
