@@ -33,6 +33,7 @@ above `frozen_speed` that publish keeps (a publish cannot write the Context), a 
 the commands sent like HardwareReelsSystem's `_stopped_at`.
 """
 
+import dataclasses
 import logging
 import time
 
@@ -50,6 +51,7 @@ from cdpm_drake.hardware.canopen_config import (CanopenReels, check_canopen_reel
 from cdpm_drake.hardware.reels import ReelFault, start_pose_problem
 from cdpm_drake.kernels.drive_torque import drive_model, tension_from_drive
 from cdpm_drake.kernels.kinematics import KinematicsError, cable_lengths, forward_kinematics
+from cdpm_drake.robot.stretch import derived_length_residual
 
 _log = logging.getLogger(__name__)
 
@@ -113,6 +115,9 @@ class CanopenReelsSystem(LeafSystem):
             raise ValueError(f"time_step must be a finite number > 0 s, got {time_step!r}")
         self._m = m = robot.num_cables
         self.bus_load = check_canopen_reels(config, m, float(time_step))
+        if config.max_length_residual is None:  # derived from the robot's cables
+            config = dataclasses.replace(
+                config, max_length_residual=derived_length_residual(robot))
         self._robot, self._config, self._T = robot, config, float(time_step)
         self._vmax = float(robot.limits.max_reel_speed)
         self._ids = resolved_node_ids(config, m)
