@@ -13,10 +13,10 @@ date and the machine, and no test compares them. The adversarial benchmark's tab
 docs/benchmarks.md (scripts/bench/adversarial_benchmark.py, ~7 min on two cores) and the
 hand-measured paragraphs of the pages are not regenerated here.
 
-    python scripts/tools/regenerate_docs.py              # everything (~4 min on two cores)
+    python scripts/tools/regenerate_docs.py              # everything (~1.5 min on two cores)
     python scripts/tools/regenerate_docs.py --list       # the blocks and pictures
     python scripts/tools/regenerate_docs.py --only readme_exp2_paper --only exp1_distances
-    python scripts/tools/regenerate_docs.py --check      # which blocks are stale; writes nothing
+    python scripts/tools/regenerate_docs.py --check      # which blocks are stale (not the pictures)
 """
 
 import argparse

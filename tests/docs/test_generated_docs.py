@@ -38,10 +38,12 @@ WHOLE = ("readme_exp2_promise", "readme_exp2_paper", "readme_exp2_tension",
          "readme_exp2_tension_none", "robots_shipped_holding", "robots_paper_share",
          "dynamic_kinematic_closest", "dynamic_braking_tension", "dynamic_exp2_smallest")
 # Recomputed for a sample of rows (the whole tables take ~1 min): experiment 2's three
-# controllers on the dynamic plant, one hand of the damping benchmark under every sensor.
+# controllers on the dynamic plant and exp3's open loop (its slack and fault), one hand of the
+# damping benchmark under every sensor.
 SAMPLED = {"dynamic_experiments": [("exp2_interaction", "full pose"),
                                    ("exp2_interaction", "length loop"),
-                                   ("exp2_interaction", "open loop")],
+                                   ("exp2_interaction", "open loop"),
+                                   ("exp3_two_pairs", "open loop")],
            "dynamic_damping_table": ["exp2 corner 20 N"]}
 # Rendered from their picture's numbers (checked against runs in test_sweep_pictures_...).
 FROM_PICTURES = ("sweep_exp2_numbers", "sweep_exp2_dynamic_numbers")
