@@ -145,6 +145,11 @@ def _resolve(scenario: Scenario, source: str) -> ResolvedScenario:
     elif not isinstance(scenario.plant, SimulatedReels):
         from cdpm_drake.hardware.canopen_config import CanopenReels, check_canopen_reels
         from cdpm_drake.hardware.config import check_hardware_reels
+        if scenario.plant.max_length_residual is None:  # derived from the robot's cables
+            from cdpm_drake.robot.stretch import derived_length_residual
+            bound = derived_length_residual(robot, scenario.controller.max_tension)
+            scenario = dataclasses.replace(scenario, plant=dataclasses.replace(
+                scenario.plant, max_length_residual=bound))
         try:
             if isinstance(scenario.plant, CanopenReels):
                 check_canopen_reels(scenario.plant, robot.num_cables, scenario.time_step)

@@ -73,8 +73,9 @@ class CanopenReels:
     frozen_ticks: int = 1
     # Time for the commanded reel velocity to ramp from 0 to full after enabling, s.
     ramp_time: float = 0.5
-    # Largest forward-kinematics residual accepted for the first measured lengths, m.
-    max_length_residual: float = 0.005
+    # Largest forward-kinematics residual accepted for the measured lengths, m; None (the
+    # default): derived from the robot's cables, as HardwareReels.max_length_residual.
+    max_length_residual: typing.Optional[float] = None
 
 
 def resolved_node_ids(config: CanopenReels, m: int) -> list[int]:
@@ -135,6 +136,8 @@ def check_canopen_reels(config: CanopenReels, m: int, period: float,
                            ("frozen_speed", True), ("ramp_time", False),
                            ("max_length_residual", True)):
         value = getattr(config, name)
+        if name == "max_length_residual" and value is None:  # derived from the robot
+            continue
         if not _finite(value) or (value <= 0 if positive else value < 0):
             raise ValueError(f"{field}.{name} must be a finite number "
                              f"{'> 0' if positive else '>= 0'} s, got {value!r}")

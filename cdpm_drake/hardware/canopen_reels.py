@@ -40,6 +40,7 @@ count of consecutive commands above `frozen_speed`, the stop's stage, and the fa
 publish found (the update latches it).
 """
 
+import dataclasses
 import logging
 import time
 
@@ -57,6 +58,7 @@ from cdpm_drake.hardware.canopen_config import (CanopenReels, check_canopen_reel
 from cdpm_drake.hardware.reels import ReelFault, start_pose_problem
 from cdpm_drake.kernels.drive_torque import drive_model, tension_from_drive
 from cdpm_drake.kernels.kinematics import KinematicsError, cable_lengths, forward_kinematics
+from cdpm_drake.robot.stretch import derived_length_residual
 
 _log = logging.getLogger(__name__)
 
@@ -121,6 +123,9 @@ class CanopenReelsSystem(LeafSystem):
             raise ValueError(f"time_step must be a finite number > 0 s, got {time_step!r}")
         self._m = m = robot.num_cables
         self.bus_load = check_canopen_reels(config, m, float(time_step))
+        if config.max_length_residual is None:  # derived from the robot's cables
+            config = dataclasses.replace(
+                config, max_length_residual=derived_length_residual(robot))
         self._robot, self._config, self._T = robot, config, float(time_step)
         self._vmax = float(robot.limits.max_reel_speed)
         self._ids = resolved_node_ids(config, m)

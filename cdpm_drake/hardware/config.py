@@ -6,6 +6,7 @@ annotations as types, not strings.
 
 import dataclasses
 import math
+import typing
 
 from cdpm_drake.hardware.link import resolve_ipv4
 
@@ -44,9 +45,13 @@ class HardwareReels:
     startup_timeout: float = 2.0
     # Time for the commanded reel velocity to ramp from 0 to full after enabling, s.
     ramp_time: float = 0.5
-    # Largest forward-kinematics residual accepted for the first measured lengths, m: above
-    # it the lengths do not fit the robot file and the reels are not enabled.
-    max_length_residual: float = 0.005
+    # Largest forward-kinematics residual accepted for the measured lengths, m: above it at
+    # the start the lengths do not fit the robot file and the reels are not enabled, and in
+    # the run the controller stops. None (the default): derived from the robot's cables, 5 mm
+    # (the encoders' zero, the geometry's errors) plus the stretch controller.max_tension gives
+    # the longest cable in the workspace box, which the translating, inextensible model sees
+    # as misfit (robot.stretch.derived_length_residual; 12.3 mm on paper_7cable).
+    max_length_residual: typing.Optional[float] = None
     # Copies of the final zero-velocity, enable-off command sent by shutdown() (UDP may
     # drop one; the bridge ignores the repeats' identical content).
     shutdown_repeats: int = 3
@@ -74,7 +79,8 @@ def check_hardware_reels(config: HardwareReels, field: str = "plant") -> None:
                          f"bridge silent longer is broken, not paused), got "
                          f"{config.resume_within!r}")
     _number(config.ramp_time, f"{field}.ramp_time", "s", positive=False)
-    _number(config.max_length_residual, f"{field}.max_length_residual", "m", positive=True)
+    if config.max_length_residual is not None:  # None: derived from the robot
+        _number(config.max_length_residual, f"{field}.max_length_residual", "m", positive=True)
     if config.tension_sensor not in TENSION_SENSORS:
         raise ValueError(f"{field}.tension_sensor must be one of "
                          f"{', '.join(TENSION_SENSORS)}, got {config.tension_sensor!r}")

@@ -45,6 +45,7 @@ into or restored from a Context. Everything that changes what the system outputs
 the Context.
 """
 
+import dataclasses
 import gc
 import time
 
@@ -55,6 +56,7 @@ from cdpm_drake.kernels.drive_torque import drive_model, tension_from_drive
 from cdpm_drake.kernels.kinematics import KinematicsError, cable_lengths, forward_kinematics
 from cdpm_drake.hardware.config import HardwareReels, check_hardware_reels
 from cdpm_drake.hardware.link import ReelLink
+from cdpm_drake.robot.stretch import derived_length_residual
 from cdpm_drake.hardware.protocol import (VERSION, VERSIONS, fault_names, next_sequence,
                                           sequence_delta)
 
@@ -126,6 +128,9 @@ class HardwareReelsSystem(LeafSystem):
                 and time_step > 0):
             raise ValueError(f"time_step must be a finite number > 0 s, got {time_step!r}")
         self._robot = robot
+        if config.max_length_residual is None:  # derived from the robot's cables
+            config = dataclasses.replace(
+                config, max_length_residual=derived_length_residual(robot))
         self._config = config
         self._T = float(time_step)
         self._m = m = robot.num_cables

@@ -1272,8 +1272,8 @@ def test_hardware_ramp_time_ramps_the_sent_velocity(tmp_path):
 
 @covers("Scenario.plant!HardwareReels.max_length_residual")
 def test_hardware_max_length_residual_refuses_lengths_that_do_not_fit(tmp_path):
-    """Cable 1 reported 6 mm long: the best fit's residual is within the default 5 mm (checked
-    here with the same forward kinematics), but not within 2.1 mm: refused."""
+    """Cable 1 reported 6 mm long: the best fit's residual is within 5 mm (the former
+    default; checked here with the same forward kinematics), but not within 2.1 mm: refused."""
     offset = np.zeros(7)
     offset[0] = 0.006
     robot = load_robot("paper_7cable")

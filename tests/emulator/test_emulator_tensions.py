@@ -254,7 +254,7 @@ def _run_against_dynamic_emulator(tmp_path, extra=()):
         port = int(re.search(r"on 127\.0\.0\.1:(\d+), period 2 ms", line).group(1))
         code = main(["run", "exp2_interaction", "--duration", "2", "--out", str(out_dir),
                      "--scenario-text", f"{{plant: !HardwareReels {{port: {port}, "
-                     "watchdog_ticks: 500, ramp_time: 0.0, max_length_residual: 0.02}, "
+                     "watchdog_ticks: 500, ramp_time: 0.0}, "
                      # The sensor measured here, not damped: with the damping the truth
                      # moves too little for the comparison to say anything.
                      "controller: {tension_damping: {enabled: false}}}"])

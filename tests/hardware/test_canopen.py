@@ -49,8 +49,13 @@ def test_config_from_yaml_and_refusals_name_the_field(robot):
     scenario = load_scenario("exp1_no_interaction", overlay_text=(
         "{plant: !CanopenReels {interface: virtual, channel: c, node_ids: [7, 6, 5, 4, 3, 2, "
         "1], counts_per_metre: 4096.0}}"))
-    assert scenario.plant == CanopenReels(interface="virtual", channel="c",
-                                          node_ids=[7, 6, 5, 4, 3, 2, 1], counts_per_metre=4096.0)
+    # The residual bound unset is derived from the scenario's robot (robot.stretch).
+    from cdpm_drake.config import scenario_robot
+    from cdpm_drake.robot.stretch import derived_length_residual
+    assert scenario.plant == CanopenReels(
+        interface="virtual", channel="c", node_ids=[7, 6, 5, 4, 3, 2, 1],
+        counts_per_metre=4096.0,
+        max_length_residual=derived_length_residual(scenario_robot(scenario)))
     for text, match in (("node_ids: [1, 2, 3]", r"plant.node_ids must have one node id per "
                          r"cable \(7\), got \[1, 2, 3\]"),
                         ("node_ids: [1, 2, 3, 4, 5, 6, 6]", r"node_ids must be distinct"),
