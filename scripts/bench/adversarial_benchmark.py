@@ -57,7 +57,7 @@ ROBOTS = (
     ("exp3 (paper_7cable, 1-3 and 5-7 swapped)", "exp3_two_pairs", [(1, 3), (5, 7)]),
     ("cube_8cable, 5-7 swapped", str(SCENARIOS / "cube_5_7.yaml"), [(5, 7)]),
     ("own_7cable, 5-7 swapped", str(SCENARIOS / "own_5_7.yaml"), [(5, 7)]),
-    ("long_8cable (ours, issue 31)", str(SCENARIOS / "long_8cable_start.yaml"), [(6, 7)]),
+    ("long_8cable (ours)", str(SCENARIOS / "long_8cable_start.yaml"), [(6, 7)]),
 )
 FULL = "controller: {pose: full, tension_control: true}, plant: !DynamicReels {}, "
 # The same with the plant's tension sensor named.

@@ -1,4 +1,4 @@
-"""What the hard promise costs a tick (issue 33): experiment 2's diagram as shipped, each safety
+"""What the hard promise costs a tick: experiment 2's diagram as shipped, each safety
 block off, the paper's Fig. 5, the safety blocks' Drake cost alone and the all-C++ floor, in
 instructions per tick (callgrind: exact and repeatable on a busy host) and in real-time factor
 (wall clock, best of --repeats interleaved runs), all in one run, with ratios against Fig. 5

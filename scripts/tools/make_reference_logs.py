@@ -6,7 +6,7 @@ writes tests/data/reference_logs/<name>.npz with the signals p, F_int, F_d, leng
 pair_distances and velocity (m, N, m/s), plus the git commit the code came from.
 
 With --promise: the same three experiments as shipped (the hard promise: the safety filter,
-the kinetostatic force and the model monitor on, issue 33's speed-up pinned by them) into
+the kinetostatic force and the model monitor on: a speed-up of those blocks is pinned by them) into
 tests/data/reference_logs/promise/, with every logged signal of those blocks too
 (PROMISE_SIGNALS); non-finite values (t* = +inf) are stored apart, where they are.
 
@@ -40,7 +40,7 @@ from cdpm_drake.runs.simulate import simulate  # noqa: E402
 EXPERIMENTS = ("exp1_no_interaction", "exp2_interaction", "exp3_two_pairs")
 SIGNALS = ("p", "F_int", "F_d", "lengths", "pair_distances", "velocity")
 QUANTUM = 1e-11  # m, N, m/s per integer step
-# The default diagram's signals (issue 33): Fig. 5's and the safety blocks' outputs.
+# The default diagram's signals: Fig. 5's and the safety blocks' outputs.
 PROMISE_SIGNALS = SIGNALS + ("velocity_admittance", "velocity_limited", "F_kin", "kappa", "t_c",
                              "t_star_hand", "filter_status", "filter_binding", "pair_margin",
                              "model_status", "model_residual", "reel_velocity",

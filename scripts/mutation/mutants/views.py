@@ -169,7 +169,7 @@ MUTANTS = [
     M("safety_cap_is_the_speed_limit", "cdpm_drake/views/figures_safety.py",
       "capped = at_speed & (speed < v_max * (1.0 - 1e-6))",
       "capped = at_speed & False",
-      "safety.png calls the lost-margin cap the speed limit (issue 32)",
+      "safety.png calls the lost-margin cap the speed limit",
       ("tests/views/test_safety_plots.py",)),
     M("safety_true_margin_unsigned", "cdpm_drake/views/figures_safety.py",
       'if "crossed_true" in log:\n        d = np.where(',
