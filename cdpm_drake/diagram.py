@@ -247,7 +247,7 @@ def build_diagram(scenario: Scenario | ResolvedScenario,
         # The floor clears the ringing the damping measures; without it, the lengths fill
         # the ignored slot (its factor 0).
         blocks["tension_distribution"].connect_input(
-            blocks["tension_damping"].GetOutputPort("ringing") if damped else lengths,
+            blocks["tension_damping"].GetOutputPort("ringing_previous") if damped else lengths,
             "tension_ringing")
     builder.Connect(command, plant.GetInputPort("reel_velocity_command"))
     if monitor_on:

@@ -28,7 +28,7 @@ def build_tension_damping(builder, robot, *, kd, tau, max_reel_speed, estimate, 
     """Inputs reel_velocity_desired (m) m/s (the mapping's reel_velocity_command),
     tension_measured (m) N, tension_expected (m) N (the controller's estimate; ignored
     without one, `estimate` False), cable_lengths (m) m; outputs reel_velocity_command (m)
-    m/s (to the reels), damping (m) m/s (its part of it) and ringing (m) N^2 (last tick's
+    m/s (to the reels), damping (m) m/s (its part of it) and ringing_previous (m) N^2 (last tick's
     variance of the damped tension, for the tension target's floor). loop_gain: the mapping's
     length-loop gain 1/s, against which the damper's payout is held (damping_tick)."""
     m = robot.num_cables
@@ -43,4 +43,4 @@ def build_tension_damping(builder, robot, *, kd, tau, max_reel_speed, estimate, 
                 ("tension_expected", m), ("cable_lengths", m)],
         memory=(3 * m + 1, None),
         outputs=[("reel_velocity_command", 0, m), ("damping", m, m)], memory_at=2 * m,
-        time_step=time_step, memory_outputs=[("ringing", 2 * m + 1, m)])
+        time_step=time_step, memory_outputs=[("ringing_previous", 2 * m + 1, m)])

@@ -327,9 +327,10 @@ def test_the_full_pose_overview_ranks_the_blocks_in_signal_order():
     # Issue 27: a tangle of crossing edges: graphviz broke the loops itself and ranked the
     # tension distribution (whose memory feeds the forward kinematics) above the forward
     # kinematics. The edges that close loops between blocks are drawn without a rank
-    # constraint (the reel command's loop back to the plant is graphviz's): the two memory
+    # constraint (the reel command's loop back to the plant is graphviz's): the three memory
     # outputs (`*_previous`: the tension estimate back to the forward kinematics, the
-    # filter's last command to the kinetostatic block) and the command back to the
+    # filter's last command to the kinetostatic block, the damping's ringing back to the
+    # tension distribution's floor) and the command back to the
     # admittance (its anti-windup), so the blocks come top to bottom as the signals flow.
     dot = (DIAGRAMS / "controller_full_pose_overview.dot").read_text()
     nodes = _nodes(dot)
@@ -342,6 +343,7 @@ def test_the_full_pose_overview_ranks_the_blocks_in_signal_order():
                       flags=re.M)
     assert sorted(free) == sorted([(ids["tension_distribution"], ids["forward_kinematics"]),
                                    (ids["safety_filter"], ids["kinetostatic_force"]),
+                                   (ids["tension_damping"], ids["tension_distribution"]),
                                    (ids["safety_filter"], ids["admittance"])])
     # Laid out: the blocks' heights in that order (graphviz's y grows upwards).
     import pygraphviz
