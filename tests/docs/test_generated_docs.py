@@ -9,7 +9,6 @@ Machine-dependent text (real-time factors, written as measured with date and mac
 compared. The reference for every number is a fresh simulation of the current code (the same
 runs the script makes), never the numbers the pages hold."""
 
-import importlib.util
 import math
 import re
 from pathlib import Path
@@ -18,16 +17,13 @@ import numpy as np
 import pytest
 
 from helpers_docs import guide_text, page
+from helpers_scripts import load_script
 
 REPO = Path(__file__).resolve().parents[2]
 
 
 def _generator():
-    spec = importlib.util.spec_from_file_location(
-        "regenerate_docs", REPO / "scripts" / "tools" / "regenerate_docs.py")
-    module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
-    return module
+    return load_script("tools/regenerate_docs.py")
 
 
 gen = _generator()

@@ -2,21 +2,18 @@
 dataclasses today, and it has a row for every field of every scenario and robot-file class."""
 
 import dataclasses
-import importlib.util
 import re
 import typing
 from pathlib import Path
+
+from helpers_scripts import load_script
 
 REPO = Path(__file__).resolve().parents[2]
 REFERENCE = REPO / "docs" / "scenario_reference.md"
 
 
 def _generator():
-    spec = importlib.util.spec_from_file_location(
-        "scenario_reference", REPO / "scripts" / "tools" / "scenario_reference.py")
-    module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
-    return module
+    return load_script("tools/scenario_reference.py")
 
 
 def _tables(text: str) -> dict[str, set[str]]:

@@ -14,6 +14,7 @@ import pytest
 
 from cdpm_drake.config import load_scenario
 from cdpm_drake.runs.simulate import simulate
+from helpers_scripts import load_script
 
 REFERENCE_DIR = Path(__file__).resolve().parents[1] / "data" / "reference_logs"
 EXPERIMENTS = ("exp1_no_interaction", "exp2_interaction", "exp3_two_pairs")
@@ -58,13 +59,7 @@ DYNAMIC_RUNS = ("exp2_friction", "free_oscillation", "hand_step")
 
 
 def _reference_script():
-    import importlib.util
-
-    path = Path(__file__).resolve().parents[2] / "scripts" / "tools" / "make_reference_logs.py"
-    spec = importlib.util.spec_from_file_location("make_reference_logs", path)
-    module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
-    return module
+    return load_script("tools/make_reference_logs.py")
 
 
 def test_every_dynamic_reference_scenario_has_its_log_and_a_test():

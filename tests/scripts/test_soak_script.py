@@ -1,7 +1,6 @@
 """scripts/bench/soak_realtime.py: its measurements from known datagram timelines, and a smoke run
 end to end (one short run, normal scheduling: the suite assumes no root)."""
 
-import importlib.util
 import json
 import subprocess
 import sys
@@ -10,15 +9,14 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from helpers_scripts import load_script
+
 SCRIPT = Path(__file__).resolve().parents[2] / "scripts" / "bench" / "soak_realtime.py"
 
 
 @pytest.fixture(scope="module")
 def soak():
-    spec = importlib.util.spec_from_file_location("soak_realtime", SCRIPT)
-    module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
-    return module
+    return load_script("bench/soak_realtime.py")
 
 
 def _commands(rows):
