@@ -25,7 +25,6 @@ on the dynamic plant.
 
 import argparse
 import os
-import re
 import subprocess
 import sys
 import tempfile
@@ -123,11 +122,11 @@ def instructions(variant, args, out_dir) -> float:
                     f"--callgrind-out-file={out}"]
                    + _child_args(variant, args, 1.0, args.ticks * 0.002) + ["--callgrind"],
                    check=True, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    from count_instructions import total
+
     text = subprocess.run(["callgrind_annotate", str(out)], check=True, capture_output=True,
                           text=True).stdout
-    total = int(re.search(r"([\d,]+) \(100\.0%\)\s+PROGRAM TOTALS", text).group(1)
-                .replace(",", ""))
-    return total / args.ticks
+    return total(text) / args.ticks
 
 
 def wall(variant, args) -> float:
