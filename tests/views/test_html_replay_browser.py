@@ -20,8 +20,10 @@ WIDTH, HEIGHT = 800, 600
 # Rows under Meshcat's "Open Controls" bar at the top: the 3D area.
 TOP_BAR = 30
 # s of wall time per browser start; a run takes 2-7 s. Headless Chromium with a virtual time
-# budget hangs now and then (measured here: 2 of 24 starts, both with the 4 s budget), so a
-# hung start is killed and the screenshot retried, up to ATTEMPTS starts in all.
+# budget hangs now and then unless it runs every compositor stage before it draws (Chromium
+# 156, the 4 s budget: 4 of 16 starts hung without --run-all-compositor-stages-before-draw,
+# 0 of 25 with it; CI once met 4 hung starts in a row), so the flag is passed, and a hung
+# start is still killed and the screenshot retried, up to ATTEMPTS starts in all.
 TIMEOUT = 30
 ATTEMPTS = 4
 
@@ -51,7 +53,8 @@ def screenshot(html, png, profile, virtual_ms: int) -> np.ndarray:
         command = [_browser(), "--headless", "--no-sandbox", "--disable-gpu", "--disable-quic",
                    "--no-first-run", "--disable-background-networking",
                    "--disable-component-update", "--disable-sync", "--enable-unsafe-swiftshader",
-                   "--hide-scrollbars", f"--user-data-dir={profile}_{attempt}",
+                   "--hide-scrollbars", "--run-all-compositor-stages-before-draw",
+                   f"--user-data-dir={profile}_{attempt}",
                    f"--window-size={WIDTH},{HEIGHT}", f"--virtual-time-budget={virtual_ms}",
                    f"--screenshot={png}", html.resolve().as_uri()]
         proc = subprocess.Popen(command, stdout=subprocess.PIPE, stderr=subprocess.PIPE,
