@@ -327,7 +327,29 @@ def _kinetostatic_params(resolved):
         rows=wrench_rows(robot), barrier=True, t_l=f.t_l, t_u=f.t_u, F_u=f.F_u, eps=f.eps,
         force=f.enabled, a_brake=_filter_braking(resolved),
         time_step=resolved.time_step, ripple=RIPPLE,
-        smoothing=float(scenario.safety_filter.position_smoothing))
+        smoothing=float(scenario.safety_filter.position_smoothing),
+        soft=_soft_margin(resolved))
+
+
+def _soft_margin(resolved) -> float:
+    """The kinetostatic margin's soft-min temperature, N: on a robot with mass (the full pose
+    with tension control) the tension swing of the filter's braking onset at the start
+    (kinetostatics.braking_swing; the kinetostatics module docstring says why); 0, the hard
+    margin, otherwise (nothing rings on the kinematic plant, and the paper's experiments keep
+    their margin)."""
+    from cdpm_drake.kernels.kinetostatics import braking_swing, wrench_rows
+
+    scenario, robot = resolved.scenario, resolved.robot
+    if not _robot_with_mass(resolved):
+        return 0.0
+    return braking_swing(robot, np.asarray(scenario.initial_position, dtype=float),
+                         wrench_rows(robot), _filter_braking(resolved))
+
+
+def _robot_with_mass(resolved) -> bool:
+    """The controller for a robot with mass and elastic cables: the full pose with tension
+    control (controller.pose full, controller.tension_control)."""
+    return bool(resolved.scenario.controller.tension_control)
 
 
 def _filter_braking(resolved) -> float:
@@ -346,22 +368,31 @@ def _filter_braking(resolved) -> float:
     return min(resolved.max_acceleration / np.sqrt(3.0), ringing)
 
 
+def _filter_params(resolved, *, full: bool, kinetostatic: bool):
+    """The safety filter's parameters (safety_filter.filter_params) for the scenario; on a
+    robot with mass the lost-margin slowdown brakes at a_brake."""
+    from cdpm_drake.kernels.safety_filter import filter_params
+
+    scenario = resolved.scenario
+    f = scenario.safety_filter
+    a_brake = _filter_braking(resolved)
+    return filter_params(
+        time_step=resolved.time_step, gamma=f.gamma, a_brake=a_brake,
+        max_velocity=resolved.max_velocity,
+        max_acceleration=resolved.max_acceleration,
+        return_speed=f.return_speed, full_pose=full, kinetostatic=kinetostatic,
+        box=scenario.limits.virtual_wall, smoothing=float(f.position_smoothing),
+        lost_brake=a_brake if _robot_with_mass(resolved) else None)
+
+
 def _add_safety_filter(builder, blocks, resolved, velocity_desired, omega_desired, p_WP, R_WP,
                        kinetostatic, T):
     """The safety filter between the limits and the Jacobian mapping, its barriers at the
     commanded pose (p_WP and, for the full pose, the held orientation R_WP); returns its
     velocity and angular velocity commands (None without a full pose)."""
-    from cdpm_drake.kernels.safety_filter import filter_params
-
     scenario, robot = resolved.scenario, resolved.robot
-    f = scenario.safety_filter
     full = R_WP is not None
-    params = filter_params(
-        time_step=T, gamma=f.gamma, a_brake=_filter_braking(resolved),
-        max_velocity=resolved.max_velocity,
-        max_acceleration=resolved.max_acceleration,
-        return_speed=f.return_speed, full_pose=full, kinetostatic=kinetostatic is not None,
-        box=scenario.limits.virtual_wall, smoothing=float(f.position_smoothing))
+    params = _filter_params(resolved, full=full, kinetostatic=kinetostatic is not None)
     block = blocks["safety_filter"] = FlatBlock(
         builder, "safety_filter", KERNEL_BLOCK_MAIN, lambda b: build_safety_filter(
             b, robot, d_min=resolved.d_min, params=params, full_pose=full, time_step=T))

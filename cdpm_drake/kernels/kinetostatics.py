@@ -17,6 +17,20 @@ A robot whose wrench matrix has rank 6 (six cables or more, attachment points th
 moments) is judged on the full wrench (`rows` 6); one with fewer or coplanar attachments can
 only translate its platform (robot.py's validation says so) and is judged on the forces alone
 (`rows` 3), the moments being the platform's own business.
+
+The soft margin (a robot with mass: the full pose with tension control). The max-min has
+kinks where the cable that binds changes, and its gradient jumps there; the safety filter's
+barrier and the cue follow the gradient, so at a kink they turned the command within a few
+ticks (an 8-26 tick steer or hold at the 2 m/s^2 acceleration limit), an impulse that rang
+the platform's elastic modes until a cable went slack a quarter period later (dynamic plant,
+20 N lifts and corner pulls on paper_7cable and long_8cable). The soft margin replaces the
+minimum over the lines by the soft minimum -mu log sum exp(-line / mu), whose maximum over
+lam is smooth: the gradient turns over a band of lines within a few mu of each other instead
+of at once. It is below the hard margin by at most mu log 2m (conservative: a soft margin >= 0
+has a hard one >= 0). The temperature mu (N) is the tension swing of the filter's own braking
+onset, 2 m a_brake max_i |W^+_i| (`braking_swing`): the true tensions differ from the static
+lines by that much whenever the filter brakes, so lines closer than it cannot be told apart
+as "the one that binds" anyway.
 """
 
 import math
@@ -36,6 +50,9 @@ _jit = numba.njit(cache=True, error_model="numpy")
 # lines that bind change), and round-off of the margin (1e-8 relative, the QP form of
 # max_min_lines) stays below 1e-3 of a gradient of ~10 N/m.
 FD_STEP_P = 1e-4
+# At most this many Newton steps of the soft margin (soft_max_min_lines) from the hard
+# maximiser; it converges in 2-5 where measured.
+SOFT_ITERATIONS = 20
 
 
 def ringing_deceleration(robot, p, rows: int, swing: float) -> float:
@@ -57,6 +74,20 @@ def ringing_deceleration(robot, p, rows: int, swing: float) -> float:
     return swing / (2.0 * mass * share)
 
 
+def braking_swing(robot, p, rows: int, a: float) -> float:
+    """The largest swing of a cable's tension (N) when the level platform at p starts
+    braking at a (m/s^2): 2 m a max_i |W^+_i| (`ringing_deceleration`'s bound, inverted);
+    0 for a robot without mass."""
+    from cdpm_drake.kernels.tension import wrench_matrix
+
+    mass = float(robot.dynamics.mass)
+    W = wrench_matrix(robot, np.asarray(p, dtype=float))[:rows]
+    share = float(np.linalg.norm(np.linalg.pinv(W)[:, :3], axis=1).max())
+    if not (mass > 0.0 and math.isfinite(a)):
+        return 0.0
+    return 2.0 * mass * share * float(a)
+
+
 def wrench_rows(robot) -> int:
     """6 when the robot's wrench matrix at its workspace centre (level platform) has rank 6,
     else 3 (a platform the cables can only translate: its statics on the forces alone)."""
@@ -68,9 +99,87 @@ def wrench_rows(robot) -> int:
 
 
 @_jit
-def margin(reels, attachments, rows, p, R, w, floor, ceiling, scratch):
+def soft_max_min_lines(a, C, lam, mu):
+    """max over lam (k,) of the soft minimum -mu log sum_j exp(-(a_j + C_j . lam) / mu) of
+    the lines (a (K,), C (K, k); temperature mu > 0, units of a), by Newton's method from
+    lam, a maximiser of the hard max-min (`tension.max_min_lines`), which it overwrites with
+    the soft one. The soft minimum is concave in lam and below the minimum, so the result is
+    smooth in a and C and lies within [hard - mu log K, hard]. For a bounded max-min only (a
+    floor and a ceiling line per cable)."""
+    K, k = C.shape
+    lines = np.empty(K)
+    wts = np.empty(K)
+    g = np.empty(k)
+    H = np.empty((k, k))
+    trial = np.empty(k)
+    step = np.empty(k)
+    f = _soft_min(a, C, lam, mu, lines, wts)
+    for _ in range(SOFT_ITERATIONS):
+        for c in range(k):
+            s = 0.0
+            for j in range(K):
+                s += wts[j] * C[j, c]
+            g[c] = s
+        for c in range(k):
+            for e in range(k):
+                s = 0.0
+                for j in range(K):
+                    s += wts[j] * C[j, c] * C[j, e]
+                H[c, e] = (s - g[c] * g[e]) / mu
+            H[c, c] += 1e-12
+        if k == 0:
+            break
+        if k == 1:  # paper_7cable's case: no LAPACK call
+            step[0] = g[0] / H[0, 0]
+        else:
+            step[:] = np.linalg.solve(H, g)
+        gain = 0.0
+        for c in range(k):
+            gain += g[c] * step[c]
+        if not gain > 1e-12 * mu:
+            break
+        t = 1.0
+        for _ in range(30):
+            for c in range(k):
+                trial[c] = lam[c] + t * step[c]
+            ft = _soft_min(a, C, trial, mu, lines, wts)
+            if ft >= f:
+                break
+            t *= 0.5
+        if not ft >= f:
+            _soft_min(a, C, lam, mu, lines, wts)
+            break
+        for c in range(k):
+            lam[c] = trial[c]
+        f = ft
+    return f
+
+
+@_jit
+def _soft_min(a, C, lam, mu, lines, wts):
+    """The soft minimum of the lines at lam; their softmax weights into wts."""
+    K, k = C.shape
+    low = math.inf
+    for j in range(K):
+        s = a[j]
+        for c in range(k):
+            s += C[j, c] * lam[c]
+        lines[j] = s
+        low = min(low, s)
+    total = 0.0
+    for j in range(K):
+        wts[j] = math.exp(-(lines[j] - low) / mu)
+        total += wts[j]
+    for j in range(K):
+        wts[j] /= total
+    return low - mu * math.log(total)
+
+
+@_jit
+def margin(reels, attachments, rows, p, R, w, floor, ceiling, scratch, soft=0.0):
     """(kappa, t*) at the pose (p, R) under the wrench w (6,) (module docstring): kappa the
-    margin of the floor and ceiling (N), t* the largest achievable minimum tension without a
+    margin of the floor and ceiling (N; with soft > 0 the soft margin of that temperature,
+    N: `soft_max_min_lines`), t* the largest achievable minimum tension without a
     ceiling (+inf where an internal force raises every tension). -inf for both where the
     wrench matrix's first `rows` rows are rank-deficient (a pose where the cables cannot
     produce some wrench: nothing holds there). scratch: `margin_scratch(m)`."""
@@ -99,6 +208,8 @@ def margin(reels, attachments, rows, p, R, w, floor, ceiling, scratch):
             C[i, c] = N[i, c]
             C[m + i, c] = -N[i, c]
     kappa = max_min_lines(a, C[:, :k], lam[:k])
+    if soft > 0.0 and math.isfinite(kappa):
+        kappa = soft_max_min_lines(a, C[:, :k], lam[:k], soft)
     t_star = max_min_lines(T_p, N[:, :k], lam2[:k])
     return kappa, t_star
 
@@ -113,7 +224,8 @@ def margin_scratch(m: int):
 
 # The kinetostatic block's parameters (a flat array, `kinetostatic_params`).
 P_MASS, P_HANDLE, P_FLOOR, P_CEILING, P_ROWS, P_BARRIER = 0, 1, 4, 5, 6, 7
-P_T_L, P_T_U, P_F_U, P_B, P_MID, P_FORCE, P_A_BRAKE, P_T, P_RIPPLE, P_SMOOTHING = range(8, 18)
+P_T_L, P_T_U, P_F_U, P_B, P_MID, P_FORCE, P_A_BRAKE, P_T, P_RIPPLE, P_SMOOTHING, P_SOFT = \
+    range(8, 19)
 # kinetostatic_tick's input x: [p (3), F_H (3), the safety filter's barrier state (BARRIER_STATE:
 # p_c (3), valid (1), v_prev (3)) at X_STATE, and for the full pose R (9) at X_R].
 X_STATE = 6
@@ -122,19 +234,21 @@ X_R = X_STATE + BARRIER_STATE
 
 def kinetostatic_params(robot, *, floor, ceiling, rows, barrier, t_l, t_u, F_u, eps,
                         force: bool, a_brake: float, time_step: float,
-                        ripple: float = 0.0, smoothing: float = 0.0) -> np.ndarray:
+                        ripple: float = 0.0, smoothing: float = 0.0,
+                        soft: float = 0.0) -> np.ndarray:
     """The kinetostatic block's parameters: the platform's mass (kg) and handle (m, platform
     frame), the floor and ceiling (N), the wrench rows (3 or 6), whether the safety filter's
     barrier needs the gradient and the look ahead, the cue's logistic t_l, t_u (N), F_u (N),
     its steepness b (1/N, eq. 28 in tensions) and centre (N), whether the cue is on, the
     deceleration the filter brakes with (m/s^2), the time step (s), the floor's rise per
-    newton of hand (N/N) and the filter's position_smoothing (s: the margin is evaluated
-    where the filter evaluates its barriers, safety_filter.barrier_position)."""
+    newton of hand (N/N), the filter's position_smoothing (s: the margin is evaluated
+    where the filter evaluates its barriers, safety_filter.barrier_position) and the soft
+    margin's temperature (N; 0: the hard margin; the module docstring says why)."""
     b = 2.0 * math.log((F_u - eps) / eps) / (t_l - t_u)
     d = robot.dynamics
     return np.array([d.mass, *d.handle, floor, ceiling, rows, 1.0 if barrier else 0.0,
                      t_l, t_u, F_u, b, 0.5 * (t_l + t_u), 1.0 if force else 0.0, a_brake,
-                     time_step, ripple, smoothing], dtype=float)
+                     time_step, ripple, smoothing, soft], dtype=float)
 
 
 @_jit
@@ -166,7 +280,7 @@ RAY_TOLERANCE = 0.5
 @_jit
 def _margin_at(reels, attachments, params, scratch, p, R, w, floor):
     return margin(reels, attachments, int(params[P_ROWS]), p, R, w, floor,
-                  params[P_CEILING], scratch)[0]
+                  params[P_CEILING], scratch, params[P_SOFT])[0]
 
 
 @_jit
@@ -205,7 +319,7 @@ def kinetostatic_tick(reels, attachments, params, scratch, x, out):
     zero = np.zeros(3)
     held_wrench(R, params[P_MASS:P_MASS + 4], F, zero, w)
     kappa, t_star = margin(reels, attachments, int(params[P_ROWS]), p, R, w, floor,
-                           params[P_CEILING], scratch)
+                           params[P_CEILING], scratch, params[P_SOFT])
     for k in range(KIN_OUT):
         out[k] = 0.0
     out[3] = kappa

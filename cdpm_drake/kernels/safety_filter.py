@@ -74,7 +74,7 @@ BIND_TEXT = ((BIND_PAIR, "cable pairs"), (BIND_BOX, "workspace box"),
 
 # Parameters (a flat array, `filter_params`).
 (F_T, F_GAMMA, F_A_BRAKE, F_V_MAX, F_A_MAX, F_V_RETURN, F_DOF, F_KINETOSTATIC, F_BOX,
- F_SMOOTHING, F_SIZE) = range(11)
+ F_SMOOTHING, F_LOST_BRAKE, F_SIZE) = range(12)
 # Where `filter_tick`'s memory and its pass-through of v_d start in its output; the memory
 # is [p_c (3), p_c valid (1), v_prev (3), w_prev (3)].
 OUT_MEMORY, OUT_V_D, MEMORY = 11, 21, 10
@@ -101,14 +101,18 @@ BALL_TOL = 1e-9
 
 def filter_params(*, time_step, gamma, a_brake, max_velocity, max_acceleration,
                   return_speed, full_pose, kinetostatic, box: bool = True,
-                  smoothing: float = 0.0) -> np.ndarray:
+                  smoothing: float = 0.0, lost_brake: float | None = None) -> np.ndarray:
     """The filter's parameters: s, -, m/s^2, m/s, m/s^2, m/s; the full pose (a twist of 6)
     or not (3); the kinetostatic barrier on; the box's barriers on (off with the virtual
     wall: limits.virtual_wall false lets the platform leave the box); the time constant (s)
-    of the position the barriers are evaluated at (`barrier_position`; 0: the estimate)."""
+    of the position the barriers are evaluated at (`barrier_position`; 0: the estimate); the
+    deceleration (m/s^2) of the slowdown while a margin is lost (None: RAMP_SHARE of
+    max_acceleration; a robot with mass: a_brake, filter_tick says why)."""
+    if lost_brake is None:
+        lost_brake = RAMP_SHARE * max_acceleration
     return np.array([time_step, gamma, a_brake, max_velocity, max_acceleration,
                      return_speed, 6 if full_pose else 3, 1.0 if kinetostatic else 0.0,
-                     1.0 if box else 0.0, smoothing], dtype=float)
+                     1.0 if box else 0.0, smoothing, lost_brake], dtype=float)
 
 
 def filter_sizes(P: int, full_pose: bool) -> dict:
@@ -362,12 +366,18 @@ def filter_tick(reels, attachments, pi, pj, d_min, bounds, params, x, out):
         # 1853 slack ticks in 10 s, 654 with the cap graded).
         share = min(1.0, (depth - LOST_DEPTH) / LOST_DEPTH)
         slow_to = v_max + share * (LOST_SPEED - v_max)
-        # Slowing by RAMP_SHARE of the acceleration limit a tick, not all of it: with all of
-        # it the speed and acceleration balls touch in a single point, which the cutting
-        # planes never reach (the solve failed and the filter reported a hold on 103 ticks of
-        # a 40 N push across exp3's pair 5-7, commanding that very point).
+        # Slowing by F_LOST_BRAKE a tick: at most RAMP_SHARE of the acceleration limit, not
+        # all of it: with all of it the speed and acceleration balls touch in a single point,
+        # which the cutting planes never reach (the solve failed and the filter reported a
+        # hold on 103 ticks of a 40 N push across exp3's pair 5-7, commanding that very
+        # point). On a robot with mass it is a_brake: a hand that takes the kinetostatic
+        # margin away faster than the platform moves (exp3's 20 N corner pull on the dynamic
+        # plant: +12.9 to -0.9 N in 70 ms, the platform accelerating at the 2 m/s^2 limit)
+        # met a slowdown at 1.8 m/s^2 the next tick, and that reversal rang cable 2 slack
+        # within 20 ms.
         prev_speed = math.sqrt(prev[0] * prev[0] + prev[1] * prev[1] + prev[2] * prev[2])
-        speed_cap = min(v_max, max(slow_to, prev_speed - RAMP_SHARE * a_max * T))
+        speed_cap = min(v_max, max(slow_to, prev_speed
+                                   - min(params[F_LOST_BRAKE], RAMP_SHARE * a_max) * T))
     z = np.empty(n)
     u = np.empty(rows)
     status = STATUS_HOLD

@@ -71,7 +71,7 @@ def test_pair_barrier_distance_and_gradient_match_independent_references():
 
 def _filter(robot, *, v_d, p, v_prev=(0.0, 0.0, 0.0), kappa=100.0, grad_kappa=(0, 0, 0),
             ray=math.inf, d_min=None, crossed=None, kinetostatic=True, full=False,
-            w_d=(0.0, 0.0, 0.0)):
+            w_d=(0.0, 0.0, 0.0), lost_brake=None):
     """One filter tick on paper_7cable (level); returns (v, status, binding, out)."""
     i, j = robot.pair_index
     pi, pj = np.asarray(i, dtype=np.int64), np.asarray(j, dtype=np.int64)
@@ -80,7 +80,7 @@ def _filter(robot, *, v_d, p, v_prev=(0.0, 0.0, 0.0), kappa=100.0, grad_kappa=(0
     bounds = np.array([robot.workspace.lower, robot.workspace.upper])
     params = filter_params(time_step=T, gamma=GAMMA, a_brake=A_BRAKE, max_velocity=V_MAX,
                            max_acceleration=A_MAX, return_speed=0.02,
-                           full_pose=full, kinetostatic=kinetostatic)
+                           full_pose=full, kinetostatic=kinetostatic, lost_brake=lost_brake)
     s = filter_sizes(P, full)
     x = np.zeros(s["x"])
     x[0:3], x[3:6] = v_d, p
@@ -269,6 +269,23 @@ def test_a_lost_margin_caps_the_speed_by_how_deep_it_is_lost(depth, share):
     assert np.linalg.norm(v) == pytest.approx(min(expected, speed), abs=1e-7)
     if share > 0.0:
         assert binding & BIND_SPEED
+
+
+@pytest.mark.parametrize("lost_brake, per_tick", [(None, RAMP_SHARE * A_MAX * T),
+                                                   (0.5, 0.5 * T), (50.0, RAMP_SHARE * A_MAX * T)])
+def test_a_lost_margin_slows_the_platform_at_the_lost_brake_deceleration(lost_brake, per_tick):
+    """3 mm beyond the box's upper x face (share 1: the cap is LOST_SPEED) at 0.3 m/s along
+    the face: the cap comes down from the speed by lost_brake T a tick (a robot with mass:
+    a_brake, which its cables take without ringing), by RAMP_SHARE a_max T without one, and
+    never faster than that (the balls would touch in a point)."""
+    robot = _robot()
+    p = np.array(robot.workspace.center, dtype=float)
+    p[0] = robot.workspace.upper[0] + 0.003
+    v_prev = np.array([0.0, 0.3, 0.0])
+    v, status, binding, _ = _filter(robot, v_d=v_prev, p=p, v_prev=v_prev, kinetostatic=False,
+                                    lost_brake=lost_brake)
+    assert binding & BIND_SPEED
+    assert np.linalg.norm(v) == pytest.approx(0.3 - per_tick, abs=1e-9)
 
 
 def test_a_crossed_pair_counts_its_distance_negative_and_is_walked_back():
