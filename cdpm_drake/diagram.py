@@ -390,7 +390,7 @@ def _add_safety_filter(builder, blocks, resolved, velocity_desired, omega_desire
     """The safety filter between the limits and the Jacobian mapping, its barriers at the
     commanded pose (p_WP and, for the full pose, the held orientation R_WP); returns its
     velocity and angular velocity commands (None without a full pose)."""
-    scenario, robot = resolved.scenario, resolved.robot
+    robot = resolved.robot
     full = R_WP is not None
     params = _filter_params(resolved, full=full, kinetostatic=kinetostatic is not None)
     block = blocks["safety_filter"] = FlatBlock(
