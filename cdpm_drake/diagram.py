@@ -185,7 +185,7 @@ def build_diagram(scenario: Scenario | ResolvedScenario,
     if kinetostatic_on:
         kinetostatic = blocks["kinetostatic_force"] = FlatBlock(
             builder, "kinetostatic_force", KERNEL_BLOCK_MAIN, lambda b: build_kinetostatic_force(
-                b, robot, params=_kinetostatic_params(resolved),
+                b, robot, params=kinetostatic_block_params(resolved),
                 full_pose=full, time_step=T))
         kinetostatic.connect_input(p_WP, "p_WP")
         kinetostatic.connect_input(force_sensor.GetOutputPort("F_H"), "F_H")
@@ -313,7 +313,7 @@ RIPPLE = 0.1
 LENGTH_INTEGRAL_GAIN = 100.0
 
 
-def _kinetostatic_params(resolved):
+def kinetostatic_block_params(resolved):
     """The kinetostatic block's parameters (kinetostatics.kinetostatic_params) for the
     scenario: the barrier's floor, the controller's ceiling, the robot's wrench rows, the
     cue's logistic."""
@@ -325,7 +325,7 @@ def _kinetostatic_params(resolved):
         robot, floor=float(scenario.safety_filter.kinetostatic_floor),
         ceiling=float(c.max_tension),
         rows=wrench_rows(robot), barrier=True, t_l=f.t_l, t_u=f.t_u, F_u=f.F_u, eps=f.eps,
-        force=f.enabled, a_brake=_filter_braking(resolved),
+        force=f.enabled, a_brake=filter_braking(resolved),
         time_step=resolved.time_step, ripple=RIPPLE,
         smoothing=float(scenario.safety_filter.position_smoothing),
         soft=_soft_margin(resolved))
@@ -343,7 +343,7 @@ def _soft_margin(resolved) -> float:
     if not _robot_with_mass(resolved):
         return 0.0
     return braking_swing(robot, np.asarray(scenario.initial_position, dtype=float),
-                         wrench_rows(robot), _filter_braking(resolved))
+                         wrench_rows(robot), filter_braking(resolved))
 
 
 def _robot_with_mass(resolved) -> bool:
@@ -352,7 +352,7 @@ def _robot_with_mass(resolved) -> bool:
     return bool(resolved.scenario.controller.tension_control)
 
 
-def _filter_braking(resolved) -> float:
+def filter_braking(resolved) -> float:
     """The deceleration the safety filter's barriers brake with, m/s^2: per axis as the
     virtual wall does (limits._wall_caps), a / sqrt(3), which keeps the braking within the
     acceleration limit where three barriers meet; and no harder than the cables can take
@@ -368,14 +368,14 @@ def _filter_braking(resolved) -> float:
     return min(resolved.max_acceleration / np.sqrt(3.0), ringing)
 
 
-def _filter_params(resolved, *, full: bool, kinetostatic: bool):
+def safety_filter_params(resolved, *, full: bool, kinetostatic: bool):
     """The safety filter's parameters (safety_filter.filter_params) for the scenario; on a
     robot with mass the lost-margin slowdown brakes at a_brake."""
     from cdpm_drake.kernels.safety_filter import filter_params
 
     scenario = resolved.scenario
     f = scenario.safety_filter
-    a_brake = _filter_braking(resolved)
+    a_brake = filter_braking(resolved)
     return filter_params(
         time_step=resolved.time_step, gamma=f.gamma, a_brake=a_brake,
         max_velocity=resolved.max_velocity,
@@ -392,7 +392,7 @@ def _add_safety_filter(builder, blocks, resolved, velocity_desired, omega_desire
     velocity and angular velocity commands (None without a full pose)."""
     robot = resolved.robot
     full = R_WP is not None
-    params = _filter_params(resolved, full=full, kinetostatic=kinetostatic is not None)
+    params = safety_filter_params(resolved, full=full, kinetostatic=kinetostatic is not None)
     block = blocks["safety_filter"] = FlatBlock(
         builder, "safety_filter", KERNEL_BLOCK_MAIN, lambda b: build_safety_filter(
             b, robot, d_min=resolved.d_min, params=params, full_pose=full, time_step=T))

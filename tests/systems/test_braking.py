@@ -64,19 +64,19 @@ def test_a_robot_with_mass_gets_the_soft_margin_and_the_gentle_slowdown():
     # controller keeps the hard margin and RAMP_SHARE a_max (the paper's experiments as
     # shipped, pinned by the reference logs).
     from cdpm_drake.config import load_resolved_scenario
-    from cdpm_drake.diagram import _filter_braking, _filter_params, _kinetostatic_params
+    from cdpm_drake.diagram import filter_braking, safety_filter_params, kinetostatic_block_params
     from cdpm_drake.kernels.kinetostatics import P_SOFT
     from cdpm_drake.kernels.safety_filter import F_LOST_BRAKE, RAMP_SHARE
 
     full = load_resolved_scenario("exp2_interaction", "{plant: !DynamicReels {}, controller: "
                                                       "{pose: full, tension_control: true}}")
     plain = load_resolved_scenario("exp2_interaction")
-    assert _kinetostatic_params(full)[P_SOFT] == pytest.approx(3.0, rel=1e-9)
-    assert _kinetostatic_params(plain)[P_SOFT] == 0.0
-    a_brake = _filter_braking(full)
+    assert kinetostatic_block_params(full)[P_SOFT] == pytest.approx(3.0, rel=1e-9)
+    assert kinetostatic_block_params(plain)[P_SOFT] == 0.0
+    a_brake = filter_braking(full)
     assert a_brake < RAMP_SHARE * full.max_acceleration
-    assert _filter_params(full, full=True, kinetostatic=True)[F_LOST_BRAKE] == a_brake
-    assert _filter_params(plain, full=False, kinetostatic=True)[F_LOST_BRAKE] == \
+    assert safety_filter_params(full, full=True, kinetostatic=True)[F_LOST_BRAKE] == a_brake
+    assert safety_filter_params(plain, full=False, kinetostatic=True)[F_LOST_BRAKE] == \
         RAMP_SHARE * plain.max_acceleration
 
 
