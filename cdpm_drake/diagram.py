@@ -382,7 +382,7 @@ def safety_filter_params(resolved, *, full: bool, kinetostatic: bool):
         max_acceleration=resolved.max_acceleration,
         return_speed=f.return_speed, full_pose=full, kinetostatic=kinetostatic,
         box=scenario.limits.virtual_wall, smoothing=float(f.position_smoothing),
-        lost_brake=a_brake if _robot_with_mass(resolved) else None)
+        cable_brake=a_brake if _robot_with_mass(resolved) else None)
 
 
 def _add_safety_filter(builder, blocks, resolved, velocity_desired, omega_desired, p_WP, R_WP,

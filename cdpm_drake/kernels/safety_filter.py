@@ -74,7 +74,7 @@ BIND_TEXT = ((BIND_PAIR, "cable pairs"), (BIND_BOX, "workspace box"),
 
 # Parameters (a flat array, `filter_params`).
 (F_T, F_GAMMA, F_A_BRAKE, F_V_MAX, F_A_MAX, F_V_RETURN, F_DOF, F_KINETOSTATIC, F_BOX,
- F_SMOOTHING, F_LOST_BRAKE, F_SIZE) = range(12)
+ F_SMOOTHING, F_CABLE_BRAKE, F_SIZE) = range(12)
 # Where `filter_tick`'s memory and its pass-through of v_d start in its output; the memory
 # is [p_c (3), p_c valid (1), v_prev (3), w_prev (3)].
 OUT_MEMORY, OUT_V_D, MEMORY = 11, 21, 10
@@ -101,18 +101,19 @@ BALL_TOL = 1e-9
 
 def filter_params(*, time_step, gamma, a_brake, max_velocity, max_acceleration,
                   return_speed, full_pose, kinetostatic, box: bool = True,
-                  smoothing: float = 0.0, lost_brake: float | None = None) -> np.ndarray:
+                  smoothing: float = 0.0, cable_brake: float | None = None) -> np.ndarray:
     """The filter's parameters: s, -, m/s^2, m/s, m/s^2, m/s; the full pose (a twist of 6)
     or not (3); the kinetostatic barrier on; the box's barriers on (off with the virtual
     wall: limits.virtual_wall false lets the platform leave the box); the time constant (s)
     of the position the barriers are evaluated at (`barrier_position`; 0: the estimate); the
-    deceleration (m/s^2) of the slowdown while a margin is lost (None: RAMP_SHARE of
-    max_acceleration; a robot with mass: a_brake, filter_tick says why)."""
-    if lost_brake is None:
-        lost_brake = RAMP_SHARE * max_acceleration
+    cable brake (m/s^2): the most the filter decelerates for the kinetostatic limit (its rows'
+    ramps) and while a margin is lost (the slowdown) (None: RAMP_SHARE of max_acceleration;
+    a robot with mass: a_brake, which its cables take without ringing; filter_tick says why)."""
+    if cable_brake is None:
+        cable_brake = RAMP_SHARE * max_acceleration
     return np.array([time_step, gamma, a_brake, max_velocity, max_acceleration,
                      return_speed, 6 if full_pose else 3, 1.0 if kinetostatic else 0.0,
-                     1.0 if box else 0.0, smoothing, lost_brake], dtype=float)
+                     1.0 if box else 0.0, smoothing, cable_brake], dtype=float)
 
 
 def filter_sizes(P: int, full_pose: bool) -> dict:
@@ -283,6 +284,13 @@ def filter_tick(reels, attachments, pi, pj, d_min, bounds, params, x, out):
     # command cycled between braking and re-accelerating at ~15 Hz (10 N across exp3's pair
     # 1-3 on the dynamic plant: the platform rang, 716 slack ticks).
     ramp = RAMP_SHARE * params[F_A_MAX] * T
+    # The kinetostatic limit's rows ramp at the cable brake: on a robot with mass (a_brake)
+    # a hand that takes the margin away (exp2's 40 N corner pull: +7.7 to -7.7 N in 0.12 s)
+    # was met by a return steered at 0.9 a_max, the platform's vertical speed reversed from
+    # +0.05 to -0.03 m/s in 40 ms, and cable 5 went slack; the limit is there to keep the
+    # cables taut, and a braking they cannot take defeats it. The pair and box barriers keep
+    # the full ramp (the crossing is the hard promise).
+    kin_ramp = min(params[F_CABLE_BRAKE], RAMP_SHARE * params[F_A_MAX]) * T
     smallest = math.inf
     # Only barriers that could bind this tick: the most a velocity within the speed limit can
     # take off a margin is g v_max.
@@ -334,7 +342,7 @@ def filter_tick(reels, attachments, pi, pj, d_min, bounds, params, x, out):
         k_next = kappa + T * (gk[0] * prev[0] + gk[1] * prev[1] + gk[2] * prev[2])
         count = _add_barrier(C, d, kind, lost, lost_by, count, grad, n,
                              -barrier_rate(kappa, gv, params), kappa, k_next,
-                             BIND_KINETOSTATIC, prev, gv * ramp, T)
+                             BIND_KINETOSTATIC, prev, gv * kin_ramp, T)
         speed = math.sqrt(prev[0] * prev[0] + prev[1] * prev[1] + prev[2] * prev[2])
         if ray < math.inf and speed > 0.0:
             # The look ahead (kinetostatics.kinetostatic_tick): the margin is lost `ray` m
@@ -346,7 +354,7 @@ def filter_tick(reels, attachments, pi, pj, d_min, bounds, params, x, out):
                 along += prev[c] / speed * prev[c]
             cap = face_cap(ray, params[F_A_BRAKE], T)
             count = _add_barrier(C, d, kind, lost, lost_by, count, grad, n,
-                                 -max(cap, along - ramp), ray, ray - T * along,
+                                 -max(cap, along - kin_ramp), ray, ray - T * along,
                                  BIND_KINETOSTATIC, prev, 1e300, T)
     base = count
     # While a margin is lost (by more than a tick's round-off) the platform is at a limit its
@@ -366,7 +374,7 @@ def filter_tick(reels, attachments, pi, pj, d_min, bounds, params, x, out):
         # 1853 slack ticks in 10 s, 654 with the cap graded).
         share = min(1.0, (depth - LOST_DEPTH) / LOST_DEPTH)
         slow_to = v_max + share * (LOST_SPEED - v_max)
-        # Slowing by F_LOST_BRAKE a tick: at most RAMP_SHARE of the acceleration limit, not
+        # Slowing by the cable brake a tick: at most RAMP_SHARE of the acceleration limit, not
         # all of it: with all of it the speed and acceleration balls touch in a single point,
         # which the cutting planes never reach (the solve failed and the filter reported a
         # hold on 103 ticks of a 40 N push across exp3's pair 5-7, commanding that very
@@ -377,7 +385,7 @@ def filter_tick(reels, attachments, pi, pj, d_min, bounds, params, x, out):
         # within 20 ms.
         prev_speed = math.sqrt(prev[0] * prev[0] + prev[1] * prev[1] + prev[2] * prev[2])
         speed_cap = min(v_max, max(slow_to, prev_speed
-                                   - min(params[F_LOST_BRAKE], RAMP_SHARE * a_max) * T))
+                                   - min(params[F_CABLE_BRAKE], RAMP_SHARE * a_max) * T))
     z = np.empty(n)
     u = np.empty(rows)
     status = STATUS_HOLD

@@ -71,7 +71,7 @@ def test_pair_barrier_distance_and_gradient_match_independent_references():
 
 def _filter(robot, *, v_d, p, v_prev=(0.0, 0.0, 0.0), kappa=100.0, grad_kappa=(0, 0, 0),
             ray=math.inf, d_min=None, crossed=None, kinetostatic=True, full=False,
-            w_d=(0.0, 0.0, 0.0), lost_brake=None):
+            w_d=(0.0, 0.0, 0.0), cable_brake=None):
     """One filter tick on paper_7cable (level); returns (v, status, binding, out)."""
     i, j = robot.pair_index
     pi, pj = np.asarray(i, dtype=np.int64), np.asarray(j, dtype=np.int64)
@@ -80,7 +80,7 @@ def _filter(robot, *, v_d, p, v_prev=(0.0, 0.0, 0.0), kappa=100.0, grad_kappa=(0
     bounds = np.array([robot.workspace.lower, robot.workspace.upper])
     params = filter_params(time_step=T, gamma=GAMMA, a_brake=A_BRAKE, max_velocity=V_MAX,
                            max_acceleration=A_MAX, return_speed=0.02,
-                           full_pose=full, kinetostatic=kinetostatic, lost_brake=lost_brake)
+                           full_pose=full, kinetostatic=kinetostatic, cable_brake=cable_brake)
     s = filter_sizes(P, full)
     x = np.zeros(s["x"])
     x[0:3], x[3:6] = v_d, p
@@ -141,7 +141,10 @@ def test_the_acceleration_and_speed_limits_hold_exactly():
             np.testing.assert_array_equal(v, v_d)
 
 
-def test_the_kinetostatic_barrier_and_its_look_ahead():
+@pytest.mark.parametrize("cable_brake", [None, 0.5])
+def test_the_kinetostatic_barrier_and_its_look_ahead(cable_brake):
+    # The rows' ramp: RAMP_SHARE a_max T a tick, or the cable brake's (a robot with mass).
+    per_tick = RAMP_SHARE * A_MAX * T if cable_brake is None else cable_brake * T
     robot = _robot()
     p = robot.workspace.center
     # kappa = 0.5 N with the margin falling 100 N/m along +x: moving +x at 0.3 m/s the
@@ -150,8 +153,8 @@ def test_the_kinetostatic_barrier_and_its_look_ahead():
     v_d = np.array([0.3, 0.0, 0.0])
     rate = min(GAMMA * kappa / T, g * face_cap(kappa / g, CURVE_SHARE * A_BRAKE, T))
     v, status, binding, _ = _filter(robot, v_d=v_d, p=p, v_prev=v_d, kappa=kappa,
-                                    grad_kappa=(-g, 0.0, 0.0))
-    assert v[0] == pytest.approx(max(rate / g, 0.3 - RAMP_SHARE * A_MAX * T), rel=1e-12)
+                                    grad_kappa=(-g, 0.0, 0.0), cable_brake=cable_brake)
+    assert v[0] == pytest.approx(max(rate / g, 0.3 - per_tick), rel=1e-12)
     assert binding & BIND_KINETOSTATIC
     # Off: the same inputs pass.
     v, status, _, _ = _filter(robot, v_d=v_d, p=p, v_prev=v_d, kappa=kappa,
@@ -160,9 +163,9 @@ def test_the_kinetostatic_barrier_and_its_look_ahead():
     # The look ahead: the margin is lost 2 cm along the last command (gradient here flat):
     # the speed along it brakes to the braking curve of 2 cm, a_max T a tick at most.
     v, status, binding, _ = _filter(robot, v_d=v_d, p=p, v_prev=v_d, kappa=5.0,
-                                    grad_kappa=(0.0, 0.0, 0.0), ray=0.02)
-    assert v[0] == pytest.approx(max(face_cap(0.02, A_BRAKE, T), 0.3 - RAMP_SHARE * A_MAX * T),
-                                 rel=1e-12)
+                                    grad_kappa=(0.0, 0.0, 0.0), ray=0.02,
+                                    cable_brake=cable_brake)
+    assert v[0] == pytest.approx(max(face_cap(0.02, A_BRAKE, T), 0.3 - per_tick), rel=1e-12)
     assert binding & BIND_KINETOSTATIC
 
 
@@ -271,11 +274,11 @@ def test_a_lost_margin_caps_the_speed_by_how_deep_it_is_lost(depth, share):
         assert binding & BIND_SPEED
 
 
-@pytest.mark.parametrize("lost_brake, per_tick", [(None, RAMP_SHARE * A_MAX * T),
+@pytest.mark.parametrize("cable_brake, per_tick", [(None, RAMP_SHARE * A_MAX * T),
                                                    (0.5, 0.5 * T), (50.0, RAMP_SHARE * A_MAX * T)])
-def test_a_lost_margin_slows_the_platform_at_the_lost_brake_deceleration(lost_brake, per_tick):
+def test_a_lost_margin_slows_the_platform_at_the_cable_brake_deceleration(cable_brake, per_tick):
     """3 mm beyond the box's upper x face (share 1: the cap is LOST_SPEED) at 0.3 m/s along
-    the face: the cap comes down from the speed by lost_brake T a tick (a robot with mass:
+    the face: the cap comes down from the speed by cable_brake T a tick (a robot with mass:
     a_brake, which its cables take without ringing), by RAMP_SHARE a_max T without one, and
     never faster than that (the balls would touch in a point)."""
     robot = _robot()
@@ -283,7 +286,7 @@ def test_a_lost_margin_slows_the_platform_at_the_lost_brake_deceleration(lost_br
     p[0] = robot.workspace.upper[0] + 0.003
     v_prev = np.array([0.0, 0.3, 0.0])
     v, status, binding, _ = _filter(robot, v_d=v_prev, p=p, v_prev=v_prev, kinetostatic=False,
-                                    lost_brake=lost_brake)
+                                    cable_brake=cable_brake)
     assert binding & BIND_SPEED
     assert np.linalg.norm(v) == pytest.approx(0.3 - per_tick, abs=1e-9)
 
