@@ -20,9 +20,7 @@ from cdpm_drake.runs.simulate import simulate
 OWN_5_7 = str(Path(__file__).resolve().parents[2] / "scripts" / "bench" / "adversarial"
               / "own_5_7.yaml")
 # The adversarial benchmark's 20 N push across own_7cable's swapped pair 5-7 (along minus the
-# gradient of their distance at the start), ramped in over 0.1 s. (Its 10 N push rang a cable
-# slack without the damping until the kinetostatic margin became soft on a robot with mass;
-# the 20 N one still does.)
+# gradient of their distance at the start), ramped in over 0.1 s.
 PUSH = ("operator: !ScriptedOperator {times: [0, 0.1, 10], forces: [[0, 0, 0], "
         "[9.496356, 13.004564, 11.861726], [9.496356, 13.004564, 11.861726]]}")
 
@@ -33,8 +31,21 @@ def _overlay(damping: bool, sensor="drive_torque", duration=4.0) -> str:
             % (duration, "true" if damping else "false", sensor, PUSH))
 
 
-def _holdable_slack(damping: bool, sensor="drive_torque") -> tuple[int, dict]:
-    resolved = load_resolved_scenario(OWN_5_7, _overlay(damping, sensor))
+def _holdable_slack(damping: bool) -> tuple[int, dict]:
+    """The adversarial benchmark's 40 N push across exp3's pair 5-7 (paper_7cable), 4 s, drive
+    torque sensor, the damping on or off. (Pushes on own_7cable and cube_8cable no longer
+    ring a cable slack without the damping since the kinetostatic margin is soft and its
+    braking at the cable brake on a robot with mass.)"""
+    from helpers_scripts import load_script
+
+    bench = load_script("bench/adversarial_benchmark.py")
+    case = next(c for c in bench.cases(methods=("default",), plants=("dynamic",))
+                if c.robot.startswith("exp3") and c.hand == "push 40 N across 5-7")
+    overlay = case.overlay.replace("{duration: 10,", "{duration: 4,").replace(
+        "tension_control: true}", "tension_control: true, tension_damping: {enabled: %s}}"
+        % ("true" if damping else "false"))
+    assert "duration: 4," in overlay and "tension_damping" in overlay
+    resolved = load_resolved_scenario(case.scenario, overlay)
     result = simulate(scenario=resolved)
     assert result.error is None, result.error
     log = result.log
@@ -43,11 +54,11 @@ def _holdable_slack(damping: bool, sensor="drive_torque") -> tuple[int, dict]:
     return int(slack.sum()), log
 
 
-def test_the_damping_takes_the_slack_out_of_a_hard_push_on_a_robot_it_was_not_tuned_on():
+def test_the_damping_takes_the_slack_out_of_a_hard_push():
     off, log_off = _holdable_slack(False)
     on, log_on = _holdable_slack(True)
     # Without the damping the push rings a cable slack where the statics could hold it
-    # (measured 46 ticks in the 4 s run); with it, none (its smallest true tension 1.57 N).
+    # (measured 117 ticks in the 4 s run); with it, none (its smallest true tension 5.0 N).
     assert off >= 20
     assert on == 0
     assert log_on["tensions"].min() > 0.3
@@ -55,7 +66,7 @@ def test_the_damping_takes_the_slack_out_of_a_hard_push_on_a_robot_it_was_not_tu
     assert "reel_velocity_damping" not in log_off
     damping = log_on["reel_velocity_damping"]
     assert np.abs(damping).max() > 1e-3
-    assert np.abs(log_on["reel_velocity"]).max() <= 0.8 + 1e-12  # own_7cable's reel limit
+    assert np.abs(log_on["reel_velocity"]).max() <= 1.0 + 1e-12  # paper_7cable's reel limit
 
 
 def test_without_a_tension_sensor_the_block_passes_the_command_through_bit_for_bit():
