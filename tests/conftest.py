@@ -100,6 +100,12 @@ def highs_t_star(W, w):
 def highs_margin(W, w, floor, ceiling):
     """kappa = max s s.t. W T + w = 0, floor + s <= T_i <= ceiling - s, by HiGHS (-inf when
     infeasible for every s)."""
+    return highs_margin_distribution(W, w, floor, ceiling)[0]
+
+
+def highs_margin_distribution(W, w, floor, ceiling):
+    """(kappa, T): `highs_margin` and the tensions HiGHS attains it with ((-inf, None) when
+    infeasible for every s)."""
     import numpy as np
     from scipy.optimize import linprog
 
@@ -110,7 +116,7 @@ def highs_margin(W, w, floor, ceiling):
     res = linprog(np.r_[np.zeros(m), -1.0], A_ub=A_ub, b_ub=b_ub,
                   A_eq=np.hstack([W, np.zeros((W.shape[0], 1))]), b_eq=-w,
                   bounds=[(None, None)] * (m + 1), method="highs")
-    return -res.fun if res.status == 0 else -np.inf
+    return (-res.fun, res.x[:m]) if res.status == 0 else (-np.inf, None)
 
 
 def default_signals():

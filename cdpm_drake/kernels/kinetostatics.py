@@ -64,11 +64,8 @@ def ringing_deceleration(robot, p, rows: int, swing: float) -> float:
     directions (the rows of W^+'s force columns). Measured on paper_7cable's exp2 (dynamic
     plant, no tension sensor): a braking onset of 1.1 m/s^2 took cable 2 from 6.6 to 0.53 N,
     as this predicts (5.6 N per m/s^2); inf for a robot without mass."""
-    from cdpm_drake.kernels.tension import wrench_matrix
-
     mass = float(robot.dynamics.mass)
-    W = wrench_matrix(robot, np.asarray(p, dtype=float))[:rows]
-    share = float(np.linalg.norm(np.linalg.pinv(W)[:, :3], axis=1).max())
+    share = _force_share(robot, p, rows)
     if not (mass > 0.0 and share > 0.0):
         return math.inf
     return swing / (2.0 * mass * share)
@@ -78,14 +75,19 @@ def braking_swing(robot, p, rows: int, a: float) -> float:
     """The largest swing of a cable's tension (N) when the level platform at p starts
     braking at a (m/s^2): 2 m a max_i |W^+_i| (`ringing_deceleration`'s bound, inverted);
     0 for a robot without mass."""
-    from cdpm_drake.kernels.tension import wrench_matrix
-
     mass = float(robot.dynamics.mass)
-    W = wrench_matrix(robot, np.asarray(p, dtype=float))[:rows]
-    share = float(np.linalg.norm(np.linalg.pinv(W)[:, :3], axis=1).max())
     if not (mass > 0.0 and math.isfinite(a)):
         return 0.0
-    return 2.0 * mass * share * float(a)
+    return 2.0 * mass * _force_share(robot, p, rows) * float(a)
+
+
+def _force_share(robot, p, rows: int) -> float:
+    """max_i |W^+_i| over the force columns (N of tension per N of force on the platform, the
+    level platform at p; the wrench matrix's first `rows` rows, minimum-norm)."""
+    from cdpm_drake.kernels.tension import wrench_matrix
+
+    W = wrench_matrix(robot, np.asarray(p, dtype=float))[:rows]
+    return float(np.linalg.norm(np.linalg.pinv(W)[:, :3], axis=1).max())
 
 
 def wrench_rows(robot) -> int:

@@ -7,7 +7,7 @@ import pytest
 from scipy.optimize import linprog
 
 from cdpm_drake.kernels.tension import max_min_lines
-from conftest import highs_margin, highs_t_star
+from conftest import highs_margin, highs_margin_distribution, highs_t_star
 
 
 def _highs_max_min(a, C):
@@ -215,19 +215,6 @@ def _soft_reference(W, w, floor, ceiling, mu, T0):
     return -res.fun
 
 
-def _highs_distribution(W, w, floor, ceiling):
-    from scipy.optimize import linprog
-
-    m = W.shape[1]
-    A_ub = np.vstack([np.hstack([-np.eye(m), np.ones((m, 1))]),
-                      np.hstack([np.eye(m), np.ones((m, 1))])])
-    b_ub = np.r_[-floor * np.ones(m), ceiling * np.ones(m)]
-    res = linprog(np.r_[np.zeros(m), -1.0], A_ub=A_ub, b_ub=b_ub,
-                  A_eq=np.hstack([W, np.zeros((W.shape[0], 1))]), b_eq=-w,
-                  bounds=[(None, None)] * (m + 1), method="highs")
-    return res.x[:m] if res.status == 0 else None
-
-
 @pytest.mark.parametrize("name", ["paper_7cable", "cube_8cable"])
 def test_the_soft_margin_equals_an_independent_optimisation(name):
     from cdpm_drake.kernels.kinetostatics import margin, margin_scratch
@@ -249,7 +236,7 @@ def test_the_soft_margin_equals_an_independent_optimisation(name):
             soft, t_star = margin(robot.reels, robot.attachments, 6, p, R, w, 3.0, 100.0,
                                   scratch, mu)
             W = wrench_matrix(robot, p, R)
-            T0 = _highs_distribution(W, w, 3.0, 100.0)
+            _, T0 = highs_margin_distribution(W, w, 3.0, 100.0)
             if T0 is None:
                 assert not np.isfinite(hard) or hard < -1e3
                 continue

@@ -13,15 +13,21 @@ from cdpm_drake.robot import load_robot
 from cdpm_drake.runs.simulate import simulate
 
 
+def _largest_share(robot, p):
+    """max_i |W^+_i| over the force columns, W built here from the geometry (the level
+    platform at p): force and moment of each unit tension."""
+    b = np.asarray(robot.attachments, dtype=float)
+    d = np.asarray(robot.reels, dtype=float) - (p + b)
+    u = d / np.linalg.norm(d, axis=1)[:, None]
+    W = np.vstack([u.T, np.cross(b, u).T])
+    return np.linalg.norm(np.linalg.pinv(W)[:, :3], axis=1).max()
+
+
 @pytest.mark.parametrize("name", ["paper_7cable", "cube_8cable"])
 def test_the_ringing_bound_is_the_swing_over_twice_the_mass_and_the_largest_share(name):
     robot = load_robot(name)
     p = robot.workspace.center
-    b = np.asarray(robot.attachments, dtype=float)
-    d = np.asarray(robot.reels, dtype=float) - (p + b)
-    u = d / np.linalg.norm(d, axis=1)[:, None]
-    W = np.vstack([u.T, np.cross(b, u).T])  # force and moment of each unit tension
-    share = np.linalg.norm(np.linalg.pinv(W)[:, :3], axis=1).max()
+    share = _largest_share(robot, p)
     expected = 3.0 / (2.0 * robot.dynamics.mass * share)
     assert ringing_deceleration(robot, p, 6, 3.0) == pytest.approx(expected, rel=1e-9)
 
@@ -46,11 +52,7 @@ def test_the_braking_swing_is_twice_the_mass_the_deceleration_and_the_largest_sh
 
     robot = load_robot(name)
     p = robot.workspace.center
-    b = np.asarray(robot.attachments, dtype=float)
-    d = np.asarray(robot.reels, dtype=float) - (p + b)
-    u = d / np.linalg.norm(d, axis=1)[:, None]
-    W = np.vstack([u.T, np.cross(b, u).T])
-    share = np.linalg.norm(np.linalg.pinv(W)[:, :3], axis=1).max()
+    share = _largest_share(robot, p)
     assert braking_swing(robot, p, 6, 0.7) == pytest.approx(
         2.0 * robot.dynamics.mass * 0.7 * share, rel=1e-9)
     assert braking_swing(robot, p, 6, ringing_deceleration(robot, p, 6, 3.0)) == \
