@@ -214,7 +214,7 @@ def _export_parser(sub) -> None:
                     "for Foxglove and ros2 bag (joint states of the reels, the platform pose "
                     "estimated and true, the forces as wrenches, the cables as line markers; "
                     "frame 'base', stamps from 0 s). Cables are numbered from 1 and pairs by "
-                    "their cables (docs/LOG_FORMAT.md). --mat needs scipy and --mcap rosbags: "
+                    "their cables (docs/LOG_FORMAT.md). --mcap needs rosbags: "
                     "pip install 'cdpm_drake[export]'.")
     p.add_argument("log", type=Path,
                    help="a log.npz, the run folder holding it (or only ticks.bin: recovered "

@@ -10,7 +10,7 @@ from cdpm_drake.cli.errors import CliError, InputError
 from cdpm_drake.cli.recover import find_log
 
 # Format: (default file name beside the log, the package it needs beyond the base install).
-FORMATS = {"csv": ("log.csv", None), "mat": ("log.mat", "scipy"),
+FORMATS = {"csv": ("log.csv", None), "mat": ("log.mat", None),
            "mcap": ("log.mcap", "rosbags")}
 EXTRA = "pip install 'cdpm_drake[export]'"
 

@@ -463,7 +463,12 @@ def build_parser() -> argparse.ArgumentParser:
 
 def build_drives(args, log=None) -> EmulatedDrives:
     """The drives described by parsed arguments, on a bus opened here."""
-    import can
+    try:
+        import can
+    except ImportError:
+        raise RuntimeError("the emulated CiA 402 drives need the python-can package: pip "
+                           "install 'cdpm_drake[canopen]' (pip install -e '.[canopen]' in a "
+                           "clone)") from None
 
     from cdpm_drake.emulator.bridges import DynamicBridge, ReelBridge
     from cdpm_drake.emulator.main import dynamic_scenario

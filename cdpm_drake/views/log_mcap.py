@@ -169,11 +169,16 @@ def topics(log: Mapping) -> dict:
 
 def write_log_mcap(log: Mapping, path) -> dict:
     """Write the log to `path` (a new .mcap file, a ROS 2 bag whose metadata it holds);
-    returns {topic: messages written}. Needs rosbags (ImportError without it)."""
+    returns {topic: messages written}. Needs rosbags (ImportError naming the extra without
+    it)."""
     import shutil
     import tempfile
 
-    from rosbags.rosbag2 import CompressionFormat, CompressionMode, StoragePlugin, Writer
+    try:
+        from rosbags.rosbag2 import CompressionFormat, CompressionMode, StoragePlugin, Writer
+    except ImportError:
+        raise ImportError("writing an MCAP bag needs the rosbags package: pip install "
+                          "'cdpm_drake[export]'") from None
 
     check_mcap_keys(log)
     path = Path(path)
