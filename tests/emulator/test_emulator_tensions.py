@@ -25,6 +25,8 @@ from cdpm_drake.robot import load_robot
 from cdpm_drake.config import load_scenario
 
 M = 7
+# Runs of the real-time comparison against the emulator, at most (a busy host stalls some).
+ATTEMPTS = 3
 
 
 @pytest.fixture(scope="module")
@@ -325,41 +327,50 @@ def test_cdpm_run_logs_tension_measured_that_follows_the_emulators_truth(tmp_pat
     idle; RMS 0.26-0.38 N, largest 2.5-5.8 N, correlation > 0.94, with the host loaded (the
     emulator's ticks then come irregularly, so its statuses' speeds are sampled at irregular
     times and the acceleration from two of them is off), against a true tension that moves
-    by 0.5-2 N (std) over the run. A run that a host stall of more than 20 ms disturbed (the
-    controller's ticks or the bridge's statuses) and that misses is repeated, up to three
-    times in all."""
+    by 0.5-2 N (std) over the run. A busy host disturbs the timing with a long stall (the
+    watchdog ends the run) or without one (statuses bunched and sampled at irregular times):
+    a run that misses any of the timing-dependent bounds below is repeated, up to three
+    times in all.
+    The bounds are the same on every attempt and the last one must meet them all; a failure
+    names every attempt's numbers."""
     from cdpm_drake.config import scenario_robot
 
     robot = scenario_robot(load_scenario("exp2_interaction"))
-    for attempt in range(3):
+    tried = []  # each attempt's numbers, for the assertions' messages
+    for attempt in range(ATTEMPTS):
         code, out_dir, out, truth_path = _run_against_dynamic_emulator(tmp_path / f"a{attempt}")
+        if code != 0 and attempt < ATTEMPTS - 1:
+            continue  # a stall that ended the run (the watchdog): not what this test is about
         assert code == 0, out
         log, truth = np.load(out_dir / "log.npz"), np.load(truth_path)
         rms, worst, corr, lags, rows = _compare(log, truth)
-        stalled = (np.diff(log["wall"]).max() > 0.02
-                   or np.diff(truth["time"]).max() > 0.02)
-        if (rms < 0.5 and min(corr) > 0.9) or not stalled:
+        matched, finite = _conversions_matched(log, truth, robot)
+        silences = int(np.sum(np.diff(truth["time"]) > 0.1))
+        pt, T = truth["plant_time"], truth["tensions"]
+        run = (pt > 0.05) & (pt < 1.9)
+        measured, t = log["tension_measured"], log["time"]
+        mean_measured = np.nanmean(measured[(t > 0.05) & (t < 1.9)], axis=0)
+        bias = np.abs(mean_measured - T[run].mean(axis=0)).max()
+        tried.append(dict(rms=round(rms, 3), worst=round(worst, 2), corr=round(min(corr), 3),
+                          lags=lags, rows=rows, matched=matched, finite=finite,
+                          silences=silences, bias=round(bias, 3),
+                          tick_gap=round(float(np.diff(log["wall"]).max()), 3)))
+        if (rms < 0.5 and min(corr) > 0.9 and rows > 900 and matched == finite
+                and finite >= 0.9 * (len(log["time"]) - 1 - silences) and bias <= 0.2):
             break
     assert "session 1: speaking protocol version 2" in out
     # Only the first tick is NaN (no earlier reel speed for an acceleration).
-    assert np.isnan(log["tension_measured"][0]).all() and rows > 900
+    assert np.isnan(log["tension_measured"][0]).all() and rows > 900, tried
     # Every value the exact conversion of what was sent; NaN only at the first tick and
     # after a silence of the bridge longer than 0.1 s (a host stall: no acceleration then).
-    matched, finite = _conversions_matched(log, truth, robot)
-    silences = int(np.sum(np.diff(truth["time"]) > 0.1))
     # On a loaded host a status can come too late for its tick (the tick then reads none:
     # NaN); most ticks read one.
-    assert matched == finite >= 0.9 * (len(log["time"]) - 1 - silences)
-    pt, T = truth["plant_time"], truth["tensions"]
-    run = (pt > 0.05) & (pt < 1.9)
+    assert matched == finite >= 0.9 * (len(log["time"]) - 1 - silences), tried
     # The truth moves (0.25-1.9 N std per cable measured: a comparison that says something).
     assert np.median(T[run].std(axis=0)) > 0.3
-    assert rms < 0.5, (rms, worst, corr, lags)
-    assert min(corr) > 0.9, (rms, worst, corr, lags)
+    assert rms < 0.5, tried
+    assert min(corr) > 0.9, tried
     # Unbiased: each cable's mean over the run within 0.2 N of the truth's (0.07 N measured).
-    measured = log["tension_measured"]
-    t = log["time"]
-    mean_measured = np.nanmean(measured[(t > 0.05) & (t < 1.9)], axis=0)
-    np.testing.assert_allclose(mean_measured, T[run].mean(axis=0), atol=0.2)
+    np.testing.assert_allclose(mean_measured, T[run].mean(axis=0), atol=0.2, err_msg=str(tried))
     # Not the truth copied: the conversion's model (acceleration from two statuses) differs.
     assert rms > 1e-4
