@@ -58,6 +58,50 @@ def tension_control_summary(log) -> str:
     return text + (f"; estimated tensions {estimate.min():.2f} to {estimate.max():.1f} N")
 
 
+def overload_summary(log, ceiling: float, overload: float = 0.0) -> str:
+    """A WARNING line when a cable's measured tension (log `tension_measured`, N; NaN where
+    there is no reading) went above the controller's ceiling `ceiling` (N,
+    controller.max_tension): on how many ticks, and per cable (1-based) its peak, when, and
+    its ticks above; "" when none did, or nothing was measured. `overload` (N, 0: off): the
+    model monitor's fault tension, said beside it. The dynamic plant's true tensions
+    (`tensions`) where nothing was measured."""
+    key = "tension_measured"
+    if key not in log or not np.isfinite(np.asarray(log[key], dtype=float)).any():
+        key = "tensions"
+    if key not in log:
+        return ""
+    T = np.asarray(log[key], dtype=float)
+    T = T.reshape(T.shape[0], -1)
+    if not T.size:
+        return ""
+    with np.errstate(invalid="ignore"):
+        above = np.where(np.isfinite(T), T, -np.inf) > ceiling
+    if not above.any():
+        return ""
+    time = np.asarray(log["time"], dtype=float).reshape(-1)
+    cables = []
+    for i in np.flatnonzero(above.any(axis=0)):
+        k = int(np.nanargmax(T[:, i]))
+        cables.append(f"cable {i + 1} up to {T[k, i]:.1f} N at t = {time[k]:.3f} s "
+                      f"({int(above[:, i].sum())} ticks)")
+    what = "measured" if key == "tension_measured" else "true (the dynamic plant's)"
+    stop = (f"; the model monitor stops a run at {overload:g} N (model_monitor.overload)"
+            if overload > 0 else "")
+    return (f"WARNING: a cable's {what} tension went ABOVE the ceiling "
+            f"controller.max_tension = {ceiling:g} N on {int(above.any(axis=1).sum())} of "
+            f"{T.shape[0]} ticks: {', '.join(cables)}{stop}")
+
+
+def print_overload(log, scenario, out) -> None:
+    """overload_summary of a run of `scenario` (its ceiling, and its monitor's overload
+    tension where the monitor runs), if a cable went above the ceiling."""
+    mon = scenario.model_monitor
+    ceiling = float(scenario.controller.max_tension)
+    line = overload_summary(log, ceiling, float(mon.overload) * ceiling if mon.enabled else 0.0)
+    if line:
+        print(line, file=out)
+
+
 def _spans(mask, time) -> list[tuple[float, float]]:
     """The (start, end) times (s) of each run of True ticks in `mask`."""
     m = np.concatenate([[False], np.asarray(mask, dtype=bool), [False]])

@@ -172,7 +172,7 @@ def _resolve(scenario: Scenario, source: str) -> ResolvedScenario:
         params = interference_params(scenario, robot)
     check_safety(scenario)
     d_min = pair_d_min(scenario, robot)
-    check_pairs_separable(scenario, robot, d_min)
+    check_pairs_separable(scenario, robot)
     limits = scenario.limits
     plant = scenario.plant
     simulated = isinstance(plant, SimulatedReels)
@@ -264,38 +264,27 @@ def check_swaps(swaps) -> None:
                             "started, so the run would not swap them; list each swap once")
 
 
-# Below this largest distance translation can give a pair, m, its cables cross at every
-# pose (0 up to round-off).
-CROSS_EVERYWHERE = 1e-3
-
-
-def check_pairs_separable(scenario: Scenario, robot: Robot, d_min) -> None:
+def check_pairs_separable(scenario: Scenario, robot: Robot) -> None:
     """ScenarioError for a watched pair that no platform translation separates: its cables
-    cross at every pose (largest distance under CROSS_EVERYWHERE: e.g. a swap that puts both
-    attachment points on the line through the reels), or, with the safety filter, never
-    reach their d_min (m, robot.pairs order), so the filter's margin is lost everywhere.
-    The message names the pair, the distances and the swaps that moved its cables."""
+    cross (or touch: closer than the robot's cable_diameter, at least 1 um) at every pose,
+    e.g. a swap that puts both attachment points on the line through the reels, so nothing
+    the controller does keeps them apart (it was only the d_u warning). The message names
+    the pair, the distance and the swaps that moved its cables."""
     from cdpm_drake.kernels.interference import translation_distance_bound
 
     if not robot.num_pairs:
         return
-    bound = translation_distance_bound(robot)
-    for k, ((i, j), g) in enumerate(zip(robot.pairs, bound)):
-        swaps = [list(s) for s in scenario.swaps if {i, j} & {int(c) for c in s}]
-        by = f" with swaps {swaps!r}" if swaps else ""
-        if g < CROSS_EVERYWHERE:
+    touching = max(float(robot.cable_diameter), 1e-6)
+    for (i, j), g in zip(robot.pairs, translation_distance_bound(robot)):
+        if g < touching:
+            swaps = [list(s) for s in scenario.swaps if {i, j} & {int(c) for c in s}]
+            by = f" with swaps {swaps!r}" if swaps else ""
             raise ScenarioError(
                 f"cables {i} and {j} of robot {robot.name!r}{by} cross at every pose: no "
-                f"platform translation takes them more than {1000 * g:.2f} mm apart, so "
-                "nothing can keep them apart (swap other cables, or ignore_pairs in the "
-                "robot file for cables that share a reel exit)")
-        if scenario.safety_filter.enabled and g < d_min[k]:
-            raise ScenarioError(
-                f"cables {i} and {j} of robot {robot.name!r}{by} are never d_min = "
-                f"{1000 * d_min[k]:.1f} mm apart: no platform translation takes them more "
-                f"than {1000 * g:.1f} mm apart, so the safety filter's pair margin is lost "
-                "at every pose (swap other cables, or set interference.pairs' d_min and d_l "
-                f"for pair [{i}, {j}] below {1000 * g:.1f} mm)")
+                f"platform translation takes them more than {1000 * g:.2f} mm apart (their "
+                f"diameter: {1000 * float(robot.cable_diameter):g} mm), so nothing keeps them "
+                "apart (swap other cables, or list them in the robot file's ignore_pairs if "
+                "they share a reel exit)")
 
 
 def scenario_operator(scenario: Scenario):

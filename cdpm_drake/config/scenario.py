@@ -300,6 +300,14 @@ class ModelMonitor:
     # three times the drive-torque sensor's noise (0.3 N) above a slack cable's zero, and
     # below the target's hard floor (controller.tension_floor).
     measured_slack: float = 1.0
+    # Where the plant measures the cables' tensions: a cable measured above this many times
+    # controller.max_tension for `ticks` ticks is overloaded, a fault (the run stops with
+    # zero reel velocity); 0: off. Above the ceiling but under this, the run goes on and its
+    # summary warns. 1.5: the ceiling is the controller's own bound, well under a cable's
+    # rating (the paper's robot's limiters); half as much again is a cable pulled where no
+    # command of the controller's puts it (a snag, a hand on the cable, a ringing stop),
+    # while a cable's overshoot at a knock (~20 % over its target) stays under it.
+    overload: float = 1.5
 
 
 OperatorConfig = typing.Union[NoOperator, ScriptedOperator, CsvOperator, SpringHandOperator]

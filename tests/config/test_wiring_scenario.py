@@ -744,8 +744,10 @@ def test_robot_file_platform_mass_is_what_the_cables_carry(tmp_path):
     from cdpm_drake.robot import resolve_robot_path
 
     path = tmp_path / "heavy.yaml"
-    path.write_text(resolve_robot_path("paper_7cable").read_text()
-                    + "\nplatform: {mass: 3.1}\n")
+    from helpers_robots import with_sections
+
+    path.write_text(with_sections(resolve_robot_path("paper_7cable").read_text(),
+                                  "platform: {mass: 3.1}"))
     s = _dynamic(robot=str(path), lock_rotation=True)
     log = sim(s, 0.004)
     assert np.abs(_force_residual(s, log, 0, 3.1)[:3]).max() < 1e-6
@@ -753,11 +755,14 @@ def test_robot_file_platform_mass_is_what_the_cables_carry(tmp_path):
 
 
 def _paper_with(tmp_path, extra, name="robot.yaml"):
-    """paper_7cable's file with `extra` (YAML sections) appended."""
+    """paper_7cable's file with `extra` (YAML sections) in place of its own sections of the
+    same names (as YAML's last-of-two-keys would have read them)."""
     from cdpm_drake.robot import resolve_robot_path
 
+    from helpers_robots import with_sections
+
     path = tmp_path / name
-    path.write_text(resolve_robot_path("paper_7cable").read_text() + "\n" + extra + "\n")
+    path.write_text(with_sections(resolve_robot_path("paper_7cable").read_text(), extra))
     return str(path)
 
 
