@@ -180,9 +180,33 @@ def safety_filter_summary(log) -> str:
             true = (np.asarray(log["pair_distances_true"], dtype=float)
                     - np.asarray(log["d_min"], dtype=float)).min(axis=1)
             text += f" (true {format_number(1000 * true.min())} mm)"
+        text += _closest_to_d_min(log)
     if np.isfinite(kappa).any():
         text += f"; smallest kinetostatic margin {kappa[np.isfinite(kappa)].min():.2f} N"
     return text
+
+
+def _closest_to_d_min(log) -> str:
+    """The pair behind the smallest pair margin, in the pair table's terms: a margin is a
+    distance less the pair's d_min (the safety filter's hard floor, not d_l or d_u), at the
+    filter's smoothed position; the table's distances are the distances themselves at the
+    estimated pose. "" without the pairs' distances and d_min in the log."""
+    if not all(k in log for k in ("pair_distances", "d_min", "pairs")):
+        return ""
+    d = np.asarray(log["pair_distances"], dtype=float)
+    d_min = np.asarray(log["d_min"], dtype=float).reshape(-1)
+    if d.ndim != 2 or not d.size or d.shape[1] != d_min.size:
+        return ""
+    over = d - d_min
+    if not np.isfinite(over).any():
+        return ""
+    k, q = np.unravel_index(np.nanargmin(over), over.shape)
+    i, j = (int(c) for c in np.asarray(log["pairs"])[q])
+    return (f" (a distance less its pair's d_min, at the filter's smoothed position; the "
+            f"pair table's distances are the distances themselves: the closest to its d_min "
+            f"was ({i},{j}), {format_number(1000 * d[k, q])} mm at t = "
+            f"{float(log['time'][k]):.3f} s against d_min {format_number(1000 * d_min[q])} "
+            f"mm)")
 
 
 def model_monitor_summary(log, monitor=None) -> str:
