@@ -82,8 +82,9 @@ def overload_summary(log, ceiling: float, overload: float = 0.0) -> str:
     cables = []
     for i in np.flatnonzero(above.any(axis=0)):
         k = int(np.nanargmax(T[:, i]))
+        n = int(above[:, i].sum())
         cables.append(f"cable {i + 1} up to {T[k, i]:.1f} N at t = {time[k]:.3f} s "
-                      f"({int(above[:, i].sum())} ticks)")
+                      f"({n} tick{'s' if n != 1 else ''})")
     what = "measured" if key == "tension_measured" else "true (the dynamic plant's)"
     stop = (f"; the model monitor stops a run at {overload:g} N (model_monitor.overload)"
             if overload > 0 else "")

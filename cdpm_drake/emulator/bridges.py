@@ -444,7 +444,8 @@ class _Record:
         if not over:
             return ""
         cables = ", ".join(f"cable {i + 1} up to {self.peak[i]:.2f} N at t = "
-                           f"{self.peak_time[i]:.3f} s ({int(self.over_ticks[i])} ticks)"
+                           f"{self.peak_time[i]:.3f} s ({int(self.over_ticks[i])} tick"
+                           f"{'s' if self.over_ticks[i] != 1 else ''})"
                            for i in over)
         return (f", ABOVE the ceiling controller.max_tension = {self.ceiling:g} N: {cables}")
 

@@ -308,8 +308,9 @@ def test_ticks_the_controller_drives_after_it_resumed_are_driven_ones_again():
     rows = np.flatnonzero(~stopped_rows)
     for i in over:
         k = rows[int(np.argmax(T[rows, i]))]
+        n = int((T[rows, i] > ceiling).sum())
         assert (f"cable {i + 1} up to {T[k, i]:.2f} N at t = {0.002 * k:.3f} s "
-                f"({int((T[rows, i] > ceiling).sum())} ticks)") in driven_part, driven_part
+                f"({n} tick{'s' if n != 1 else ''})") in driven_part, driven_part
 
 
 def test_a_session_within_the_ceiling_reports_no_overload():
