@@ -81,3 +81,33 @@ def test_a_cable_measured_above_the_overload_stops_the_run(tmp_path, capsys):
     assert float(m.group(1)) == round(float(time[-1]), 3) and len(time) <= 5
     assert (T[:, int(m.group(2)) - 1] > 16.5).all() and float(m.group(3)) > 16.5
     assert "the model monitor stops a run at 16.5 N (model_monitor.overload)" in captured.out
+
+
+def test_cdpm_runs_summary_repeats_the_warning(tmp_path, capsys, monkeypatch):
+    # `cdpm run`'s report is made from its log as simulate's is: a log whose cable 4 read
+    # 140 N (ceiling 100 N, overload 150 N: no fault) at t = 0.018 s ends "completed" with the
+    # warning (the issue's rehearsal reached 203 N and said only "run ended: completed").
+    from helpers_synthetic_log import synthetic_log
+
+    from cdpm_drake.cli.run import run_main
+    from cdpm_drake.config import load_scenario
+    from cdpm_drake.runs import realtime
+
+    log = synthetic_log(duration=0.1, realtime=True)
+    T = np.full((len(log["time"]), 7), 30.0)
+    T[8:12, 3] = [110.0, 140.0, 120.0, 101.0]
+    log["tension_measured"] = T
+
+    def fake_run(**kwargs):
+        return realtime.RunResult(log=log, timing={}, link={"sent": 51, "rejected": {}},
+                                  error=None, ending="completed", log_path=None,
+                                  tick_log_path=None)
+
+    monkeypatch.setattr(realtime, "run", fake_run)
+    scenario = load_scenario("exp1_no_interaction", "plant: !HardwareReels {}")
+    assert run_main(scenario=scenario, out_dir=tmp_path / "run") == 0
+    out = capsys.readouterr().out
+    assert "run ended: completed" in out
+    assert ("WARNING: a cable's measured tension went ABOVE the ceiling controller.max_tension "
+            "= 100 N on 4 of 51 ticks: cable 4 up to 140.0 N at t = 0.018 s (4 ticks); the "
+            "model monitor stops a run at 150 N (model_monitor.overload)") in out, out
