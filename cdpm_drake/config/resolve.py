@@ -194,16 +194,17 @@ def _resolve(scenario: Scenario, source: str) -> ResolvedScenario:
         files={field: path.read_bytes() for field, path in scenario_files(scenario).items()})
 
 
-def check_name(name) -> None:
-    """ScenarioError unless `name` is one folder name: a run's folder is runs/<name>/, and a
-    name with a path separator or `..` would put it elsewhere (`../../etc/x`)."""
+def check_name(name, folder: str = "runs/<name>/") -> None:
+    """ScenarioError unless `name` is one folder name: a run's folder is runs/<name>/ (a
+    sweep's `folder`), and a name with a path separator or `..` would put it elsewhere
+    (`../../etc/x`)."""
     import re
 
     if not (isinstance(name, str) and re.fullmatch(r"[A-Za-z0-9_.+-]+", name)
             and name.strip(".")):
         raise ScenarioError(
-            f"name must be one folder name of letters, digits, '_', '-', '.' and '+' (a run "
-            f"is written to runs/<name>/; no '/', '\\', spaces or '..'), got {name!r}")
+            f"name must be one folder name of letters, digits, '_', '-', '.' and '+' (it is "
+            f"written to {folder}; no '/', '\\', spaces or '..'), got {name!r}")
 
 
 def _or(value, default):

@@ -85,7 +85,7 @@ def test_a_cable_measured_above_the_overload_stops_the_run(tmp_path, capsys):
 
 def test_cdpm_runs_summary_repeats_the_warning(tmp_path, capsys, monkeypatch):
     # `cdpm run`'s report is made from its log as simulate's is: a log whose cable 4 read
-    # 140 N (ceiling 100 N, overload 150 N: no fault) at t = 0.018 s ends "completed" with the
+    # 140 N (ceiling 100 N, overload 200 N: no fault) at t = 0.018 s ends "completed" with the
     # warning (the issue's rehearsal reached 203 N and said only "run ended: completed").
     from helpers_synthetic_log import synthetic_log
 
@@ -110,4 +110,4 @@ def test_cdpm_runs_summary_repeats_the_warning(tmp_path, capsys, monkeypatch):
     assert "run ended: completed" in out
     assert ("WARNING: a cable's measured tension went ABOVE the ceiling controller.max_tension "
             "= 100 N on 4 of 51 ticks: cable 4 up to 140.0 N at t = 0.018 s (4 ticks); the "
-            "model monitor stops a run at 150 N (model_monitor.overload)") in out, out
+            "model monitor stops a run at 200 N (model_monitor.overload)") in out, out

@@ -138,6 +138,12 @@ def load_sweep_file(name_or_path) -> tuple[SweepFile, Path]:
                          f"valid metrics: {NUMERIC_METRICS}")
     if not sweep.name:
         sweep.name = path.stem
+    from cdpm_drake.config.resolve import check_name
+
+    try:  # its results go to runs/sweeps/<name>/: a name must not leave that folder
+        check_name(sweep.name, "runs/sweeps/<name>/")
+    except ScenarioError as e:
+        raise SweepError(f"{path}: {e}") from None
     return sweep, path
 
 
