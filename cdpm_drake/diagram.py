@@ -253,7 +253,9 @@ def build_diagram(scenario: Scenario | ResolvedScenario,
     if monitor_on:
         _add_model_monitor(builder, blocks, resolved, lengths, p_WP, R_WP if full else None,
                            force_sensor.GetOutputPort("F_H"), T,
-                           plant.GetOutputPort(TENSION_PORT) if damped else None)
+                           plant.GetOutputPort(TENSION_PORT)
+                           if _senses_tensions(scenario.plant, plant) else None,
+                           slack_from_tensions=damped)
 
     wirings = {}
     if options.loggers:
@@ -475,28 +477,38 @@ def _add_tension_damping(builder, blocks, resolved, command, lengths, tensions, 
     return block.GetOutputPort("reel_velocity_command")
 
 
+def overload_tension(scenario) -> float:
+    """The measured tension above which the model monitor calls a cable overloaded, N:
+    model_monitor.overload x controller.max_tension (0: off)."""
+    return float(scenario.model_monitor.overload) * float(scenario.controller.max_tension)
+
+
 def _add_model_monitor(builder, blocks, resolved, lengths, p_WP, R_WP, F_H, T,
-                       tensions=None):
+                       tensions=None, slack_from_tensions=True):
     """The model monitor (model_monitor.py) on the measurements and the estimates; tensions:
-    the plant's measured tensions, where it may have some."""
+    the plant's measured tensions, where it may have some: an overload there is a fault, and
+    with slack_from_tensions (the tension damping on) a slack reading too."""
     from cdpm_drake.kernels.kinetostatics import wrench_rows
     from cdpm_drake.kernels.model_monitor import monitor_params
 
     scenario, robot = resolved.scenario, resolved.robot
     mon = scenario.model_monitor
     estimate = "tension_distribution" in blocks
+    slacks = tensions is not None and slack_from_tensions and estimate
     params = monitor_params(
         robot, EA=robot.dynamics.EA if estimate else 0.0, slack_tension=mon.slack_tension,
         slack_length=mon.slack_length, fit_tolerance=mon.fit_tolerance,
         unholdable=mon.unholdable, ticks=mon.ticks, estimate=estimate,
         full_pose=R_WP is not None, rows=wrench_rows(robot),
         holdable=float(mon.holdable), slack_ticks=mon.slack_ticks,
-        measured_slack=float(mon.measured_slack) if tensions is not None and estimate
-        else 0.0)
-    # With tension control only: its target keeps every cable at tension_floor (4 N) or
-    # more, so a reading under measured_slack (1 N) is a slack cable; the translating
-    # controller keeps no floor (a cable may hold 0.6 N, taut).
-    measured = tensions is not None and estimate and mon.measured_slack > 0.0
+        measured_slack=float(mon.measured_slack) if slacks else 0.0,
+        overload=overload_tension(scenario) if tensions is not None else 0.0)
+    # Slack from measured tensions with tension control only: its target keeps every cable
+    # at tension_floor (4 N) or more, so a reading under measured_slack (1 N) is a slack
+    # cable; the translating controller keeps no floor (a cable may hold 0.6 N, taut). An
+    # overload is one whatever the controller.
+    measured = tensions is not None and ((slacks and mon.measured_slack > 0.0)
+                                         or overload_tension(scenario) > 0.0)
     block = blocks["model_monitor"] = FlatBlock(
         builder, "model_monitor", KERNEL_BLOCK_MAIN, lambda b: build_model_monitor(
             b, robot, params=params, full_pose=R_WP is not None, estimate=estimate,

@@ -122,3 +122,36 @@ def duplicate_yaml_keys(*, filename=None, data=None) -> list[str]:
     if root is not None:
         walk(root, "")
     return found
+
+
+def quoted_numbers(*, filename=None, data=None) -> list[tuple[str, int, str]]:
+    """Each quoted scalar of a YAML file or text that reads as a number (`mass: "3.0"`), as
+    (path, line, text), path like `platform.mass` or `reels[0][1]`; [] when there is none or
+    the YAML does not parse. Drake's loader turns such a string into a float without a
+    word, so a value the user quoted (perhaps meaning something else) passes unseen."""
+    import yaml
+
+    try:
+        text = data if data is not None else open(filename, encoding="utf-8").read()
+        root = yaml.compose(text, Loader=yaml.SafeLoader)
+    except (OSError, yaml.YAMLError, UnicodeDecodeError):
+        return []
+    found = []
+
+    def walk(node, path):
+        if isinstance(node, yaml.MappingNode):
+            for k, v in node.value:
+                walk(v, f"{path}.{k.value}" if path else str(k.value))
+        elif isinstance(node, yaml.SequenceNode):
+            for i, v in enumerate(node.value):
+                walk(v, f"{path}[{i}]")
+        elif isinstance(node, yaml.ScalarNode) and node.style in ("'", '"'):
+            try:
+                float(node.value)
+            except ValueError:
+                return
+            found.append((path, node.start_mark.line + 1, node.value))
+
+    if root is not None:
+        walk(root, "")
+    return found

@@ -23,3 +23,18 @@ def crossing_robot():
     return Robot(name="crossing", reels=np.array([[0, 2, 0], [-3, 1, -3], [0, -3, 0.0]]),
                  attachments=np.array([[0, 0, 0], [1, 1, 1], [0, -0.3, 0.0]]),
                  workspace=Workspace(np.array([-1.0, -1, -1]), np.array([1.0, 1, 1])))
+
+
+def with_sections(text: str, extra: str) -> str:
+    """A robot file's `text` with the top-level YAML sections of `extra` in place of its own
+    sections of the same names (as YAML's last-of-two-keys read them; a robot file refuses a
+    key written twice). A section is its key's line and the indented or comment lines under
+    it."""
+    keys = {line.split(":")[0] for line in extra.splitlines() if line[:1] not in (" ", "#", "")}
+    out, skipping = [], False
+    for line in text.splitlines():
+        if line[:1] not in (" ", "#", ""):
+            skipping = line.split(":")[0] in keys
+        if not skipping:
+            out.append(line)
+    return "\n".join(out) + "\n" + extra + "\n"

@@ -85,8 +85,9 @@ def info(*, robot: str = "paper_7cable", swaps=None, plot_dir=None, grid_step: f
     print(format_table(["pair", "distance (mm)", "largest (mm)"], rows), file=out)
     print("(the two are equal where the closest points are the attachment points; d_u must "
           "stay below 'largest' or that pair's force never switches off)", file=out)
-    path, grid, t_grid, grid_text = _print_statics(r, scenario, grid_step, out, base=base)
-    _print_wrench_feasibility(r, grid, t_grid, grid_text, out)
+    path, grid, t_grid, grid_text, solved = _print_statics(r, scenario, grid_step, out,
+                                                           base=base)
+    _print_wrench_feasibility(r, grid, t_grid, grid_text, out, solved)
     if plot_dir is None:
         return []
     from cdpm_drake.views.workspace_plots import plot_workspace
@@ -221,6 +222,9 @@ def _print_statics(r, scenario, step, out, base=None):
     from cdpm_drake.kernels.tension import step_grid
     from cdpm_drake.robot.statics import holding_tension
 
+    from cdpm_drake.kernels.tension import grid_points
+    from cdpm_drake.robot.statics import solver_points
+
     statics = robot_statics(r)
     mass = r.dynamics.mass
     grid = step_grid(r.workspace.lower, r.workspace.upper, step)
@@ -228,6 +232,16 @@ def _print_statics(r, scenario, step, out, base=None):
               for lo, hi in zip(r.workspace.lower, r.workspace.upper)]
     grid_text = (f"{100 * step:g} cm grid from the lower corner: {counts[0]} x {counts[1]} x "
                  f"{counts[2]} points")
+    slow = int(np.sum(solver_points(r, grid)))
+    solved = slow > INFO_MAX_SOLVER_POINTS
+    if solved:
+        # Milliseconds a point: a robot of every attachment at one point took 757 s here
+        # with no word. The coarse grid the load's check uses, said so.
+        n = INFO_SOLVER_GRID
+        grid = grid_points(r.workspace.lower, r.workspace.upper, n)
+        grid_text = (f"a coarser {n} x {n} x {n} grid, corners included: at {slow:,} of the "
+                     f"{100 * step:g} cm grid's {int(np.prod(counts)):,} points t* needs a "
+                     f"solver, ~{slow * SOLVER_SECONDS:.0f} s")
     print(f"statics of the level platform ({mass:g} kg at its centre, moments about the "
           f"centre); t* = the largest achievable minimum cable tension (N):", file=out)
     rank_note = ("" if statics.unreachable is None else
@@ -250,7 +264,7 @@ def _print_statics(r, scenario, step, out, base=None):
                                     grid=label, base=base, base_share=base_share):
         print(f"  warning: {message}", file=out)
     if scenario is None:
-        return None, grid, t_grid, grid_text
+        return None, grid, t_grid, grid_text, solved
     p0 = np.asarray(scenario.initial_position, dtype=float)
     print(f"  at the start {format_vector(p0, 2)} m: t* "
           f"{_t_star_text(r, p0, float(holding_tension(r, p0)))}", file=out)
@@ -264,7 +278,7 @@ def _print_statics(r, scenario, step, out, base=None):
           f"{_t_star_text(r, log['p'][k], t[k])} at t = {log['time'][k]:.3f} s, p = "
           f"{format_vector(log['p'][k])} m; {100 * np.mean(t >= INFO_FLOOR):.1f} % of the ticks at "
           f">= {INFO_FLOOR:g} N", file=out)
-    return log["p"], grid, t_grid, grid_text
+    return log["p"], grid, t_grid, grid_text, solved
 
 
 def _t_star_text(r, p, t) -> str:
@@ -339,19 +353,21 @@ def feasibility_shares(r, points, t_weight) -> list[list[float]]:
     return out
 
 
-def _print_wrench_feasibility(r, points, t_weight, grid_text, out) -> None:
+def _print_wrench_feasibility(r, points, t_weight, grid_text, out, solved=False) -> None:
     from cdpm_drake.kernels.tension import grid_points
     from cdpm_drake.robot.statics import holding_tension
 
     d = r.dynamics
-    if r.num_cables in (7, 8):  # compiled closed forms: the whole grid in about a second
+    if r.num_cables in (7, 8) and not solved:  # compiled closed forms: about a second
         where = f"on the same grid ({grid_text})"
     else:  # a solver per point and direction: a coarser grid, said so
         n = FEASIBILITY_GRID
         points = grid_points(r.workspace.lower, r.workspace.upper, n)
         t_weight = holding_tension(r, points)
-        where = (f"on a coarser {n} x {n} x {n} grid (corners included: {r.num_cables} cables "
-                 "need a solver per point)")
+        why = (f"{r.num_cables} cables need" if r.num_cables not in (7, 8) else
+               "this robot's statics need")
+        where = (f"on a coarser {n} x {n} x {n} grid (corners included: {why} a solver per "
+                 "point)")
     rows = [(f"{force:g}", *(f"{100 * share:.1f}" for share in shares))
             for force, shares in zip(FEASIBILITY_FORCES,
                                      feasibility_shares(r, points, t_weight))]
@@ -361,6 +377,14 @@ def _print_wrench_feasibility(r, points, t_weight, grid_text, out) -> None:
     print(format_table(["hand force (N)"] + [f"all cables >= {floor:g} N (%)"
                                              for floor in FEASIBILITY_FLOORS], rows), file=out)
 
+
+# The most points of the --grid at which `cdpm info` solves t* with Clarabel (milliseconds
+# each, robot.statics.solver_points; SOLVER_SECONDS measured on a degenerate 7-cable
+# robot, its 11^3 grid in 5 s): beyond, its statics use a coarse grid of INFO_SOLVER_GRID
+# points per axis (11^3, the load check's), a few seconds.
+INFO_MAX_SOLVER_POINTS = 2000
+INFO_SOLVER_GRID = 11
+SOLVER_SECONDS = 0.004
 
 # The most points `cdpm info --grid` computes statics on (~1 us a point and hand-force
 # direction for 7 and 8 cables: a few seconds at the default 5 cm, ~140 k points).

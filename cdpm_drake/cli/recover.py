@@ -38,6 +38,13 @@ def recover_log(run_dir, out=None) -> None:
         raise InputError(str(e)) from None
     cut = (f"the tail was cut: a partial last row of {tail['cut_bytes']} bytes left out"
            if tail["cut_bytes"] else "the tail was whole (no partial row)")
+    damaged = tail.get("damaged", 0)
+    if damaged:  # rows the file's damage garbled: said, never passed as data
+        rows = tail["damaged_ticks"]
+        shown = ", ".join(str(k) for k in rows[:5]) + (", ..." if len(rows) > 5 else "")
+        cut += (f"; but {damaged} of the {tail['ticks']} rows are DAMAGED (tick counter, "
+                f"clock or position/force/lengths unreadable: rows {shown}), kept as read "
+                "(NaN or wrong values there): the file was damaged, not only cut short")
     print(f"recovered {tail['ticks']} ticks of {tail['expected']} ({tail['ending']}); {cut}; "
           f"log: {path}", file=out)
 

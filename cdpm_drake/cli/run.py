@@ -7,8 +7,8 @@ from cdpm_drake.cli.arguments import (check_duration_arg, check_duration_tick, d
                                       load_scenario_arg, new_run_folder)
 from cdpm_drake.cli.errors import CliError
 from cdpm_drake.cli.meshcat import live_meshcat
-from cdpm_drake.cli.summaries import (model_monitor_summary, print_pair_summary,
-                                      safety_filter_summary)
+from cdpm_drake.cli.summaries import (model_monitor_summary, print_overload,
+                                      print_pair_summary, safety_filter_summary)
 
 
 def run_main(*, scenario, duration=None, out_dir=None, out=None, on_status=None,
@@ -58,6 +58,7 @@ def run_main(*, scenario, duration=None, out_dir=None, out=None, on_status=None,
             print(safety_filter_summary(result.log), file=out)
         if "model_status" in result.log:
             print(model_monitor_summary(result.log, scenario.model_monitor), file=out)
+        print_overload(result.log, scenario, out)
         if plots and result.log_path is not None:
             _plot(result.log, out_dir, out)
     if result.ending == "fault":

@@ -9,9 +9,10 @@ from cdpm_drake.cli.arguments import (check_duration_arg, check_duration_tick, c
                                       duration_flag, load_scenario_arg, new_run_folder)
 from cdpm_drake.cli.errors import CliError
 from cdpm_drake.cli.meshcat import live_meshcat, save_replay
-from cdpm_drake.cli.summaries import (model_monitor_summary, print_clipped,
-                                      print_dynamic_summary, print_pair_summary,
-                                      safety_filter_summary, tension_control_summary)
+from cdpm_drake.cli.summaries import (model_monitor_summary, print_overload,
+                                      print_clipped, print_dynamic_summary,
+                                      print_pair_summary, safety_filter_summary,
+                                      tension_control_summary)
 
 
 def simulate_main(*, scenario, duration=None, out_dir=None, progress=True, out=None,
@@ -54,6 +55,8 @@ def simulate_main(*, scenario, duration=None, out_dir=None, progress=True, out=N
         print(model_monitor_summary(log, scenario.model_monitor), file=out)
     if T and "tensions" in log:  # the dynamic plant's ground truth
         print_dynamic_summary(log, out)
+    if T:
+        print_overload(log, scenario, out)
     print(f"log: {path}", file=out)
     # A second Ctrl-C / SIGTERM while the outputs are written must not lose them: the first
     # one already decided the exit code.

@@ -58,6 +58,51 @@ def tension_control_summary(log) -> str:
     return text + (f"; estimated tensions {estimate.min():.2f} to {estimate.max():.1f} N")
 
 
+def overload_summary(log, ceiling: float, overload: float = 0.0) -> str:
+    """A WARNING line when a cable's measured tension (log `tension_measured`, N; NaN where
+    there is no reading) went above the controller's ceiling `ceiling` (N,
+    controller.max_tension): on how many ticks, and per cable (1-based) its peak, when, and
+    its ticks above; "" when none did, or nothing was measured. `overload` (N, 0: off): the
+    model monitor's fault tension, said beside it. The dynamic plant's true tensions
+    (`tensions`) where nothing was measured."""
+    key = "tension_measured"
+    if key not in log or not np.isfinite(np.asarray(log[key], dtype=float)).any():
+        key = "tensions"
+    if key not in log:
+        return ""
+    T = np.asarray(log[key], dtype=float)
+    T = T.reshape(T.shape[0], -1)
+    if not T.size:
+        return ""
+    with np.errstate(invalid="ignore"):
+        above = np.where(np.isfinite(T), T, -np.inf) > ceiling
+    if not above.any():
+        return ""
+    time = np.asarray(log["time"], dtype=float).reshape(-1)
+    cables = []
+    for i in np.flatnonzero(above.any(axis=0)):
+        k = int(np.nanargmax(T[:, i]))
+        n = int(above[:, i].sum())
+        cables.append(f"cable {i + 1} up to {T[k, i]:.1f} N at t = {time[k]:.3f} s "
+                      f"({n} tick{'s' if n != 1 else ''})")
+    what = "measured" if key == "tension_measured" else "true (the dynamic plant's)"
+    stop = (f"; the model monitor stops a run at {overload:g} N (model_monitor.overload)"
+            if overload > 0 else "")
+    return (f"WARNING: a cable's {what} tension went ABOVE the ceiling "
+            f"controller.max_tension = {ceiling:g} N on {int(above.any(axis=1).sum())} of "
+            f"{T.shape[0]} ticks: {', '.join(cables)}{stop}")
+
+
+def print_overload(log, scenario, out) -> None:
+    """overload_summary of a run of `scenario` (its ceiling, and its monitor's overload
+    tension where the monitor runs), if a cable went above the ceiling."""
+    mon = scenario.model_monitor
+    ceiling = float(scenario.controller.max_tension)
+    line = overload_summary(log, ceiling, float(mon.overload) * ceiling if mon.enabled else 0.0)
+    if line:
+        print(line, file=out)
+
+
 def _spans(mask, time) -> list[tuple[float, float]]:
     """The (start, end) times (s) of each run of True ticks in `mask`."""
     m = np.concatenate([[False], np.asarray(mask, dtype=bool), [False]])
@@ -136,9 +181,33 @@ def safety_filter_summary(log) -> str:
             true = (np.asarray(log["pair_distances_true"], dtype=float)
                     - np.asarray(log["d_min"], dtype=float)).min(axis=1)
             text += f" (true {format_number(1000 * true.min())} mm)"
+        text += _closest_to_d_min(log)
     if np.isfinite(kappa).any():
         text += f"; smallest kinetostatic margin {kappa[np.isfinite(kappa)].min():.2f} N"
     return text
+
+
+def _closest_to_d_min(log) -> str:
+    """The pair behind the smallest pair margin, in the pair table's terms: a margin is a
+    distance less the pair's d_min (the safety filter's hard floor, not d_l or d_u), at the
+    filter's smoothed position; the table's distances are the distances themselves at the
+    estimated pose. "" without the pairs' distances and d_min in the log."""
+    if not all(k in log for k in ("pair_distances", "d_min", "pairs")):
+        return ""
+    d = np.asarray(log["pair_distances"], dtype=float)
+    d_min = np.asarray(log["d_min"], dtype=float).reshape(-1)
+    if d.ndim != 2 or not d.size or d.shape[1] != d_min.size:
+        return ""
+    over = d - d_min
+    if not np.isfinite(over).any():
+        return ""
+    k, q = np.unravel_index(np.nanargmin(over), over.shape)
+    i, j = (int(c) for c in np.asarray(log["pairs"])[q])
+    return (f" (a distance less its pair's d_min, at the filter's smoothed position; the "
+            f"pair table's distances are the distances themselves: the closest to its d_min "
+            f"was ({i},{j}), {format_number(1000 * d[k, q])} mm at t = "
+            f"{float(log['time'][k]):.3f} s against d_min {format_number(1000 * d_min[q])} "
+            f"mm)")
 
 
 def model_monitor_summary(log, monitor=None) -> str:

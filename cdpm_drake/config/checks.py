@@ -24,6 +24,22 @@ def check_finite(value, field: str) -> None:
         raise ScenarioError(f"{field} must be a finite number, got {value!r}")
 
 
+# The longest a count of ticks a scenario sets may span, s: a sliding average or a
+# monitor's wait longer than this is no filter or watch (and a window of a million samples
+# would take terabytes of memory).
+MAX_TICKS_SPAN = 1.0
+
+
+def check_ticks(value, field: str, time_step: float, what: str) -> None:
+    """ScenarioError unless `value` is an integer count of ticks of `time_step` s from 1 to
+    MAX_TICKS_SPAN s's worth, naming the field, the value and the range."""
+    most = max(1, int(round(MAX_TICKS_SPAN / time_step)))
+    if isinstance(value, bool) or not isinstance(value, int) or not 1 <= value <= most:
+        raise ScenarioError(f"{field} must be an integer in 1..{most} ({what}, ticks of "
+                            f"time_step {time_step:g} s: at most {MAX_TICKS_SPAN:g} s), got "
+                            f"{value!r}")
+
+
 def check_duration(duration: float, time_step: float, field: str) -> None:
     """ScenarioError when `duration` (s) is shorter than one tick of `time_step` (s): the run
     would be the start tick alone."""
@@ -42,14 +58,16 @@ def check_safety(scenario: Scenario) -> None:
         check_finite(getattr(c, name), f"controller.{name}")
     if not 0 < float(c.tension_floor) < float(c.max_tension):
         raise ScenarioError(f"controller.tension_floor must be > 0 N and below "
-                            f"controller.max_tension = {c.max_tension!r} N, got "
-                            f"{c.tension_floor!r}")
+                            f"controller.max_tension = {c.max_tension!r} N"
+                            f"{default_said(c, 'max_tension')}, got {c.tension_floor!r}"
+                            f"{default_said(c, 'tension_floor')}")
     f = scenario.safety_filter
     check_finite(f.kinetostatic_floor, "safety_filter.kinetostatic_floor")
     if not 0 < float(f.kinetostatic_floor) < float(c.max_tension):
         raise ScenarioError(f"safety_filter.kinetostatic_floor must be > 0 N and below "
-                            f"controller.max_tension = {c.max_tension!r} N, got "
-                            f"{f.kinetostatic_floor!r}")
+                            f"controller.max_tension = {c.max_tension!r} N"
+                            f"{default_said(c, 'max_tension')}, got "
+                            f"{f.kinetostatic_floor!r}{default_said(f, 'kinetostatic_floor')}")
     check_finite(f.gamma, "safety_filter.gamma")
     if not 0 < float(f.gamma) <= 1:
         raise ScenarioError(f"safety_filter.gamma must lie in (0, 1] (the share of a "
@@ -82,11 +100,14 @@ def check_safety(scenario: Scenario) -> None:
                                 f"{getattr(mon, name)!r}")
     for name in ("slack_length", "fit_tolerance"):
         check_positive(getattr(mon, name), f"model_monitor.{name}")
+    check_finite(mon.overload, "model_monitor.overload")
+    if not (float(mon.overload) == 0 or float(mon.overload) > 1):
+        raise ScenarioError(f"model_monitor.overload must be 0 (off) or above 1 (times "
+                            f"controller.max_tension: a cable measured above it is "
+                            f"overloaded), got {mon.overload!r}")
     for name in ("ticks", "slack_ticks"):
-        value = getattr(mon, name)
-        if not (isinstance(value, int) and value >= 1):
-            raise ScenarioError(f"model_monitor.{name} must be an integer >= 1 tick, got "
-                                f"{value!r}")
+        check_ticks(getattr(mon, name), f"model_monitor.{name}", scenario.time_step,
+                    "ticks a condition must last to be a fault")
 
 
 def check_logistic_set(values: dict, names: dict, pair: str) -> None:
@@ -148,13 +169,15 @@ def check_controller(c: Controller, robot: Robot, plant) -> None:
     if not (is_number(c.min_tension) and math.isfinite(float(c.min_tension))
             and float(c.min_tension) >= float(c.tension_floor)):
         raise ScenarioError(f"controller.min_tension must be a finite number >= "
-                            f"controller.tension_floor = {c.tension_floor!r} N, got "
-                            f"{c.min_tension!r}")
+                            f"controller.tension_floor = {c.tension_floor!r} N"
+                            f"{default_said(c, 'tension_floor')}, got {c.min_tension!r}"
+                            f"{default_said(c, 'min_tension')}")
     if not (is_number(c.max_tension) and math.isfinite(float(c.max_tension))
             and float(c.max_tension) > float(c.min_tension)):
         raise ScenarioError(f"controller.max_tension must be a finite number above "
-                            f"controller.min_tension = {c.min_tension!r} N, got "
-                            f"{c.max_tension!r}")
+                            f"controller.min_tension = {c.min_tension!r} N"
+                            f"{default_said(c, 'min_tension')}, got {c.max_tension!r}"
+                            f"{default_said(c, 'max_tension')}")
 
 
 def default_start(robot: Robot) -> list[float]:
@@ -173,6 +196,14 @@ def start_text(scenario: Scenario, robot: Robot, defaulted=()) -> str:
         return (f"initial_position {centre!r} m (the default: the centre of the workspace box "
                 f"of robot {robot.name!r})")
     return f"initial_position {p0!r} m"
+
+
+def default_said(config, field: str) -> str:
+    """" (default value; the scenario does not change it)" when `config`'s field has its
+    dataclass default, for a message that blames it while another field is the one changed
+    (a tension_floor raised above the default min_tension)."""
+    return (" (default value; the scenario does not change it)"
+            if _default_note(config, field) else "")
 
 
 def _default_note(config, field: str) -> str:
@@ -279,6 +310,8 @@ def check_dynamic_reels(scenario: Scenario, robot: Robot, defaulted=()):
                 msg += (f"; the cables hold it tilted by plant.initial_rpy "
                         f"{np.round(tilt, 3).tolist()!r} rad")
         raise ScenarioError(msg)
+    check_start_fits_translation(scenario, robot, p0, dist.tensions, f"{start} with "
+                                 f"plant.initial_rpy {list(rpy)!r} rad")
     h_max = stable_time_step(robot, p0, rotation_from_rpy(rpy), dist.tensions,
                              locked=cfg.lock_rotation)
     if cfg.time_step > 0.5 * h_max:
@@ -291,3 +324,46 @@ def check_dynamic_reels(scenario: Scenario, robot: Robot, defaulted=()):
             + (f"; {cfg.time_step!r} s is plant.time_step's default"
                if _default_note(cfg, "time_step") else ""))
     return dist
+
+
+def check_start_fits_translation(scenario: Scenario, robot: Robot, p0, tensions,
+                                 start: str) -> None:
+    """ScenarioError when the translating controller (controller.pose: translation) cannot
+    read the dynamic plant's start: the encoder lengths of the platform turned by
+    plant.initial_rpy (stretched by the start `tensions`, N) fit no level platform within
+    plant.max_length_residual, so its first tick would stop on "cable lengths are
+    inconsistent with the robot" while the cause is the orientation. `start` names the pose
+    for the message."""
+    from cdpm_drake.kernels.kinematics import KinematicsError, forward_kinematics
+    from cdpm_drake.kernels.rotation import rotation_from_rpy
+
+    cfg = scenario.plant
+    if scenario.controller.pose != "translation" or not any(cfg.initial_rpy):
+        return  # the full pose estimates the orientation too; a level start has none
+
+    def misfit(rpy):
+        """Each cable's residual of the level fit to the start lengths turned by rpy, m."""
+        R0 = rotation_from_rpy(rpy)
+        rigid = np.linalg.norm(robot.reels - (p0 + robot.attachments @ R0.T), axis=1)
+        lengths = rigid / (1.0 + np.asarray(tensions, dtype=float) / robot.dynamics.EA)
+        p = forward_kinematics(robot, lengths, p_guess=p0, max_residual=math.inf)
+        return np.abs(np.linalg.norm(robot.reels - (p + robot.attachments), axis=1) - lengths)
+
+    bound = float(cfg.max_length_residual)
+    try:
+        # The orientation is the trouble only where the level start fits (the stretch alone
+        # can exceed a tight bound: the run's own check says so then).
+        residual = misfit(cfg.initial_rpy)
+        if residual.max() <= bound or misfit([0.0, 0.0, 0.0]).max() > bound:
+            return
+    except KinematicsError:
+        return  # no fit at all: the run's own check says so
+    cable = int(np.argmax(residual))
+    raise ScenarioError(
+        f"{start}: the platform's orientation is the trouble: controller.pose "
+        f"{scenario.controller.pose!r}{_default_note(scenario.controller, 'pose')} estimates "
+        f"a level platform, and the cable lengths of one turned by plant.initial_rpy fit no "
+        f"level one (the best fit leaves {1000 * residual[cable]:.1f} mm on cable "
+        f"{cable + 1}; plant.max_length_residual {1000 * float(cfg.max_length_residual):g} "
+        f"mm): give a smaller plant.initial_rpy, or controller.pose: full to estimate the "
+        "orientation too")

@@ -11,7 +11,8 @@ import numpy as np
 
 from cdpm_drake.config.checks import (check_controller, check_duration, check_dynamic_reels,
                                       check_finite, check_logistic_set, check_positive,
-                                      check_safety, default_start)
+                                      check_safety, check_ticks, default_said,
+                                      default_start)
 from cdpm_drake.config.plants import DynamicReels, SimulatedReels, check_tension_sensor
 from cdpm_drake.config.scenario import PairLogistic, Scenario, ScenarioError
 from cdpm_drake.config.yaml_io import is_number
@@ -87,6 +88,7 @@ def _resolve(scenario: Scenario, source: str) -> ResolvedScenario:
     if scenario.method == "paper":
         scenario = dataclasses.replace(scenario, safety_filter=dataclasses.replace(
             scenario.safety_filter, enabled=False))
+    check_name(scenario.name)
     robot = scenario_robot(scenario)
     check_positive(scenario.duration, "duration")
     check_positive(scenario.time_step, "time_step")
@@ -108,15 +110,15 @@ def _resolve(scenario: Scenario, source: str) -> ResolvedScenario:
         v = getattr(scenario.limits, name)
         if v is not None:
             check_positive(v, f"limits.{name}")
-    if not (isinstance(scenario.random_seed, int) and scenario.random_seed >= 0):
-        raise ScenarioError(f"random_seed must be an integer >= 0, got "
-                            f"{scenario.random_seed!r}")
+    seed = scenario.random_seed
+    if isinstance(seed, bool) or not (isinstance(seed, int) and 0 <= seed < 2**32):
+        # 32 bits: what every generator it seeds takes (numba's and numpy's legacy ones).
+        raise ScenarioError(f"random_seed must be an integer in 0..{2**32 - 1}, got {seed!r}")
     s = scenario.sensor
     check_positive(s.axial_range, "sensor.axial_range")
     check_positive(s.transverse_range, "sensor.transverse_range")
-    if not (isinstance(s.filter_window, int) and s.filter_window >= 1):
-        raise ScenarioError(f"sensor.filter_window must be an integer >= 1 sample, got "
-                            f"{s.filter_window!r}")
+    check_ticks(s.filter_window, "sensor.filter_window", scenario.time_step,
+                "samples of the sliding average")
     if len(s.axial_axis) != 3 or not np.linalg.norm(s.axial_axis) > 0:
         raise ScenarioError(f"sensor.axial_axis must be a non-zero [x, y, z], got "
                             f"{s.axial_axis!r}")
@@ -127,7 +129,8 @@ def _resolve(scenario: Scenario, source: str) -> ResolvedScenario:
             and float(gain) * scenario.time_step < 1.0):
         raise ScenarioError(
             f"controller.length_gain must be a number >= 0 1/s and below 1 / time_step = "
-            f"{1.0 / scenario.time_step:g} 1/s (0: the paper's open loop), got {gain!r}")
+            f"{1.0 / scenario.time_step:g} 1/s (0: the paper's open loop), got {gain!r}"
+            f"{default_said(scenario.controller, 'length_gain')}")
     check_controller(scenario.controller, robot, scenario.plant)
     scale = scenario.controller.tension_damping.gain_scale
     if not (is_number(scale) and math.isfinite(float(scale)) and float(scale) >= 0):
@@ -169,6 +172,7 @@ def _resolve(scenario: Scenario, source: str) -> ResolvedScenario:
         params = interference_params(scenario, robot)
     check_safety(scenario)
     d_min = pair_d_min(scenario, robot)
+    check_pairs_separable(scenario, robot)
     limits = scenario.limits
     plant = scenario.plant
     simulated = isinstance(plant, SimulatedReels)
@@ -188,6 +192,19 @@ def _resolve(scenario: Scenario, source: str) -> ResolvedScenario:
         defaulted=defaulted,
         # Read right after the robot and the operator were loaded from them.
         files={field: path.read_bytes() for field, path in scenario_files(scenario).items()})
+
+
+def check_name(name, folder: str = "runs/<name>/") -> None:
+    """ScenarioError unless `name` is one folder name: a run's folder is runs/<name>/ (a
+    sweep's `folder`), and a name with a path separator or `..` would put it elsewhere
+    (`../../etc/x`)."""
+    import re
+
+    if not (isinstance(name, str) and re.fullmatch(r"[A-Za-z0-9_.+-]+", name)
+            and name.strip(".")):
+        raise ScenarioError(
+            f"name must be one folder name of letters, digits, '_', '-', '.' and '+' (it is "
+            f"written to {folder}; no '/', '\\', spaces or '..'), got {name!r}")
 
 
 def _or(value, default):
@@ -228,6 +245,11 @@ def check_swaps(swaps) -> None:
         if len(swap) != 2:
             raise ScenarioError(f"swaps[{k}] must be two cable numbers [i, j], got {swap!r}")
         i, j = (int(c) for c in swap)
+        low = [c for c in (i, j) if c < 1]
+        if low:
+            raise ScenarioError(f"swaps[{k}] = {list(swap)!r}: {low[0]} is not a cable; "
+                                "cables are numbered from 1 (cable 1 is the robot file's "
+                                "first row)")
         if i == j:
             raise ScenarioError(f"swaps[{k}] = {list(swap)!r} swaps cable {i} with itself; "
                                 "give two different cables")
@@ -241,6 +263,29 @@ def check_swaps(swaps) -> None:
         listed = ", ".join(f"swaps[{k}] = {list(swaps[k])!r}" for k in ks)
         raise ScenarioError(f"{listed} undo each other: cable(s) {back} end where they "
                             "started, so the run would not swap them; list each swap once")
+
+
+def check_pairs_separable(scenario: Scenario, robot: Robot) -> None:
+    """ScenarioError for a watched pair that no platform translation separates: its cables
+    cross (or touch: closer than the robot's cable_diameter, at least 1 um) at every pose,
+    e.g. a swap that puts both attachment points on the line through the reels, so nothing
+    the controller does keeps them apart (it was only the d_u warning). The message names
+    the pair, the distance and the swaps that moved its cables."""
+    from cdpm_drake.kernels.interference import translation_distance_bound
+
+    if not robot.num_pairs:
+        return
+    touching = max(float(robot.cable_diameter), 1e-6)
+    for (i, j), g in zip(robot.pairs, translation_distance_bound(robot)):
+        if g < touching:
+            swaps = [list(s) for s in scenario.swaps if {i, j} & {int(c) for c in s}]
+            by = f" with swaps {swaps!r}" if swaps else ""
+            raise ScenarioError(
+                f"cables {i} and {j} of robot {robot.name!r}{by} cross at every pose: no "
+                f"platform translation takes them more than {1000 * g:.2f} mm apart (their "
+                f"diameter: {1000 * float(robot.cable_diameter):g} mm), so nothing keeps them "
+                "apart (swap other cables, or list them in the robot file's ignore_pairs if "
+                "they share a reel exit)")
 
 
 def scenario_operator(scenario: Scenario):
@@ -311,6 +356,16 @@ def pair_d_min(scenario: Scenario, robot: Robot) -> np.ndarray:
     d_l = np.full(P, float(cfg.default.d_l))
     d_min = np.full(P, math.nan)
     field = ["interference.default.d_min"] * P
+    first = {}
+    for n, override in enumerate(cfg.pairs):
+        k = _override_position(n, override, robot)
+        if k in first:  # the second would silently win over the first, field by field
+            i, j = robot.pairs[k]
+            raise ScenarioError(
+                f"interference.pairs[{n}].pair = {list(override.pair)!r} overrides pair "
+                f"({i},{j}) again (interference.pairs[{first[k]}].pair = "
+                f"{list(cfg.pairs[first[k]].pair)!r}): give each pair one entry")
+        first[k] = n
     if cfg.default.d_min is not None:
         check_finite(cfg.default.d_min, "interference.default.d_min")
         d_min[:] = float(cfg.default.d_min)

@@ -25,8 +25,11 @@ def check_yaml_text(source: str, **where) -> None:
         raise ScenarioError(f"{source}: the file is empty (or only comments); a scenario is a "
                             "mapping of fields, e.g. `robot: paper_7cable` "
                             "(docs/scenario_reference.md lists them)")
-    if raw is None:
-        return
+    if raw is None:  # `null`, `~` or only comments: Drake's loader says "YAML root was a
+        # <class 'NoneType'>"
+        raise ScenarioError(f"{source}: the overlay is empty (YAML {where['data'].strip()!r} "
+                            "is no field); an overlay is a mapping of fields, e.g. "
+                            "--scenario-text 'duration: 2'")
     if not isinstance(raw, dict):
         raise ScenarioError(f"{source}: a scenario is a mapping of fields (`field: value` "
                             f"lines), got a YAML {type(raw).__name__}: {raw!r:.80}")
@@ -36,8 +39,12 @@ def check_yaml_text(source: str, **where) -> None:
     if twice:
         raise ScenarioError(f"{source}: the key {twice[0]}: write each key once (YAML would "
                             "keep the last one and drop the first without a word)")
+    from cdpm_drake.text import quoted_numbers
+
+    quoted = frozenset(path for path, _, _ in quoted_numbers(filename=where.get("filename"),
+                                                              data=where.get("data")))
     try:
-        check_yaml(raw, Scenario, "")
+        check_yaml(raw, Scenario, "", quoted)
     except ScenarioError as e:
         raise ScenarioError(f"{source}: {with_line(e, where.get('filename'))}") from None
 
@@ -85,9 +92,10 @@ def is_number(v) -> bool:
         return False
 
 
-def check_yaml(value, schema, field: str) -> None:
+def check_yaml(value, schema, field: str, quoted=frozenset()) -> None:
     """Raise ScenarioError naming the field, the value and the valid choices where raw YAML
-    data `value` does not fit the type `schema`."""
+    data `value` does not fit the type `schema`. `quoted`: the fields written as quoted
+    strings (text.quoted_numbers), which a number field refuses."""
     from cdpm_drake.text import did_you_mean
 
     name = field or "the scenario"
@@ -107,7 +115,7 @@ def check_yaml(value, schema, field: str) -> None:
         types = typing.get_type_hints(schema)
         for key, item in value.items():
             if key != "_tag":
-                check_yaml(item, types[key], f"{field}.{key}" if field else key)
+                check_yaml(item, types[key], f"{field}.{key}" if field else key, quoted)
         return
     origin, args = typing.get_origin(schema), typing.get_args(schema)
     if origin is typing.Union:
@@ -116,25 +124,28 @@ def check_yaml(value, schema, field: str) -> None:
                 return
             rest = [a for a in args if a is not type(None)]
             return check_yaml(value, rest[0] if len(rest) == 1 else typing.Union[tuple(rest)],
-                               field)
+                              field, quoted)
         tags = ["!" + a.__name__ for a in args]
         tag = value.get("_tag") if isinstance(value, dict) else None
         if tag is None:
             try:  # an untagged entry is the first member, as yaml_load_typed reads it
-                return check_yaml(value, args[0], field)
+                return check_yaml(value, args[0], field, quoted)
             except ScenarioError as e:
                 raise _field_error(getattr(e, "field", field),
                                    _untagged_hint(e, value, args, tags, field)) from None
         if tag not in tags:
             raise _field_error(field, f"{field}: unknown type {tag!r}{did_you_mean(tag, tags)} "
                                       f"(valid {field} types: {tags})")
-        return check_yaml(value, args[tags.index(tag)], field)
+        return check_yaml(value, args[tags.index(tag)], field, quoted)
     if origin is list:
         if not isinstance(value, list):
             raise _field_error(field, f"{name} must be a list, got {value!r}")
         for k, item in enumerate(value):
-            check_yaml(item, args[0], f"{field}[{k}]")
+            check_yaml(item, args[0], f"{field}[{k}]", quoted)
         return
+    if schema is float and isinstance(value, str) and field in quoted:
+        raise _field_error(field, f"{name} must be a number, got the string {value!r} "
+                                  f"(quoted); write it without quotes: {value}")
     if schema is float and not is_number(value):
         raise _field_error(field, f"{name} must be a number, got {value!r}")
     if schema is int and not (isinstance(value, int) and not isinstance(value, bool)):

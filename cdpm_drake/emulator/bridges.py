@@ -216,6 +216,9 @@ class DynamicBridge:
         self.time = 0.0                             # s stepped so far (the bridge's clock)
         self.operator_start = None                  # `time` of the first enabling command, s
         self._settings = scenario.plant
+        # The controller's ceiling of a cable's tension, N: a true tension above it is
+        # reported (a rehearsal that overloaded a cable must not read as a clean one).
+        self.ceiling = float(scenario.controller.max_tension)
         self._initial = self._context.Clone()       # the start: what reset() goes back to
         self._clear_record()
 
@@ -234,9 +237,12 @@ class DynamicBridge:
         # the operator pulls on, which can raise tensions the run itself never saw).
         m = self.robot.num_cables
         self._accel = np.zeros(m)                   # reel accelerations, m/s^2 (last step)
-        self.driven = _Record(m)
-        self.stopped = _Record(m)
-        self.stop_time = None                       # plant time the reels were stopped, s
+        self.driven = _Record(m, self.ceiling)
+        self.stopped = _Record(m, self.ceiling)
+        self.stop_time = None                       # plant time the reels were first stopped, s
+        self.stops = 0                              # times the reels were stopped
+        self.resumes = 0                            # times the controller enabled them again
+        self._reels_stopped = False                 # now stopped (the ticks go to `stopped`)
         self._observe()
 
     def reset(self) -> None:
@@ -277,6 +283,9 @@ class DynamicBridge:
         self.enabled = bool(enable) and self.faults == 0
         if was and not self.enabled:
             self._stopped()
+        if self.enabled and self._reels_stopped:  # the controller resumed: driven again
+            self._reels_stopped = False
+            self.resumes += 1
         self._apply(velocity if self.enabled else np.zeros_like(self.command))
         if self.enabled and self.operator_start is None:
             self.operator_start = self.time
@@ -291,8 +300,13 @@ class DynamicBridge:
         self._apply(np.zeros_like(self.command))
 
     def _stopped(self) -> None:
-        if self.stop_time is None:  # the first stop ends what the controller drove
+        # Every tick from here to the next enabling command is a stopped one; the ticks the
+        # controller drives after it resumed are driven ones again.
+        if self.stop_time is None:
             self.stop_time = self.plant_time
+        if not self._reels_stopped:
+            self.stops += 1
+        self._reels_stopped = True
 
     def _apply(self, velocity) -> None:
         if not np.array_equal(velocity, self.command):
@@ -336,7 +350,7 @@ class DynamicBridge:
         trace = (math.cos(y) * math.cos(p) + math.sin(y) * math.sin(p) * math.sin(r)
                  + math.cos(y) * math.cos(r) + math.cos(p) * math.cos(r))
         tilt = math.acos(max(-1.0, min(1.0, (trace - 1) / 2)))
-        record = self.driven if self.stop_time is None else self.stopped
+        record = self.stopped if self._reels_stopped else self.driven
         record.observe(T, slack, tilt, self.plant_time)
         self._true_tensions = np.array(T)
 
@@ -372,9 +386,18 @@ class DynamicBridge:
         were stopped (disabled or faulted), if the plant ran on. Times on the plant's clock (0
         at the session's first enabling command, as the controller's log)."""
         text = f"dynamic plant over {self.driven.ticks} ticks: {self.driven.describe()}"
-        if self.stopped.ticks:
+        if self.resumes:
+            text = (f"dynamic plant over {self.driven.ticks} ticks the controller drove (it "
+                    f"resumed {self.resumes} time{'s' if self.resumes > 1 else ''} after a "
+                    f"stop): {self.driven.describe()}")
+        if self.stopped.ticks and not self.resumes:
             text += (f"; after the reels stopped at t = {self.stop_time:.3f} s, "
                      f"{self.stopped.ticks} ticks: {self.stopped.describe()}")
+        elif self.stopped.ticks:
+            stops = f"{self.stops} stop{'s' if self.stops > 1 else ''}"
+            text += (f"; while the reels were stopped ({stops}, the first at t = "
+                     f"{self.stop_time:.3f} s), {self.stopped.ticks} ticks: "
+                     f"{self.stopped.describe()}")
         return text + f" (plant time 0..{self.plant_time:.3f} s)"
 
 
@@ -382,8 +405,12 @@ class _Record:
     """What the cables went through over some ticks: tensions (N), slack ticks, tilt (rad);
     times on the plant's clock, s."""
 
-    def __init__(self, m: int):
+    def __init__(self, m: int, ceiling: float = math.inf):
         self.ticks = 0
+        self.ceiling = ceiling                      # N: tensions above it are reported
+        self.peak = np.zeros(m)                     # each cable's largest tension, N
+        self.peak_time = np.zeros(m)                # and when, s
+        self.over_ticks = np.zeros(m, dtype=int)    # ticks above the ceiling per cable
         self.min_tension = math.inf
         self.max_tension = 0.0
         self.slack_ticks = np.zeros(m, dtype=int)
@@ -397,6 +424,9 @@ class _Record:
         self.max_tension = max(self.max_tension, float(T.max()))
         self.slack_ticks += slack
         self.first_slack[slack & np.isnan(self.first_slack)] = now
+        higher = T > self.peak
+        self.peak[higher], self.peak_time[higher] = T[higher], now
+        self.over_ticks += T > self.ceiling
         if tilt > self.max_tilt:
             self.max_tilt, self.max_tilt_time = tilt, now
 
@@ -405,5 +435,17 @@ class _Record:
                           for i, n in enumerate(self.slack_ticks) if n)
         return (f"tensions {self.min_tension:.2f}..{self.max_tension:.2f} N, slack ticks per "
                 f"cable {slack or 'none'}, largest tilt {math.degrees(self.max_tilt):.2f} deg "
-                f"at t = {self.max_tilt_time:.3f} s")
+                f"at t = {self.max_tilt_time:.3f} s{self.overload()}")
+
+    def overload(self) -> str:
+        """", ABOVE the ceiling ...: cable 3 up to 203.10 N at t = 4.210 s (57 ticks)", or ""
+        when no cable's tension went above the ceiling."""
+        over = [i for i in range(self.peak.size) if self.over_ticks[i]]
+        if not over:
+            return ""
+        cables = ", ".join(f"cable {i + 1} up to {self.peak[i]:.2f} N at t = "
+                           f"{self.peak_time[i]:.3f} s ({int(self.over_ticks[i])} tick"
+                           f"{'s' if self.over_ticks[i] != 1 else ''})"
+                           for i in over)
+        return (f", ABOVE the ceiling controller.max_tension = {self.ceiling:g} N: {cables}")
 

@@ -252,6 +252,30 @@ def read_tick_log(path) -> dict[str, np.ndarray]:
     return {name: np.array(table[name]) for name in dtype.names}
 
 
+def damaged_rows(table: dict, time_step: float, finite=("p", "F_H", "lengths")) -> np.ndarray:
+    """A bool per row of a read tick log (read_tick_log): True where the row cannot be what
+    the writer wrote: its tick out of the sequence the other rows keep (tick k + the
+    median offset), its time not the tick's (tick x time_step, within half a tick) or not
+    finite, its wall clock not finite, or NaN in a signal of `finite` (the position, the
+    hand force and the lengths are numbers on every tick a run logs). Bytes overwritten in
+    the file's middle read as such rows; read_tick_log keeps them as they read."""
+    tick = np.asarray(table.get("tick", np.zeros(0)), dtype=np.int64).reshape(-1)
+    n = tick.size
+    if not n:
+        return np.zeros(0, dtype=bool)
+    offset = int(np.median(tick - np.arange(n)))
+    bad = tick != np.arange(n) + offset
+    t = np.asarray(table["time"], dtype=float).reshape(-1)
+    with np.errstate(invalid="ignore", over="ignore"):
+        bad |= ~np.isfinite(t) | ~(np.abs(t - tick * time_step) <= time_step / 2)
+        bad |= ~np.isfinite(np.asarray(table["wall"], dtype=float).reshape(-1))
+    for key in finite:
+        if key in table:
+            values = np.asarray(table[key], dtype=float).reshape(n, -1)
+            bad |= np.isnan(values).any(axis=1)
+    return bad
+
+
 def tick_log_tail(path) -> dict:
     """{'ticks': whole rows in the file, 'cut_bytes': bytes of a partial last row (a writer
     killed mid-write), which read_tick_log leaves out}."""

@@ -20,7 +20,11 @@ controller already has:
   fit_tolerance: beyond it the pose estimate no longer fits the lengths;
 - t*, the largest minimum tension with which the cables could hold the weight and the
   measured hand force at the estimated pose (kinetostatics.margin): below -unholdable no
-  tension holds the platform against that hand.
+  tension holds the platform against that hand;
+- the measured tension, where the plant has one, against the cables' overload (a multiple
+  of the controller's ceiling max_tension): a cable pulled that far above what the
+  controller keeps it under is overloaded, whatever the controller believes (its estimate
+  comes from lengths, which a ringing or snagged cable does not show).
 
 A condition that lasts `ticks` consecutive ticks is a fault (ModelFault, naming the cable, the
 reason and the numbers); a slack cable where t* says the cables can hold the hand (t* >=
@@ -42,13 +46,16 @@ from cdpm_drake.kernels.full_pose import held_wrench
 _jit = numba.njit(cache=True, error_model="numpy")
 
 # monitor_tick's status / reason codes (the cable is reported beside them).
-OK, SLACK, MISFIT, UNHOLDABLE = 0, 1, 2, 3
-REASONS = ("ok", "slack cable", "lengths no longer fit the pose", "hand force cannot be held")
+OK, SLACK, MISFIT, UNHOLDABLE, OVERLOAD = 0, 1, 2, 3, 4
+REASONS = ("ok", "slack cable", "lengths no longer fit the pose", "hand force cannot be held",
+           "cable overloaded")
 
 # Parameters (a flat array, `monitor_params`).
 (M_EA, M_SLACK_TENSION, M_SLACK_LENGTH, M_FIT, M_UNHOLDABLE, M_TICKS, M_ESTIMATE, M_FULL,
- M_MASS, M_HANDLE, M_ROWS, M_HOLDABLE, M_SLACK_TICKS, M_MEASURED) = (
-    0, 1, 2, 3, 4, 5, 6, 7, 8, 9, 12, 13, 14, 15)
+ M_MASS, M_HANDLE, M_ROWS, M_HOLDABLE, M_SLACK_TICKS, M_MEASURED, M_OVERLOAD) = (
+    0, 1, 2, 3, 4, 5, 6, 7, 8, 9, 12, 13, 14, 15, 16)
+# The memory: ticks of slack, misfit, unholdable, overload.
+MEMORY = 4
 
 
 class ModelFault(RuntimeError):
@@ -58,43 +65,46 @@ class ModelFault(RuntimeError):
 
 def monitor_params(robot, *, EA, slack_tension, slack_length, fit_tolerance, unholdable,
                    ticks, estimate: bool, full_pose: bool, rows: int, holdable: float,
-                   slack_ticks: int, measured_slack: float = 0.0) -> np.ndarray:
+                   slack_ticks: int, measured_slack: float = 0.0,
+                   overload: float = 0.0) -> np.ndarray:
     """The monitor's parameters: EA (N; 0: no modelled stretch), the thresholds (N, m, m, N),
     the ticks a condition must last, whether there is a tension estimate and a full pose,
     the platform's mass (kg) and handle (m, platform frame), the wrench rows (3 or 6), the t*
     (N) from which the cables hold the hand and the ticks a slack cable must last there, and
-    the measured tension (N) below which a cable is slack (0: the monitor reads no measured
-    tensions)."""
+    the measured tension (N) below which a cable is slack (0: no slack from measured
+    tensions), and the measured tension (N) above which a cable is overloaded (0: none)."""
     d = robot.dynamics
     return np.array([EA, slack_tension, slack_length, fit_tolerance, unholdable, ticks,
                      1.0 if estimate else 0.0, 1.0 if full_pose else 0.0, d.mass, *d.handle,
-                     rows, holdable, slack_ticks, measured_slack], dtype=float)
+                     rows, holdable, slack_ticks, measured_slack, overload], dtype=float)
 
 
 def monitor_sizes(m: int, full_pose: bool, estimate: bool, measured: bool = False) -> dict:
     """x: lengths (m), p (3), F_H (3), and R (9) for the full pose, the tension estimate (m)
-    with one, the measured tensions (m) with them, then the memory: counters (3); out:
-    status (1), cable (1, 1-based, 0 none), value (1: the number behind it, N or m), t* (1,
-    N), residual (m, m), next memory (3)."""
+    with one, the measured tensions (m) with them, then the memory: counters (MEMORY);
+    out: status (1), cable (1, 1-based, 0 none), value (1: the number behind it, N or m), t*
+    (1, N), residual (m, m), next memory (MEMORY)."""
     x = m + 6 + (9 if full_pose else 0) + (m if estimate else 0) + (m if measured else 0)
-    return {"x": x + 3, "out": m + 7, "memory": 3, "memory_at": m + 4}
+    return {"x": x + MEMORY, "out": m + 4 + MEMORY, "memory": MEMORY, "memory_at": m + 4}
 
 
 @_jit
 def monitor_tick(reels, attachments, params, scratch, x, out):
     """One tick (module docstring). x = [l (m) m, p (3) m, F_H (3) N, (full pose:) R (9),
-    (with a tension estimate:) T_est (m) N, (params[M_MEASURED] > 0:) T_measured (m) N,
-    memory: ticks of slack, misfit, unholdable (3)]; a cable with a finite measured tension
-    is slack below params[M_MEASURED], whatever the estimate says;
-    out = [status, cable (1-based), value, t* (N), residual (m) m, next memory (3)];
+    (with a tension estimate:) T_est (m) N, (params[M_MEASURED] > 0 or params[M_OVERLOAD]
+    > 0:) T_measured (m) N, memory: ticks of slack, misfit, unholdable, overload (MEMORY)];
+    a cable with a finite measured tension is slack below params[M_MEASURED] (where > 0),
+    whatever the estimate says, and overloaded above params[M_OVERLOAD] (where > 0);
+    out = [status, cable (1-based), value, t* (N), residual (m) m, next memory (MEMORY)];
     scratch: kinetostatics.margin_scratch(m). The status is the condition that has lasted
-    its ticks (a fault), OK otherwise; where several have, the first of SLACK, MISFIT,
-    UNHOLDABLE. A slack cable counts after params[M_TICKS] ticks where the statics at the
-    estimated pose hold the measured hand force with less than params[M_HOLDABLE] in every
-    cable (t* below it: the slack is the hand's doing and lasts), after params[M_SLACK_TICKS]
-    where they hold it with more (the controller takes the slack of a knock up again: a hand
-    that hits the platform with 40 N at once slackens a cable for a few milliseconds whatever
-    the controller does). Returns the status."""
+    its ticks (a fault), OK otherwise; where several have, the first of OVERLOAD, SLACK,
+    MISFIT, UNHOLDABLE (an overloaded cable first: it may snap). A slack cable counts
+    after params[M_TICKS] ticks where the statics at the estimated pose hold the measured
+    hand force with less than params[M_HOLDABLE] in every cable (t* below it: the slack is
+    the hand's doing and lasts), after params[M_SLACK_TICKS] where they hold it with more
+    (the controller takes the slack of a knock up again: a hand that hits the platform with
+    40 N at once slackens a cable for a few milliseconds whatever the controller does).
+    Returns the status."""
     m = reels.shape[0]
     l = x[0:m]
     p = x[m:m + 3]
@@ -110,8 +120,9 @@ def monitor_tick(reels, attachments, params, scratch, x, out):
     T = x[k:k + m] if estimate else x[0:m]
     measured_slack = params[M_MEASURED]
     measured = measured_slack > 0.0
+    overload = params[M_OVERLOAD]
     k_measured = k + m if estimate else k
-    mem = x[x.shape[0] - 3:]
+    mem = x[x.shape[0] - 4:]
     EA = params[M_EA]
     w = np.empty(6)
     held_wrench(R, params[M_MASS:M_MASS + 4], F, np.zeros(3), w)
@@ -122,7 +133,11 @@ def monitor_tick(reels, attachments, params, scratch, x, out):
     r = out[4:4 + m]
     slack_cable, slack_value = -1, 0.0
     misfit_cable, misfit_value = -1, 0.0
+    over_cable, over_value = -1, 0.0
     for i in range(m):
+        if overload > 0.0 and x[k_measured + i] > overload and (
+                over_cable < 0 or x[k_measured + i] > over_value):  # NaN: no reading
+            over_cable, over_value = i, x[k_measured + i]
         stretched = l[i] * (1.0 + T[i] / EA) if (estimate and EA > 0.0) else l[i]
         r[i] = L[i] - stretched
         if measured and math.isfinite(x[k_measured + i]):
@@ -142,12 +157,15 @@ def monitor_tick(reels, attachments, params, scratch, x, out):
     unholdable = t_star < -params[M_UNHOLDABLE]
     counts = (mem[0] + 1.0 if slack_cable >= 0 else 0.0,
               mem[1] + 1.0 if misfit_cable >= 0 else 0.0,
-              mem[2] + 1.0 if unholdable else 0.0)
-    out[4 + m], out[5 + m], out[6 + m] = counts
+              mem[2] + 1.0 if unholdable else 0.0,
+              mem[3] + 1.0 if over_cable >= 0 else 0.0)
+    out[4 + m], out[5 + m], out[6 + m], out[7 + m] = counts
     status, cable, value = OK, 0, 0.0
     n = params[M_TICKS]
     slack_n = n if t_star < params[M_HOLDABLE] else params[M_SLACK_TICKS]
-    if counts[0] >= slack_n:
+    if counts[3] >= n:
+        status, cable, value = OVERLOAD, over_cable + 1, over_value
+    elif counts[0] >= slack_n:
         status, cable, value = SLACK, slack_cable + 1, slack_value
     elif counts[1] >= n:
         status, cable, value = MISFIT, misfit_cable + 1, misfit_value
@@ -158,12 +176,17 @@ def monitor_tick(reels, attachments, params, scratch, x, out):
 
 
 def fault_message(status: int, cable: int, value: float, *, ticks: int, time_step: float,
-                  estimate: bool, p, F_H=None, measured: bool = False) -> str:
+                  estimate: bool, p, F_H=None, measured: bool = False,
+                  overload: float = 0.0) -> str:
     """The words of a monitor fault: the cable (1-based), the reason, the number and for how
     many ticks (of time_step s) it lasted; measured: the slack cable's value is its
-    measured tension."""
+    measured tension; overload: the tension (N) an overloaded cable is above."""
     lasting = f"for {ticks} ticks ({1000 * ticks * time_step:.3g} ms)"
     where = f"at p = {np.round(np.asarray(p, dtype=float), 4).tolist()} m"
+    if status == OVERLOAD:
+        return (f"cable {cable} is overloaded: its measured tension is {value:.1f} N, above "
+                f"{overload:g} N (model_monitor.overload x controller.max_tension) {lasting}, "
+                f"{where}")
     if status == SLACK:
         what = (f"its measured tension is {value:.2f} N" if measured else
                 f"its tension estimate is {value:.2f} N" if estimate else

@@ -74,6 +74,19 @@ def load_robot(path: str | Path) -> Robot:
     if not isinstance(raw, dict):
         raise RobotError(f"{src}: expected a mapping with fields {list(REQUIRED_FIELDS)}, "
                          f"got {type(raw).__name__}")
+    from cdpm_drake.text import duplicate_yaml_keys, quoted_numbers
+
+    twice = duplicate_yaml_keys(filename=src)
+    if twice:  # as a scenario file's: YAML keeps the last and drops the first silently
+        raise RobotError(f"{src}: the key {twice[0]}: write each key once (YAML would keep "
+                         "the last one and drop the first without a word)")
+    # Every number of a robot file is a float or an int: a quoted one ("3.0") is a string
+    # Drake's loader would convert without a word; only the name is text.
+    quoted = [q for q in quoted_numbers(filename=src) if q[0] != "name"]
+    if quoted:
+        where, line, text = quoted[0]
+        raise RobotError(f"{src}: line {line}: {where} must be a number, got the string "
+                         f"{text!r} (quoted); write it without quotes: {text}")
     missing = [k for k in REQUIRED_FIELDS if k not in raw]
     if missing:
         valid = [f.name for f in dataclasses.fields(RobotSchema)]

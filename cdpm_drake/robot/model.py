@@ -78,6 +78,11 @@ class Dynamics:
         return float(self.coulomb_friction) / (float(self.bandwidth) * float(self.reel_inertia))
 
 
+# The platform masses a robot file may give, kg: below 10 g no platform carries a handle
+# and a force sensor (1e-12 is a unit slip), above 10 t no cable robot of this kind holds it.
+MIN_MASS, MAX_MASS = 0.01, 10_000.0
+
+
 def validate_dynamics(d: Dynamics, src: str) -> Dynamics:
     """The checked Dynamics (arrays as float arrays); RobotError naming field and value."""
     def positive(value, field, unit, allow_zero=False):
@@ -87,6 +92,10 @@ def validate_dynamics(d: Dynamics, src: str) -> Dynamics:
                              f"got {plain(value)!r}")
 
     positive(d.mass, "platform.mass", "kg")
+    if not MIN_MASS <= float(d.mass) <= MAX_MASS:
+        raise RobotError(f"{src}: platform.mass must lie in [{MIN_MASS:g}, {MAX_MASS:g}] kg "
+                         f"(a platform carries a handle and a force sensor, and cables hold "
+                         f"it), got {float(d.mass):g} kg")
     I = d.inertia
     if not (is_sequence(I) and len(I) == 3 and all(is_sequence(r) and len(r) == 3 for r in I)
             and all(is_finite(c) for r in I for c in r)):

@@ -32,6 +32,28 @@ def max_min_tensions(robot, points, wrenches) -> np.ndarray:
     return out
 
 
+def solver_points(robot, points) -> np.ndarray:
+    """A bool per point of points (N, 3) m: True where t* of the level platform needs
+    Clarabel (`max_min_tension`'s LP, milliseconds a point) rather than the compiled closed
+    forms (about a microsecond): a nullspace of three or more dimensions, e.g. more than
+    eight cables, or a wrench matrix of low rank (every attachment at one point: rank 3). A
+    grid of a hundred thousand such points takes minutes."""
+    points = np.ascontiguousarray(np.reshape(points, (-1, 3)), dtype=float)
+    if not len(points):
+        return np.zeros(0, dtype=bool)
+    out = np.empty((len(points), 1))
+    max_min_grid(np.ascontiguousarray(robot.reels), np.ascontiguousarray(robot.attachments),
+                 points, gravity_wrench(robot.dynamics.mass)[None, :], out)
+    unsolved = np.isnan(out[:, 0])
+    # Where the closed forms do not apply, a nullspace of 0-2 dimensions is quick anyway.
+    if not unsolved.any():
+        return unsolved
+    sv = np.linalg.svd(wrench_matrix(robot, points[int(np.argmax(unsolved))]),
+                       compute_uv=False)
+    rank = int(np.sum(sv > RANK_TOL * sv[0])) if sv[0] > 0 else 0  # nullspace_form's rank
+    return unsolved if robot.num_cables - rank >= 3 else np.zeros(len(points), dtype=bool)
+
+
 def holding_tension(robot, points, mass: float | None = None) -> np.ndarray:
     """t* (N) of the level platform at points (..., 3) m holding its own weight: mass (kg,
     default the robot file's platform mass) at its centre, moments about the centre, no other

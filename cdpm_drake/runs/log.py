@@ -140,9 +140,12 @@ def collect_log(diagram, context, scenario: Scenario | ResolvedScenario, robot) 
 def log_from_tick_log(tick_path, scenario: Scenario | ResolvedScenario,
                       robot) -> tuple[dict, dict, dict]:
     """docs/LOG_FORMAT.md from a run's ticks.bin: (log without the ending keys, timing,
-    {"ticks": whole rows read, "cut_bytes": bytes of a partial last row left out})."""
+    {"ticks": whole rows read, "cut_bytes": bytes of a partial last row left out,
+    "damaged": rows read that the file's damage garbled (tick_log.damaged_rows), kept as
+    read, "damaged_ticks": their row numbers})."""
     from cdpm_drake.diagram import LOGGED
-    from cdpm_drake.hardware.tick_log import read_tick_log, realtime_stats, tick_log_tail
+    from cdpm_drake.hardware.tick_log import (damaged_rows, read_tick_log, realtime_stats,
+                                              tick_log_tail)
 
     resolved = resolve_scenario(scenario)
     scenario = resolved.scenario
@@ -151,6 +154,9 @@ def log_from_tick_log(tick_path, scenario: Scenario | ResolvedScenario,
     raw = read_tick_log(tick_path) if tick_path.exists() else {}
     tail = tick_log_tail(tick_path) if tick_path.exists() else {"ticks": 0, "cut_bytes": 0}
     T = scenario.time_step
+    damaged = damaged_rows(raw, T) if raw else np.zeros(0, dtype=bool)
+    tail = dict(tail, damaged=int(damaged.sum()),
+                damaged_ticks=np.flatnonzero(damaged).tolist())
     timing = realtime_stats(raw, T) if raw else {}
     signals = {key: raw[key] for key, _, _ in LOGGED if key in raw}
     log = assemble_log(raw.get("time", np.zeros(0)), signals, resolved, robot)

@@ -5,8 +5,8 @@ import numpy as np
 
 from cdpm_drake.kernels.call import bind, owned
 from cdpm_drake.kernels.kinetostatics import margin_scratch
-from cdpm_drake.kernels.model_monitor import (ModelFault, OK, SLACK, fault_message,
-                                              monitor_sizes, monitor_tick)
+from cdpm_drake.kernels.model_monitor import (M_MEASURED, M_OVERLOAD, ModelFault, OK, SLACK,
+                                              fault_message, monitor_sizes, monitor_tick)
 from cdpm_drake.systems.kernel_system import KernelSystem, build_kernel_block
 
 
@@ -25,7 +25,7 @@ def build_model_monitor(builder, robot, *, params, full_pose, estimate, time_ste
     a cable has no reading), read where params says (model_monitor.monitor_params)."""
     m = robot.num_cables
     s = monitor_sizes(m, full_pose, estimate, measured)
-    measured_at = s["x"] - 3 - m
+    measured_at = s["x"] - s["memory"] - m
     reels, attachments = owned(robot.reels), owned(robot.attachments)
     par = owned(params)
     scratch = margin_scratch(m)
@@ -40,11 +40,14 @@ def build_model_monitor(builder, robot, *, params, full_pose, estimate, time_ste
 
     def failed(status, x, out):
         cable = int(out[1])
-        reading = measured and status == SLACK and np.isfinite(x[measured_at + cable - 1])
+        # A slack cable's value is its measured tension where the monitor reads slack from
+        # them (an overload alone wires them in too).
+        reading = (measured and params[M_MEASURED] > 0 and status == SLACK
+                   and np.isfinite(x[measured_at + cable - 1]))
         raise ModelFault(fault_message(
             int(status), cable, float(out[2]), ticks=int(out[at + int(status) - 1]),
             time_step=time_step, estimate=estimate, p=x[m:m + 3], F_H=x[m + 3:m + 6],
-            measured=bool(reading)))
+            measured=bool(reading), overload=float(params[M_OVERLOAD])))
 
     inputs = [("cable_lengths", m), ("p_WP", 3), ("F_H", 3)]
     if full_pose:

@@ -224,3 +224,67 @@ def test_a_robot_given_as_a_folder_says_so(tmp_path, capsys):
 def test_recover_of_a_folder_that_does_not_exist_says_so(tmp_path, capsys):
     assert _main(["recover", str(tmp_path / "nodir")]) == 1
     assert "does not exist" in capsys.readouterr().err
+
+
+def _tick_stream(run_dir, rows=51):
+    """A `cdpm run` folder as a killed run leaves it: scenario.yaml and a ticks.bin of `rows`
+    whole rows (exp1 on the reel bridge; the position, hand force, lengths and distances
+    written as the real-time loop's sink writes them, tick = t / time_step)."""
+    from cdpm_drake.config import load_scenario, scenario_robot, scenario_to_yaml
+    from cdpm_drake.hardware.tick_log import TickLogWriter, tick_log_header
+
+    scenario = load_scenario("exp1_no_interaction", "plant: !HardwareReels {}\nduration: 0.1")
+    run_dir.mkdir()
+    (run_dir / "scenario.yaml").write_text(scenario_to_yaml(scenario))
+    P = scenario_robot(scenario).num_pairs
+    with TickLogWriter(run_dir / "ticks.bin", {"p": 3, "F_H": 3, "lengths": 7,
+                                               "pair_distances": P}) as writer:
+        for k in range(rows):
+            writer.append(k * scenario.time_step, {"p": [1.5, 2.0, 1.0], "F_H": [0, 0, 0],
+                                                   "lengths": np.ones(7),
+                                                   "pair_distances": np.full(P, 0.1)}, tick=k)
+    return tick_log_header(run_dir / "ticks.bin")
+
+
+def test_recover_counts_the_rows_the_damage_garbled(tmp_path, capsys):
+    # Three rows in the middle overwritten with 0xFF bytes (NaN floats, tick -1): before,
+    # "the tail was whole" and nothing else, the NaN rows passed as data.
+    run_dir = tmp_path / "run"
+    header = _tick_stream(run_dir)
+    data = bytearray((run_dir / "ticks.bin").read_bytes())
+    row = header["dtype"].itemsize
+    start = header["data_offset"] + 20 * row
+    data[start:start + 3 * row] = b"\xff" * (3 * row)
+    (run_dir / "ticks.bin").write_bytes(bytes(data))
+    assert _main(["recover", str(run_dir)]) == 0
+    out = capsys.readouterr().out
+    assert ("recovered 51 ticks of 51 (completed); the tail was whole (no partial row); but 3 "
+            "of the 51 rows are DAMAGED (tick counter, clock or position/force/lengths "
+            "unreadable: rows 20, 21, 22)") in out, out
+
+
+def test_recover_of_an_undamaged_stream_says_only_that_the_tail_was_whole(tmp_path, capsys):
+    run_dir = tmp_path / "run"
+    _tick_stream(run_dir)
+    assert _main(["recover", str(run_dir)]) == 0
+    out = capsys.readouterr().out
+    assert "the tail was whole (no partial row); log:" in out and "DAMAGED" not in out
+
+
+def test_a_scenario_name_never_puts_the_run_folder_outside_runs(tmp_path, capsys,
+                                                                monkeypatch):
+    # `name: ../../etc/x` wrote runs/../../etc/x/<stamp>/: two levels above runs/.
+    work = tmp_path / "a" / "b"
+    work.mkdir(parents=True)
+    monkeypatch.chdir(work)
+    (work / "s.yaml").write_text("name: ../../etc/x\nduration: 0.01\n")
+    assert _main(["simulate", "s.yaml", "--no-progress"]) == 1
+    assert "name must be one folder name" in capsys.readouterr().err
+    assert not (tmp_path / "etc").exists() and not (work / "runs").exists()
+
+
+def test_a_null_overlay_says_it_is_empty(capsys):
+    assert _main(["simulate", "exp1_no_interaction", "--scenario-text", "null",
+                  "--duration", "0.01", "--no-progress"]) == 1
+    err = capsys.readouterr().err
+    assert "the overlay is empty" in err and "NoneType" not in err, err

@@ -320,3 +320,36 @@ def test_the_colour_bar_stands_beside_the_slices_and_the_legend_below_them(which
     legend = fig.legends[0].get_window_extent(renderer)
     assert [t.get_text() for t in fig.legends[0].get_texts()] == ["path (projected)", "start"]
     assert all(legend.y1 <= ax.get_tightbbox(renderer).y0 for ax in slices)
+
+
+def test_info_of_a_robot_whose_statics_need_a_solver_everywhere_uses_a_coarse_grid(
+        capsys, tmp_path):
+    # Every attachment at the platform's centre: the wrench matrix has rank 3, a nullspace of
+    # 4 dimensions, so t* needs Clarabel at every point (robot.statics.solver_points), ~4 ms
+    # each: the 5 cm grid's 51 x 65 x 43 = 142,545 points took minutes with no word (757 s
+    # before it was stopped). Now the statics and the feasibility table use the coarse grids
+    # (11^3 and 5^3), said so, and the share is the one HiGHS finds on the same 11^3 points.
+    from cdpm_drake.data import ROBOTS_DIR
+    from cdpm_drake.kernels.tension import grid_points
+    from cdpm_drake.robot.statics import solver_points
+
+    text = (ROBOTS_DIR / "paper_7cable.yaml").read_text()
+    start, end = text.index("attachments:"), text.index("# The virtual wall")
+    path = tmp_path / "point.yaml"
+    path.write_text(text[:start] + "attachments:\n" + "  - [0.0, 0.0, 0.0]\n" * 7 + text[end:])
+    r = load_robot(path)
+    grid = step_grid(r.workspace.lower, r.workspace.upper, 0.05)
+    assert len(grid) == 51 * 65 * 43 and solver_points(r, grid).all()
+    assert not solver_points(load_robot("paper_7cable"), grid).any()
+    assert cli.main(["info", str(path)]) == 0
+    out = capsys.readouterr().out
+    m = re.search(r"held with every cable >= 5 N on ([0-9.]+) % of the workspace box \(a "
+                  r"coarser 11 x 11 x 11 grid, corners included: at 142,545 of the 5 cm grid's "
+                  r"142,545 points t\* needs a solver, ~570 s\)", out)
+    assert m, out
+    coarse = grid_points(r.workspace.lower, r.workspace.upper, 11)
+    t = np.array([highs_t_star(wrench_matrix(r, p), gravity_wrench(r.dynamics.mass))
+                  for p in coarse])
+    assert float(m.group(1)) == pytest.approx(100 * np.mean(t >= 5.0), abs=0.05)
+    assert ("wrench feasibility on a coarser 5 x 5 x 5 grid (corners included: this robot's "
+            "statics need a solver per point)") in out

@@ -522,3 +522,27 @@ def test_safety_filter_and_model_monitor_summaries_count_each_code():
     monitor["model_status"][:] = 0
     assert model_monitor_summary(monitor).startswith(
         "model monitor: the model fitted on all 6 ticks;")
+
+
+def test_the_smallest_pair_margin_names_its_pair_and_its_distance_beside_the_table():
+    # A hardware summary printed a minimum distance of 58.03 mm in the pair table beside
+    # "smallest pair margin above d_min 0.81 mm": two different numbers with no word of which
+    # is which. The margin is a distance less the pair's d_min (here pair (5,7)'s 50 mm, under
+    # its d_l), the table's the distance itself; the line now names the pair closest to its
+    # d_min with its distance. Two pairs: (1,3) down to 58.03 mm against d_min 50 mm (8.03 mm
+    # above), (5,7) down to 50.83 mm against d_min 50 mm (0.83 mm above, at t = 0.004 s).
+    from cdpm_drake.cli.summaries import safety_filter_summary
+
+    log = {"time": np.arange(4) * 0.002, "filter_status": np.zeros((4, 1)),
+           "filter_binding": np.zeros((4, 1)),
+           "pair_margin": np.array([[0.01], [0.002], [0.00081], [0.003]]),
+           "kappa": np.full((4, 1), 5.0), "velocity": np.zeros((4, 3)),
+           "max_velocity": np.array(0.5), "pairs": np.array([[1, 3], [5, 7]]),
+           "d_min": np.array([0.05, 0.05]),
+           "pair_distances": np.array([[0.06, 0.06], [0.05803, 0.055], [0.059, 0.05083],
+                                       [0.06, 0.052]])}
+    text = safety_filter_summary(log)
+    assert ("smallest pair margin above d_min 0.81 mm (a distance less its pair's d_min, at "
+            "the filter's smoothed position; the pair table's distances are the distances "
+            "themselves: the closest to its d_min was (5,7), 50.83 mm at t = 0.004 s against "
+            "d_min 50.00 mm)") in text, text

@@ -293,8 +293,9 @@ def test_an_unknown_field_in_a_file_gives_its_line_and_the_closest_name(tmp_path
                                       "got nan"),
     ("{limits: {max_velocity: 0.0}}", "limits.max_velocity must be a finite number > 0, "
                                       "got 0.0"),
-    ("{sensor: {filter_window: 0}}", "sensor.filter_window must be an integer >= 1 sample, "
-                                     "got 0"),
+    ("{sensor: {filter_window: 0}}", "sensor.filter_window must be an integer in 1..500 "
+                                     "(samples of the sliding average, ticks of time_step "
+                                     "0.002 s: at most 1 s), got 0"),
     ("{sensor: {noise_std: -1.0}}", "sensor.noise_std must be >= 0 N, got -1.0"),
     ("{sensor: {axial_axis: [0, 0, 0]}}", "sensor.axial_axis must be a non-zero [x, y, z], "
                                           "got [0.0, 0.0, 0.0]"),
@@ -404,7 +405,8 @@ def test_a_message_about_a_defaulted_start_says_default(tmp_path):
 
 
 def test_a_negative_random_seed_is_refused_at_load():
-    with pytest.raises(ScenarioError, match=r"random_seed must be an integer >= 0, got -1"):
+    with pytest.raises(ScenarioError,
+                       match=r"random_seed must be an integer in 0\.\.4294967295, got -1"):
         load_scenario("exp1_no_interaction", overlay_text="random_seed: -1")
 
 
@@ -434,12 +436,16 @@ _TENSION = "plant: !DynamicReels {{}}\ncontroller: {{pose: full, tension_control
                             "tension no cable is commanded below), got -1.5"),
     ("tension_floor: .inf", "controller.tension_floor must be a finite number > 0 N (the "
                             "tension no cable is commanded below), got inf"),
+    # A field the scenario leaves at its default is said to be (issue 42).
     ("min_tension: 2.5", "controller.min_tension must be a finite number >= "
-                         "controller.tension_floor = 4.0 N, got 2.5"),
+                         "controller.tension_floor = 4.0 N (default value; the scenario does "
+                         "not change it), got 2.5"),
     ("tension_floor: 12.0", "controller.min_tension must be a finite number >= "
-                            "controller.tension_floor = 12.0 N, got 10.0"),
+                            "controller.tension_floor = 12.0 N, got 10.0 (default value; the "
+                            "scenario does not change it)"),
     ("max_tension: 10.0", "controller.max_tension must be a finite number above "
-                          "controller.min_tension = 10.0 N, got 10.0"),
+                          "controller.min_tension = 10.0 N (default value; the scenario does "
+                          "not change it), got 10.0"),
 ])
 def test_the_tension_floors_and_ceiling_are_checked_at_load(setting, message):
     """0 < tension_floor <= min_tension < max_tension, each message naming the field and the

@@ -744,8 +744,10 @@ def test_robot_file_platform_mass_is_what_the_cables_carry(tmp_path):
     from cdpm_drake.robot import resolve_robot_path
 
     path = tmp_path / "heavy.yaml"
-    path.write_text(resolve_robot_path("paper_7cable").read_text()
-                    + "\nplatform: {mass: 3.1}\n")
+    from helpers_robots import with_sections
+
+    path.write_text(with_sections(resolve_robot_path("paper_7cable").read_text(),
+                                  "platform: {mass: 3.1}"))
     s = _dynamic(robot=str(path), lock_rotation=True)
     log = sim(s, 0.004)
     assert np.abs(_force_residual(s, log, 0, 3.1)[:3]).max() < 1e-6
@@ -753,11 +755,14 @@ def test_robot_file_platform_mass_is_what_the_cables_carry(tmp_path):
 
 
 def _paper_with(tmp_path, extra, name="robot.yaml"):
-    """paper_7cable's file with `extra` (YAML sections) appended."""
+    """paper_7cable's file with `extra` (YAML sections) in place of its own sections of the
+    same names (as YAML's last-of-two-keys would have read them)."""
     from cdpm_drake.robot import resolve_robot_path
 
+    from helpers_robots import with_sections
+
     path = tmp_path / name
-    path.write_text(resolve_robot_path("paper_7cable").read_text() + "\n" + extra + "\n")
+    path.write_text(with_sections(resolve_robot_path("paper_7cable").read_text(), extra))
     return str(path)
 
 
@@ -1647,6 +1652,35 @@ def test_the_monitor_reads_measured_tensions_where_the_plant_has_them():
     assert cable - 1 == int(np.argmin(log["tension_measured"][-1]))
     assert run(DynamicReels(), measured_slack=0.0)[0] is None
     assert run(DynamicReels(tension_sensor="none"), measured_slack=1000.0)[0] is None
+
+
+@covers("Scenario.model_monitor.overload")
+def test_the_monitor_stops_a_cable_measured_above_its_overload():
+    """exp2's start on the dynamic plant, the translating controller, no hand: its drive
+    torques read 5-25 N. With the ceiling controller.max_tension at 10 N, overload 2 (20 N)
+    stops the run after `ticks` ticks naming the cable read highest; 3 (30 N: above every
+    reading) and 0 (off) run on, as does a plant without a tension sensor."""
+    from cdpm_drake.config import Controller, DynamicReels
+
+    def run(plant, overload):
+        scenario = dataclasses.replace(
+            load_scenario("exp2_interaction", None), plant=plant,
+            controller=Controller(max_tension=10.0),
+            safety_filter=SafetyFilter(kinetostatic_floor=3.0),
+            operator=ScriptedOperator(times=[0.0, 1.0], forces=[[0.0] * 3, [0.0] * 3]),
+            model_monitor=ModelMonitor(overload=overload))
+        return _monitor_fault(scenario, 0.1)
+
+    fault, log = run(DynamicReels(), 2.0)
+    assert "is overloaded: its measured tension is" in str(fault), str(fault)
+    assert "above 20 N" in str(fault) and "for 5 ticks" in str(fault)
+    cable = int(str(fault).split("cable ")[1].split(" ")[0])
+    assert cable - 1 == int(np.argmax(log["tension_measured"][-1]))
+    assert (log["tension_measured"][:, cable - 1] > 20.0).all()
+    _, quiet = run(DynamicReels(), 3.0)
+    assert quiet["tension_measured"].max() < 30.0  # why 3 runs on
+    assert run(DynamicReels(), 3.0)[0] is None and run(DynamicReels(), 0.0)[0] is None
+    assert run(DynamicReels(tension_sensor="none"), 2.0)[0] is None
 
 
 # --- the dynamic plant's tension sensor and the damping block ----------------------------------

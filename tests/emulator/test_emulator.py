@@ -240,6 +240,88 @@ def test_the_dynamic_summary_keeps_what_happened_after_the_reels_stopped_apart()
     assert summary.endswith("(plant time 0..0.400 s)"), summary
 
 
+def _reference_truth(resolved, command, switches, duration):
+    """The plant alone under its own Simulator, its command `command` or zero between the
+    `switches` times (s; on from 0, off at the first, on at the second...): its logged
+    ground truth to `duration` s (rows every 2 ms, the emulator's ticks)."""
+    from pydrake.systems.analysis import Simulator
+    from pydrake.systems.framework import DiagramBuilder
+    from pydrake.systems.primitives import TrajectorySource
+    from pydrake.trajectories import PiecewisePolynomial
+
+    from cdpm_drake.diagram import make_plant
+    from cdpm_drake.systems.plants.dynamic_plant import ground_truth_log
+
+    times = [0.0, *switches, duration + 1.0]
+    columns = [command if k % 2 == 0 else np.zeros(7) for k in range(len(times))]
+    builder = DiagramBuilder()
+    plant = builder.AddNamedSystem("reels", make_plant(resolved))
+    source = builder.AddSystem(TrajectorySource(PiecewisePolynomial.ZeroOrderHold(
+        times, np.column_stack(columns))))
+    builder.Connect(source.get_output_port(), plant.GetInputPort("reel_velocity_command"))
+    diagram = builder.Build()
+    simulator = Simulator(diagram)
+    simulator.AdvanceTo(duration)
+    return ground_truth_log(diagram, simulator.get_context())
+
+
+def test_ticks_the_controller_drives_after_it_resumed_are_driven_ones_again():
+    # Driven 0.2 s, stopped 0.1 s, resumed (enabled again) for 0.1 s, as the controller does
+    # after a watchdog stop the bridge answered. Before, every tick after the first stop was
+    # counted "after the reels stopped", the resumed driving's slack included; the reference
+    # is the plant alone under its own Simulator with the same command switches. The ceiling
+    # (controller.max_tension) is set between the driven and the stopped peak tensions: the
+    # report names the cables above it, with their peaks and ticks, per part.
+    from cdpm_drake.config import resolve_scenario
+
+    command = np.array([0.05, -0.05, 0.05, -0.05, 0.05, -0.05, 0.0])
+    truth = _reference_truth(_dynamic_resolved(), command, [0.2, 0.3], 0.4)
+    T, slack = truth["tensions"][:201], truth["slack"][:201].astype(bool)
+    stopped_rows = np.zeros(201, dtype=bool)
+    stopped_rows[101:151] = True  # plant ticks 0.202..0.300 s
+    ceiling = round(float(T[~stopped_rows].max()) - 1.0)
+    resolved = resolve_scenario(load_scenario(
+        "exp2_interaction", f"{{plant: !DynamicReels {{}}, operator: !ScriptedOperator "
+        f"{{times: [0.0, 0.2], forces: [[0, 0, 0], [3.0, -2.0, 4.0]]}}, controller: "
+        f"{{max_tension: {ceiling}}}}}"))
+    bridge = E.DynamicBridge(resolved)
+    for enable, ticks in ((True, 100), (False, 50), (True, 50)):
+        bridge.set_command(command, enable=enable)
+        for _ in range(ticks):
+            bridge.step(0.002)
+    assert bridge.driven.ticks == 151 and bridge.stopped.ticks == 50  # before: 101 and 100
+    assert bridge.stops == 1 and bridge.resumes == 1
+    assert bridge.stop_time == pytest.approx(0.2)
+    for record, rows in ((bridge.driven, ~stopped_rows), (bridge.stopped, stopped_rows)):
+        assert record.max_tension == pytest.approx(T[rows].max(), abs=1e-9)
+        assert record.slack_ticks.tolist() == slack[rows].sum(axis=0).astype(int).tolist()
+        np.testing.assert_array_equal(record.over_ticks, (T[rows] > ceiling).sum(axis=0))
+    summary = bridge.summary()
+    assert summary.startswith("dynamic plant over 151 ticks the controller drove (it resumed "
+                              "1 time after a stop): "), summary
+    assert "; while the reels were stopped (1 stop, the first at t = 0.200 s), 50 ticks: " \
+        in summary, summary
+    driven_part = summary.split("; while the reels")[0]
+    over = np.flatnonzero((T[~stopped_rows] > ceiling).any(axis=0))
+    assert over.size  # the ceiling is 1 N under the driven peak
+    assert f"ABOVE the ceiling controller.max_tension = {ceiling:g} N: " in driven_part
+    rows = np.flatnonzero(~stopped_rows)
+    for i in over:
+        k = rows[int(np.argmax(T[rows, i]))]
+        n = int((T[rows, i] > ceiling).sum())
+        assert (f"cable {i + 1} up to {T[k, i]:.2f} N at t = {0.002 * k:.3f} s "
+                f"({n} tick{'s' if n != 1 else ''})") in driven_part, driven_part
+
+
+def test_a_session_within_the_ceiling_reports_no_overload():
+    bridge = E.DynamicBridge(_dynamic_resolved())
+    bridge.set_command(np.zeros(7), enable=True)
+    for _ in range(20):
+        bridge.step(0.002)
+    assert bridge.driven.max_tension < bridge.ceiling == 100.0
+    assert "ABOVE" not in bridge.summary()
+
+
 def test_a_faulted_dynamic_bridge_stops_its_drives_with_their_own_dynamics():
     resolved = _dynamic_resolved()
     bridge = E.DynamicBridge(resolved)

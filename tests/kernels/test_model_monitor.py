@@ -6,8 +6,9 @@ import numpy as np
 import pytest
 
 from cdpm_drake.kernels.kinetostatics import margin_scratch
-from cdpm_drake.kernels.model_monitor import (MISFIT, OK, SLACK, UNHOLDABLE, fault_message,
-                                      monitor_params, monitor_sizes, monitor_tick)
+from cdpm_drake.kernels.model_monitor import (MISFIT, OK, OVERLOAD, SLACK, UNHOLDABLE,
+                                              fault_message, monitor_params, monitor_sizes,
+                                              monitor_tick)
 from cdpm_drake.kernels.pose import pose_lengths
 from cdpm_drake.kernels.tension import gravity_wrench, wrench_matrix
 from conftest import highs_t_star
@@ -21,7 +22,8 @@ def _robot():
     return load_robot(resolve_robot_path("paper_7cable"))
 
 
-def _run(robot, frames, *, estimate=False, EA=70000.0, F=(0.0, 0.0, 0.0), measured=None):
+def _run(robot, frames, *, estimate=False, EA=70000.0, F=(0.0, 0.0, 0.0), measured=None,
+         overload=0.0, measured_slack=None):
     """Feed frames [(lengths, p, T_est)] through the monitor tick by tick (its memory carried
     as the block's delay does), the hand force F (N) at every tick; measured: the measured
     tensions (N, NaN: no reading) of every tick, read below 1 N as slack; returns (status,
@@ -32,16 +34,18 @@ def _run(robot, frames, *, estimate=False, EA=70000.0, F=(0.0, 0.0, 0.0), measur
                             fit_tolerance=0.01, unholdable=1.0, ticks=TICKS,
                             estimate=estimate, full_pose=False, rows=6, holdable=HOLDABLE,
                             slack_ticks=SLACK_TICKS,
-                            measured_slack=0.0 if measured is None else 1.0)
+                            measured_slack=(0.0 if measured is None else 1.0)
+                            if measured_slack is None else measured_slack,
+                            overload=overload)
     scratch = margin_scratch(m)
-    memory = np.zeros(3)
+    memory = np.zeros(s["memory"])
     out = np.empty(s["out"])
     seen = []
     for lengths, p, T_est in frames:
         x = np.concatenate([lengths, p, F] + ([T_est] if estimate else [])
                            + ([measured] if measured is not None else []) + [memory])
         status = monitor_tick(robot.reels, robot.attachments, params, scratch, x, out)
-        memory = out[s["memory_at"]:s["memory_at"] + 3].copy()
+        memory = out[s["memory_at"]:s["memory_at"] + s["memory"]].copy()
         seen.append((int(status), int(out[1]), float(out[2]), float(out[3])))
         expected = pose_lengths(robot, p, np.eye(3)) - (
             lengths * (1 + T_est / EA) if estimate else lengths)
@@ -178,3 +182,44 @@ def test_a_measured_tension_decides_where_the_estimate_cannot_see():
     message = fault_message(SLACK, 4, 0.4, ticks=25, time_step=0.002, estimate=True, p=p,
                             measured=True)
     assert "its measured tension is 0.40 N" in message
+
+
+def test_a_cable_measured_above_the_overload_is_a_fault_after_ticks():
+    """A cable measured above the overload tension (model_monitor.overload x
+    controller.max_tension: 150 N here) for TICKS ticks is OVERLOAD, naming the cable and the
+    largest reading; at the overload itself, or with no reading (NaN), nothing. It comes
+    before a slack cable (an overloaded cable may snap): cable 2 slack and cable 5 overloaded
+    on the same ticks is cable 5's overload. Without a tension estimate (the translating
+    controller) too: the readings alone decide."""
+    robot = _robot()
+    m = robot.num_cables
+    L = pose_lengths(robot, P, np.eye(3))
+    T_meas = np.full(m, 20.0)
+    T_meas[4], T_meas[6] = 203.0, 160.0
+    seen = _run(robot, [(L, P, None)] * TICKS, measured=T_meas, overload=150.0,
+                measured_slack=0.0)
+    assert [s[0] for s in seen] == [OK] * (TICKS - 1) + [OVERLOAD]
+    assert seen[-1][1] == 5 and seen[-1][2] == pytest.approx(203.0)
+    at = np.full(m, 150.0)  # at the overload, not above it
+    assert {s[0] for s in _run(robot, [(L, P, None)] * TICKS, measured=at, overload=150.0,
+                               measured_slack=0.0)} == {OK}
+    unread = np.full(m, np.nan)
+    assert {s[0] for s in _run(robot, [(L, P, None)] * TICKS, measured=unread,
+                               overload=150.0, measured_slack=0.0)} == {OK}
+    # Off (0): a reading of 1000 N is nobody's business but the summary's.
+    huge = np.full(m, 1000.0)
+    assert {s[0] for s in _run(robot, [(L, P, None)] * TICKS, measured=huge,
+                               measured_slack=0.0)} == {OK}
+    # With a slack cable on the same ticks (its estimate 15 N; at P the weight alone leaves
+    # t* = 16.5 N, so the slack alone would need SLACK_TICKS anyway).
+    Lt = L / (1 + 15.0 / 70000.0)
+    both = np.full(m, 15.0)
+    both[1], both[4] = 0.2, 203.0
+    seen = _run(robot, [(Lt, P, np.full(m, 15.0))] * TICKS, estimate=True, measured=both,
+                overload=150.0)
+    assert seen[-1][0] == OVERLOAD and seen[-1][1] == 5
+    message = fault_message(OVERLOAD, 5, 203.0, ticks=TICKS, time_step=0.002,
+                            estimate=False, p=P, overload=150.0)
+    assert message.startswith("cable 5 is overloaded: its measured tension is 203.0 N, "
+                              "above 150 N (model_monitor.overload x controller.max_tension) "
+                              "for 5 ticks (10 ms)"), message

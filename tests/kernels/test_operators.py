@@ -76,8 +76,9 @@ def test_csv_replay_matches_the_table(tmp_path):
         np.testing.assert_allclose(replay.force(t, P, V), reference.force(t, P, V), atol=1e-15)
 
 
-def test_csv_header_is_case_and_space_tolerant_and_extra_columns_are_ignored(tmp_path):
-    path = write_csv(tmp_path, " T , Fx,FY ,fz,note\n0,1,2,3,start\n2,3,2,1,end\n")
+def test_csv_header_is_case_and_space_tolerant(tmp_path):
+    # (An extra column is refused: test_bad_csv_files_are_rejected_naming_the_file_and_line.)
+    path = write_csv(tmp_path, " T , Fx,FY ,fz\n0,1,2,3\n2,3,2,1\n")
     np.testing.assert_allclose(load_force_csv(path).force(1.0, P, V), [2.0, 2.0, 2.0])
 
 
@@ -90,8 +91,15 @@ def test_csv_operator_resolves_relative_paths_against_the_scenario_dir(tmp_path)
 @pytest.mark.parametrize("text,match", [
     ("", r"is empty"),
     ("t,fx,fy,fz\n", r"has no data rows"),
-    ("time,fx,fy,fz\n0,0,0,0\n", r"must start with the header t,fx,fy,fz, got 'time,fx,fy,fz'"),
-    ("t,fx,fy,fz\n0,0,0,0\n1,2,x,3\n", r"line 3: not four numbers: \['1', '2', 'x', '3'\]"),
+    ("time,fx,fy,fz\n0,0,0,0\n", r"must have exactly the header t,fx,fy,fz \(four columns\), "
+                                 r"got 'time,fx,fy,fz'"),
+    ("t,fx,fy,fz\n0,0,0,0\n1,2,x,3\n", r"line 3: not four numbers \(t, fx, fy, fz\): "
+                                      r"\['1', '2', 'x', '3'\]"),
+    # Issue 42: an extra column, in the header or in a row, was dropped without a word.
+    ("t,fx,fy,fz,tz\n0,0,0,0,1\n", r"exactly the header t,fx,fy,fz \(four columns\), got "
+                                   r"'t,fx,fy,fz,tz'"),
+    ("t,fx,fy,fz\n0,0,0,0\n1,2,3,4,5\n", r"line 3: not four numbers \(t, fx, fy, fz\): "
+                                        r"\['1', '2', '3', '4', '5'\]"),
     ("t,fx,fy,fz\n0,0,0\n", r"line 2: not four numbers"),
     ("t,fx,fy,fz\n1,0,0,0\n0,0,0,0\n", r"times must increase strictly"),
     # Issue 22: NaN, inf and rows out of order name the file's line and the value. Lines count
@@ -109,6 +117,11 @@ def test_bad_csv_files_are_rejected_naming_the_file_and_line(tmp_path, text, mat
     with pytest.raises(OperatorError, match=match) as info:
         load_force_csv(path)
     assert "operator.path" in str(info.value)
+
+
+def test_a_spreadsheets_trailing_commas_are_not_an_extra_column(tmp_path):
+    path = write_csv(tmp_path, "t,fx,fy,fz,\n0,0,0,0,\n1,2,0,0,\n")
+    np.testing.assert_array_equal(load_force_csv(path).forces, [[0, 0, 0], [2, 0, 0]])
 
 
 def test_a_blank_line_in_a_csv_is_skipped(tmp_path):

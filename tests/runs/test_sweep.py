@@ -184,7 +184,18 @@ variants: [{admittance: {damping: 3.0}}, {limits: {max_velocity: 0.2}}]
     (SMALL + "metric: min_distance_pair\n", "valid metrics: ['min_distance', "),
     (SMALL + "seeds: [a]\n", "seeds[0] must be an integer, got 'a'"),
     (SMALL.replace("linspace: [5.0, 7.0, 2]", "linspace: [5.0, 7.0, 2.5]"),
-     "must be [start, stop, count] with an integer count >= 1"),
+     "must be [start, stop, count] with an integer count in 1..100,000"),
+    # Issue 42: a count beyond the variants a sweep may have is refused before a single value
+    # is made (np.linspace of 1e12 values: 8 TB).
+    (SMALL.replace("linspace: [5.0, 7.0, 2]", "linspace: [5.0, 7.0, 1e12]"),
+     "axes[1].linspace must be [start, stop, count] with an integer count in 1..100,000, got "
+     "[5.0, 7.0, 1000000000000.0]"),
+    (SMALL + "random: {count: 1000000000, seed: 1, ranges: {admittance.mass: [2.0, 10.0]}}\n",
+     "random.count must be an integer in 1..100,000, got 1000000000"),
+    # Its results go to runs/sweeps/<name>/: `../../x` would write two folders above.
+    (SMALL.replace("name: small", "name: ../../x"),
+     "name must be one folder name of letters, digits, '_', '-', '.' and '+' (it is written "
+     "to runs/sweeps/<name>/; no '/', '\\', spaces or '..'), got '../../x'"),
     # Issue 22, point 5: an empty list is a list given, and a NaN value is spelled out.
     (SMALL.replace("linspace: [5.0, 7.0, 2]", "values: []"),
      "axes[1].values (admittance.damping) is empty: list at least one value"),

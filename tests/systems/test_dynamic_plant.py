@@ -36,7 +36,9 @@ EXP2_START = "initial_position: [1.56, 3.24, 1.22]"
 
 def _robot_file(tmp_path, extra: str, name="robot.yaml") -> Path:
     path = tmp_path / name
-    path.write_text(PAPER_YAML + "\n" + extra + "\n")
+    from helpers_robots import with_sections
+
+    path.write_text(with_sections(PAPER_YAML, extra))
     return path
 
 

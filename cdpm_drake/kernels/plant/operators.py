@@ -122,6 +122,14 @@ def _spring_force_into(times, waypoints, K, D, F_max, release, t, p, v, out):
     out[0], out[1], out[2] = fx, fy, fz
 
 
+def _without_trailing_blanks(cells: list) -> list:
+    """A CSV row without its trailing empty cells (`1,2,3,4,` as a spreadsheet writes it)."""
+    cells = list(cells)
+    while cells and not cells[-1].strip():
+        cells.pop()
+    return cells
+
+
 def load_force_csv(path, *, field: str = "operator.path") -> ForceProfile:
     """A CSV with a header row `t, fx, fy, fz` (s, N) replayed as a ForceProfile."""
     path = Path(path)
@@ -131,22 +139,23 @@ def load_force_csv(path, *, field: str = "operator.path") -> ForceProfile:
         rows = list(csv.reader(fh))
     if not rows:
         raise OperatorError(f"{field}: force file {str(path)!r} is empty")
-    header = [h.strip().lower() for h in rows[0]]
+    header = _without_trailing_blanks([h.strip().lower() for h in rows[0]])
     want = ["t", "fx", "fy", "fz"]
-    if header[:4] != want:
-        raise OperatorError(f"{field}: force file {str(path)!r} must start with the header "
-                            f"{','.join(want)}, got {','.join(rows[0])!r}")
+    if header != want:
+        # An extra column (a torque, a second sensor) would be dropped without a word.
+        raise OperatorError(f"{field}: force file {str(path)!r} must have exactly the header "
+                            f"{','.join(want)} (four columns), got {','.join(rows[0])!r}")
     data, lines = [], []
     for n, row in enumerate(rows[1:], start=2):
         if not any(cell.strip() for cell in row):
             continue  # a blank line (a trailing newline too many)
         where = f"{field}: {str(path)!r} line {n}"
         try:
-            if len(row) < 4:  # a short row would otherwise surface as a shape error
-                raise ValueError
+            if len(_without_trailing_blanks(row)) != 4:  # short: a shape error; long: a
+                raise ValueError                            # column dropped unseen
             values = [float(x) for x in row[:4]]
         except ValueError:
-            raise OperatorError(f"{where}: not four numbers: {row!r}") from None
+            raise OperatorError(f"{where}: not four numbers (t, fx, fy, fz): {row!r}") from None
         if not all(math.isfinite(x) for x in values):
             raise OperatorError(f"{where}: t, fx, fy, fz must be finite numbers, got {row!r}")
         if data and not values[0] > data[-1][0]:

@@ -64,6 +64,11 @@ class SweepFile:
     metric: str = "min_distance"
 
 
+# Most variants a sweep may expand to: a typo in a grid (a count of 1000 on four axes) should
+# be an error, not a year of runs.
+MAX_VARIANTS = 100_000
+
+
 # Fields whose contents are scenario YAML (or a field's values): kept as written and checked
 # per variant by the scenario's own checks, since their schema is the scenario's.
 _RAW_FIELDS = ("overlay", "variants")
@@ -133,6 +138,12 @@ def load_sweep_file(name_or_path) -> tuple[SweepFile, Path]:
                          f"valid metrics: {NUMERIC_METRICS}")
     if not sweep.name:
         sweep.name = path.stem
+    from cdpm_drake.config.resolve import check_name
+
+    try:  # its results go to runs/sweeps/<name>/: a name must not leave that folder
+        check_name(sweep.name, "runs/sweeps/<name>/")
+    except ScenarioError as e:
+        raise SweepError(f"{path}: {e}") from None
     return sweep, path
 
 
@@ -160,9 +171,10 @@ def _check_axis(axis: Axis, where: str, given=None) -> None:
         return
     key = given[0]
     spec = getattr(axis, key)
-    if len(spec) != 3 or not float(spec[2]).is_integer() or spec[2] < 1:
+    if (len(spec) != 3 or not float(spec[2]).is_integer()
+            or not 1 <= spec[2] <= MAX_VARIANTS):  # checked before any value is made
         raise SweepError(f"{where}.{key} must be [start, stop, count] with an integer "
-                         f"count >= 1, got {spec!r}")
+                         f"count in 1..{MAX_VARIANTS:,}, got {spec!r}")
     if not all(math.isfinite(x) for x in spec[:2]):
         raise SweepError(f"{where}.{key} start and stop must be finite, got {spec!r}")
     if key == "geomspace" and not (spec[0] > 0 and spec[1] > 0):
@@ -172,8 +184,9 @@ def _check_axis(axis: Axis, where: str, given=None) -> None:
 
 
 def _check_random(r: RandomSamples, where: str) -> None:
-    if r.count < 1:
-        raise SweepError(f"{where}.count must be an integer >= 1, got {r.count!r}")
+    if not 1 <= r.count <= MAX_VARIANTS:  # checked before any sample is drawn
+        raise SweepError(f"{where}.count must be an integer in 1..{MAX_VARIANTS:,}, got "
+                         f"{r.count!r}")
     if r.seed < 0:
         raise SweepError(f"{where}.seed must be an integer >= 0, got {r.seed!r}")
     if not r.ranges:

@@ -19,12 +19,10 @@ from cdpm_drake.runs.sweep.cells import flow_yaml, shown_value
 from cdpm_drake.runs.sweep.errors import SweepError
 from cdpm_drake.runs.sweep.fields import (apply_overlay, apply_overlay_resolved, field_type,
                                           parse_field_path, put_field)
-from cdpm_drake.runs.sweep.file import RandomSamples, SweepFile, axis_values, load_sweep_file
+from cdpm_drake.runs.sweep.file import (MAX_VARIANTS, RandomSamples, SweepFile, axis_values,
+                                        load_sweep_file)
 
 
-# Most variants a sweep may expand to: a typo in a grid (a count of 1000 on four axes) should
-# be an error, not a year of runs.
-MAX_VARIANTS = 100_000
 
 
 @dataclasses.dataclass
