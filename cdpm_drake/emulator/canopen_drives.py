@@ -25,7 +25,15 @@ fault_bit (the drive goes to Fault without an EMCY: only its statusword tells), 
 (the drive's next TPDO is held back and sent a SYNC late, just before the following one; with
 another kind on the same cable: the first TPDO that shows the fault comes late), lost_tpdo (the drive stops sending TPDOs; heartbeats go on), frozen_position (position actual
 stops changing), dead_node (the node sends nothing and ignores the bus; its reel stops),
-bus_off (every node leaves the bus: nothing sent or received; the reels stop).
+bus_off (every node leaves the bus: nothing sent or received; the reels stop),
+force_silent (the handle's force sensor node stops sending its TPDO).
+
+The handle's force sensor, when the scenario's plant has `force_sensor: !CanopenForceSensor
+{...}`: a node that NMT starts like the drives and that sends, after each SYNC's plant step,
+its TPDO (COB-ID 0x180 + node_id): the plant's hand force (the force the UDP bridge's status
+carries) in the sensor's axes (`axes`) and counts (`counts_per_newton`) plus the sensor's own
+bias (`force_bias`, N in its axes: what the controller's tare must remove), as 3 int16, and a
+status word 0.
 """
 
 import argparse
@@ -44,7 +52,7 @@ from cdpm_drake.hardware.canopen_bus import (COB_EMCY, COB_HEARTBEAT, COB_NMT, C
                                              NMT_START, NMT_STOP)
 
 FAULT_KINDS = ("drive_fault", "fault_bit", "late_tpdo", "lost_tpdo", "frozen_position",
-               "dead_node", "bus_off")
+               "dead_node", "bus_off", "force_silent")
 # Statuswords of the states (bit 9 remote, bit 4 voltage enabled where it is).
 SW = {"switch on disabled": 0x0250, "ready to switch on": 0x0231, "switched on": 0x0233,
       "operation enabled": 0x0237, "quick stop active": 0x0217, "fault": 0x0218}
@@ -141,7 +149,8 @@ class EmulatedDrives:
 
     def __init__(self, bridge, bus, node_ids, *, counts_per_metre=1_000_000.0,
                  position_offset=None, velocity_units=None, force_per_torque_unit=0.1,
-                 period=0.002, faults=(), record=100_000, log=None):
+                 period=0.002, faults=(), record=100_000, log=None, force_sensor=None,
+                 force_bias=(0.0, 0.0, 0.0)):
         m = bridge.robot.num_cables
         if len(node_ids) != m:
             raise ValueError(f"node ids must be one per cable ({m}), got {list(node_ids)!r}")
@@ -161,6 +170,13 @@ class EmulatedDrives:
                                  f"{kind!r}")
             if not 0 <= cable < m:
                 raise ValueError(f"fault cable must be in 1..{m}, got {cable + 1}")
+        # The handle's force sensor node (a CanopenForceSensor config, or None) and its NMT
+        # state, bias (N, sensor axes), TPDOs sent.
+        self.force_sensor = force_sensor
+        self.force_nmt = "pre-operational"
+        self.force_bias = np.asarray(force_bias, dtype=float)
+        self.force_silent = False
+        self.force_sent = 0
         self.bus_off = False
         self.syncs = 0
         self.tpdo_sent = 0
@@ -226,6 +242,8 @@ class EmulatedDrives:
             for d in self.drives:
                 if data[1] in (0, d.node_id) and not d.dead:
                     self._nmt(d, data[0])
+            if self.force_sensor is not None and data[1] in (0, self.force_sensor.node_id):
+                self.force_nmt = "operational" if data[0] == NMT_START else "pre-operational"
         elif cob_id == COB_SYNC:
             self._sync()
         elif COB_SDO_RX < cob_id <= COB_SDO_RX + 127:
@@ -347,7 +365,28 @@ class EmulatedDrives:
                     d.held = (d.od[(0x1800, 1)] & 0x7FF, payload)
                 elif self._send(d.od[(0x1800, 1)] & 0x7FF, payload, d):
                     self.tpdo_sent += 1
+        self._send_force()
         self.syncs += 1  # last: a SYNC counted is one fully answered
+
+    def force_counts(self) -> list[int]:
+        """The force sensor's Fx, Fy, Fz counts now: the plant's hand force (base frame) in the
+        sensor's axes, plus its bias, times counts_per_newton, rounded, saturated at int16."""
+        s = self.force_sensor
+        f = np.asarray(self.bridge.force(), dtype=float)
+        out = []
+        for i, name in enumerate(s.axes):  # sensor axis i measures base axis `name`
+            value = (1.0 if name[0] == "+" else -1.0) * f["xyz".index(name[1])]
+            counts = (value + self.force_bias[i]) * s.counts_per_newton
+            out.append(int(max(-32768, min(32767, round(counts)))))
+        return out
+
+    def _send_force(self) -> None:
+        if (self.force_sensor is None or self.force_nmt != "operational"
+                or self.force_silent):
+            return
+        payload = struct.pack("<3hH", *self.force_counts(), 0)
+        if self._send(0x180 + self.force_sensor.node_id, payload):
+            self.force_sent += 1
 
     def _drive_fault(self, d: Drive, code: int) -> None:
         d.state = "fault"
@@ -377,6 +416,8 @@ class EmulatedDrives:
         elif kind == "dead_node":
             d.dead = True
             d.state = "switch on disabled"  # a dead drive's power stage is off
+        elif kind == "force_silent":
+            self.force_silent = True
         elif kind == "bus_off":
             self.bus_off = True
             for d in self.drives:  # CiA 301 error behaviour: every drive stops
@@ -471,7 +512,7 @@ def build_drives(args, log=None) -> EmulatedDrives:
                            "clone)") from None
 
     from cdpm_drake.emulator.bridges import DynamicBridge, ReelBridge
-    from cdpm_drake.emulator.main import dynamic_scenario
+    from cdpm_drake.emulator.plant_setup import dynamic_scenario
     from cdpm_drake.hardware.canopen_config import (CanopenReels, resolved_node_ids,
                                                     resolved_offsets, velocity_units)
     from cdpm_drake.kernels.kinematics import cable_lengths, jacobian
@@ -509,13 +550,24 @@ def build_drives(args, log=None) -> EmulatedDrives:
         kwargs["receive_own_messages"] = False
     bus = can.Bus(**kwargs)
     cable = args.fault_cable - 1
-    return EmulatedDrives(bridge, bus, resolved_node_ids(config, m),
+    drives = EmulatedDrives(bridge, bus, resolved_node_ids(config, m),
                           counts_per_metre=config.counts_per_metre,
                           position_offset=resolved_offsets(config, m),
                           velocity_units=velocity_units(config),
                           force_per_torque_unit=config.force_per_torque_unit,
                           period=args.period or period,
-                          faults=[(k, cable, args.fault_after) for k in args.fault], log=log)
+                          faults=[(k, cable, args.fault_after) for k in args.fault], log=log,
+                          force_sensor=_bus_force_sensor(config))
+    drives.config = config  # the scenario's bus settings (its Net F/T, if any)
+    return drives
+
+
+def _bus_force_sensor(config):
+    """The plant's force sensor if it is a node on the bus (the drives play it), else None."""
+    from cdpm_drake.hardware.force_config import CanopenForceSensor
+
+    sensor = config.force_sensor
+    return sensor if isinstance(sensor, CanopenForceSensor) else None
 
 
 def main(argv=None) -> int:
@@ -533,6 +585,9 @@ def main(argv=None) -> int:
 
         set_realtime_priority(args.rt_priority)
         drives = build_drives(args, log=say)
+        from cdpm_drake.emulator.plant_setup import netft_server
+
+        netft = netft_server(drives.config, drives.bridge, say)
     except Exception as e:  # a robot, a scenario, a bus that will not open: say which
         print(f"cdpm emulate --canopen: error: {e}", file=sys.stderr)
         return 1
@@ -555,6 +610,8 @@ def main(argv=None) -> int:
             code = exit_code(e)
         finally:
             drives.stop()
+            if netft is not None:
+                netft.stop()
             states = ", ".join(f"{d.node_id}: {d.state}" for d in drives.drives)
             say(f"{drives.syncs} SYNCs; drive states {states}; lengths "
                 f"{np.round(drives.bridge.lengths, 4).tolist()} m")

@@ -36,6 +36,10 @@ Examples:
 
 `--canopen` plays CiA 402 drives on a CAN bus instead (emulator/canopen_drives.py; `cdpm
 emulate --canopen --help` lists its options).
+
+A scenario whose plant has `force_sensor: !NetFT {address, port, ...}` gets its Net F/T
+played too (emulator/netft.py): the hand force streamed over RDT at that address, one record
+per plant step.
 """
 
 import argparse
@@ -48,6 +52,7 @@ import numpy as np
 
 from cdpm_drake.emulator.bridges import DynamicBridge, ReelBridge
 from cdpm_drake.emulator.faults import FaultPlan
+from cdpm_drake.emulator.plant_setup import dynamic_scenario, netft_server
 from cdpm_drake.emulator.server import ReelBridgeServer, count_by_reason, vector_text
 from cdpm_drake.hardware.config import DEFAULT_BRIDGE_PORT
 from cdpm_drake.hardware.priority import set_realtime_priority
@@ -146,7 +151,7 @@ def build_server(args, log=None) -> ReelBridgeServer:
     """The server described by parsed command-line arguments; `log` as ReelBridgeServer's."""
     from cdpm_drake.robot import load_robot
 
-    force = None
+    force = plant_config = None
     address, port = "127.0.0.1", DEFAULT_BRIDGE_PORT
     if args.scenario:
         from cdpm_drake.config import load_scenario, scenario_operator, scenario_robot
@@ -155,6 +160,7 @@ def build_server(args, log=None) -> ReelBridgeServer:
         robot = scenario_robot(scenario)
         start = scenario.initial_position
         force = scenario_operator(scenario).force
+        plant_config = scenario.plant
         address = getattr(scenario.plant, "address", address)
         port = getattr(scenario.plant, "port", port)
     else:
@@ -207,12 +213,15 @@ def build_server(args, log=None) -> ReelBridgeServer:
                                  "are rigid and carry no tension")
         bridge = ReelBridge(robot, lengths, force=force, time_constant=0.02
                             if args.time_constant is None else args.time_constant)
-    return ReelBridgeServer(bridge, address=(args.address or address,
+    server = ReelBridgeServer(bridge, address=(args.address or address,
                                              args.port if args.port is not None else port),
                             faults=faults, period=args.period, seed=args.seed,
                             controller=controller, command_timeout=args.command_timeout,
                             record=0, log=log, protocol_version=args.protocol_version,
                             truth=TRUTH_ROWS if args.truth_log else 0)
+    # The handle's Net F/T, where the scenario's plant reads the hand from one.
+    server.netft = netft_server(plant_config, bridge, log)
+    return server
 
 
 # Statuses the truth log keeps: the last 10 minutes at 500 Hz.
@@ -232,42 +241,12 @@ def write_truth_log(server, path) -> int:
     return len(rows)
 
 
-def dynamic_scenario(args, robot, start):
-    """The resolved scenario of `--plant dynamic`: the scenario's (or, with --robot, a
-    scenario of that robot), at `start`, with --force as its operator, and a !DynamicReels
-    plant (the scenario's own when it has one)."""
-    import dataclasses as dc
-
-    from cdpm_drake.kernels.plant.operators import NoOperator, ScriptedOperator
-    from cdpm_drake.config import DynamicReels, Scenario, load_scenario, resolve_scenario
-
-    if args.scenario:
-        scenario = load_scenario(args.scenario, args.scenario_text)
-    else:
-        scenario = Scenario(robot=args.robot or "paper_7cable", swaps=[],
-                            operator=NoOperator())
-    plant = scenario.plant if isinstance(scenario.plant, DynamicReels) else DynamicReels()
-    operator = scenario.operator
-    if args.force is not None:
-        operator = ScriptedOperator(times=[0.0], forces=[[float(f) for f in args.force]])
-    scenario = dc.replace(scenario, plant=plant, operator=operator,
-                          initial_position=[float(x) for x in start])
-    resolved = resolve_scenario(scenario)
-    if resolved.robot.num_cables != robot.num_cables:  # pragma: no cover - same robot
-        raise ValueError("the scenario's robot changed under --plant dynamic")
-    return resolved
-
-
 def main(argv=None) -> int:
     """Exit codes as `cdpm`'s: 0 done (--duration), 1 error (robot, scenario, cannot bind),
     2 bad usage, 130 / 143 after Ctrl-C / SIGTERM (the summary is printed first)."""
     from cdpm_drake.text import prefixed_log_records
 
     argv = list(sys.argv[1:] if argv is None else argv)
-    if "--canopen" in argv:  # CiA 402 drives on a CAN bus instead of the UDP bridge
-        from cdpm_drake.emulator.canopen_drives import main as canopen_main
-        argv.remove("--canopen")
-        return canopen_main(argv)
     with prefixed_log_records():
         return _main(argv)
 
@@ -315,6 +294,8 @@ def _main(argv) -> int:
             code = exit_code(e)
         finally:
             server.stop()
+            if getattr(server, "netft", None) is not None:
+                server.netft.stop()
             now = time.monotonic() - server.start_wall if server.start_wall else 0.0
             if server.session_open:
                 server.close_session(now, "the emulator stopped")

@@ -82,7 +82,8 @@ class CanopenMaster:
     frames with a non-zero code.
     """
 
-    def __init__(self, interface: str, channel: str, bitrate: int, node_ids):
+    def __init__(self, interface: str, channel: str, bitrate: int, node_ids,
+                 force_node_id: int | None = None):
         self.interface, self.channel, self.bitrate = interface, channel, int(bitrate)
         self.node_ids = [int(i) for i in node_ids]
         m = len(self.node_ids)
@@ -113,6 +114,15 @@ class CanopenMaster:
             self._handlers[COB_TPDO1 + node_id] = self._on_tpdo
             self._handlers[COB_EMCY + node_id] = self._on_emcy
             self._handlers[COB_HEARTBEAT + node_id] = self._on_heartbeat
+        # The handle's force sensor node, if on this bus: its TPDO's Fx, Fy, Fz (counts),
+        # status word, the TPDOs counted, and while `force_tare` is a list, each sample.
+        self.force_node_id = force_node_id
+        self.force_counts = np.zeros(3)
+        self.force_status = 0
+        self.force_count = 0
+        self.force_tare: list | None = None
+        if force_node_id is not None:
+            self._handlers[COB_TPDO1 + force_node_id] = self._on_force
 
     # --- connection and configuration -----------------------------------------------------
 
@@ -141,6 +151,8 @@ class CanopenMaster:
             network.subscribe(COB_TPDO1 + node_id, self._on_tpdo)
             network.subscribe(COB_EMCY + node_id, self._on_emcy)
             network.subscribe(COB_HEARTBEAT + node_id, self._on_heartbeat)
+        if self.force_node_id is not None:
+            network.subscribe(COB_TPDO1 + self.force_node_id, self._on_force)
 
     def close(self) -> None:
         network, self.network = self.network, None
@@ -375,6 +387,25 @@ class CanopenMaster:
             self.still[k] = self.still[k] + 1 if same else 0
             self.statusword[k], self.position[k], self.torque[k] = sw, pos, torque
             self.tpdo_count[k] += 1
+
+    def _on_force(self, can_id, data, timestamp) -> None:
+        if len(data) < 6:
+            return
+        counts = struct.unpack_from("<3h", bytes(data))
+        status = struct.unpack_from("<H", bytes(data), 6)[0] if len(data) >= 8 else 0
+        with self.lock:
+            self.force_counts = np.array(counts, dtype=float)
+            self.force_status = status
+            self.force_count += 1
+            if self.force_tare is not None:
+                self.force_tare.append(self.force_counts)
+
+    def force_snapshot(self):
+        """(Fx, Fy, Fz counts, status word, TPDOs counted) of the force sensor node, after
+        poll()."""
+        self.poll()
+        with self.lock:
+            return self.force_counts.copy(), self.force_status, self.force_count
 
     def _on_emcy(self, can_id, data, timestamp) -> None:
         k = self._cable.get(can_id - COB_EMCY)

@@ -194,6 +194,10 @@ def run(*, scenario: Scenario | ResolvedScenario, out_dir, duration: float | Non
             "reels and needs plant: !HardwareReels {address: ..., port: ...} or plant: "
             "!CanopenReels {interface: ..., channel: ...} (use `cdpm "
             "simulate` for a simulation, or --scenario-text 'plant: !HardwareReels {}')")
+    from cdpm_drake.hardware.force_config import force_source_problem
+
+    if force_source_problem(scenario.plant):  # before anything opens the bus
+        raise ScenarioError(force_source_problem(scenario.plant))
     duration = scenario.duration if duration is None else float(duration)
     if not (duration > 0 and np.isfinite(duration)):
         raise ScenarioError(f"duration must be a finite number > 0 s, got {duration!r}")
