@@ -164,8 +164,9 @@ def check_canopen_reels(config: CanopenReels, m: int, period: float,
         raise ValueError(
             f"{field}: {m} drives at {config.bitrate} bit/s with a {period * 1e3:g} ms cycle "
             f"need {load['bits']:.0f} bits per cycle ({m} RPDOs of {load['rpdo_bits']} bits, "
-            f"{m} TPDOs of {load['tpdo_bits']} bits, {sensors} force sensor TPDO(s), a SYNC "
-            f"of {load['sync_bits']} bits, "
+            f"{m} TPDOs of {load['tpdo_bits']} bits, "
+            + (f"the force sensor's TPDO of {load['tpdo_bits']} bits, " if sensors else "")
+            + f"a SYNC of {load['sync_bits']} bits, "
             f"heartbeats {load['heartbeat_bits']:.1f} bits), {100 * load['load']:.1f} % of "
             f"the {load['capacity']:.0f} bits the cycle holds: more than "
             f"{100 * MAX_BUS_LOAD:.0f} % (worst case with bit stuffing "
@@ -197,7 +198,8 @@ def bus_load(m: int, bitrate: int, period: float, heartbeat_period: float,
     hb, hb_worst = frame_bits(1)
     share = period / heartbeat_period if heartbeat_period > 0 else 0.0
     bits = m * (rpdo + tpdo + share * hb) + sync + sensors * tpdo
-    worst = m * (rpdo_worst + tpdo_worst + share * hb_worst) + sync_worst + sensors * tpdo_worst
+    worst = (m * (rpdo_worst + tpdo_worst + share * hb_worst) + sync_worst
+             + sensors * tpdo_worst)
     capacity = bitrate * period
     return dict(bits=bits, worst_bits=worst, capacity=capacity, load=bits / capacity,
                 worst_load=worst / capacity, rpdo_bits=rpdo, tpdo_bits=tpdo, sync_bits=sync,

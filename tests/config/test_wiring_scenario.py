@@ -109,6 +109,8 @@ def schema_fields(schema, prefix=""):
             out += schema_fields(tp, path + ".")
         elif typing.get_origin(tp) is typing.Union:
             for member in typing.get_args(tp):
+                if member is type(None):  # an optional union: None is no member to wire
+                    continue
                 out.append(f"{path}=!{member.__name__}")
                 out += schema_fields(member, f"{path}!{member.__name__}.")
         elif (typing.get_origin(tp) is list and typing.get_args(tp)

@@ -22,16 +22,18 @@ from helpers_canopen import namespace_problem
 REPO = Path(__file__).resolve().parents[2]
 T = 0.002
 ATTEMPTS = 3
+# The handle's force sensor, a node on the bus that the emulator plays with the drives.
+SENSOR = "force_sensor: !CanopenForceSensor {node_id: 20}"
 # missed_tpdo_ticks 6 (default 3), as the UDP run tests widen their watchdog: two Python
 # processes on this shared 2-core host are held up for several ms at times, and these runs
 # are about the run, not the silence (whose tests are in tests/hardware).
 PLANT = ("plant: !CanopenReels {interface: udp_multicast, channel: 239.74.163.2, "
-         "ramp_time: 0.0, missed_tpdo_ticks: 6}")
+         "ramp_time: 0.0, missed_tpdo_ticks: 6, " + SENSOR + "}")
 # The fault runs keep the default missed_tpdo_ticks (2): both processes run under SCHED_FIFO
 # (`--rt-priority`, as on the robot; under normal scheduling, with other jobs on this host,
 # both were held up past 5 ticks: p99 tick 5 ms, 17 overruns in 0.4 s measured).
 FAULT_PLANT = ("plant: !CanopenReels {interface: udp_multicast, channel: 239.74.163.2, "
-               "ramp_time: 0.0}")
+               "ramp_time: 0.0, " + SENSOR + "}")
 
 
 def _script(out: Path, emulate_flags: str, duration: float, plant: str) -> str:
