@@ -26,8 +26,10 @@ class NetFTServer:
     in front of `bridge` (ReelBridge or DynamicBridge: its force() is the hand's)."""
 
     def __init__(self, bridge, address=("127.0.0.1", 49152), counts_per_force=1_000_000.0,
-                 axes=("+x", "+y", "+z"), bias=(0.0, 0.0, 0.0), log=None):
+                 axes=("+x", "+y", "+z"), bias=(0.0, 0.0, 0.0), log=None, hand=None):
         self.bridge = bridge
+        # The hand force it measures, N, base frame: the bridge's, unless `hand()` says.
+        self.hand = bridge.force if hand is None else hand
         self.counts_per_force = float(counts_per_force)
         self.axes = list(axes)
         self.bias = np.asarray(bias, dtype=float)
@@ -66,7 +68,7 @@ class NetFTServer:
     def counts(self) -> list[int]:
         """Fx, Fy, Fz, Tx, Ty, Tz counts now: the hand force (base frame) in the sensor's
         axes, plus its bias, times counts_per_force."""
-        f = np.asarray(self.bridge.force(), dtype=float)
+        f = np.asarray(self.hand(), dtype=float)
         out = []
         for i, name in enumerate(self.axes):  # sensor axis i measures base axis `name`
             value = (1.0 if name[0] == "+" else -1.0) * f["xyz".index(name[1])]

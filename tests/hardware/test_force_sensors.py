@@ -184,3 +184,43 @@ def test_netft_over_loopback_scaled_axis_mapped_and_tared(robot):
     np.testing.assert_allclose(measured, HAND, atol=1e-12)
     # One record per SYNC's plant step, all read: the tare's 5 and the run's ~150 ticks.
     assert records >= 150 and reels.force_source.lost == 0
+
+
+def test_netft_on_the_udp_bridge_replaces_the_status_force_and_its_silence_stops(robot):
+    from pydrake.systems.analysis import Simulator
+    from pydrake.systems.framework import DiagramBuilder
+    from pydrake.systems.primitives import ConstantVectorSource
+
+    from cdpm_drake.emulator import ReelBridgeServer
+    from cdpm_drake.hardware.config import HardwareReels
+    from cdpm_drake.hardware.reels import HardwareReelsSystem
+
+    bridge = _bridge(robot)
+    netft = NetFTServer(bridge, address=("127.0.0.1", 0), counts_per_force=1000.0, axes=AXES,
+                        bias=BIAS).start()
+    server = ReelBridgeServer(bridge, address=("127.0.0.1", 0)).start()
+    config = HardwareReels(port=server.address[1], watchdog_ticks=25, force_sensor=NetFT(
+        address="127.0.0.1", port=netft.address[1], local_address="127.0.0.1",
+        counts_per_force=1000.0, axes=AXES, tare_samples=5, missed_ticks=25))
+    b = DiagramBuilder()
+    reels = b.AddNamedSystem("reels", HardwareReelsSystem(robot, config, time_step=T))
+    source = b.AddSystem(ConstantVectorSource(np.zeros(7)))
+    b.Connect(source.get_output_port(), reels.get_input_port())
+    sim = Simulator(b.Build())
+    try:
+        start_realtime(sim)
+        # The tare removed the box's bias (the bridge's status force has none to remove).
+        np.testing.assert_allclose(reels.force_source.scale.bias, BIAS_BASE, atol=1e-12)
+        sim.AdvanceTo(0.4)
+        measured = _measured(sim, reels)
+        records = reels.force_source.records
+        netft.silent = True  # the box stops streaming: 25 ticks later the reels stop
+        with pytest.raises(ReelFault, match=r"no record from the handle's force sensor \(Net "
+                           r"F/T at 127.0.0.1:\d+\) for 25 ticks"):
+            sim.AdvanceTo(1.5)
+    finally:
+        reels.close()
+        server.stop()
+        netft.stop()
+    np.testing.assert_allclose(measured, HAND, atol=1e-12)
+    assert records >= 100  # one per bridge period (2 ms) over 0.4 s, less a busy host's
