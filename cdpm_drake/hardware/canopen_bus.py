@@ -262,9 +262,8 @@ class CanopenMaster:
                 with self._patience(node_id, optional):
                     self.network[node_id].sdo.download(index, sub, data)
             except Exception as e:
-                raise CanopenError(
-                    f"drive of cable {k + 1} (node {node_id}) refused the SDO write of "
-                    f"{what} ({index:#06x}:{sub}): {type(e).__name__}: {e}") from None
+                raise CanopenError(self._sdo_failure(k, node_id, "write", what, index, sub, e,
+                                                     optional)) from None
         return write
 
     def _read(self, k, node_id, index, sub, what, optional: bool = False) -> bytes:
@@ -272,9 +271,27 @@ class CanopenMaster:
             with self._patience(node_id, optional):
                 return bytes(self.network[node_id].sdo.upload(index, sub))
         except Exception as e:
-            raise CanopenError(f"drive of cable {k + 1} (node {node_id}) refused the SDO read "
-                               f"of {what} ({index:#06x}:{sub}): {type(e).__name__}: "
-                               f"{e}") from None
+            raise CanopenError(self._sdo_failure(k, node_id, "read", what, index, sub, e,
+                                                 optional)) from None
+
+    def _sdo_failure(self, k, node_id, kind, what, index, sub, e, optional) -> str:
+        """What went wrong with an SDO request, in words: a drive that aborted it refused it
+        (its abort code says why); one that sent nothing did not answer within the SDO
+        timeout (canopen's, tried twice)."""
+        who = f"drive of cable {k + 1} (node {node_id})"
+        try:
+            from canopen.sdo.exceptions import SdoAbortedError, SdoCommunicationError
+        except ImportError:  # pragma: no cover - open() needs canopen first
+            SdoAbortedError = SdoCommunicationError = ()
+        if isinstance(e, SdoCommunicationError) and not isinstance(e, SdoAbortedError):
+            sdo = self.network[node_id].sdo
+            timeout = OPTIONAL_SDO_TIMEOUT if optional else sdo.RESPONSE_TIMEOUT
+            tries = 1 + int(getattr(sdo, "MAX_RETRIES", 0))
+            return (f"{who} did not answer the SDO {kind} of {what} ({index:#06x}:{sub}) within "
+                    f"the SDO timeout ({tries} x {timeout:g} s): is it powered, on "
+                    f"{self.interface} {self.channel!r}, with this node id?")
+        return (f"{who} refused the SDO {kind} of {what} ({index:#06x}:{sub}): "
+                f"{type(e).__name__}: {e}")
 
     @contextlib.contextmanager
     def _patience(self, node_id, optional: bool):
@@ -283,14 +300,22 @@ class CanopenMaster:
         drive that leaves such requests unanswered instead of aborting them costs 0.2 s an
         object, not 0.6."""
         sdo = self.network[node_id].sdo
-        if not optional:
-            yield
-            return
-        sdo.RESPONSE_TIMEOUT = OPTIONAL_SDO_TIMEOUT
+        # canopen logs its own abort of an unanswered request as an error ("Transfer aborted
+        # by client with code 0x05040000"); the CanopenError raised instead says it in words.
+        quiet = logging.getLogger("canopen.sdo.client")
+        level = quiet.level
+        quiet.setLevel(logging.CRITICAL)
         try:
-            yield
+            if not optional:
+                yield
+                return
+            sdo.RESPONSE_TIMEOUT = OPTIONAL_SDO_TIMEOUT
+            try:
+                yield
+            finally:
+                del sdo.RESPONSE_TIMEOUT  # back to the class's
         finally:
-            del sdo.RESPONSE_TIMEOUT  # back to the class's
+            quiet.setLevel(level)
 
     # --- cyclic traffic ----------------------------------------------------------------------
 

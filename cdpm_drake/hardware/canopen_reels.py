@@ -85,17 +85,27 @@ FAULT_NAMES = {FAULT_STATUS: "drive fault or state", FAULT_EMCY: "EMCY",
 
 
 class _Counters:
-    """The bus's counters in the shape realtime.py reports for the UDP link."""
+    """The bus's counters in the shape realtime.py reports for the UDP link, and what the
+    report says of the bus: its interface and channel, the drives' rated torque 0x6076 (N m,
+    NaN: not read), the force sensor's tare (N, base frame)."""
 
-    def __init__(self, master: CanopenMaster, lost: int):
+    def __init__(self, system):
+        master = system.master
         self.sent, self.received = master.sent, int(master.tpdo_count.sum())
-        self.accepted, self.lost = self.received, lost
+        self.accepted, self.lost = self.received, system.lost_tpdos
         self.rejected, self.foreign = {}, 0
         self.send_errors = master.send_errors
+        self.bus = f"{master.interface} {master.channel!r}"
+        self.rated_torque = [float(x) for x in master.rated_torque]
+        self.force_per_torque_unit = float(system._config.force_per_torque_unit)
+        self.force_bias = [float(x) for x in system._force_scale.bias]
 
     def as_dict(self) -> dict:
         return dict(sent=self.sent, received=self.received, accepted=self.accepted,
-                    lost=self.lost, rejected={}, foreign=0, send_errors=self.send_errors)
+                    lost=self.lost, rejected={}, foreign=0, send_errors=self.send_errors,
+                    bus=self.bus, rated_torque=self.rated_torque,
+                    force_per_torque_unit=self.force_per_torque_unit,
+                    force_bias=self.force_bias)
 
 
 class _LinkView:
@@ -104,7 +114,7 @@ class _LinkView:
 
     @property
     def counters(self) -> _Counters:
-        return _Counters(self._system.master, self._system.lost_tpdos)
+        return _Counters(self._system)
 
 
 class CanopenReelsSystem(LeafSystem):
@@ -166,6 +176,7 @@ class CanopenReelsSystem(LeafSystem):
         self._stopped = self._quick_stopped = False
         self._fault = None  # (reason, cable, detail, t) a publish found
         self.lost_tpdos = 0
+        self._count_start = np.zeros(m)
 
         self._command = self.DeclareVectorInputPort("reel_velocity_command", m)
         self._lengths = self.DeclareDiscreteState(cable_lengths(robot, robot.workspace.center))
@@ -319,6 +330,8 @@ class CanopenReelsSystem(LeafSystem):
             [samples, -1.0, time.monotonic()])  # tick 0 follows no SYNC of the run
         drives = np.zeros(6 * m)
         drives[0:m], drives[2 * m:3 * m], drives[3 * m:4 * m] = count, pos, still
+        self._count_start = count.astype(float)  # the TPDOs before the run's first SYNC
+        self.lost_tpdos = 0
         # Tick 0 follows no SYNC of the run (the enable sequence's were answered above): its
         # lack of a new TPDO is not a miss.
         drives[m:2 * m] = -1.0
@@ -458,7 +471,11 @@ class CanopenReelsSystem(LeafSystem):
         at = self.master.sync_snapshot() or (self.master.snapshot(), time.monotonic())
         snap = at[0]
         drives, speed0, new, (reason, cable, detail) = self._advance(context, *at)
-        self.lost_tpdos += int(np.count_nonzero(~new))
+        # TPDOs lost: the SYNCs of the run this update has seen answered (tick k's snapshot,
+        # taken before its own SYNC, answers SYNCs 1..k: none on tick 0) less the TPDOs that
+        # came for them, per drive. A TPDO a tick late is read with the next: not lost.
+        answered = drives[0:m] - self._count_start
+        self.lost_tpdos = int(np.maximum(0.0, book[TICKS] - answered).sum())
         pos, torque = snap[1], snap[2]
         speed = drives[4 * m:5 * m]
         lengths = self._offset + pos / self._counts

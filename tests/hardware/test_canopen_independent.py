@@ -298,6 +298,16 @@ def test_cdpm_run_against_the_independent_drives(tmp_path):
     assert not [r for r in summary["requests"] if r[0] == "abort"]
     log = np.load(run_dir / "log.npz")
     assert str(log["ending"]) == "completed" and len(log["time"]) == 751
+    run = texts["run.txt"]
+    # The report names the bus and shows the rated torque the start-up read (0x6076 = 500
+    # mN m on every drive of this set).
+    assert f"on CAN interface udp_multicast channel '{CHANNEL}'" in run, run
+    assert (f"CAN bus udp_multicast '{CHANNEL}': rated torque 0x6076 per drive "
+            f"[0.5, 0.5, 0.5, 0.5, 0.5, 0.5, 0.5] N m") in run, run
+    # A clean bus loses no TPDO: the drives answered every SYNC of the run (the 751 ticks'
+    # updates saw 750 of them answered; the count was m = 7 too many, tick 0's).
+    lost = int(re.search(r"statuses received \d+, accepted \d+, lost (\d+)", run).group(1))
+    assert lost == 0, run
     # The logged lengths against the logged commands, as tests/emulator/test_canopen_run.py:
     # from tick k to k + 1 the lengths move by the command of tick k times T, to the drives'
     # quantisation (counts of 0.48 um, 8 nm/s of velocity units), on most ticks (a TPDO a
