@@ -224,3 +224,20 @@ def test_netft_on_the_udp_bridge_replaces_the_status_force_and_its_silence_stops
         netft.stop()
     np.testing.assert_allclose(measured, HAND, atol=1e-12)
     assert records >= 100  # one per bridge period (2 ms) over 0.4 s, less a busy host's
+
+
+def test_both_hardware_plants_implement_the_one_interface(robot):
+    """hardware/INTERFACE.md: the ports and the resources cdpm run drives, on both buses."""
+    from cdpm_drake.hardware.config import HardwareReels
+    from cdpm_drake.hardware.interface import INPUT_PORTS, OUTPUT_PORTS, HardwarePlant
+    from cdpm_drake.hardware.reels import HardwareReelsSystem
+
+    for plant in (HardwareReelsSystem(robot, HardwareReels(), time_step=T),
+                  CanopenReelsSystem(robot, CanopenReels(force_sensor=bus_sensor()),
+                                     time_step=T)):
+        assert isinstance(plant, HardwarePlant)
+        assert [plant.get_input_port(i).get_name()
+                for i in range(plant.num_input_ports())] == list(INPUT_PORTS)
+        assert [plant.get_output_port(i).get_name()
+                for i in range(plant.num_output_ports())] == list(OUTPUT_PORTS)
+        assert plant.link is None  # nothing opened before the initialisation
