@@ -241,3 +241,36 @@ def test_both_hardware_plants_implement_the_one_interface(robot):
         assert [plant.get_output_port(i).get_name()
                 for i in range(plant.num_output_ports())] == list(OUTPUT_PORTS)
         assert plant.link is None  # nothing opened before the initialisation
+
+
+def test_the_emulators_play_the_scenarios_force_sensor():
+    """`cdpm emulate` serves a scenario's !NetFT at its address; `cdpm emulate --canopen`
+    plays its !CanopenForceSensor node with the drives."""
+    import socket
+
+    from cdpm_drake.emulator import build_parser, build_server
+    from cdpm_drake.emulator import canopen_drives
+
+    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as s:
+        s.bind(("127.0.0.1", 0))
+        port = s.getsockname()[1]
+    args = build_parser().parse_args([
+        "--scenario", "exp2_interaction", "--port", "0", "--scenario-text",
+        "plant: !HardwareReels {force_sensor: !NetFT {address: 127.0.0.1, port: %d, "
+        "counts_per_force: 10.0}}" % port])
+    server = build_server(args)
+    try:
+        assert isinstance(server.netft, NetFTServer)
+        assert server.netft.address == ("127.0.0.1", port)
+        assert server.netft.counts_per_force == 10.0
+    finally:
+        server.netft.stop()
+    args = canopen_drives.build_parser().parse_args([
+        "--scenario", "exp2_interaction", "--channel", fresh_channel(), "--scenario-text",
+        "plant: !CanopenReels {interface: virtual, force_sensor: !CanopenForceSensor "
+        "{node_id: 42, counts_per_newton: 20.0}}"])
+    drives = canopen_drives.build_drives(args)
+    try:
+        assert drives.force_sensor == CanopenForceSensor(node_id=42, counts_per_newton=20.0)
+    finally:
+        drives.stop()
