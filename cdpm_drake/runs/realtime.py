@@ -192,7 +192,7 @@ def run(*, scenario: Scenario | ResolvedScenario, out_dir, duration: float | Non
             f"scenario {scenario.name!r} has plant: !{type(scenario.plant).__name__}; `cdpm "
             "run` drives real "
             "reels and needs plant: !HardwareReels {address: ..., port: ...} or plant: "
-            "!CanopenReels {interface: ..., channel: ...} (use `cdpm "
+            "!CanopenReels {interface: ..., channel: ..., force_sensor: ...} (use `cdpm "
             "simulate` for a simulation, or --scenario-text 'plant: !HardwareReels {}')")
     from cdpm_drake.hardware.force_config import force_source_problem
 

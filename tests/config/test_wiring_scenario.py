@@ -1173,8 +1173,8 @@ _HF = "Scenario.plant!HardwareReels.force_sensor"
 def test_hardware_force_sensor_reaches_the_diagrams_measured_force(tmp_path):
     """The bridge's status carries a hand of [2, 0, 0] N; a Net F/T on the same plant, in
     axes [+y, -z, -x] with 500 counts per N and a bias of [1, -1, 0.5] N of its own, a hand
-    of [-3, 5, 1.5] N from its 51st record on. !BridgeForce logs the status's force; !NetFT the box's,
-    tared (the bias gone) and mapped back to the base frame."""
+    of [-3, 5, 1.5] N from its 51st record on. !BridgeForce logs the status's force; !NetFT
+    the box's, tared (the bias gone) and mapped back to the base frame."""
     from cdpm_drake.emulator.netft import NetFTServer
     from cdpm_drake.hardware.force_config import BridgeForce, NetFT
 

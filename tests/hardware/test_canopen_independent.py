@@ -265,7 +265,8 @@ ip route add 224.0.0.0/4 dev lo
 cd {out}
 {py} {DRIVES} --channel {CHANNEL} --nodes 1 2 3 4 5 6 7 \\
     --start-counts {' '.join(map(str, START_COUNTS))} --counts-per-rev {COUNTS_PER_REV} \\
-    --record drives.json --force-node {FORCE_NODE} --rt-priority 40 --duration 120 {fault_args} > drives.txt 2>&1 &
+    --record drives.json --force-node {FORCE_NODE} --rt-priority 40 --duration 120 \\
+    {fault_args} > drives.txt 2>&1 &
 DRV=$!
 for i in $(seq 600); do grep -q "ready on" drives.txt && break; sleep 0.1; done
 PYTHONPATH={REPO} {py} -m cdpm_drake.cli run exp2_interaction --duration {duration} \\
