@@ -428,8 +428,10 @@ class EmulatedDrives:
                 if other.state == "operation enabled" and not other.dead:
                     velocity[other.cable] = self.bridge.command[other.cable]
             self.bridge.set_command(velocity, enable=bool(np.any(velocity)))
-        self._say(f"injected {kind} on cable {cable + 1} (node {d.node_id}) at SYNC "
-                  f"{self.syncs}")
+        where = (f"the force sensor (node {self.force_sensor.node_id})"
+                 if kind == "force_silent" and self.force_sensor is not None else
+                 f"cable {cable + 1} (node {d.node_id})")
+        self._say(f"injected {kind} on {where} at SYNC {self.syncs}")
 
     def _inject(self, now: float) -> None:
         if self.first_enable_time is None or not self.faults:
