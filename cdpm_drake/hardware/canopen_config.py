@@ -49,6 +49,10 @@ class CanopenReels:
     force_per_torque_unit: float = 0.1
     # tension_measured from the drives' torque (kernels/drive_torque) or none (NaN).
     tension_sensor: str = "drive_torque"
+    # The handle's force sensor, the admittance's input: a node on this bus
+    # (!CanopenForceSensor {node_id: ...}) or a Net F/T on the network (!NetFT {address:
+    # ...}). None: the drives carry no force sensor, and the run refuses to enable.
+    force_sensor: typing.Optional[typing.Union[CanopenForceSensor, NetFT]] = None
     # Control ticks without a TPDO from a drive after which every drive is stopped (and as
     # many control periods less one of wall time). 2: a TPDO a tick late is waited for, a
     # drive silent for two SYNCs is stopped (quick stop with the third SYNC of its silence,
@@ -80,10 +84,6 @@ class CanopenReels:
     # Largest forward-kinematics residual accepted for the measured lengths, m; None (the
     # default): derived from the robot's cables, as HardwareReels.max_length_residual.
     max_length_residual: typing.Optional[float] = None
-    # The handle's force sensor, the admittance's input: a node on this bus
-    # (!CanopenForceSensor {node_id: ...}) or a Net F/T on the network (!NetFT {address:
-    # ...}). None: the drives carry no force sensor, and the run refuses to enable.
-    force_sensor: typing.Optional[typing.Union[CanopenForceSensor, NetFT]] = None
 
 
 def resolved_node_ids(config: CanopenReels, m: int) -> list[int]:

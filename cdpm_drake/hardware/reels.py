@@ -55,13 +55,13 @@ from pydrake.systems.framework import LeafSystem
 from cdpm_drake.kernels.drive_torque import drive_model, tension_from_drive
 from cdpm_drake.kernels.kinematics import KinematicsError, cable_lengths, forward_kinematics
 from cdpm_drake.hardware.config import HardwareReels, check_hardware_reels
-from cdpm_drake.hardware.force_config import NetFT
-from cdpm_drake.hardware.force_sources import (RDT_STATUS_ERROR, ForceSensorError,
-                                               NetFTSource)
 from cdpm_drake.hardware.link import ReelLink
 from cdpm_drake.robot.stretch import derived_length_residual
 from cdpm_drake.hardware.protocol import (VERSION, VERSIONS, fault_names, next_sequence,
                                           sequence_delta)
+from cdpm_drake.hardware.force_config import NetFT
+from cdpm_drake.hardware.force_sources import (RDT_STATUS_ERROR, ForceSensorError,
+                                               NetFTSource)
 
 # Book-keeping state vector (float64; 32-bit sequence numbers are exact in a double).
 STATUS_SEQ = 0        # sequence of the last accepted status
