@@ -45,11 +45,13 @@ def rig(robot, config, u, *, bridge=None, faults=(), drive_ids=None, **drive_arg
         bridge = ReelBridge(robot, L0, time_constant=0.0)
     bus = can.Bus(interface="virtual", channel=config.channel, receive_own_messages=False)
     ids = drive_ids or resolved_node_ids(config, robot.num_cables)
-    # The handle's force sensor node, played with the drives when the config has one.
+    # The handle's force sensor node, played with the drives when the config has one (with
+    # `force_bias`, N in its axes, a zero offset of its own).
     from cdpm_drake.hardware.force_config import CanopenForceSensor
-    if isinstance(config.force_sensor, CanopenForceSensor):
-        drive_args.setdefault("force_sensor", config.force_sensor)
+    bias = drive_args.pop("force_bias", (0.0, 0.0, 0.0))
     drives = EmulatedDrives(bridge, bus, ids, faults=faults, **drive_args)
+    if isinstance(config.force_sensor, CanopenForceSensor):
+        drives.play_force_sensor(config.force_sensor, bias)
     b = DiagramBuilder()
     reels = b.AddSystem(CanopenReelsSystem(robot, config, time_step=T))
     source = b.AddSystem(ConstantVectorSource(np.asarray(u, dtype=float)))

@@ -149,8 +149,7 @@ class EmulatedDrives:
 
     def __init__(self, bridge, bus, node_ids, *, counts_per_metre=1_000_000.0,
                  position_offset=None, velocity_units=None, force_per_torque_unit=0.1,
-                 period=0.002, faults=(), record=100_000, log=None, force_sensor=None,
-                 force_bias=(0.0, 0.0, 0.0)):
+                 period=0.002, faults=(), record=100_000, log=None):
         m = bridge.robot.num_cables
         if len(node_ids) != m:
             raise ValueError(f"node ids must be one per cable ({m}), got {list(node_ids)!r}")
@@ -170,13 +169,6 @@ class EmulatedDrives:
                                  f"{kind!r}")
             if not 0 <= cable < m:
                 raise ValueError(f"fault cable must be in 1..{m}, got {cable + 1}")
-        # The handle's force sensor node (a CanopenForceSensor config, or None) and its NMT
-        # state, bias (N, sensor axes), TPDOs sent.
-        self.force_sensor = force_sensor
-        self.force_nmt = "pre-operational"
-        self.force_bias = np.asarray(force_bias, dtype=float)
-        self.force_silent = False
-        self.force_sent = 0
         self.bus_off = False
         self.syncs = 0
         self.tpdo_sent = 0
@@ -187,6 +179,17 @@ class EmulatedDrives:
         self._log = log
         self._stop = threading.Event()
         self._thread = None
+        self.play_force_sensor(None)
+
+    def play_force_sensor(self, sensor, bias=(0.0, 0.0, 0.0)) -> "EmulatedDrives":
+        """Play the handle's force sensor node `sensor` (a CanopenForceSensor, or None: none)
+        with the drives, with a zero offset of its own, `bias` (N, in its axes)."""
+        self.force_sensor = sensor
+        self.force_nmt = "pre-operational"
+        self.force_bias = np.asarray(bias, dtype=float)
+        self.force_silent = False
+        self.force_sent = 0
+        return self
 
     # --- running -----------------------------------------------------------------------------
 
@@ -354,6 +357,8 @@ class EmulatedDrives:
                 self._drive_fault(d, 0x8400)
         self.bridge.step(self.period)
         self.record.append((self.syncs + 1, [d.state for d in self.drives], cws, targets))
+        # The force node first: a controller that waits for the drives' TPDOs has it then.
+        self._send_force()
         for d in self.drives:
             if d.held is not None:  # last SYNC's TPDO, a SYNC late
                 self._send(*d.held, d)
@@ -365,7 +370,6 @@ class EmulatedDrives:
                     d.held = (d.od[(0x1800, 1)] & 0x7FF, payload)
                 elif self._send(d.od[(0x1800, 1)] & 0x7FF, payload, d):
                     self.tpdo_sent += 1
-        self._send_force()
         self.syncs += 1  # last: a SYNC counted is one fully answered
 
     def force_counts(self) -> list[int]:
@@ -552,24 +556,31 @@ def build_drives(args, log=None) -> EmulatedDrives:
         kwargs["receive_own_messages"] = False
     bus = can.Bus(**kwargs)
     cable = args.fault_cable - 1
-    drives = EmulatedDrives(bridge, bus, resolved_node_ids(config, m),
+    return EmulatedDrives(bridge, bus, resolved_node_ids(config, m),
                           counts_per_metre=config.counts_per_metre,
                           position_offset=resolved_offsets(config, m),
                           velocity_units=velocity_units(config),
                           force_per_torque_unit=config.force_per_torque_unit,
                           period=args.period or period,
-                          faults=[(k, cable, args.fault_after) for k in args.fault], log=log,
-                          force_sensor=_bus_force_sensor(config))
-    drives.config = config  # the scenario's bus settings (its Net F/T, if any)
-    return drives
+                          faults=[(k, cable, args.fault_after) for k in args.fault], log=log)
 
 
-def _bus_force_sensor(config):
-    """The plant's force sensor if it is a node on the bus (the drives play it), else None."""
+def play_force_sensor(args, drives, log=None):
+    """The handle's force sensor of the scenario's `!CanopenReels` (args.scenario): a node on
+    the bus, played by `drives`, or a Net F/T served at its address (the NetFTServer, to
+    stop, is returned; None otherwise)."""
+    from cdpm_drake.emulator.plant_setup import netft_server
     from cdpm_drake.hardware.force_config import CanopenForceSensor
 
-    sensor = config.force_sensor
-    return sensor if isinstance(sensor, CanopenForceSensor) else None
+    if not args.scenario:
+        return None
+    from cdpm_drake.config import load_scenario
+
+    plant = load_scenario(args.scenario, args.scenario_text).plant
+    sensor = getattr(plant, "force_sensor", None)
+    if isinstance(sensor, CanopenForceSensor):
+        drives.play_force_sensor(sensor)
+    return netft_server(plant, drives.bridge, log)
 
 
 def main(argv=None) -> int:
@@ -587,9 +598,7 @@ def main(argv=None) -> int:
 
         set_realtime_priority(args.rt_priority)
         drives = build_drives(args, log=say)
-        from cdpm_drake.emulator.plant_setup import netft_server
-
-        netft = netft_server(drives.config, drives.bridge, say)
+        netft = play_force_sensor(args, drives, log=say)
     except Exception as e:  # a robot, a scenario, a bus that will not open: say which
         print(f"cdpm emulate --canopen: error: {e}", file=sys.stderr)
         return 1

@@ -151,7 +151,7 @@ def build_server(args, log=None) -> ReelBridgeServer:
     """The server described by parsed command-line arguments; `log` as ReelBridgeServer's."""
     from cdpm_drake.robot import load_robot
 
-    force = plant_config = None
+    force = None
     address, port = "127.0.0.1", DEFAULT_BRIDGE_PORT
     if args.scenario:
         from cdpm_drake.config import load_scenario, scenario_operator, scenario_robot
@@ -160,7 +160,6 @@ def build_server(args, log=None) -> ReelBridgeServer:
         robot = scenario_robot(scenario)
         start = scenario.initial_position
         force = scenario_operator(scenario).force
-        plant_config = scenario.plant
         address = getattr(scenario.plant, "address", address)
         port = getattr(scenario.plant, "port", port)
     else:
@@ -213,15 +212,22 @@ def build_server(args, log=None) -> ReelBridgeServer:
                                  "are rigid and carry no tension")
         bridge = ReelBridge(robot, lengths, force=force, time_constant=0.02
                             if args.time_constant is None else args.time_constant)
-    server = ReelBridgeServer(bridge, address=(args.address or address,
+    return ReelBridgeServer(bridge, address=(args.address or address,
                                              args.port if args.port is not None else port),
                             faults=faults, period=args.period, seed=args.seed,
                             controller=controller, command_timeout=args.command_timeout,
                             record=0, log=log, protocol_version=args.protocol_version,
                             truth=TRUTH_ROWS if args.truth_log else 0)
-    # The handle's Net F/T, where the scenario's plant reads the hand from one.
-    server.netft = netft_server(plant_config, bridge, log)
-    return server
+
+
+def start_netft(args, bridge, log=None):
+    """The Net F/T of the scenario's plant (`force_sensor: !NetFT {...}`), served at its
+    address with `bridge`'s hand force (a NetFTServer, to stop), or None."""
+    if not args.scenario:
+        return None
+    from cdpm_drake.config import load_scenario
+
+    return netft_server(load_scenario(args.scenario, args.scenario_text).plant, bridge, log)
 
 
 # Statuses the truth log keeps: the last 10 minutes at 500 Hz.
@@ -267,6 +273,7 @@ def _main(argv) -> int:
     try:
         set_realtime_priority(args.rt_priority)
         server = build_server(args, log=say)
+        netft = start_netft(args, server.bridge, log=say)  # the handle's Net F/T, if any
     except (RobotError, ScenarioError, OSError) as e:
         why = e.strerror if isinstance(e, OSError) and e.strerror else e
         print(f"cdpm-reel-emulator: error: {why}", file=sys.stderr)
@@ -294,8 +301,6 @@ def _main(argv) -> int:
             code = exit_code(e)
         finally:
             server.stop()
-            if getattr(server, "netft", None) is not None:
-                server.netft.stop()
             now = time.monotonic() - server.start_wall if server.start_wall else 0.0
             if server.session_open:
                 server.close_session(now, "the emulator stopped")
@@ -309,4 +314,6 @@ def _main(argv) -> int:
             if args.truth_log:
                 say(f"truth log: {write_truth_log(server, args.truth_log)} statuses written to "
                     f"{args.truth_log}")
+            if netft is not None:
+                netft.stop()
     return code

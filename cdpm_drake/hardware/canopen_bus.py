@@ -82,8 +82,7 @@ class CanopenMaster:
     frames with a non-zero code.
     """
 
-    def __init__(self, interface: str, channel: str, bitrate: int, node_ids,
-                 force_node_id: int | None = None):
+    def __init__(self, interface: str, channel: str, bitrate: int, node_ids):
         self.interface, self.channel, self.bitrate = interface, channel, int(bitrate)
         self.node_ids = [int(i) for i in node_ids]
         m = len(self.node_ids)
@@ -114,15 +113,14 @@ class CanopenMaster:
             self._handlers[COB_TPDO1 + node_id] = self._on_tpdo
             self._handlers[COB_EMCY + node_id] = self._on_emcy
             self._handlers[COB_HEARTBEAT + node_id] = self._on_heartbeat
-        # The handle's force sensor node, if on this bus: its TPDO's Fx, Fy, Fz (counts),
-        # status word, the TPDOs counted, and while `force_tare` is a list, each sample.
-        self.force_node_id = force_node_id
+        # The handle's force sensor node, if on this bus (watch_force_node): its TPDO's Fx,
+        # Fy, Fz (counts), status word, the TPDOs counted, and while `force_tare` is a list,
+        # each sample.
+        self.force_node_id = None
         self.force_counts = np.zeros(3)
         self.force_status = 0
         self.force_count = 0
         self.force_tare: list | None = None
-        if force_node_id is not None:
-            self._handlers[COB_TPDO1 + force_node_id] = self._on_force
 
     # --- connection and configuration -----------------------------------------------------
 
@@ -412,6 +410,11 @@ class CanopenMaster:
             self.still[k] = self.still[k] + 1 if same else 0
             self.statusword[k], self.position[k], self.torque[k] = sw, pos, torque
             self.tpdo_count[k] += 1
+
+    def watch_force_node(self, node_id: int) -> None:
+        """Read the TPDO of the handle's force sensor node `node_id` too (before open())."""
+        self.force_node_id = int(node_id)
+        self._handlers[COB_TPDO1 + self.force_node_id] = self._on_force
 
     def _on_force(self, can_id, data, timestamp) -> None:
         if len(data) < 6:

@@ -154,19 +154,21 @@ class CanopenReelsSystem(LeafSystem):
         self._drive_model = drive_model(robot.dynamics, m)
         self._ramp_step = 1.0 if config.ramp_time == 0 else self._T / config.ramp_time
         self._silence = (config.missed_tpdo_ticks - 1) * self._T
-        sensor = config.force_sensor
-        on_bus = isinstance(sensor, CanopenForceSensor)
         self.master = CanopenMaster(config.interface, config.channel, config.bitrate,
-                                    self._ids, sensor.node_id if on_bus else None)
+                                    self._ids)
+        self._moving = np.zeros(m)  # consecutive commands >= frozen_speed, same sign
         # The handle's force sensor: the master reads a node on the bus, a NetFTSource a Net
         # F/T; either way `_force_scale` turns its counts into N in the base frame.
+        sensor = config.force_sensor
+        on_bus = isinstance(sensor, CanopenForceSensor)
+        if on_bus:
+            self.master.watch_force_node(sensor.node_id)
         self.force_source = None if on_bus else NetFTSource(sensor)
         self._force_scale = (ForceScale(sensor.counts_per_newton, sensor.axes) if on_bus
                              else self.force_source.scale)
         self._force_missed = (config.missed_tpdo_ticks if sensor.missed_ticks is None
                               else sensor.missed_ticks)
         self._force_silence = (self._force_missed - 1) * self._T
-        self._moving = np.zeros(m)  # consecutive commands >= frozen_speed, same sign
         # TPDOs of an unchanged position that make a frozen encoder: frozen_ticks, or more
         # where frozen_speed moves less than FROZEN_COUNTS counts in frozen_ticks (coarse
         # counts leave a slow drive's position unchanged for several ticks).
@@ -175,6 +177,7 @@ class CanopenReelsSystem(LeafSystem):
         self._last_sign = np.zeros(m)
         self._stopped = self._quick_stopped = False
         self._fault = None  # (reason, cable, detail, t) a publish found
+        self._force_at_sync = None  # (samples, time.monotonic()) when the publish ran
         self.lost_tpdos = 0
         self._count_start = np.zeros(m)
 
@@ -388,10 +391,14 @@ class CanopenReelsSystem(LeafSystem):
         return n, self._force_scale.force(counts), status
 
     def _judge_force(self, context, state) -> tuple:
-        """The force sample into the state; (reason, detail) of a silent or failing sensor."""
-        samples, force, status = self._force_sample()
+        """The newest force sample into the state; (reason, detail) of a silent or failing
+        sensor. Its silence is counted as the drives' is: on the samples that had come when
+        the tick's publish sent its SYNC (`_force_at_sync`), so the sample answering SYNC k is
+        expected by tick k + 1, however soon this tick's own SYNC is answered."""
+        _, force, status = self._force_sample()
+        samples, now = self._force_at_sync or (self._force_sample()[0], time.monotonic())
+        self._force_at_sync = None
         count0, missed, heard = context.get_discrete_state(self._sensor).get_value()
-        now = time.monotonic()
         new = samples != count0
         missed, heard = (0.0, now) if new else (missed + 1.0, heard)
         state.get_mutable_vector(self._sensor).SetFromVector([samples, missed, heard])
@@ -535,6 +542,7 @@ class CanopenReelsSystem(LeafSystem):
         return FAULT_NONE, -1, 0.0
 
     def _publish(self, context):
+        self._force_at_sync = (self._force_sample()[0], time.monotonic())  # _judge_force
         book = context.get_discrete_state(self._book).get_value()
         if book[FAULT] == FAULT_NONE and self._fault is None:
             # Drake runs this tick's update right after this publish, so the update has not

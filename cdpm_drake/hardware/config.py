@@ -86,10 +86,10 @@ def check_hardware_reels(config: HardwareReels, field: str = "plant") -> None:
     _number(config.ramp_time, f"{field}.ramp_time", "s", positive=False)
     if config.max_length_residual is not None:  # None: derived from the robot
         _number(config.max_length_residual, f"{field}.max_length_residual", "m", positive=True)
-    check_force_sensor(config.force_sensor, f"{field}.force_sensor")
     if config.tension_sensor not in TENSION_SENSORS:
         raise ValueError(f"{field}.tension_sensor must be one of "
                          f"{', '.join(TENSION_SENSORS)}, got {config.tension_sensor!r}")
+    check_force_sensor(config.force_sensor, f"{field}.force_sensor")
 
 
 def _int_in(value, lo, hi, field, what):

@@ -194,13 +194,13 @@ def run(*, scenario: Scenario | ResolvedScenario, out_dir, duration: float | Non
             "reels and needs plant: !HardwareReels {address: ..., port: ...} or plant: "
             "!CanopenReels {interface: ..., channel: ..., force_sensor: ...} (use `cdpm "
             "simulate` for a simulation, or --scenario-text 'plant: !HardwareReels {}')")
+    duration = scenario.duration if duration is None else float(duration)
+    if not (duration > 0 and np.isfinite(duration)):
+        raise ScenarioError(f"duration must be a finite number > 0 s, got {duration!r}")
     from cdpm_drake.hardware.force_config import force_source_problem
 
     if force_source_problem(scenario.plant):  # before anything opens the bus
         raise ScenarioError(force_source_problem(scenario.plant))
-    duration = scenario.duration if duration is None else float(duration)
-    if not (duration > 0 and np.isfinite(duration)):
-        raise ScenarioError(f"duration must be a finite number > 0 s, got {duration!r}")
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     for stale in ("ticks.bin", "log.npz"):

@@ -86,14 +86,17 @@ def test_cdpm_run_against_emulated_canopen_drives(tmp_path):
     # The hand reached the diagram through the force sensor node: the emulator's hand is
     # exp2's spring hand on its platform (the best fit to the lengths the controller reads
     # too), so the logged measured_force is that hand at the logged pose and velocity, to
-    # the node's counts (0.01 N), the tare's rounding and a tick's motion (measured: 0.015 N
-    # at most, with the hand up to 1.4 N).
+    # the node's counts (0.01 N) and the tare's rounding, of a tick within a few (the
+    # sample read is the newest; a frame late on a busy host is a tick older). Measured on a
+    # quiet host: 0.015 N at most at the same tick, with the hand up to 1.4 N.
     from cdpm_drake.config import load_scenario, scenario_operator
     hand = scenario_operator(load_scenario("exp2_interaction")).force
     expected = np.array([hand(t, p, v) for t, p, v in zip(log["time"], log["p"],
                                                           log["velocity"])])
     assert np.linalg.norm(expected, axis=1).max() > 1.0
-    assert np.abs(log["F_measured"] - expected).max() <= 0.05
+    off = np.min([np.abs(log["F_measured"][3:-1] - expected[3 + lag:n - 1 + lag]).max(axis=1)
+                  for lag in (-3, -2, -1, 0, 1)], axis=0)
+    assert off.max() <= 0.03, np.sort(off)[-10:]
     # The drives integrate their target velocities one plant step per SYNC (lag 0); the
     # command logged at tick k goes out with SYNC k, and the drives' answer to it is read
     # on tick k + 1 (Drake runs the update right after the publish). So from tick k to
