@@ -356,9 +356,9 @@ class EmulatedDrives:
             for d in self.drives:
                 self._drive_fault(d, 0x8400)
         self.bridge.step(self.period)
-        self.record.append((self.syncs + 1, [d.state for d in self.drives], cws, targets))
         # The force node first: a controller that waits for the drives' TPDOs has it then.
         self._send_force()
+        self.record.append((self.syncs + 1, [d.state for d in self.drives], cws, targets))
         for d in self.drives:
             if d.held is not None:  # last SYNC's TPDO, a SYNC late
                 self._send(*d.held, d)
