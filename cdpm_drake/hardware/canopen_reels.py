@@ -169,6 +169,8 @@ class CanopenReelsSystem(LeafSystem):
         self._force_missed = (config.missed_tpdo_ticks if sensor.missed_ticks is None
                               else sensor.missed_ticks)
         self._force_silence = (self._force_missed - 1) * self._T
+        if getattr(config, "lockstep", False):  # ticks are the clock: count them alone
+            self._force_silence = 0.0
         # TPDOs of an unchanged position that make a frozen encoder: frozen_ticks, or more
         # where frozen_speed moves less than FROZEN_COUNTS counts in frozen_ticks (coarse
         # counts leave a slow drive's position unchanged for several ticks).
@@ -177,7 +179,8 @@ class CanopenReelsSystem(LeafSystem):
         self._last_sign = np.zeros(m)
         self._stopped = self._quick_stopped = False
         self._fault = None  # (reason, cable, detail, t) a publish found
-        self._force_at_sync = None  # (samples, time.monotonic()) when the publish ran
+        # (samples, force, status, time.monotonic()) when the publish ran.
+        self._force_at_sync = None
         self.lost_tpdos = 0
         self._count_start = np.zeros(m)
 
@@ -391,12 +394,13 @@ class CanopenReelsSystem(LeafSystem):
         return n, self._force_scale.force(counts), status
 
     def _judge_force(self, context, state) -> tuple:
-        """The newest force sample into the state; (reason, detail) of a silent or failing
-        sensor. Its silence is counted as the drives' is: on the samples that had come when
-        the tick's publish sent its SYNC (`_force_at_sync`), so the sample answering SYNC k is
-        expected by tick k + 1, however soon this tick's own SYNC is answered."""
-        _, force, status = self._force_sample()
-        samples, now = self._force_at_sync or (self._force_sample()[0], time.monotonic())
+        """The force sample into the state; (reason, detail) of a silent or failing sensor.
+        As the drives' TPDOs: the sample as it was when the tick's publish sent its SYNC
+        (`_force_at_sync`), not what this tick's own SYNC brought back meanwhile, so the
+        sample answering SYNC k is read (and expected) on tick k + 1, whatever the host's
+        timing."""
+        at = self._force_at_sync or (*self._force_sample(), time.monotonic())
+        samples, force, status, now = at
         self._force_at_sync = None
         count0, missed, heard = context.get_discrete_state(self._sensor).get_value()
         new = samples != count0
@@ -542,7 +546,7 @@ class CanopenReelsSystem(LeafSystem):
         return FAULT_NONE, -1, 0.0
 
     def _publish(self, context):
-        self._force_at_sync = (self._force_sample()[0], time.monotonic())  # _judge_force
+        self._force_at_sync = (*self._force_sample(), time.monotonic())  # _judge_force
         book = context.get_discrete_state(self._book).get_value()
         if book[FAULT] == FAULT_NONE and self._fault is None:
             # Drake runs this tick's update right after this publish, so the update has not
