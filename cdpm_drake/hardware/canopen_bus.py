@@ -121,6 +121,7 @@ class CanopenMaster:
         self.force_status = 0
         self.force_count = 0
         self.force_tare: list | None = None
+        self.force_at_snapshot = (np.zeros(3), 0, 0, time.monotonic())
 
     # --- connection and configuration -----------------------------------------------------
 
@@ -389,9 +390,13 @@ class CanopenMaster:
     def snapshot(self, drain_emcy: bool = True):
         """(statusword, position, torque, tpdo_count, still, heartbeat_wall, heartbeat_state,
         new EMCY list) after poll(), copied under the lock; the EMCY list is emptied if
-        `drain_emcy`."""
+        `drain_emcy`. The force sensor node's state at the same moment goes to
+        `force_at_snapshot` ((Fx, Fy, Fz counts, status word, TPDOs counted, time.monotonic())):
+        as the drives', the last snapshot before a SYNC is what the tick judges."""
         self.poll()
         with self.lock:
+            self.force_at_snapshot = (self.force_counts.copy(), self.force_status,
+                                      self.force_count, time.monotonic())
             emcy = self.emcy
             self.emcy = [] if drain_emcy else list(emcy)
             return (self.statusword.copy(), self.position.copy(), self.torque.copy(),

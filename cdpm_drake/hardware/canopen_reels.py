@@ -395,12 +395,17 @@ class CanopenReelsSystem(LeafSystem):
 
     def _judge_force(self, context, state) -> tuple:
         """The force sample into the state; (reason, detail) of a silent or failing sensor.
-        As the drives' TPDOs: the sample as it was when the tick's publish sent its SYNC
-        (`_force_at_sync`), not what this tick's own SYNC brought back meanwhile, so the
-        sample answering SYNC k is read (and expected) on tick k + 1, whatever the host's
-        timing."""
-        at = self._force_at_sync or (*self._force_sample(), time.monotonic())
-        samples, force, status, now = at
+        As the drives' TPDOs: the sample as it was when the tick's publish sent its SYNC (the
+        bus node: the master's last snapshot, `force_at_snapshot`; a Net F/T: what the
+        publish read, `_force_at_sync`), not what this tick's own SYNC brought back
+        meanwhile, so the sample answering SYNC k is read (and expected) on tick k + 1,
+        whatever the host's timing."""
+        if self.force_source is None:  # the bus node: as the SYNC's snapshot left it
+            counts, status, samples, now = self.master.force_at_snapshot
+            force = self._force_scale.force(counts)
+        else:  # the Net F/T: as the tick's publish read it
+            at = self._force_at_sync or (*self._force_sample(), time.monotonic())
+            samples, force, status, now = at
         self._force_at_sync = None
         count0, missed, heard = context.get_discrete_state(self._sensor).get_value()
         new = samples != count0
@@ -546,7 +551,8 @@ class CanopenReelsSystem(LeafSystem):
         return FAULT_NONE, -1, 0.0
 
     def _publish(self, context):
-        self._force_at_sync = (*self._force_sample(), time.monotonic())  # _judge_force
+        if self.force_source is not None:  # the Net F/T's records as of now, for the update
+            self._force_at_sync = (*self._force_sample(), time.monotonic())
         book = context.get_discrete_state(self._book).get_value()
         if book[FAULT] == FAULT_NONE and self._fault is None:
             # Drake runs this tick's update right after this publish, so the update has not
