@@ -304,7 +304,7 @@ def test_cdpm_run_against_the_independent_drives(tmp_path):
     run = texts["run.txt"]
     # The report names the bus and shows the rated torque the start-up read (0x6076 = 500
     # mN m on every drive of this set).
-    assert f"on CAN interface udp_multicast channel '{CHANNEL}'" in run, run
+    assert f", CAN interface udp_multicast channel '{CHANNEL}')" in run, run
     assert (f"CAN bus udp_multicast '{CHANNEL}': rated torque 0x6076 per drive "
             f"[0.5, 0.5, 0.5, 0.5, 0.5, 0.5, 0.5] N m") in run, run
     # A clean bus loses no TPDO: the drives answered every SYNC of the run (the 751 ticks'
