@@ -13,6 +13,13 @@ T = 0.002
 _channels = itertools.count()
 
 
+def bus_sensor(**fields):
+    """A CanopenForceSensor for the tests' rigs (node 20, a short tare)."""
+    from cdpm_drake.hardware.force_config import CanopenForceSensor
+
+    return CanopenForceSensor(**dict(dict(node_id=20, tare_samples=5), **fields))
+
+
 def fresh_channel() -> str:
     return f"canopen-test-{next(_channels)}"
 
@@ -38,7 +45,13 @@ def rig(robot, config, u, *, bridge=None, faults=(), drive_ids=None, **drive_arg
         bridge = ReelBridge(robot, L0, time_constant=0.0)
     bus = can.Bus(interface="virtual", channel=config.channel, receive_own_messages=False)
     ids = drive_ids or resolved_node_ids(config, robot.num_cables)
+    # The handle's force sensor node, played with the drives when the config has one (with
+    # `force_bias`, N in its axes, a zero offset of its own).
+    from cdpm_drake.hardware.force_config import CanopenForceSensor
+    bias = drive_args.pop("force_bias", (0.0, 0.0, 0.0))
     drives = EmulatedDrives(bridge, bus, ids, faults=faults, **drive_args)
+    if isinstance(config.force_sensor, CanopenForceSensor):
+        drives.play_force_sensor(config.force_sensor, bias)
     b = DiagramBuilder()
     reels = b.AddSystem(CanopenReelsSystem(robot, config, time_step=T))
     source = b.AddSystem(ConstantVectorSource(np.asarray(u, dtype=float)))

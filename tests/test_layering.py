@@ -139,3 +139,25 @@ def test_the_import_reader_sees_relative_and_absolute_imports():
     assert not _imports_drake(PACKAGE / "kernels" / "kinematics.py")
     assert _unit(PACKAGE / "systems" / "plants" / "dynamic_plant.py") == "systems"
     assert _unit(PACKAGE / "diagram.py") == "diagram"
+
+
+def test_the_emulators_two_command_lines_import_neither_each_other():
+    """emulator/main.py (the UDP bridge) and emulator/canopen_drives.py (CiA 402 drives)
+    share what they build alike through emulator/plant_setup.py; the console entry point
+    that chooses between them is emulator/entry.py."""
+    import ast
+
+    def imported(path):
+        names = set()
+        for node in ast.walk(ast.parse(path.read_text())):
+            if isinstance(node, ast.ImportFrom) and node.module:
+                names.add(node.module)
+            elif isinstance(node, ast.Import):
+                names.update(a.name for a in node.names)
+        return names
+
+    emulator = PACKAGE / "emulator"
+    assert "cdpm_drake.emulator.canopen_drives" not in imported(emulator / "main.py")
+    assert "cdpm_drake.emulator.main" not in imported(emulator / "canopen_drives.py")
+    assert {"cdpm_drake.emulator.main", "cdpm_drake.emulator.canopen_drives"} <= imported(
+        emulator / "entry.py")

@@ -48,7 +48,9 @@ def run_main(*, scenario, duration=None, out_dir=None, out=None, on_status=None,
     if tty:
         print(file=sys.stderr)
     plant = scenario.plant
-    where = (f" at {plant.address}:{plant.port}" if hasattr(plant, "address") else "")
+    where = (f" at {plant.address}:{plant.port}" if hasattr(plant, "address") else
+             f", CAN interface {plant.interface} channel {plant.channel!r}"
+             if hasattr(plant, "interface") else "")
     print(f"scenario {scenario.name!r} ({', '.join(variant)}{where})", file=out)
     for line in report_lines(result):
         print(line, file=out)

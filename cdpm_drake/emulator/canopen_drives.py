@@ -25,7 +25,15 @@ fault_bit (the drive goes to Fault without an EMCY: only its statusword tells), 
 (the drive's next TPDO is held back and sent a SYNC late, just before the following one; with
 another kind on the same cable: the first TPDO that shows the fault comes late), lost_tpdo (the drive stops sending TPDOs; heartbeats go on), frozen_position (position actual
 stops changing), dead_node (the node sends nothing and ignores the bus; its reel stops),
-bus_off (every node leaves the bus: nothing sent or received; the reels stop).
+bus_off (every node leaves the bus: nothing sent or received; the reels stop),
+force_silent (the handle's force sensor node stops sending its TPDO).
+
+The handle's force sensor, when the scenario's plant has `force_sensor: !CanopenForceSensor
+{...}`: a node that NMT starts like the drives and that sends, after each SYNC's plant step,
+its TPDO (COB-ID 0x180 + node_id): the plant's hand force (the force the UDP bridge's status
+carries) in the sensor's axes (`axes`) and counts (`counts_per_newton`) plus the sensor's own
+bias (`force_bias`, N in its axes: what the controller's tare must remove), as 3 int16, and a
+status word 0.
 """
 
 import argparse
@@ -44,7 +52,7 @@ from cdpm_drake.hardware.canopen_bus import (COB_EMCY, COB_HEARTBEAT, COB_NMT, C
                                              NMT_START, NMT_STOP)
 
 FAULT_KINDS = ("drive_fault", "fault_bit", "late_tpdo", "lost_tpdo", "frozen_position",
-               "dead_node", "bus_off")
+               "dead_node", "bus_off", "force_silent")
 # Statuswords of the states (bit 9 remote, bit 4 voltage enabled where it is).
 SW = {"switch on disabled": 0x0250, "ready to switch on": 0x0231, "switched on": 0x0233,
       "operation enabled": 0x0237, "quick stop active": 0x0217, "fault": 0x0218}
@@ -171,6 +179,17 @@ class EmulatedDrives:
         self._log = log
         self._stop = threading.Event()
         self._thread = None
+        self.play_force_sensor(None)
+
+    def play_force_sensor(self, sensor, bias=(0.0, 0.0, 0.0)) -> "EmulatedDrives":
+        """Play the handle's force sensor node `sensor` (a CanopenForceSensor, or None: none)
+        with the drives, with a zero offset of its own, `bias` (N, in its axes)."""
+        self.force_sensor = sensor
+        self.force_nmt = "pre-operational"
+        self.force_bias = np.asarray(bias, dtype=float)
+        self.force_silent = False
+        self.force_sent = 0
+        return self
 
     # --- running -----------------------------------------------------------------------------
 
@@ -226,6 +245,8 @@ class EmulatedDrives:
             for d in self.drives:
                 if data[1] in (0, d.node_id) and not d.dead:
                     self._nmt(d, data[0])
+            if self.force_sensor is not None and data[1] in (0, self.force_sensor.node_id):
+                self.force_nmt = "operational" if data[0] == NMT_START else "pre-operational"
         elif cob_id == COB_SYNC:
             self._sync()
         elif COB_SDO_RX < cob_id <= COB_SDO_RX + 127:
@@ -335,6 +356,8 @@ class EmulatedDrives:
             for d in self.drives:
                 self._drive_fault(d, 0x8400)
         self.bridge.step(self.period)
+        # The force node first: a controller that waits for the drives' TPDOs has it then.
+        self._send_force()
         self.record.append((self.syncs + 1, [d.state for d in self.drives], cws, targets))
         for d in self.drives:
             if d.held is not None:  # last SYNC's TPDO, a SYNC late
@@ -348,6 +371,26 @@ class EmulatedDrives:
                 elif self._send(d.od[(0x1800, 1)] & 0x7FF, payload, d):
                     self.tpdo_sent += 1
         self.syncs += 1  # last: a SYNC counted is one fully answered
+
+    def force_counts(self) -> list[int]:
+        """The force sensor's Fx, Fy, Fz counts now: the plant's hand force (base frame) in the
+        sensor's axes, plus its bias, times counts_per_newton, rounded, saturated at int16."""
+        s = self.force_sensor
+        f = np.asarray(self.bridge.force(), dtype=float)
+        out = []
+        for i, name in enumerate(s.axes):  # sensor axis i measures base axis `name`
+            value = (1.0 if name[0] == "+" else -1.0) * f["xyz".index(name[1])]
+            counts = (value + self.force_bias[i]) * s.counts_per_newton
+            out.append(int(max(-32768, min(32767, round(counts)))))
+        return out
+
+    def _send_force(self) -> None:
+        if (self.force_sensor is None or self.force_nmt != "operational"
+                or self.force_silent):
+            return
+        payload = struct.pack("<3hH", *self.force_counts(), 0)
+        if self._send(0x180 + self.force_sensor.node_id, payload):
+            self.force_sent += 1
 
     def _drive_fault(self, d: Drive, code: int) -> None:
         d.state = "fault"
@@ -377,6 +420,8 @@ class EmulatedDrives:
         elif kind == "dead_node":
             d.dead = True
             d.state = "switch on disabled"  # a dead drive's power stage is off
+        elif kind == "force_silent":
+            self.force_silent = True
         elif kind == "bus_off":
             self.bus_off = True
             for d in self.drives:  # CiA 301 error behaviour: every drive stops
@@ -387,8 +432,10 @@ class EmulatedDrives:
                 if other.state == "operation enabled" and not other.dead:
                     velocity[other.cable] = self.bridge.command[other.cable]
             self.bridge.set_command(velocity, enable=bool(np.any(velocity)))
-        self._say(f"injected {kind} on cable {cable + 1} (node {d.node_id}) at SYNC "
-                  f"{self.syncs}")
+        where = (f"the force sensor (node {self.force_sensor.node_id})"
+                 if kind == "force_silent" and self.force_sensor is not None else
+                 f"cable {cable + 1} (node {d.node_id})")
+        self._say(f"injected {kind} on {where} at SYNC {self.syncs}")
 
     def _inject(self, now: float) -> None:
         if self.first_enable_time is None or not self.faults:
@@ -471,7 +518,7 @@ def build_drives(args, log=None) -> EmulatedDrives:
                            "clone)") from None
 
     from cdpm_drake.emulator.bridges import DynamicBridge, ReelBridge
-    from cdpm_drake.emulator.main import dynamic_scenario
+    from cdpm_drake.emulator.plant_setup import dynamic_scenario
     from cdpm_drake.hardware.canopen_config import (CanopenReels, resolved_node_ids,
                                                     resolved_offsets, velocity_units)
     from cdpm_drake.kernels.kinematics import cable_lengths, jacobian
@@ -518,6 +565,24 @@ def build_drives(args, log=None) -> EmulatedDrives:
                           faults=[(k, cable, args.fault_after) for k in args.fault], log=log)
 
 
+def play_force_sensor(args, drives, log=None):
+    """The handle's force sensor of the scenario's `!CanopenReels` (args.scenario): a node on
+    the bus, played by `drives`, or a Net F/T served at its address (the NetFTServer, to
+    stop, is returned; None otherwise)."""
+    from cdpm_drake.emulator.plant_setup import netft_server
+    from cdpm_drake.hardware.force_config import CanopenForceSensor
+
+    if not args.scenario:
+        return None
+    from cdpm_drake.config import load_scenario
+
+    plant = load_scenario(args.scenario, args.scenario_text).plant
+    sensor = getattr(plant, "force_sensor", None)
+    if isinstance(sensor, CanopenForceSensor):
+        drives.play_force_sensor(sensor)
+    return netft_server(plant, drives.bridge, log)
+
+
 def main(argv=None) -> int:
     """Exit codes: 0 done (--duration), 1 error, 2 bad usage, 130 / 143 after Ctrl-C /
     SIGTERM."""
@@ -533,6 +598,7 @@ def main(argv=None) -> int:
 
         set_realtime_priority(args.rt_priority)
         drives = build_drives(args, log=say)
+        netft = play_force_sensor(args, drives, log=say)
     except Exception as e:  # a robot, a scenario, a bus that will not open: say which
         print(f"cdpm emulate --canopen: error: {e}", file=sys.stderr)
         return 1
@@ -555,6 +621,8 @@ def main(argv=None) -> int:
             code = exit_code(e)
         finally:
             drives.stop()
+            if netft is not None:
+                netft.stop()
             states = ", ".join(f"{d.node_id}: {d.state}" for d in drives.drives)
             say(f"{drives.syncs} SYNCs; drive states {states}; lengths "
                 f"{np.round(drives.bridge.lengths, 4).tolist()} m")

@@ -36,6 +36,10 @@ Examples:
 
 `--canopen` plays CiA 402 drives on a CAN bus instead (emulator/canopen_drives.py; `cdpm
 emulate --canopen --help` lists its options).
+
+A scenario whose plant has `force_sensor: !NetFT {address, port, ...}` gets its Net F/T
+played too (emulator/netft.py): the hand force streamed over RDT at that address, one record
+per plant step.
 """
 
 import argparse
@@ -48,6 +52,7 @@ import numpy as np
 
 from cdpm_drake.emulator.bridges import DynamicBridge, ReelBridge
 from cdpm_drake.emulator.faults import FaultPlan
+from cdpm_drake.emulator.plant_setup import dynamic_scenario, netft_server
 from cdpm_drake.emulator.server import ReelBridgeServer, count_by_reason, vector_text
 from cdpm_drake.hardware.config import DEFAULT_BRIDGE_PORT
 from cdpm_drake.hardware.priority import set_realtime_priority
@@ -215,6 +220,16 @@ def build_server(args, log=None) -> ReelBridgeServer:
                             truth=TRUTH_ROWS if args.truth_log else 0)
 
 
+def start_netft(args, bridge, log=None):
+    """The Net F/T of the scenario's plant (`force_sensor: !NetFT {...}`), served at its
+    address with `bridge`'s hand force (a NetFTServer, to stop), or None."""
+    if not args.scenario:
+        return None
+    from cdpm_drake.config import load_scenario
+
+    return netft_server(load_scenario(args.scenario, args.scenario_text).plant, bridge, log)
+
+
 # Statuses the truth log keeps: the last 10 minutes at 500 Hz.
 TRUTH_ROWS = 300_000
 
@@ -232,42 +247,12 @@ def write_truth_log(server, path) -> int:
     return len(rows)
 
 
-def dynamic_scenario(args, robot, start):
-    """The resolved scenario of `--plant dynamic`: the scenario's (or, with --robot, a
-    scenario of that robot), at `start`, with --force as its operator, and a !DynamicReels
-    plant (the scenario's own when it has one)."""
-    import dataclasses as dc
-
-    from cdpm_drake.kernels.plant.operators import NoOperator, ScriptedOperator
-    from cdpm_drake.config import DynamicReels, Scenario, load_scenario, resolve_scenario
-
-    if args.scenario:
-        scenario = load_scenario(args.scenario, args.scenario_text)
-    else:
-        scenario = Scenario(robot=args.robot or "paper_7cable", swaps=[],
-                            operator=NoOperator())
-    plant = scenario.plant if isinstance(scenario.plant, DynamicReels) else DynamicReels()
-    operator = scenario.operator
-    if args.force is not None:
-        operator = ScriptedOperator(times=[0.0], forces=[[float(f) for f in args.force]])
-    scenario = dc.replace(scenario, plant=plant, operator=operator,
-                          initial_position=[float(x) for x in start])
-    resolved = resolve_scenario(scenario)
-    if resolved.robot.num_cables != robot.num_cables:  # pragma: no cover - same robot
-        raise ValueError("the scenario's robot changed under --plant dynamic")
-    return resolved
-
-
 def main(argv=None) -> int:
     """Exit codes as `cdpm`'s: 0 done (--duration), 1 error (robot, scenario, cannot bind),
     2 bad usage, 130 / 143 after Ctrl-C / SIGTERM (the summary is printed first)."""
     from cdpm_drake.text import prefixed_log_records
 
     argv = list(sys.argv[1:] if argv is None else argv)
-    if "--canopen" in argv:  # CiA 402 drives on a CAN bus instead of the UDP bridge
-        from cdpm_drake.emulator.canopen_drives import main as canopen_main
-        argv.remove("--canopen")
-        return canopen_main(argv)
     with prefixed_log_records():
         return _main(argv)
 
@@ -288,6 +273,7 @@ def _main(argv) -> int:
     try:
         set_realtime_priority(args.rt_priority)
         server = build_server(args, log=say)
+        netft = start_netft(args, server.bridge, log=say)  # the handle's Net F/T, if any
     except (RobotError, ScenarioError, OSError) as e:
         why = e.strerror if isinstance(e, OSError) and e.strerror else e
         print(f"cdpm-reel-emulator: error: {why}", file=sys.stderr)
@@ -328,4 +314,6 @@ def _main(argv) -> int:
             if args.truth_log:
                 say(f"truth log: {write_truth_log(server, args.truth_log)} statuses written to "
                     f"{args.truth_log}")
+            if netft is not None:
+                netft.stop()
     return code

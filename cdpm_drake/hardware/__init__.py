@@ -7,6 +7,10 @@
   canopen_config.py `CanopenReels`, the `!CanopenReels` plant entry, and its bus-load budget
   canopen_bus.py    CanopenMaster: SDO mapping, NMT, RPDO + SYNC, TPDO/EMCY/heartbeat intake
   canopen_reels.py  CanopenReelsSystem, the Drake plant on CiA 402 drives (imports Drake)
+  force_config.py   the handle's force sensor configs (`!BridgeForce`, `!CanopenForceSensor`,
+                    `!NetFT`) and their checks
+  force_sources.py  scaling, axes and tare; ATI's RDT; NetFTSource (a Net F/T over UDP)
+  interface.py      HardwarePlant: what every hardware plant implements (hardware/INTERFACE.md)
   tick_log.py       the streaming per-tick log; tick_log_sink.py its Drake wrapper
   priority.py       SCHED_FIFO for the control loop and the emulator (`--rt-priority`)
 

@@ -113,6 +113,15 @@ class CanopenMaster:
             self._handlers[COB_TPDO1 + node_id] = self._on_tpdo
             self._handlers[COB_EMCY + node_id] = self._on_emcy
             self._handlers[COB_HEARTBEAT + node_id] = self._on_heartbeat
+        # The handle's force sensor node, if on this bus (watch_force_node): its TPDO's Fx,
+        # Fy, Fz (counts), status word, the TPDOs counted, and while `force_tare` is a list,
+        # each sample.
+        self.force_node_id = None
+        self.force_counts = np.zeros(3)
+        self.force_status = 0
+        self.force_count = 0
+        self.force_tare: list | None = None
+        self.force_at_snapshot = (np.zeros(3), 0, 0, time.monotonic())
 
     # --- connection and configuration -----------------------------------------------------
 
@@ -141,6 +150,8 @@ class CanopenMaster:
             network.subscribe(COB_TPDO1 + node_id, self._on_tpdo)
             network.subscribe(COB_EMCY + node_id, self._on_emcy)
             network.subscribe(COB_HEARTBEAT + node_id, self._on_heartbeat)
+        if self.force_node_id is not None:
+            network.subscribe(COB_TPDO1 + self.force_node_id, self._on_force)
 
     def close(self) -> None:
         network, self.network = self.network, None
@@ -250,9 +261,8 @@ class CanopenMaster:
                 with self._patience(node_id, optional):
                     self.network[node_id].sdo.download(index, sub, data)
             except Exception as e:
-                raise CanopenError(
-                    f"drive of cable {k + 1} (node {node_id}) refused the SDO write of "
-                    f"{what} ({index:#06x}:{sub}): {type(e).__name__}: {e}") from None
+                raise CanopenError(self._sdo_failure(k, node_id, "write", what, index, sub, e,
+                                                     optional)) from None
         return write
 
     def _read(self, k, node_id, index, sub, what, optional: bool = False) -> bytes:
@@ -260,9 +270,27 @@ class CanopenMaster:
             with self._patience(node_id, optional):
                 return bytes(self.network[node_id].sdo.upload(index, sub))
         except Exception as e:
-            raise CanopenError(f"drive of cable {k + 1} (node {node_id}) refused the SDO read "
-                               f"of {what} ({index:#06x}:{sub}): {type(e).__name__}: "
-                               f"{e}") from None
+            raise CanopenError(self._sdo_failure(k, node_id, "read", what, index, sub, e,
+                                                 optional)) from None
+
+    def _sdo_failure(self, k, node_id, kind, what, index, sub, e, optional) -> str:
+        """What went wrong with an SDO request, in words: a drive that aborted it refused it
+        (its abort code says why); one that sent nothing did not answer within the SDO
+        timeout (canopen's, tried twice)."""
+        who = f"drive of cable {k + 1} (node {node_id})"
+        try:
+            from canopen.sdo.exceptions import SdoAbortedError, SdoCommunicationError
+        except ImportError:  # pragma: no cover - open() needs canopen first
+            SdoAbortedError = SdoCommunicationError = ()
+        if isinstance(e, SdoCommunicationError) and not isinstance(e, SdoAbortedError):
+            sdo = self.network[node_id].sdo
+            timeout = OPTIONAL_SDO_TIMEOUT if optional else sdo.RESPONSE_TIMEOUT
+            tries = 1 + int(getattr(sdo, "MAX_RETRIES", 0))
+            return (f"{who} did not answer the SDO {kind} of {what} ({index:#06x}:{sub}) within "
+                    f"the SDO timeout ({tries} x {timeout:g} s): is it powered, on "
+                    f"{self.interface} {self.channel!r}, with this node id?")
+        return (f"{who} refused the SDO {kind} of {what} ({index:#06x}:{sub}): "
+                f"{type(e).__name__}: {e}")
 
     @contextlib.contextmanager
     def _patience(self, node_id, optional: bool):
@@ -271,14 +299,22 @@ class CanopenMaster:
         drive that leaves such requests unanswered instead of aborting them costs 0.2 s an
         object, not 0.6."""
         sdo = self.network[node_id].sdo
-        if not optional:
-            yield
-            return
-        sdo.RESPONSE_TIMEOUT = OPTIONAL_SDO_TIMEOUT
+        # canopen logs its own abort of an unanswered request as an error ("Transfer aborted
+        # by client with code 0x05040000"); the CanopenError raised instead says it in words.
+        quiet = logging.getLogger("canopen.sdo.client")
+        level = quiet.level
+        quiet.setLevel(logging.CRITICAL)
         try:
-            yield
+            if not optional:
+                yield
+                return
+            sdo.RESPONSE_TIMEOUT = OPTIONAL_SDO_TIMEOUT
+            try:
+                yield
+            finally:
+                del sdo.RESPONSE_TIMEOUT  # back to the class's
         finally:
-            del sdo.RESPONSE_TIMEOUT  # back to the class's
+            quiet.setLevel(level)
 
     # --- cyclic traffic ----------------------------------------------------------------------
 
@@ -354,9 +390,13 @@ class CanopenMaster:
     def snapshot(self, drain_emcy: bool = True):
         """(statusword, position, torque, tpdo_count, still, heartbeat_wall, heartbeat_state,
         new EMCY list) after poll(), copied under the lock; the EMCY list is emptied if
-        `drain_emcy`."""
+        `drain_emcy`. The force sensor node's state at the same moment goes to
+        `force_at_snapshot` ((Fx, Fy, Fz counts, status word, TPDOs counted, time.monotonic())):
+        as the drives', the last snapshot before a SYNC is what the tick judges."""
         self.poll()
         with self.lock:
+            self.force_at_snapshot = (self.force_counts.copy(), self.force_status,
+                                      self.force_count, time.monotonic())
             emcy = self.emcy
             self.emcy = [] if drain_emcy else list(emcy)
             return (self.statusword.copy(), self.position.copy(), self.torque.copy(),
@@ -375,6 +415,30 @@ class CanopenMaster:
             self.still[k] = self.still[k] + 1 if same else 0
             self.statusword[k], self.position[k], self.torque[k] = sw, pos, torque
             self.tpdo_count[k] += 1
+
+    def watch_force_node(self, node_id: int) -> None:
+        """Read the TPDO of the handle's force sensor node `node_id` too (before open())."""
+        self.force_node_id = int(node_id)
+        self._handlers[COB_TPDO1 + self.force_node_id] = self._on_force
+
+    def _on_force(self, can_id, data, timestamp) -> None:
+        if len(data) < 6:
+            return
+        counts = struct.unpack_from("<3h", bytes(data))
+        status = struct.unpack_from("<H", bytes(data), 6)[0] if len(data) >= 8 else 0
+        with self.lock:
+            self.force_counts = np.array(counts, dtype=float)
+            self.force_status = status
+            self.force_count += 1
+            if self.force_tare is not None:
+                self.force_tare.append(self.force_counts)
+
+    def force_snapshot(self):
+        """(Fx, Fy, Fz counts, status word, TPDOs counted) of the force sensor node, after
+        poll()."""
+        self.poll()
+        with self.lock:
+            return self.force_counts.copy(), self.force_status, self.force_count
 
     def _on_emcy(self, can_id, data, timestamp) -> None:
         k = self._cable.get(can_id - COB_EMCY)

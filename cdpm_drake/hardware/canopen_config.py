@@ -9,6 +9,8 @@ import dataclasses
 import math
 import typing
 
+from cdpm_drake.hardware.force_config import CanopenForceSensor, NetFT, check_force_sensor
+
 # python-can interfaces that take no bitrate argument (socketcan's is set with `ip link`; the
 # software buses have none).
 NO_BITRATE_INTERFACES = ("socketcan", "virtual", "udp_multicast")
@@ -38,13 +40,19 @@ class CanopenReels:
     counts_per_metre: float = 1_000_000.0
     # Cable length at position count 0, m, per cable (set by the homing); empty: all 0.
     position_offset: list[float] = dataclasses.field(default_factory=list)
-    # Target velocity (0x60FF) units per m/s of cable; None: counts_per_metre (counts/s).
+    # Target velocity (0x60FF) units per m/s of cable paid out; None: counts_per_metre
+    # (counts/s). Negative: the drive turns the other way for a positive target.
     velocity_units_per_mps: typing.Optional[float] = None
     # Drive force at the cable (N, + pays out) per unit of torque actual (0x6077, per mille
-    # of rated torque): rated motor torque / 1000 x gear ratio / drum radius.
+    # of rated torque): rated motor torque / 1000 x gear ratio / drum radius. Negative: the
+    # drive's positive torque winds the cable in.
     force_per_torque_unit: float = 0.1
     # tension_measured from the drives' torque (kernels/drive_torque) or none (NaN).
     tension_sensor: str = "drive_torque"
+    # The handle's force sensor, the admittance's input: a node on this bus
+    # (!CanopenForceSensor {node_id: ...}) or a Net F/T on the network (!NetFT {address:
+    # ...}). None: the drives carry no force sensor, and the run refuses to enable.
+    force_sensor: typing.Optional[typing.Union[CanopenForceSensor, NetFT]] = None
     # Control ticks without a TPDO from a drive after which every drive is stopped (and as
     # many control periods less one of wall time). 2: a TPDO a tick late is waited for, a
     # drive silent for two SYNCs is stopped (quick stop with the third SYNC of its silence,
@@ -147,13 +155,18 @@ def check_canopen_reels(config: CanopenReels, m: int, period: float,
     if config.heartbeat_period and config.heartbeat_timeout <= config.heartbeat_period:
         raise ValueError(f"{field}.heartbeat_timeout must exceed heartbeat_period "
                          f"({config.heartbeat_period:g} s), got {config.heartbeat_timeout!r}")
-    load = bus_load(m, config.bitrate, period, config.heartbeat_period)
+    if config.force_sensor is not None:
+        check_force_sensor(config.force_sensor, f"{field}.force_sensor", ids)
+    sensors = int(isinstance(config.force_sensor, CanopenForceSensor))
+    load = bus_load(m, config.bitrate, period, config.heartbeat_period, sensors)
     if load["load"] > MAX_BUS_LOAD:
-        per_bus = max_drives(config.bitrate, period, config.heartbeat_period)
+        per_bus = max_drives(config.bitrate, period, config.heartbeat_period, sensors)
         raise ValueError(
             f"{field}: {m} drives at {config.bitrate} bit/s with a {period * 1e3:g} ms cycle "
             f"need {load['bits']:.0f} bits per cycle ({m} RPDOs of {load['rpdo_bits']} bits, "
-            f"{m} TPDOs of {load['tpdo_bits']} bits, a SYNC of {load['sync_bits']} bits, "
+            f"{m} TPDOs of {load['tpdo_bits']} bits, "
+            + (f"the force sensor's TPDO of {load['tpdo_bits']} bits, " if sensors else "")
+            + f"a SYNC of {load['sync_bits']} bits, "
             f"heartbeats {load['heartbeat_bits']:.1f} bits), {100 * load['load']:.1f} % of "
             f"the {load['capacity']:.0f} bits the cycle holds: more than "
             f"{100 * MAX_BUS_LOAD:.0f} % (worst case with bit stuffing "
@@ -172,9 +185,11 @@ def frame_bits(data_bytes: int) -> tuple[int, int]:
     return stuffed + 13, stuffed + 13 + (stuffed - 1) // 4
 
 
-def bus_load(m: int, bitrate: int, period: float, heartbeat_period: float) -> dict:
+def bus_load(m: int, bitrate: int, period: float, heartbeat_period: float,
+             sensors: int = 0) -> dict:
     """Bits per control cycle of m drives (each an RPDO of 6 bytes and a TPDO of 8 bytes per
-    cycle, a heartbeat of 1 byte per heartbeat_period) and one SYNC, as a share `load` of
+    cycle, a heartbeat of 1 byte per heartbeat_period), `sensors` force sensor nodes (a TPDO
+    of 8 bytes each) and one SYNC, as a share `load` of
     what the bus carries in `period` s at `bitrate` bit/s, without bit stuffing (what
     bus-load tools report); `worst_load` with the most stuffing a frame can have."""
     rpdo, rpdo_worst = frame_bits(sum(b for _, b in RPDO_OBJECTS) // 8)
@@ -182,18 +197,19 @@ def bus_load(m: int, bitrate: int, period: float, heartbeat_period: float) -> di
     sync, sync_worst = frame_bits(0)
     hb, hb_worst = frame_bits(1)
     share = period / heartbeat_period if heartbeat_period > 0 else 0.0
-    bits = m * (rpdo + tpdo + share * hb) + sync
-    worst = m * (rpdo_worst + tpdo_worst + share * hb_worst) + sync_worst
+    bits = m * (rpdo + tpdo + share * hb) + sync + sensors * tpdo
+    worst = (m * (rpdo_worst + tpdo_worst + share * hb_worst) + sync_worst
+             + sensors * tpdo_worst)
     capacity = bitrate * period
     return dict(bits=bits, worst_bits=worst, capacity=capacity, load=bits / capacity,
                 worst_load=worst / capacity, rpdo_bits=rpdo, tpdo_bits=tpdo, sync_bits=sync,
                 heartbeat_bits=m * share * hb)
 
 
-def max_drives(bitrate: int, period: float, heartbeat_period: float) -> int:
+def max_drives(bitrate: int, period: float, heartbeat_period: float, sensors: int = 0) -> int:
     """The most drives one bus carries within MAX_BUS_LOAD."""
     n = 0
-    while bus_load(n + 1, bitrate, period, heartbeat_period)["load"] <= MAX_BUS_LOAD:
+    while bus_load(n + 1, bitrate, period, heartbeat_period, sensors)["load"] <= MAX_BUS_LOAD:
         n += 1
     return n
 

@@ -55,6 +55,9 @@ from cdpm_drake.hardware.canopen_bus import (CW_DISABLE_VOLTAGE, CW_ENABLE_OPERA
 from cdpm_drake.hardware.canopen_config import (CanopenReels, check_canopen_reels,
                                                 resolved_node_ids, resolved_offsets,
                                                 velocity_units)
+from cdpm_drake.hardware.force_config import CanopenForceSensor, force_source_problem
+from cdpm_drake.hardware.force_sources import (RDT_STATUS_ERROR, ForceScale, ForceSensorError,
+                                               NetFTSource)
 from cdpm_drake.hardware.reels import ReelFault, start_pose_problem
 from cdpm_drake.kernels.drive_torque import drive_model, tension_from_drive
 from cdpm_drake.kernels.kinematics import KinematicsError, cable_lengths, forward_kinematics
@@ -72,25 +75,37 @@ ENABLED, RAMP, FAULT, FAULT_CABLE, FAULT_DETAIL, FAULT_TIME, TICKS, LOST = range
 BOOK_SIZE = 8
 # Why the run stops.
 (FAULT_NONE, FAULT_STATUS, FAULT_EMCY, FAULT_SILENT, FAULT_HEARTBEAT, FAULT_FROZEN,
- FAULT_SEND, FAULT_COMMAND) = range(8)
+ FAULT_SEND, FAULT_COMMAND, FAULT_FORCE_SILENT, FAULT_FORCE_STATUS) = range(10)
 FAULT_NAMES = {FAULT_STATUS: "drive fault or state", FAULT_EMCY: "EMCY",
                FAULT_SILENT: "missing TPDOs", FAULT_HEARTBEAT: "heartbeat lost",
                FAULT_FROZEN: "frozen position", FAULT_SEND: "CAN send error",
-               FAULT_COMMAND: "non-finite command"}
+               FAULT_COMMAND: "non-finite command",
+               FAULT_FORCE_SILENT: "force sensor silent",
+               FAULT_FORCE_STATUS: "force sensor error"}
 
 
 class _Counters:
-    """The bus's counters in the shape realtime.py reports for the UDP link."""
+    """The bus's counters in the shape realtime.py reports for the UDP link, and what the
+    report says of the bus: its interface and channel, the drives' rated torque 0x6076 (N m,
+    NaN: not read), the force sensor's tare (N, base frame)."""
 
-    def __init__(self, master: CanopenMaster, lost: int):
+    def __init__(self, system):
+        master = system.master
         self.sent, self.received = master.sent, int(master.tpdo_count.sum())
-        self.accepted, self.lost = self.received, lost
+        self.accepted, self.lost = self.received, system.lost_tpdos
         self.rejected, self.foreign = {}, 0
         self.send_errors = master.send_errors
+        self.bus = f"{master.interface} {master.channel!r}"
+        self.rated_torque = [float(x) for x in master.rated_torque]
+        self.force_per_torque_unit = float(system._config.force_per_torque_unit)
+        self.force_bias = [float(x) for x in system._force_scale.bias]
 
     def as_dict(self) -> dict:
         return dict(sent=self.sent, received=self.received, accepted=self.accepted,
-                    lost=self.lost, rejected={}, foreign=0, send_errors=self.send_errors)
+                    lost=self.lost, rejected={}, foreign=0, send_errors=self.send_errors,
+                    bus=self.bus, rated_torque=self.rated_torque,
+                    force_per_torque_unit=self.force_per_torque_unit,
+                    force_bias=self.force_bias)
 
 
 class _LinkView:
@@ -99,7 +114,7 @@ class _LinkView:
 
     @property
     def counters(self) -> _Counters:
-        return _Counters(self._system.master, self._system.lost_tpdos)
+        return _Counters(self._system)
 
 
 class CanopenReelsSystem(LeafSystem):
@@ -112,7 +127,7 @@ class CanopenReelsSystem(LeafSystem):
         - reel_velocity_command (m/s of cable, one per cable, + pays out)
         output_ports:
         - cable_lengths (m, one per cable, from position actual)
-        - measured_force (N, base frame; zero: the drives carry no handle force sensor)
+        - measured_force (N, base frame, from the handle's force sensor, tared at start-up)
         - tension_measured (N, one per cable, from torque actual; NaN where unknown)
     """
 
@@ -123,6 +138,9 @@ class CanopenReelsSystem(LeafSystem):
             raise ValueError(f"time_step must be a finite number > 0 s, got {time_step!r}")
         self._m = m = robot.num_cables
         self.bus_load = check_canopen_reels(config, m, float(time_step))
+        if force_source_problem(config):
+            # Refused here, before the bus is opened: the admittance would never move.
+            raise ValueError(force_source_problem(config))
         if config.max_length_residual is None:  # derived from the robot's cables
             config = dataclasses.replace(
                 config, max_length_residual=derived_length_residual(robot))
@@ -139,6 +157,20 @@ class CanopenReelsSystem(LeafSystem):
         self.master = CanopenMaster(config.interface, config.channel, config.bitrate,
                                     self._ids)
         self._moving = np.zeros(m)  # consecutive commands >= frozen_speed, same sign
+        # The handle's force sensor: the master reads a node on the bus, a NetFTSource a Net
+        # F/T; either way `_force_scale` turns its counts into N in the base frame.
+        sensor = config.force_sensor
+        on_bus = isinstance(sensor, CanopenForceSensor)
+        if on_bus:
+            self.master.watch_force_node(sensor.node_id)
+        self.force_source = None if on_bus else NetFTSource(sensor)
+        self._force_scale = (ForceScale(sensor.counts_per_newton, sensor.axes) if on_bus
+                             else self.force_source.scale)
+        self._force_missed = (config.missed_tpdo_ticks if sensor.missed_ticks is None
+                              else sensor.missed_ticks)
+        self._force_silence = (self._force_missed - 1) * self._T
+        if getattr(config, "lockstep", False):  # ticks are the clock: count them alone
+            self._force_silence = 0.0
         # TPDOs of an unchanged position that make a frozen encoder: frozen_ticks, or more
         # where frozen_speed moves less than FROZEN_COUNTS counts in frozen_ticks (coarse
         # counts leave a slow drive's position unchanged for several ticks).
@@ -147,7 +179,10 @@ class CanopenReelsSystem(LeafSystem):
         self._last_sign = np.zeros(m)
         self._stopped = self._quick_stopped = False
         self._fault = None  # (reason, cable, detail, t) a publish found
+        # (samples, force, status, time.monotonic()) when the publish ran.
+        self._force_at_sync = None
         self.lost_tpdos = 0
+        self._count_start = np.zeros(m)
 
         self._command = self.DeclareVectorInputPort("reel_velocity_command", m)
         self._lengths = self.DeclareDiscreteState(cable_lengths(robot, robot.workspace.center))
@@ -158,6 +193,9 @@ class CanopenReelsSystem(LeafSystem):
         # unchanged, reel speed from the last two positions read (m/s), time.monotonic() of
         # the last new TPDO.
         self._drives = self.DeclareDiscreteState(np.zeros(6 * m))
+        # The force sensor: samples counted, ticks without a new one, time.monotonic() of
+        # the last new one.
+        self._sensor = self.DeclareDiscreteState(np.zeros(3))
         self.DeclareStateOutputPort("cable_lengths", self._lengths)
         self.DeclareStateOutputPort("measured_force", self._force)
         self.DeclareStateOutputPort("tension_measured", self._tension)
@@ -191,9 +229,11 @@ class CanopenReelsSystem(LeafSystem):
         self._stopped = True
 
     def close(self) -> None:
-        """shutdown(), then release the bus."""
+        """shutdown(), then release the bus and the force sensor."""
         self.shutdown()
         self.master.close()
+        if self.force_source is not None:
+            self.force_source.close()
 
     def book(self, context) -> dict:
         """The book-keeping state as a dict, with the keys realtime.py reports."""
@@ -223,6 +263,14 @@ class CanopenReelsSystem(LeafSystem):
             # x gear ratio / drum radius, which this cannot know; the log says what was read.
             _log.info("rated torque 0x6076 per cable: %s N m; force_per_torque_unit %g N",
                       np.round(rated, 4).tolist(), c.force_per_torque_unit)
+        if self.force_source is not None:
+            try:
+                self.force_source.open()
+            except OSError as e:
+                raise self._fail(f"refusing to enable the drives: cannot open the socket of "
+                                 f"the handle's force sensor: {e}", t) from None
+        else:
+            self.master.force_tare = []  # every sample after NMT start, for the tare
         self.master.nmt(NMT_START, 0)
         zero = np.zeros(m)
         deadline = time.monotonic() + c.startup_timeout
@@ -265,6 +313,7 @@ class CanopenReelsSystem(LeafSystem):
                     f"cable {k + 1} (node {self._ids[k]}) is in fault, statusword "
                     f"{int(sw[k]):#06x}" for k in faulted)
                 + "; clear the cause and set fault_reset: true to reset it", t)
+        self._tare_force(t)
         lengths = self._offset + pos / self._counts
         try:
             p = forward_kinematics(self._robot, lengths, max_residual=c.max_length_residual)
@@ -281,9 +330,14 @@ class CanopenReelsSystem(LeafSystem):
         sw, pos, torque, count, still, _, _, _ = self.master.snapshot()  # drops start-up EMCY
         lengths = self._offset + pos / self._counts
         state.get_mutable_discrete_state(self._lengths).SetFromVector(lengths)
-        state.get_mutable_discrete_state(self._force).SetFromVector(np.zeros(3))
+        samples, force, _ = self._force_sample()
+        state.get_mutable_discrete_state(self._force).SetFromVector(force)
+        state.get_mutable_discrete_state(self._sensor).SetFromVector(
+            [samples, -1.0, time.monotonic()])  # tick 0 follows no SYNC of the run
         drives = np.zeros(6 * m)
         drives[0:m], drives[2 * m:3 * m], drives[3 * m:4 * m] = count, pos, still
+        self._count_start = count.astype(float)  # the TPDOs before the run's first SYNC
+        self.lost_tpdos = 0
         # Tick 0 follows no SYNC of the run (the enable sequence's were answered above): its
         # lack of a new TPDO is not a miss.
         drives[m:2 * m] = -1.0
@@ -295,6 +349,75 @@ class CanopenReelsSystem(LeafSystem):
         state.get_mutable_discrete_state(self._book).SetFromVector(book)
         self._stopped = self._quick_stopped = False
         self._fault = None
+
+    def _tare_force(self, t) -> None:
+        """The handle's sensor's first samples, `tare_samples` of them averaged as its bias
+        (the handle left alone); the drives disabled meanwhile, the SYNCs going on."""
+        sensor = self._config.force_sensor
+        try:
+            if self.force_source is not None:
+                self.force_source.tare()
+                return
+            want = max(1, sensor.tare_samples)
+            deadline = time.monotonic() + self._config.startup_timeout
+            while True:
+                with self.master.lock:
+                    got = list(self.master.force_tare)
+                if len(got) >= want:
+                    break
+                if time.monotonic() > deadline:
+                    raise ForceSensorError(
+                        f"the handle's force sensor (node {sensor.node_id}) sent {len(got)} "
+                        f"of the {want} TPDOs the start needs within startup_timeout = "
+                        f"{self._config.startup_timeout:g} s on {self._config.interface} "
+                        f"{self._config.channel!r}; is it powered, on this bus, with this "
+                        f"node id?")
+                self.master.send_cycle([CW_DISABLE_VOLTAGE] * self._m, np.zeros(self._m))
+                time.sleep(self._T)
+            self.master.force_tare = None
+            status = self.master.force_snapshot()[1]
+            if status:
+                raise ForceSensorError(f"the handle's force sensor (node {sensor.node_id}) "
+                                       f"reports status word {status:#06x}")
+            self._force_scale.tare(got[-sensor.tare_samples:] if sensor.tare_samples else [])
+        except ForceSensorError as e:
+            raise self._fail(f"refusing to enable the drives: {e}", t) from None
+        _log.info("force sensor tared: bias %s N", np.round(self._force_scale.bias, 3).tolist())
+
+    def _force_sample(self):
+        """(samples counted, force N base frame, status word) of the handle's sensor now."""
+        if self.force_source is not None:
+            self.force_source.poll()
+            src = self.force_source
+            return src.records, src.force(), src.status
+        counts, status, n = self.master.force_snapshot()
+        return n, self._force_scale.force(counts), status
+
+    def _judge_force(self, context, state) -> tuple:
+        """The force sample into the state; (reason, detail) of a silent or failing sensor.
+        As the drives' TPDOs: the sample as it was when the tick's publish sent its SYNC (the
+        bus node: the master's last snapshot, `force_at_snapshot`; a Net F/T: what the
+        publish read, `_force_at_sync`), not what this tick's own SYNC brought back
+        meanwhile, so the sample answering SYNC k is read (and expected) on tick k + 1,
+        whatever the host's timing."""
+        if self.force_source is None:  # the bus node: as the SYNC's snapshot left it
+            counts, status, samples, now = self.master.force_at_snapshot
+            force = self._force_scale.force(counts)
+        else:  # the Net F/T: as the tick's publish read it
+            at = self._force_at_sync or (*self._force_sample(), time.monotonic())
+            samples, force, status, now = at
+        self._force_at_sync = None
+        count0, missed, heard = context.get_discrete_state(self._sensor).get_value()
+        new = samples != count0
+        missed, heard = (0.0, now) if new else (missed + 1.0, heard)
+        state.get_mutable_vector(self._sensor).SetFromVector([samples, missed, heard])
+        state.get_mutable_vector(self._force).SetFromVector(force)
+        error = (status & RDT_STATUS_ERROR) if self.force_source is not None else status
+        if error:
+            return FAULT_FORCE_STATUS, float(status)
+        if missed >= self._force_missed and now - heard >= self._force_silence:
+            return FAULT_FORCE_SILENT, missed
+        return FAULT_NONE, 0.0
 
     def _enable(self, t) -> None:
         """Shutdown, switch on, enable operation, each drive from the state its statusword
@@ -364,7 +487,11 @@ class CanopenReelsSystem(LeafSystem):
         at = self.master.sync_snapshot() or (self.master.snapshot(), time.monotonic())
         snap = at[0]
         drives, speed0, new, (reason, cable, detail) = self._advance(context, *at)
-        self.lost_tpdos += int(np.count_nonzero(~new))
+        # TPDOs lost: the SYNCs of the run this update has seen answered (tick k's snapshot,
+        # taken before its own SYNC, answers SYNCs 1..k: none on tick 0) less the TPDOs that
+        # came for them, per drive. A TPDO a tick late is read with the next: not lost.
+        answered = drives[0:m] - self._count_start
+        self.lost_tpdos = int(np.maximum(0.0, book[TICKS] - answered).sum())
         pos, torque = snap[1], snap[2]
         speed = drives[4 * m:5 * m]
         lengths = self._offset + pos / self._counts
@@ -378,6 +505,9 @@ class CanopenReelsSystem(LeafSystem):
         book[TICKS] += 1.0
         book[LOST] = self.lost_tpdos
         t = context.get_time()
+        force_reason, force_detail = self._judge_force(context, state)
+        if reason == FAULT_NONE and force_reason != FAULT_NONE:
+            reason, cable, detail = force_reason, -1, force_detail
         if self._fault is not None:
             # The publish's, found first: the quick stop it sent may already show here.
             reason, cable, detail, t = self._fault
@@ -421,6 +551,8 @@ class CanopenReelsSystem(LeafSystem):
         return FAULT_NONE, -1, 0.0
 
     def _publish(self, context):
+        if self.force_source is not None:  # the Net F/T's records as of now, for the update
+            self._force_at_sync = (*self._force_sample(), time.monotonic())
         book = context.get_discrete_state(self._book).get_value()
         if book[FAULT] == FAULT_NONE and self._fault is None:
             # Drake runs this tick's update right after this publish, so the update has not
@@ -463,7 +595,16 @@ class CanopenReelsSystem(LeafSystem):
         reason, k = int(book[FAULT]), int(book[FAULT_CABLE])
         detail = float(book[FAULT_DETAIL])
         who = f"the drive of cable {k + 1} (node {self._ids[k]})" if k >= 0 else "the bus"
-        if reason == FAULT_STATUS:
+        sensor = self._config.force_sensor
+        sensor_name = (f"the handle's force sensor ({self.force_source.describe()})"
+                       if self.force_source is not None else
+                       f"the handle's force sensor (node {sensor.node_id})")
+        if reason == FAULT_FORCE_SILENT:
+            why = (f"no sample from {sensor_name} for {int(detail)} ticks "
+                   f"(missed ticks allowed: {self._force_missed})")
+        elif reason == FAULT_FORCE_STATUS:
+            why = f"{sensor_name} reports status {int(detail):#x}"
+        elif reason == FAULT_STATUS:
             why = (f"{who} reports statusword {int(detail):#06x} "
                    f"({state_name(int(detail))})")
         elif reason == FAULT_EMCY:

@@ -8,6 +8,7 @@ import dataclasses
 import math
 import typing
 
+from cdpm_drake.hardware.force_config import BridgeForce, NetFT, check_force_sensor
 from cdpm_drake.hardware.link import resolve_ipv4
 
 # The bridge's UDP port when nothing else is configured (unassigned by IANA).
@@ -52,6 +53,10 @@ class HardwareReels:
     # the longest cable in the workspace box, which the translating, inextensible model sees
     # as misfit (robot.stretch.derived_length_residual; docs/on_the_robot.md gives exp2's).
     max_length_residual: typing.Optional[float] = None
+    # The handle's force sensor, the admittance's input: the force in the bridge's status
+    # (!BridgeForce {}, the default) or a Net F/T on the network (!NetFT {address: ...}).
+    force_sensor: typing.Union[BridgeForce, NetFT] = dataclasses.field(
+        default_factory=BridgeForce)
     # Copies of the final zero-velocity, enable-off command sent by shutdown() (UDP may
     # drop one; the bridge ignores the repeats' identical content).
     shutdown_repeats: int = 3
@@ -84,6 +89,7 @@ def check_hardware_reels(config: HardwareReels, field: str = "plant") -> None:
     if config.tension_sensor not in TENSION_SENSORS:
         raise ValueError(f"{field}.tension_sensor must be one of "
                          f"{', '.join(TENSION_SENSORS)}, got {config.tension_sensor!r}")
+    check_force_sensor(config.force_sensor, f"{field}.force_sensor")
 
 
 def _int_in(value, lo, hi, field, what):

@@ -59,6 +59,9 @@ from cdpm_drake.hardware.link import ReelLink
 from cdpm_drake.robot.stretch import derived_length_residual
 from cdpm_drake.hardware.protocol import (VERSION, VERSIONS, fault_names, next_sequence,
                                           sequence_delta)
+from cdpm_drake.hardware.force_config import NetFT
+from cdpm_drake.hardware.force_sources import (RDT_STATUS_ERROR, ForceSensorError,
+                                               NetFTSource)
 
 # Book-keeping state vector (float64; 32-bit sequence numbers are exact in a double).
 STATUS_SEQ = 0        # sequence of the last accepted status
@@ -90,8 +93,9 @@ BOOK_SIZE = 22
 MAX_ACCEL_INTERVAL = 0.1
 
 # Why the run stops: a silent bridge (no answer within resume_within), a bridge fault bit, a
-# bridge that answered the watchdog's stop after losing statuses on the way.
-FAULT_NONE, FAULT_WATCHDOG, FAULT_BRIDGE, FAULT_WATCHDOG_LOSS = 0, 1, 2, 3
+# bridge that answered the watchdog's stop after losing statuses on the way, the handle's Net
+# F/T silent or reporting an error (its status in FAULT_BITS).
+FAULT_NONE, FAULT_WATCHDOG, FAULT_BRIDGE, FAULT_WATCHDOG_LOSS, FAULT_FORCE = 0, 1, 2, 3, 4
 
 
 class ReelFault(RuntimeError):
@@ -148,6 +152,11 @@ class HardwareReelsSystem(LeafSystem):
         # link.counters.sent right after the last shutdown's copies (None: not stopped yet):
         # like the socket, a fact about the link, not about the controller's state.
         self._stopped_at: int | None = None
+        # The handle's force from a Net F/T instead of the bridge's status (a resource, as
+        # the socket); its records counted, ticks without one, time.monotonic() of the last.
+        sensor = config.force_sensor
+        self.force_source = NetFTSource(sensor) if isinstance(sensor, NetFT) else None
+        self._hand = self.DeclareDiscreteState(np.zeros(3))
 
         self._command = self.DeclareVectorInputPort("reel_velocity_command", m)
         # Placeholders until the initialisation event reads the bridge.
@@ -195,10 +204,12 @@ class HardwareReelsSystem(LeafSystem):
         self._stopped_at = link.counters.sent
 
     def close(self) -> None:
-        """shutdown(), then release the socket."""
+        """shutdown(), then release the socket (and the Net F/T's)."""
         self.shutdown()
         if self._link is not None:
             self._link.close()
+        if self.force_source is not None:
+            self.force_source.close()
 
     def book(self, context) -> dict:
         """The book-keeping state as a dict (diagnostics: sequence numbers, watchdog, ramp)."""
@@ -277,6 +288,37 @@ class HardwareReelsSystem(LeafSystem):
         book[STATUS_TIME] = status.time
         book[COMMANDS_LOST] = status.commands_lost
         state.get_mutable_discrete_state(self._book).SetFromVector(book)
+        if self.force_source is not None:
+            self._start_netft(context, state)
+
+    def _start_netft(self, context, state) -> None:
+        """Open the Net F/T's stream and tare it (the handle left alone), before the first
+        enabling command; the force state from its newest record."""
+        try:
+            self.force_source.open()
+            self.force_source.tare()
+        except (OSError, ForceSensorError) as e:
+            self.shutdown()
+            raise ReelFault(f"refusing to enable the reels: {e}", context.get_time()) from None
+        state.get_mutable_discrete_state(self._force).SetFromVector(self.force_source.force())
+        state.get_mutable_discrete_state(self._hand).SetFromVector(
+            [self.force_source.records, -1.0, time.monotonic()])
+
+    def _read_netft(self, context, state, book, now) -> None:
+        """The Net F/T's newest record into the force state; a silence of
+        force_sensor.missed_ticks ticks (and as many periods less one of wall time) or an
+        error status latches FAULT_FORCE."""
+        src = self.force_source
+        src.poll()
+        count0, missed, heard = context.get_discrete_state(self._hand).get_value()
+        missed, heard = (0.0, now) if src.records != count0 else (missed + 1.0, heard)
+        state.get_mutable_vector(self._hand).SetFromVector([src.records, missed, heard])
+        state.get_mutable_vector(self._force).SetFromVector(src.force())
+        limit = src.config.missed_ticks
+        if src.status & RDT_STATUS_ERROR:
+            book[FAULT], book[FAULT_BITS] = FAULT_FORCE, float(src.status)
+        elif missed >= limit and now - heard >= (limit - 1) * self._T:
+            book[FAULT], book[FAULT_BITS] = FAULT_FORCE, -missed
 
     def _update_from_bridge(self, context, state):
         book = context.get_discrete_state(self._book).get_value().copy()
@@ -304,6 +346,8 @@ class HardwareReelsSystem(LeafSystem):
                 book[FAULT], book[FAULT_BITS] = FAULT_BRIDGE, status.faults
         else:
             book[MISSED] += 1.0
+        if self.force_source is not None and book[FAULT] == FAULT_NONE:
+            self._read_netft(context, state, book, now)
         if book[FAULT] == FAULT_NONE:
             if book[HOLD]:
                 self._judge_hold(book, status, now, link)
@@ -417,7 +461,12 @@ class HardwareReelsSystem(LeafSystem):
     def _fault_message(self, book) -> str:
         c = self._config
         t = float(book[FAULT_TIME])
-        if book[FAULT] == FAULT_BRIDGE:
+        if book[FAULT] == FAULT_FORCE:
+            detail, src = float(book[FAULT_BITS]), self.force_source
+            why = (f"no record from the handle's force sensor ({src.describe()}) for "
+                   f"{int(-detail)} ticks (force_sensor.missed_ticks = "
+                   f"{src.config.missed_ticks})" if detail < 0 else src.status_problem())
+        elif book[FAULT] == FAULT_BRIDGE:
             bits = int(book[FAULT_BITS])
             why = (f"the reel bridge reports fault bits {bits:#06x} "
                    f"({', '.join(fault_names(bits))})")

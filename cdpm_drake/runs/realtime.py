@@ -192,11 +192,15 @@ def run(*, scenario: Scenario | ResolvedScenario, out_dir, duration: float | Non
             f"scenario {scenario.name!r} has plant: !{type(scenario.plant).__name__}; `cdpm "
             "run` drives real "
             "reels and needs plant: !HardwareReels {address: ..., port: ...} or plant: "
-            "!CanopenReels {interface: ..., channel: ...} (use `cdpm "
+            "!CanopenReels {interface: ..., channel: ..., force_sensor: ...} (use `cdpm "
             "simulate` for a simulation, or --scenario-text 'plant: !HardwareReels {}')")
     duration = scenario.duration if duration is None else float(duration)
     if not (duration > 0 and np.isfinite(duration)):
         raise ScenarioError(f"duration must be a finite number > 0 s, got {duration!r}")
+    from cdpm_drake.hardware.force_config import force_source_problem
+
+    if force_source_problem(scenario.plant):  # before anything opens the bus
+        raise ScenarioError(force_source_problem(scenario.plant))
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     for stale in ("ticks.bin", "log.npz"):
@@ -385,6 +389,15 @@ def report_lines(result: RunResult) -> list[str]:
             f"{k.get('commands_lost_at_bridge')}; statuses received {k.get('received', 0)}, "
             f"accepted {k.get('accepted', 0)}, lost {k.get('lost', 0)}, rejected "
             f"{count_by_reason(rejected)}, foreign {k.get('foreign', 0)}")
+        if k.get("bus"):  # CANopen: the bus, what the drives said of themselves
+            rated = k.get("rated_torque") or []
+            torque = ("rated torque 0x6076 per drive " + str([round(x, 4) for x in rated])
+                      + " N m" if any(np.isfinite(rated)) else
+                      "rated torque 0x6076 not given by the drives")
+            lines.append(f"CAN bus {k['bus']}: {torque} (force_per_torque_unit "
+                         f"{k.get('force_per_torque_unit', float('nan')):g} N per per mille); "
+                         f"handle force sensor tared at "
+                         f"{[round(x, 3) for x in k.get('force_bias', [])]} N")
         if k.get("watchdog_holds"):
             lines.append(
                 f"watchdog: stopped the reels {k['watchdog_holds']} time(s) for a silent bridge "

@@ -7,6 +7,8 @@ defaults, and checks where each lands: the drives' object dictionary and record 
 the bus), the plant's outputs against the emulator's ground truth and the public kernel, or
 the message of the refusal or fault that names the field and its value."""
 
+import re
+
 import numpy as np
 import pytest
 
@@ -39,9 +41,10 @@ class _LoadedBridge(ReelBridge):
         return FORCE.copy()
 
 
-def _scenario(fields: str):
+def _scenario(fields: str, sensor="!CanopenForceSensor {node_id: 20, tare_samples: 5}"):
     return load_scenario("exp1_no_interaction", overlay_text=(
-        f"{{plant: !CanopenReels {{interface: virtual, channel: {fresh_channel()}, {fields}}}}}"))
+        f"{{plant: !CanopenReels {{interface: virtual, channel: {fresh_channel()}, "
+        f"force_sensor: {sensor}, {fields}}}}}"))
 
 
 def _rigged(scenario, u=U, **kwargs):
@@ -115,9 +118,11 @@ def test_tension_sensor_none_gives_nan():
 
 @covers(F + "bitrate")
 def test_bitrate_sets_the_bus_load_budget():
-    # 7 x (95 + 111 + 0.02 x 55) + 47 = 1496.7 bits per 2 ms; 125 kbit/s carry 250: 598.7 %.
+    # 7 x (95 + 111 + 0.02 x 55) + 47 + 111 (the force sensor node's TPDO) = 1607.7 bits per
+    # 2 ms; 125 kbit/s carry 250: 643.1 %.
     with pytest.raises(ScenarioError, match=r"7 drives at 125000 bit/s with a 2 ms cycle need "
-                       r"1497 bits per cycle .* 598.7 % of the 250 bits"):
+                       r"1608 bits per cycle .* force sensor's TPDO of 111 bits.* 643.1 % of "
+                       r"the 250 bits"):
         _scenario("bitrate: 125000")
 
 
@@ -209,3 +214,98 @@ def test_heartbeat_timeout_judges_a_lost_heartbeat():
     _fault_run("heartbeat_period: 0.05, heartbeat_timeout: 0.12", [],
                r"cable 7 \(node 7\)'s heartbeat is \d+ ms old \(heartbeat_timeout = 120 ms\)",
                before=silence)
+
+
+# --- the handle's force sensor ----------------------------------------------------------------
+
+S = F + "force_sensor"
+HAND = np.array([6.0, -2.5, 4.0])  # N, base frame, from 0.05 s after the enable
+
+
+def _hand(t, p, v):
+    return HAND if t >= 0.05 else np.zeros(3)
+
+
+def _sensed(scenario, until=0.2, faults=(), **drive_args):
+    """(measured_force at the end or the ReelFault, drives, the plant) of a run with the
+    hand above and ideal reels."""
+    robot = scenario_robot(scenario)
+    bridge = ReelBridge(robot, cable_lengths(robot, robot.workspace.center), force=_hand,
+                        time_constant=0.0)
+    sim, reels, drives, bridge, _ = rig(robot, scenario.plant, np.zeros(7), bridge=bridge,
+                                        faults=faults, **drive_args)
+    try:
+        start_realtime(sim, 0.0)
+        lockstep(sim, reels, drives, until)
+        out = reels.GetOutputPort("measured_force").Eval(
+            reels.GetMyContextFromRoot(sim.get_context())).copy()
+    except ReelFault as e:
+        out = e
+    finally:
+        close(reels, drives)
+    return out, drives, reels
+
+
+@covers(S + "=!CanopenForceSensor", S + "!CanopenForceSensor.node_id",
+        S + "!CanopenForceSensor.counts_per_newton", S + "!CanopenForceSensor.axes",
+        S + "!CanopenForceSensor.tare_samples", S + "!CanopenForceSensor.missed_ticks")
+def test_the_force_sensor_node_reaches_measured_force_and_its_silence_stops_the_run():
+    scenario = _scenario("missed_tpdo_ticks: 25", sensor=(
+        "!CanopenForceSensor {node_id: 33, counts_per_newton: -40.0, axes: [+z, -x, +y], "
+        "tare_samples: 4, missed_ticks: 3}"))
+    bias = np.array([1.0, 0.5, -2.0])  # the node's own offset, N in its axes
+    measured, drives, reels = _sensed(scenario, force_bias=bias)
+    # The node's counts (-40 per N) in its axes: x = F_z, y = -F_x, z = F_y, plus its bias.
+    assert drives.force_counts() == [int(-40 * (4.0 + 1.0)), int(-40 * (-6.0 + 0.5)),
+                                     int(-40 * (-2.5 - 2.0))]
+    np.testing.assert_array_equal(measured, HAND)
+    # The tare took 4 samples and removed the bias, in the base frame: x = -b_y, y = b_z,
+    # z = b_x.
+    np.testing.assert_array_equal(reels._force_scale.bias, [-0.5, -2.0, 1.0])
+    error, drives, _ = _sensed(scenario, until=1.0, faults=[("force_silent", 0, 0.05)])
+    assert isinstance(error, ReelFault)
+    assert "no sample from the handle's force sensor (node 33) for 3 ticks" in str(error)
+
+
+@covers(S + "=!NetFT", S + "!NetFT.address", S + "!NetFT.port", S + "!NetFT.local_address",
+        S + "!NetFT.counts_per_force", S + "!NetFT.axes", S + "!NetFT.tare_samples",
+        S + "!NetFT.startup_timeout", S + "!NetFT.missed_ticks")
+def test_the_net_ft_reaches_measured_force_and_a_silent_box_is_refused():
+    import socket
+
+    from cdpm_drake.emulator.netft import NetFTServer
+    from cdpm_drake.emulator.plant_setup import netft_server
+
+    probe = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+    probe.bind(("127.0.0.1", 0))
+    port = probe.getsockname()[1]
+    probe.close()
+    sensor = ("!NetFT {address: 127.0.0.1, port: %d, local_address: 127.0.0.1, "
+              "counts_per_force: 250.0, axes: [-x, -y, +z], tare_samples: 3, "
+              "startup_timeout: 0.3, missed_ticks: 30}" % port)
+    scenario = _scenario("missed_tpdo_ticks: 25", sensor=sensor)
+    robot = scenario_robot(scenario)
+    bridge = ReelBridge(robot, cable_lengths(robot, robot.workspace.center), force=_hand,
+                        time_constant=0.0)
+    server = netft_server(scenario.plant, bridge)  # the emulator's, at the sensor's address
+    assert isinstance(server, NetFTServer) and server.address == ("127.0.0.1", port)
+    sim, reels, drives, bridge, _ = rig(robot, scenario.plant, np.zeros(7), bridge=bridge)
+    try:
+        start_realtime(sim, 0.0)
+        lockstep(sim, reels, drives, 0.2)
+        measured = reels.GetOutputPort("measured_force").Eval(
+            reels.GetMyContextFromRoot(sim.get_context())).copy()
+    finally:
+        close(reels, drives)
+        server.stop()
+    np.testing.assert_array_equal(measured, HAND)  # 250 counts per N: whole counts
+    assert server.counts()[:3] == [-6 * 250, 2.5 * 250, 4 * 250]
+    assert reels.force_source.records >= 3 + 100  # the tare's and one per tick
+    # No box at that port: refused after startup_timeout, naming it and the field.
+    scenario = _scenario("missed_tpdo_ticks: 25", sensor=sensor)
+    error, drives, _ = _sensed(scenario)
+    assert isinstance(error, ReelFault)
+    assert re.search(r"refusing to enable the drives: the handle's force sensor \(Net F/T at "
+                     r"127.0.0.1:%d\) sent 0 of the 3 records .* "
+                     r"plant.force_sensor.startup_timeout = 0.3 s" % port, str(error)), error
+    assert not any(r[1][0] == "operation enabled" for r in drives.record)  # never enabled

@@ -109,6 +109,8 @@ def schema_fields(schema, prefix=""):
             out += schema_fields(tp, path + ".")
         elif typing.get_origin(tp) is typing.Union:
             for member in typing.get_args(tp):
+                if member is type(None):  # an optional union: None is no member to wire
+                    continue
                 out.append(f"{path}=!{member.__name__}")
                 out += schema_fields(member, f"{path}!{member.__name__}.")
         elif (typing.get_origin(tp) is list and typing.get_args(tp)
@@ -1164,6 +1166,47 @@ def test_hardware_address_and_port_reach_the_link(tmp_path):
         server.stop()
     assert result.ending == "completed", result.error
     assert server.counters["commands_received"] > 10
+
+
+_HF = "Scenario.plant!HardwareReels.force_sensor"
+
+
+@covers(_HF + "=!BridgeForce", _HF + "=!NetFT", _HF + "!NetFT.address", _HF + "!NetFT.port",
+        _HF + "!NetFT.local_address", _HF + "!NetFT.counts_per_force", _HF + "!NetFT.axes",
+        _HF + "!NetFT.tare_samples", _HF + "!NetFT.startup_timeout",
+        _HF + "!NetFT.missed_ticks")
+def test_hardware_force_sensor_reaches_the_diagrams_measured_force(tmp_path):
+    """The bridge's status carries a hand of [2, 0, 0] N; a Net F/T on the same plant, in
+    axes [+y, -z, -x] with 500 counts per N and a bias of [1, -1, 0.5] N of its own, a hand
+    of [-3, 5, 1.5] N from its 51st record on. !BridgeForce logs the status's force; !NetFT
+    the box's, tared (the bias gone) and mapped back to the base frame."""
+    from cdpm_drake.emulator.netft import NetFTServer
+    from cdpm_drake.hardware.force_config import BridgeForce, NetFT
+
+    status_hand, box_hand = np.array([2.0, 0.0, 0.0]), np.array([-3.0, 5.0, 1.5])
+    server = _bridge(force=lambda t, p, v: status_hand)
+    # The box's hand: nothing for the tare (its first records), then box_hand.
+    box = NetFTServer(server.bridge, address=("127.0.0.1", 0), counts_per_force=500.0,
+                      axes=["+y", "-z", "-x"], bias=[1.0, -1.0, 0.5],
+                      hand=lambda: box_hand if box.records_sent > 50 else np.zeros(3)).start()
+    try:
+        sensor = NetFT(address="127.0.0.1", port=box.address[1], local_address="127.0.0.1",
+                       counts_per_force=500.0, axes=["+y", "-z", "-x"], tare_samples=7,
+                       startup_timeout=1.0, missed_ticks=400)
+        bridge_run = _run(tmp_path, _hw(server.address[1], force_sensor=BridgeForce()),
+                          name="bridge")
+        _settle(server)
+        server.bridge.reset()
+        box_run = _run(tmp_path, _hw(server.address[1], force_sensor=sensor), duration=0.6,
+                       name="box")
+    finally:
+        server.stop()
+        box.stop()
+    assert bridge_run.ending == "completed" and box_run.ending == "completed", box_run.error
+    np.testing.assert_array_equal(bridge_run.log["F_measured"][-1], status_hand)
+    # The box's last samples: its hand, to the counts' 1/500 N (whole counts here: exact).
+    np.testing.assert_allclose(box_run.log["F_measured"][-1], box_hand, atol=1e-12)
+    assert not np.any(np.all(box_run.log["F_measured"] == status_hand, axis=1))
 
 
 @covers("Scenario.plant!HardwareReels.local_address", "Scenario.plant!HardwareReels.local_port")

@@ -240,7 +240,7 @@ class DriveSet:
     """The nodes on one bus, served from one loop (run())."""
 
     def __init__(self, bus, nodes, start_counts, counts_per_rev, torque, faults, *,
-                 mute=(), period_ms=1, rtr=False):
+                 mute=(), period_ms=1, rtr=False, force_node=None, force_counts=(0, 0, 0)):
         """`mute`: ("read" | "write", index) SDO requests left unanswered (a simple drive
         that neither serves nor aborts them); `period_ms`: the default 0x60C2; `rtr`: the
         TPDOs take remote requests (COB-ID bit 30 clear accepted)."""
@@ -256,6 +256,10 @@ class DriveSet:
         self.records = []            # per SYNC: [[state, controlword, target] per node]
         self.requests = []           # SDO and NMT requests served, in order
         self.stop = False
+        # A handle force sensor node: after each SYNC, once NMT started, a TPDO (0x180 +
+        # node) of Fx, Fy, Fz (int16 counts, constant) and a status word 0.
+        self.force_node, self.force_counts = force_node, tuple(force_counts)
+        self.force_started = False
 
     # --- frames ----------------------------------------------------------------------------
 
@@ -273,6 +277,8 @@ class DriveSet:
         if msg.is_error_frame or msg.is_remote_frame or msg.is_extended_id:
             return
         if cob == NMT and len(data) == 2:
+            if self.force_node is not None and data[1] in (0, self.force_node):
+                self.force_started = data[0] == 0x01
             for d in self.nodes:
                 if data[1] in (0, d.node) and not d.silent:
                     self.nmt(d, data[0])
@@ -453,6 +459,9 @@ class DriveSet:
             else:
                 self.send(*frame, d)
             d.reported = d.value((0x6064, 0))
+        if self.force_node is not None and self.force_started:
+            self.bus.send(can.Message(arbitration_id=0x180 + self.force_node, data=struct.pack(
+                "<3hH", *self.force_counts, 0), is_extended_id=False))
         self.syncs = n
 
     def inject(self, n: int) -> None:
@@ -514,6 +523,8 @@ def main(argv=None) -> int:
     p.add_argument("--duration", type=float, default=120.0)
     p.add_argument("--rt-priority", type=int, default=0)
     p.add_argument("--record", required=True, help="JSON file written at the end")
+    p.add_argument("--force-node", type=int, default=None,
+                   help="also play a handle force sensor node with this id (forces 0)")
     args = p.parse_args(argv)
     if len(args.start_counts) != len(args.nodes):
         p.error("--start-counts needs one value per node")
@@ -525,7 +536,7 @@ def main(argv=None) -> int:
         os.sched_setscheduler(0, os.SCHED_FIFO, os.sched_param(args.rt_priority))
     bus = can.Bus(interface=args.interface, channel=args.channel)
     drives = DriveSet(bus, args.nodes, args.start_counts, args.counts_per_rev, args.torque,
-                      faults)
+                      faults, force_node=args.force_node)
 
     def stop(signum, frame):
         drives.stop = True

@@ -1,0 +1,46 @@
+"""What the two emulators (`cdpm emulate`, emulator/main.py, and `cdpm emulate --canopen`,
+emulator/canopen_drives.py) build alike: the dynamic plant's scenario and the handle's
+network force sensor. Neither of them imports the other; both import this.
+"""
+
+from cdpm_drake.emulator.netft import NetFTServer
+
+
+def dynamic_scenario(args, robot, start):
+    """The resolved scenario of `--plant dynamic`: the scenario's (or, with --robot, a
+    scenario of that robot), at `start`, with --force as its operator, and a !DynamicReels
+    plant (the scenario's own when it has one)."""
+    import dataclasses as dc
+
+    from cdpm_drake.config import DynamicReels, Scenario, load_scenario, resolve_scenario
+    from cdpm_drake.kernels.plant.operators import NoOperator, ScriptedOperator
+
+    if args.scenario:
+        scenario = load_scenario(args.scenario, args.scenario_text)
+    else:
+        scenario = Scenario(robot=args.robot or "paper_7cable", swaps=[],
+                            operator=NoOperator())
+    plant = scenario.plant if isinstance(scenario.plant, DynamicReels) else DynamicReels()
+    operator = scenario.operator
+    if getattr(args, "force", None) is not None:
+        operator = ScriptedOperator(times=[0.0], forces=[[float(f) for f in args.force]])
+    scenario = dc.replace(scenario, plant=plant, operator=operator,
+                          initial_position=[float(x) for x in start])
+    resolved = resolve_scenario(scenario)
+    if resolved.robot.num_cables != robot.num_cables:  # pragma: no cover - same robot
+        raise ValueError("the scenario's robot changed under --plant dynamic")
+    return resolved
+
+
+def netft_server(plant_config, bridge, log=None):
+    """A started NetFTServer playing the `force_sensor: !NetFT {...}` of a scenario's plant
+    config (its address and port, counts and axes) with `bridge`'s hand force, or None when
+    the plant has no Net F/T."""
+    from cdpm_drake.hardware.force_config import NetFT
+
+    sensor = getattr(plant_config, "force_sensor", None)
+    if not isinstance(sensor, NetFT):
+        return None
+    return NetFTServer(bridge, address=(sensor.address, sensor.port),
+                       counts_per_force=sensor.counts_per_force, axes=sensor.axes,
+                       log=log).start()
