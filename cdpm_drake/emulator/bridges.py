@@ -339,10 +339,17 @@ class DynamicBridge:
         record = self.driven if self.stop_time is None else self.stopped
         record.observe(T, slack, tilt, self.plant_time)
         self._true_tensions = np.array(T)
+        self._true_pose = (np.array(step[self._p_true]), np.array(step[self._rpy]))
 
     def true_tensions(self) -> np.ndarray:
         """The cables' true tensions now, N (the plant's ground truth)."""
         return self._true_tensions.copy()
+
+    def true_pose(self) -> tuple[np.ndarray, np.ndarray]:
+        """The platform's true pose now: (centre (3,) m, roll-pitch-yaw (3,) rad), base
+        frame (the plant's ground truth)."""
+        p, rpy = self._true_pose
+        return p.copy(), rpy.copy()
 
     def drive_force(self) -> np.ndarray:
         """Each reel drive's force at the cable now, N, + pays out: what the drive's velocity

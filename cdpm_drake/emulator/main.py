@@ -51,7 +51,9 @@ from cdpm_drake.emulator.faults import FaultPlan
 from cdpm_drake.emulator.server import ReelBridgeServer, count_by_reason, vector_text
 from cdpm_drake.hardware.config import DEFAULT_BRIDGE_PORT
 from cdpm_drake.hardware.priority import set_realtime_priority
+from cdpm_drake.kernels.interference import posed_pair_distances
 from cdpm_drake.kernels.kinematics import cable_lengths
+from cdpm_drake.kernels.rotation import rotations_from_rpy
 
 
 def _port_number(text: str) -> int:
@@ -121,6 +123,11 @@ def build_parser() -> argparse.ArgumentParser:
     n.add_argument("--command-timeout", type=float, default=0.05,
                    help="raise COMMAND_TIMEOUT when enabled and no command came for this "
                    "long, s (default 0.05)")
+    n.add_argument("--lockstep", action="store_true",
+                   help="no clock of its own: each command read steps the plant one --period "
+                   "and is answered by one status, so a rehearsal with `cdpm run --lockstep` "
+                   "is deterministic on any host, at whatever speed it allows (--duration then "
+                   "counts the bridge's ticks x period)")
     n.add_argument("--duration", type=float, default=None, help="stop after this long, s")
     n.add_argument("--rt-priority", type=int, default=0, metavar="N",
                    help="run under SCHED_FIFO at priority N (1..99; needs root or "
@@ -212,7 +219,8 @@ def build_server(args, log=None) -> ReelBridgeServer:
                             faults=faults, period=args.period, seed=args.seed,
                             controller=controller, command_timeout=args.command_timeout,
                             record=0, log=log, protocol_version=args.protocol_version,
-                            truth=TRUTH_ROWS if args.truth_log else 0)
+                            truth=TRUTH_ROWS if args.truth_log else 0,
+                            lockstep=args.lockstep)
 
 
 # Statuses the truth log keeps: the last 10 minutes at 500 Hz.
@@ -220,16 +228,27 @@ TRUTH_ROWS = 300_000
 
 
 def write_truth_log(server, path) -> int:
-    """The server's truth record as an npz at `path` (keys time, plant_time s, tensions,
-    drive_force N, reel_speed m/s; one row per version-2 status sent); returns the rows."""
+    """The server's truth record as an npz at `path`, one row per version-2 status sent:
+    time, plant_time s; tensions (true), drive_force (sent) N; reel_speed (sent)
+    m/s; p_true m and rpy_true rad (the platform's true pose); pair_distances_true m, every
+    watched pair's distance on the true, rotated platform (robot.pairs order, cables
+    numbered from 1 in `pairs`). Returns the rows."""
     rows = list(server.truth or ())
-    m = server.bridge.robot.num_cables
-    columns = list(zip(*rows)) if rows else [[]] * 5
+    robot = server.bridge.robot
+    m = robot.num_cables
+    columns = list(zip(*rows)) if rows else [[]] * 7
+    n = len(rows)
+    data = {key: np.array(columns[k], dtype=float).reshape(n, width) for k, key, width in
+            ((2, "tensions", m), (3, "drive_force", m), (4, "reel_speed", m),
+             (5, "p_true", 3), (6, "rpy_true", 3))}
+    distances = np.zeros((n, robot.num_pairs))
+    if n and robot.num_pairs:
+        distances, _ = posed_pair_distances(robot, data["p_true"],
+                                            rotations_from_rpy(data["rpy_true"]))
     np.savez(path, time=np.array(columns[0], dtype=float),
-             plant_time=np.array(columns[1], dtype=float),
-             **{key: np.array(columns[k], dtype=float).reshape(len(rows), m) for k, key in
-                ((2, "tensions"), (3, "drive_force"), (4, "reel_speed"))})
-    return len(rows)
+             plant_time=np.array(columns[1], dtype=float), pair_distances_true=distances,
+             pairs=np.asarray(robot.pairs, dtype=int).reshape(-1, 2) + 1, **data)
+    return n
 
 
 def dynamic_scenario(args, robot, start):
@@ -315,7 +334,7 @@ def _main(argv) -> int:
             code = exit_code(e)
         finally:
             server.stop()
-            now = time.monotonic() - server.start_wall if server.start_wall else 0.0
+            now = server.now()
             if server.session_open:
                 server.close_session(now, "the emulator stopped")
             c = server.counters

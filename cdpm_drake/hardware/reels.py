@@ -85,6 +85,10 @@ PROTOCOL = 20         # the protocol version agreed with the bridge at start-up 
 SPEED_TIME = 21       # the `time` of the status whose reel speeds the state holds, s (NaN: none)
 BOOK_SIZE = 22
 
+# Lockstep: how long a start-up greeting waits for its answer before the next, s (a
+# version-1 bridge never answers the version-2 one).
+LOCKSTEP_GREETING = 0.5
+
 # A reel acceleration is taken from two statuses at most this far apart on the bridge's
 # clock, s; further apart (a long silence, a bridge restart) it is unknown (NaN).
 MAX_ACCEL_INTERVAL = 0.1
@@ -144,6 +148,10 @@ class HardwareReelsSystem(LeafSystem):
         # sends; the watchdog also waits this much wall-clock time so such a burst cannot
         # trip it, while a silent bridge still trips it on the N-th tick.
         self._silence = (config.watchdog_ticks - 1) * self._T
+        # Lockstep (config.lockstep): ticks are the clock; no catch-up burst to allow for.
+        self._lockstep = bool(config.lockstep)
+        if self._lockstep:
+            self._silence = 0.0
         self._link: ReelLink | None = None
         # link.counters.sent right after the last shutdown's copies (None: not stopped yet):
         # like the socket, a fact about the link, not about the controller's state.
@@ -228,7 +236,10 @@ class HardwareReelsSystem(LeafSystem):
             if greeting == 2 and first_v2 is None:
                 first_v2 = sent
             greeting = 1 if greeting == 2 else VERSION
-            link.wait(min(self._T, max(0.0, deadline - time.monotonic())))
+            # In lockstep each greeting is answered (by a bridge of its version) only when
+            # the bridge got to it: wait longer than a period, so one greeting makes one tick.
+            link.wait(min(LOCKSTEP_GREETING if self._lockstep else self._T,
+                          max(0.0, deadline - time.monotonic())))
             status = link.receive(None, VERSIONS)
             version = agreed_version(status, first_v2)
             if version is None and time.monotonic() >= deadline:
@@ -273,7 +284,7 @@ class HardwareReelsSystem(LeafSystem):
         book[COMMAND_ECHO] = -1.0 if status.echo_sequence is None else status.echo_sequence
         book[ENABLED] = 1.0
         book[RAMP] = 0.0
-        book[LAST_STATUS_WALL] = time.monotonic()
+        book[LAST_STATUS_WALL] = context.get_time() if self._lockstep else time.monotonic()
         book[STATUS_TIME] = status.time
         book[COMMANDS_LOST] = status.commands_lost
         state.get_mutable_discrete_state(self._book).SetFromVector(book)
@@ -284,8 +295,13 @@ class HardwareReelsSystem(LeafSystem):
             return  # latched; the next publish ends the run
         link = self._open_link()
         last = int(book[STATUS_SEQ]) if book[HAVE_STATUS] else None
-        status = link.receive(last, (int(book[PROTOCOL]),) if book[PROTOCOL] else VERSIONS)
-        now = time.monotonic()
+        versions = (int(book[PROTOCOL]),) if book[PROTOCOL] else VERSIONS
+        if self._lockstep:
+            status = self._receive_answer(link, last, versions, book)
+            now = context.get_time()  # the watchdog's clock: ticks x period
+        else:
+            status = link.receive(last, versions)
+            now = time.monotonic()
         if status is not None:
             state.get_mutable_vector(self._lengths).SetFromVector(status.lengths)
             state.get_mutable_vector(self._force).SetFromVector(status.force)
@@ -321,6 +337,29 @@ class HardwareReelsSystem(LeafSystem):
         elif book[ENABLED]:
             book[RAMP] = min(1.0, book[RAMP] + self._ramp_step)
         state.get_mutable_vector(self._book).SetFromVector(book)
+
+    def _receive_answer(self, link, last, versions, book):
+        """Lockstep: the newest valid status once one answers the last command sent (echoes
+        its sequence), waiting up to startup_timeout s of wall clock for it; whatever came
+        (maybe None) when the time is up. No wait when the last command was answered
+        already (a hold sends nothing)."""
+        target = link.last_sent_sequence
+        echo = int(book[COMMAND_ECHO])
+        newest = None
+        if echo >= 0 and sequence_delta(echo, target) >= 0:
+            return link.receive(last, versions)
+        deadline = time.monotonic() + self._config.startup_timeout
+        while True:
+            status = link.receive(last, versions)
+            if status is not None:
+                newest, last = status, status.sequence
+                if (status.echo_sequence is not None
+                        and sequence_delta(status.echo_sequence, target) >= 0):
+                    return newest
+            remaining = deadline - time.monotonic()
+            if remaining <= 0:
+                return newest
+            link.wait(remaining)
 
     def _measure_tension(self, book, status, speed, tension) -> None:
         """The cables' tensions (N) into `tension` from a new status, by the tension sensor;
@@ -360,6 +399,7 @@ class HardwareReelsSystem(LeafSystem):
     def _judge_hold(self, book, status, now, link) -> None:
         """While holding: resume when a status answers the stop in time with nothing lost on
         the way; latch when the time is up or statuses were lost."""
+        # (In lockstep `now` is the context time: resume_within counts ticks.)
         if now - book[HOLD_WALL] > self._config.resume_within:
             book[FAULT] = FAULT_WATCHDOG
         elif link.counters.lost != book[HOLD_LOST]:

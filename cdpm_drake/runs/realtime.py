@@ -175,8 +175,12 @@ class StopRequest:
 
 def run(*, scenario: Scenario | ResolvedScenario, out_dir, duration: float | None = None, status=None,
         status_period: float = 1.0, step: float = 0.02, on_view=None,
-        view_period: float = 0.1) -> RunResult:
+        view_period: float = 0.1, lockstep: bool | None = None) -> RunResult:
     """Run the scenario's diagram at real-time rate 1 against the reel bridge.
+
+    `lockstep` (None: the plant's own `lockstep` setting): against `cdpm emulate
+    --lockstep`, each tick waits for the status answering its command and nothing keeps
+    time (the plant's `lockstep: true`; rate unlimited), so the run is deterministic.
 
     `status(text)` receives a one-line live status every `status_period` s of run time,
     from a thread of its own (the module docstring says why); `on_view(diagram, context)` (a
@@ -194,6 +198,10 @@ def run(*, scenario: Scenario | ResolvedScenario, out_dir, duration: float | Non
             "reels and needs plant: !HardwareReels {address: ..., port: ...} or plant: "
             "!CanopenReels {interface: ..., channel: ...} (use `cdpm "
             "simulate` for a simulation, or --scenario-text 'plant: !HardwareReels {}')")
+    if lockstep is not None and lockstep != scenario.plant.lockstep:
+        scenario = dataclasses.replace(
+            scenario, plant=dataclasses.replace(scenario.plant, lockstep=bool(lockstep)))
+        resolved = dataclasses.replace(resolved, scenario=scenario)
     duration = scenario.duration if duration is None else float(duration)
     if not (duration > 0 and np.isfinite(duration)):
         raise ScenarioError(f"duration must be a finite number > 0 s, got {duration!r}")
@@ -220,7 +228,8 @@ def run(*, scenario: Scenario | ResolvedScenario, out_dir, duration: float | Non
     with StopRequest() as stop, _collector_between_steps() as collect:
         try:
             sink.open()  # before the enabling command: it maps ~20 MB (TickLogSink.open)
-            start_realtime(simulator, 1.0)
+            # Lockstep: the bridge's answers pace the ticks, as fast as both can go.
+            start_realtime(simulator, 0.0 if scenario.plant.lockstep else 1.0)
             enabled = True  # initialisation enables the reels or raises
             t, next_status, next_view = 0.0, 0.0, 0.0
             # Whole ticks counted in integers, so the last tick (D * 500 + 1 rows) is reached.
