@@ -128,6 +128,8 @@ def check_canopen_reels(config: CanopenReels, m: int, period: float,
         if not _finite(value) or value == 0:
             raise ValueError(f"{field}.{name} must be a finite non-zero number ({unit}), "
                              f"got {value!r}")
+    if not isinstance(config.lockstep, bool):
+        raise ValueError(f"{field}.lockstep must be true or false, got {config.lockstep!r}")
     if config.tension_sensor not in TENSION_SENSORS:
         raise ValueError(f"{field}.tension_sensor must be one of {', '.join(TENSION_SENSORS)}"
                          f", got {config.tension_sensor!r}")

@@ -136,8 +136,11 @@ class CanopenReelsSystem(LeafSystem):
         self._drive_model = drive_model(robot.dynamics, m)
         self._ramp_step = 1.0 if config.ramp_time == 0 else self._T / config.ramp_time
         self._silence = (config.missed_tpdo_ticks - 1) * self._T
+        if config.lockstep:  # ticks are the clock: no catch-up burst to allow for
+            self._silence = 0.0
         self.master = CanopenMaster(config.interface, config.channel, config.bitrate,
-                                    self._ids)
+                                    self._ids, lockstep_period=self._T if config.lockstep
+                                    else 0.0, lockstep_wait=config.startup_timeout)
         self._moving = np.zeros(m)  # consecutive commands >= frozen_speed, same sign
         # TPDOs of an unchanged position that make a frozen encoder: frozen_ticks, or more
         # where frozen_speed moves less than FROZEN_COUNTS counts in frozen_ticks (coarse
@@ -288,7 +291,7 @@ class CanopenReelsSystem(LeafSystem):
         # lack of a new TPDO is not a miss.
         drives[m:2 * m] = -1.0
         drives[4 * m:5 * m] = np.nan
-        drives[5 * m:] = time.monotonic()
+        drives[5 * m:] = self.master.clock()
         state.get_mutable_discrete_state(self._drives).SetFromVector(drives)
         book = np.zeros(BOOK_SIZE)
         book[ENABLED] = 1.0
@@ -333,7 +336,7 @@ class CanopenReelsSystem(LeafSystem):
 
     def _advance(self, context, snap, now):
         """The per-drive state after the bus snapshot `snap` (CanopenMaster.snapshot) read at
-        `now` (time.monotonic()), the speeds before it, which drives sent a new TPDO, and
+        `now` (the master's clock()), the speeds before it, which drives sent a new TPDO, and
         the verdict (reason, cable, detail) on them."""
         m, T = self._m, self._T
         drives = context.get_discrete_state(self._drives).get_value().copy()
@@ -361,7 +364,7 @@ class CanopenReelsSystem(LeafSystem):
         c, m, T = self._config, self._m, self._T
         # The frames as the tick's publish saw them, before its SYNC: a silence counted in
         # SYNC periods, whatever this tick's compute time lets arrive meanwhile.
-        at = self.master.sync_snapshot() or (self.master.snapshot(), time.monotonic())
+        at = self.master.sync_snapshot() or (self.master.snapshot(), self.master.clock())
         snap = at[0]
         drives, speed0, new, (reason, cable, detail) = self._advance(context, *at)
         self.lost_tpdos += int(np.count_nonzero(~new))
@@ -427,8 +430,10 @@ class CanopenReelsSystem(LeafSystem):
             # seen the TPDOs that came in during the period just ended: judge them here too,
             # so that a fault stops the drives in place of this tick's command, not the next.
             t = context.get_time()
+            # Lockstep: judged on every answer to the last SYNC, not on those in so far.
+            self.master.await_answers()
             _, _, _, (reason, cable, detail) = self._advance(
-                context, self.master.snapshot(drain_emcy=False), time.monotonic())
+                context, self.master.snapshot(drain_emcy=False), self.master.clock())
             u = self._command.Eval(context)
             bad = ~np.isfinite(u)
             if reason == FAULT_NONE and bad.any():
