@@ -229,18 +229,18 @@ TRUTH_ROWS = 300_000
 
 def write_truth_log(server, path) -> int:
     """The server's truth record as an npz at `path`, one row per version-2 status sent:
-    time, plant_time s; tensions (true), drive_force (sent) N; reel_speed (sent)
+    time, plant_time s; tensions (true), drive_force, load_cell (sent) N; reel_speed (sent)
     m/s; p_true m and rpy_true rad (the platform's true pose); pair_distances_true m, every
     watched pair's distance on the true, rotated platform (robot.pairs order, cables
     numbered from 1 in `pairs`). Returns the rows."""
     rows = list(server.truth or ())
     robot = server.bridge.robot
     m = robot.num_cables
-    columns = list(zip(*rows)) if rows else [[]] * 7
+    columns = list(zip(*rows)) if rows else [[]] * 8
     n = len(rows)
     data = {key: np.array(columns[k], dtype=float).reshape(n, width) for k, key, width in
             ((2, "tensions", m), (3, "drive_force", m), (4, "reel_speed", m),
-             (5, "p_true", 3), (6, "rpy_true", 3))}
+             (5, "p_true", 3), (6, "rpy_true", 3), (7, "load_cell", m))}
     distances = np.zeros((n, robot.num_pairs))
     if n and robot.num_pairs:
         distances, _ = posed_pair_distances(robot, data["p_true"],

@@ -130,8 +130,8 @@ class ReelBridgeServer:
         self.tick = 0
         self.commands = collections.deque(maxlen=record)
         # (bridge time s, plant time s, true tensions N, drive_force sent N, reel_speed sent
-        # m/s, true platform centre m, true roll-pitch-yaw rad) per status sent, if asked for
-        # and the plant has a ground truth.
+        # m/s, true platform centre m, true roll-pitch-yaw rad, load_cell sent N) per status
+        # sent, if asked for and the plant has a ground truth.
         self.truth = collections.deque(maxlen=truth or None) if (
             truth and hasattr(bridge, "true_tensions")) else None
         # Controller sessions, numbered from 1 (0: none yet); `session_open` while one runs.
@@ -416,11 +416,11 @@ class ReelBridgeServer:
             lengths[0] = np.nan
         drive = {}
         if self._status_version >= 2:
-            drive = dict(drive_force=b.drive_force(), reel_speed=b.speed.copy(),
+            drive = dict(drive_force=b.drive_force(), reel_speed=b.reel_speed(),
                          load_cell=b.load_cell())
             if self.truth is not None:
                 self.truth.append((now, b.plant_time, b.true_tensions(), drive["drive_force"],
-                                   drive["reel_speed"], *b.true_pose()))
+                                   drive["reel_speed"], *b.true_pose(), drive["load_cell"]))
         data = encode_status(Status(
             sequence=self._sequence, time=now, lengths=lengths, force=b.force(),
             faults=b.faults, enabled=b.enabled,
