@@ -22,15 +22,22 @@ plant's clock), while the controller drove the reels and, apart, after they were
 Protocol version 2 (the default; `--protocol-version 1` plays a version-1 bridge, to rehearse
 one): each status also carries each drive's force at the cable, the reels' speeds and load
 cells. The kinematic plant has no cable tensions: it sends NaN ("no reading") for the drive
-forces and load cells. The dynamic plant sends each drive's force from the plant and, with
-`--load-cells`, its true tensions as ideal load cells; `--truth-log FILE.npz` keeps what each
-status carried beside the plant's true tensions, to compare with the controller's log.
+forces and load cells. The dynamic plant measures with the simulated plant's own sensors
+(the scenario's plant.drive_torque and plant.load_cell): each drive's force as its current
+reads it and, with `--load-cells`, load cells; `--truth-log FILE.npz` keeps what each status
+carried beside the plant's truth (true tensions, pose, pair distances), to judge the
+controller's log on it.
+
+`--lockstep`: no clock of its own; each command read steps the plant one period and is
+answered by one status, so a rehearsal with `cdpm run --lockstep` is deterministic on any
+host (docs/on_the_robot.md, "Rehearse in lockstep").
 
 Examples:
   cdpm-reel-emulator --robot paper_7cable --start 1.77 3.65 1.22
   cdpm-reel-emulator --scenario exp2_interaction --drop 0.01 --seed 3
   cdpm-reel-emulator --scenario exp2_interaction --plant dynamic
   cdpm-reel-emulator --scenario exp2_interaction --plant dynamic --truth-log truth.npz
+  cdpm-reel-emulator --scenario exp2_interaction --plant dynamic --lockstep
   cdpm-reel-emulator --scenario exp2_interaction --protocol-version 1
   cdpm-reel-emulator --stop --fault-after 2.0
 
@@ -99,13 +106,15 @@ def build_parser() -> argparse.ArgumentParser:
     g.add_argument("--time-constant", type=float, default=None,
                    help="reel velocity lag, s (default: 0.02; kinematic plant only)")
     g.add_argument("--load-cells", action="store_true",
-                   help="dynamic plant only: report each cable's true tension as its load "
-                   "cell (ideal load cells; default: none, NaN)")
+                   help="dynamic plant only: report load cells, the simulated plant's (the "
+                   "scenario's plant.load_cell: bias, noise, bandwidth; default: none, NaN)")
     g.add_argument("--truth-log", metavar="FILE.npz",
                    help="dynamic plant only: write, when the emulator stops, each version-2 "
-                   "status's bridge time, plant time, the true tensions and the drive forces "
-                   "and reel speeds it carried (keys time, plant_time, tensions, drive_force, "
-                   "reel_speed; the last 10 minutes at 500 Hz)")
+                   "status's bridge time, plant time, the true tensions, the drive forces, "
+                   "reel speeds and load cells it carried, the platform's true pose and every "
+                   "watched pair's true distance (keys time, plant_time, tensions, drive_force, "
+                   "reel_speed, load_cell, p_true, rpy_true, pair_distances_true, pairs; the "
+                   "last 10 minutes at 500 Hz)")
     n = p.add_argument_group("network")
     n.add_argument("--address", default=None,
                    help="address to listen on (default: 127.0.0.1, or the scenario's)")
@@ -324,6 +333,7 @@ def _main(argv) -> int:
         f"{server.period * 1e3:g} ms, {server.bridge.describe()}, start "
         f"{vector_text(server.bridge.platform())} m, protocol version "
         f"{server.protocol_version}"
+        + (", lockstep (one plant period per command)" if server.lockstep else "")
         + (f", faults {server.faults.describe()} from {server.faults.after:g} s after the "
            "first enable (one session)" if server.faults.any else ""))
     code = 0
