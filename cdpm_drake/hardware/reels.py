@@ -376,6 +376,11 @@ class HardwareReelsSystem(LeafSystem):
         dt = status.time - book[SPEED_TIME]  # NaN without an earlier speed
         if 0.0 < dt <= MAX_ACCEL_INTERVAL:
             accel = (w - speed) / dt
+        elif np.isnan(book[SPEED_TIME]):
+            # The first status (start-up, drives disabled): a reel at rest (within the
+            # drives' dead band) is not accelerating, so its tension is known from the first
+            # tick, as the simulated sensor's is; a moving one waits for a second speed.
+            accel = np.where(np.abs(w) <= self._drive_model[3], 0.0, np.nan)
         else:
             accel = np.full(self._m, np.nan)
         tension_from_drive(status.drive_force, w, accel, *self._drive_model, tension)
