@@ -10,8 +10,8 @@ cables are rigid and its reels follow their commands), so it reports no drive fo
 load cell (NaN: "no reading"). A drive force for the reels' own motion with zero tension would
 convert to 0 N at the controller, which reads as every cable slack; NaN says honestly that
 this plant cannot tell. The dynamic plant's sensors are the simulated plant's, from the same
-code (kernels/plant/tension_sensor.py) and the same scenario fields, sampled at each control
-tick of the plant's clock: each drive's force as its current measures it (the true drive's
+code (kernels/plant/tension_sensor.py) and the same scenario fields, sampled once a status
+(in lockstep: each control tick of the plant's clock): each drive's force as its current measures it (the true drive's
 inertia and friction off the model by plant.drive_torque's errors, its filter, noise and
 quantum) and, with `load_cells`, the load cells of plant.load_cell (bias, noise,
 bandwidth). So a rehearsal is as pessimistic as the simulation.
@@ -211,8 +211,8 @@ class DynamicBridge:
         self._drive = slice(*_span(cables.layout["drive_force"]))
         at = cables.layout["next_reels"][0] + m  # the reels' speeds after the plant step
         self._next_speeds = slice(at, at + m)
-        # The simulated plant's sensors, from its code and the scenario's fields, ticked at
-        # the control period on the plant's clock (_sense): the drives' current (filter,
+        # The simulated plant's sensors, from its code and the scenario's fields, ticked
+        # once a status (_sensed): the drives' current (filter,
         # noise, quantum, the true drives' inertia and friction errors) and the load cells
         # (bias, noise, bandwidth).
         self._T = float(scenario.time_step)
@@ -274,7 +274,7 @@ class DynamicBridge:
     def _reset_sensors(self) -> None:
         """The sensors' start state: the start tensions as they read them, no tick yet."""
         self._sensor = {kind: start.copy() for kind, (_, _, start) in self._sensor_setup.items()}
-        self._sensor_ticks = 0                      # control ticks the sensors have sampled
+        self._sensed_at = None                      # the plant time of the last sample, s
         m = self.robot.num_cables
         params = self._sensor_setup["drive_torque"][0]
         self._drive_reading = drive_force_for_tension(
@@ -301,7 +301,6 @@ class DynamicBridge:
                 self._drive_reading = drive_force_for_tension(out[:m], w, accel, *params[6:10])
                 self._speed_reading = w.copy()
             self._sensor[kind] = out
-        self._sensor_ticks += 1
 
     def platform(self) -> np.ndarray:
         """The platform centre now (the plant's true position), base frame, m."""
@@ -366,18 +365,18 @@ class DynamicBridge:
         # Whole steps counted in integers: the clock's sums of wall-clock intervals would
         # otherwise land a hair either side of a step.
         steps = math.floor((self.time - self.operator_start) / self._h + 1e-6)
-        # The sensors sample the plant at each control tick on the way, as the plant's own;
-        # one due at the end is sampled when read (_sensed), under the command taken by then.
-        while self._sensor_ticks * self._T < steps * self._h - 1e-9:
-            self._advance(self._sensor_ticks * self._T)
-            self._sense()
         self._advance(steps * self._h)
 
     def _sensed(self) -> None:
-        """Sample the sensors if a control tick is due at the plant's time (the plant runs)."""
-        if (self.operator_start is not None
-                and self._sensor_ticks * self._T <= self.plant_time + 1e-9):
+        """Sample the sensors when read, once per plant time (the plant runs): one sample a
+        status, so that each status's drive force goes with its reel speed and the speed of
+        the status before (the controller's acceleration), as the simulated sensor's sample
+        a tick goes with its own. In lockstep (one period a status) these are the simulated
+        plant's samples, tick for tick; on wall clock a status that comes late spans more
+        plant time than the sensor's tick assumes."""
+        if self.operator_start is not None and self.plant_time != self._sensed_at:
             self._sense()
+            self._sensed_at = self.plant_time
 
     def _advance(self, until: float) -> None:
         """The plant to plant time `until` (s, a whole plant step), and its record."""
@@ -415,7 +414,7 @@ class DynamicBridge:
         """Each reel drive's force at the cable as the drive measures it, N, + pays out: the
         true drive's force (its inertia and friction off the robot file's by the scenario's
         plant.drive_torque errors) through the current filter, noise and quantum of
-        plant.drive_torque, sampled at the last control tick (the dynamic plant's
+        plant.drive_torque, sampled once a status (the dynamic plant's
         drive_torque sensor, before its conversion to a tension)."""
         self._sensed()
         return self._drive_reading.copy()
@@ -427,8 +426,8 @@ class DynamicBridge:
 
     def load_cell(self) -> np.ndarray:
         """The load cells, N: with `load_cells`, the dynamic plant's load_cell sensor on the
-        true tensions (plant.load_cell: a bias per cell, noise, bandwidth) at the last control
-        tick; else NaN (none)."""
+        true tensions (plant.load_cell: a bias per cell, noise, bandwidth), sampled once a
+        status; else NaN (none)."""
         if self.load_cells:
             self._sensed()
             return self._sensor["load_cell"][:self.robot.num_cables].copy()
