@@ -232,7 +232,7 @@ class CanopenReelsSystem(LeafSystem):
         all_tpdos = None  # time.monotonic() when every drive had sent a TPDO
         while True:
             self.master.send_cycle([CW_DISABLE_VOLTAGE] * m, zero)
-            time.sleep(self._T)
+            self._settle()
             sw, pos, torque, count, _, _, hb_state, _ = self.master.snapshot()
             now = time.monotonic()
             silent = [k for k in range(m) if count[k] == 0]
@@ -330,6 +330,14 @@ class CanopenReelsSystem(LeafSystem):
                               "operation enabled": CW_ENABLE_OPERATION,
                               "quick stop active": CW_DISABLE_VOLTAGE}.get(s, CW_DISABLE_VOLTAGE))
             self.master.send_cycle(words, np.zeros(m))
+            self._settle()
+
+    def _settle(self) -> None:
+        """After a start-up SYNC: a period for the drives to answer, or in lockstep their
+        answers themselves (so the enable sequence takes the same SYNCs on any host)."""
+        if self.master.lockstep:
+            self.master.await_answers()
+        else:
             time.sleep(self._T)
 
     # --- the tick ----------------------------------------------------------------------------
