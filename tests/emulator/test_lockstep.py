@@ -248,8 +248,8 @@ def test_a_lockstep_rehearsal_reproduces_the_simulation(tmp_path, overlay):
     """exp2's first 2 s, `cdpm simulate` on the dynamic plant against `cdpm run --lockstep`
     on `cdpm emulate --plant dynamic --lockstep`: the same end, the smallest true tension
     within 0.5 N, the largest within 5 %, the true closest approach within 0.5 mm, the true
-    path within 1 mm (the tolerances the rehearsal promises). Measured: 0.0 N, 0.5 %,
-    0.18 mm, 0.15 mm over 3 s. They differ at all because the real-time path reads the
+    path within 1 mm (the tolerances the rehearsal promises). Measured: 0.00 N, 0.1 %,
+    0.17 mm, 0.14 mm over 3 s. They differ at all because the real-time path reads the
     hand's force a tick later than the simulation's plant hands it to the controller
     (each command uses the status read on the tick before), and because the emulator's
     encoders count from the start pose where the simulation's report unstretched lengths."""
