@@ -76,6 +76,8 @@ class RunResult:
     # False when the run ended before the reels were enabled (no bridge, lengths that do not
     # fit): such a run writes nothing but its report.
     enabled: bool = True
+    # True when the ticks were paced by the bridge's answers (lockstep), not the wall clock.
+    lockstep: bool = False
 
 
 class _StatusPump:
@@ -276,12 +278,14 @@ def run(*, scenario: Scenario | ResolvedScenario, out_dir, duration: float | Non
         for path in (tick_path, scenario_path):
             path.unlink(missing_ok=True)
         return RunResult(log={}, timing={}, link=link, error=error, ending=ending,
-                         log_path=None, tick_log_path=None, signal=stop.signal, enabled=False)
+                         log_path=None, tick_log_path=None, signal=stop.signal, enabled=False,
+                         lockstep=scenario.plant.lockstep)
     log, timing, _ = log_from_tick_log(tick_path, resolved, robot)
     mark_ending(log, ending, error)
     log_path = write_log(log, out)
     return RunResult(log=log, timing=timing, link=link, error=error, ending=ending,
-                     log_path=log_path, tick_log_path=tick_path, signal=stop.signal)
+                     log_path=log_path, tick_log_path=tick_path, signal=stop.signal,
+                     lockstep=scenario.plant.lockstep)
 
 
 def tick_row_bytes(sink) -> int:
@@ -373,6 +377,9 @@ def report_lines(result: RunResult) -> list[str]:
     why = f" by {result.signal}" if result.ending == "interrupted" and result.signal else ""
     lines = [f"run ended: {result.ending}{why}"
              + (f" ({type(result.error).__name__}: {result.error})" if result.error else "")]
+    if result.lockstep:
+        lines.append("lockstep: each tick waited for the bridge's answer to its command; the "
+                     "tick periods below are this host's speed, not the robot's timing")
     if t:
         ms = {k: 1e3 * t[k] for k in ("p50", "p99", "max")}
         lines.append(f"ticks logged {t['ticks']}, missing {t['missing_ticks']}, overruns "

@@ -392,7 +392,7 @@ def test_run_rt_priority_reaches_the_scheduler_call(tmp_path, monkeypatch, bridg
 
 
 @covers("run --lockstep", "emulate --lockstep")
-def test_run_and_emulate_lockstep_tick_together(tmp_path):
+def test_run_and_emulate_lockstep_tick_together(tmp_path, capsys):
     """`cdpm emulate --lockstep`'s server steps once per command; `cdpm run --lockstep`
     waits for each answer: the emulator's ticks are the run's commands, one for one (the
     start-up greeting, ticks 0..25 of 0.05 s, the final stop's copies), and the run folder's
@@ -405,6 +405,7 @@ def test_run_and_emulate_lockstep_tick_together(tmp_path):
         assert cdpm("run", _scenario_file(tmp_path, duration=0.05), "--scenario-text",
                     "{plant: !HardwareReels {port: %d, ramp_time: 0.0}}" % server.address[1],
                     "--lockstep", "--out", out) == 0
+        assert "lockstep: each tick waited for the bridge's answer" in capsys.readouterr().out
         settle(server)
     finally:
         server.stop()
