@@ -30,6 +30,11 @@ broken, e.g. an emulator on a virtual machine whose host holds a virtual CPU for
 (measured on the shared VM this was developed on: scripts/bench/soak_realtime.py), would otherwise
 end a person's interaction; the reels stop within the same `watchdog_ticks` either way.
 
+Lockstep (`config.lockstep`, against `cdpm emulate --lockstep`, which steps its plant one
+period per command): each update waits (up to startup_timeout s of wall clock) for the status
+that echoes the last command sent, and the watchdog and resume_within count ticks of the
+context's clock instead of wall-clock seconds; the run is then the same on any host.
+
 Protocol version (hardware/PROTOCOL.md "Versions"): the start-up greetings alternate version 2
 and version 1; the first status that settles it fixes the version for the run (book
 PROTOCOL). With version 2, each status's drive forces, reel speeds and load cells give the

@@ -32,6 +32,11 @@ about one period minus that tick's compute (~1.8 ms) before the next tick is due
   milliseconds, which delays the next tick (the bridge's statuses wait in the socket): a
   rehearsal feature, not for the robot.
 
+In lockstep (`run(lockstep=True)`, `cdpm run --lockstep`: the plant's `lockstep: true`)
+nothing keeps wall-clock time: Drake runs unpaced and each tick waits for the bridge's answer
+to its command (hardware/reels.py, hardware/canopen_reels.py), so the same scenario gives the
+same log on any host.
+
 Measured (scripts/bench/soak_realtime.py; README, "On the robot", point 4): with this, a tick comes
 late only when the host holds the process's virtual CPU (a higher-priority sentinel thread on
 that CPU is late by the same amount every time); a bridge silenced that way is what the
