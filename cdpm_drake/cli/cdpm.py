@@ -112,6 +112,11 @@ def build_parser() -> argparse.ArgumentParser:
                    help="show the robot live in Meshcat (prints the URL to open)")
     p.add_argument("--force", action="store_true",
                    help="empty a non-empty --out that holds an earlier run, then write there")
+    p.add_argument("--lockstep", action="store_true",
+                   help="rehearsal against cdpm emulate --lockstep: each tick waits for the "
+                        "status answering its command, the watchdogs count ticks, nothing "
+                        "keeps wall-clock time; the run is deterministic on any host (the "
+                        "plant's lockstep: true)")
     p.add_argument("--plot", action="store_true",
                    help="after the run, write the paper's figures (PNG) into its folder, as "
                         "cdpm simulate --plot")

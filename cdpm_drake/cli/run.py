@@ -13,11 +13,12 @@ from cdpm_drake.cli.summaries import (model_monitor_summary, print_overload,
 
 def run_main(*, scenario, duration=None, out_dir=None, out=None, on_status=None,
              on_view=None, force=False, runs_root=None, overlay_text=None,
-             plots=False) -> int:
+             plots=False, lockstep=None) -> int:
     """Run on the reels in real time; print live status and the end report. The folder
     policy is simulate_main's. Exit code 0 when the run completed, 1 on a fault or when it
     never enabled the reels, 130 / 143 when Ctrl-C / SIGTERM stopped it. `plots`: the
-    log's figures into the run folder afterwards, as `cdpm simulate --plot`."""
+    log's figures into the run folder afterwards, as `cdpm simulate --plot`. `lockstep`: as
+    realtime.run's."""
     from cdpm_drake.runs.interrupt import exit_code
     from cdpm_drake.runs.realtime import report_lines, run
     from cdpm_drake.config import resolve_scenario
@@ -37,7 +38,7 @@ def run_main(*, scenario, duration=None, out_dir=None, out=None, on_status=None,
 
     try:
         result = run(scenario=resolved, out_dir=out_dir, duration=duration, status=status,
-                     on_view=on_view)
+                     on_view=on_view, lockstep=lockstep)
     except BaseException:
         folder.discard()
         raise
@@ -112,4 +113,5 @@ def cmd_run(args) -> int:
     with duration_flag(args.duration):
         return run_main(scenario=scenario, duration=args.duration, out_dir=args.out,
                         on_view=on_view, force=args.force,
-                        overlay_text=args.scenario_text, plots=args.plot)
+                        overlay_text=args.scenario_text, plots=args.plot,
+                        lockstep=True if args.lockstep else None)

@@ -1,6 +1,6 @@
 """The bridge's two plants, without sockets, behind one interface (set_command, raise_fault,
-step, lengths, speed, force, drive_force, load_cell, platform, reset, describe): ReelBridge,
-reels following their commands with a first-order lag (`--plant kinematic`), and
+step, lengths, speed, reel_speed, force, drive_force, load_cell, platform, reset, describe):
+ReelBridge, reels following their commands with a first-order lag (`--plant kinematic`), and
 DynamicBridge, the dynamic plant of `plant: !DynamicReels` stepped to the bridge's clock
 (`--plant dynamic`). Lengths m, speeds m/s of cable, forces N in the base frame (drive
 forces at the cable, + pays out), times s.
@@ -9,17 +9,21 @@ What the drives report (protocol version 2): the kinematic plant has no cable te
 cables are rigid and its reels follow their commands), so it reports no drive force and no
 load cell (NaN: "no reading"). A drive force for the reels' own motion with zero tension would
 convert to 0 N at the controller, which reads as every cable slack; NaN says honestly that
-this plant cannot tell. The dynamic plant reports each drive's force from the plant (its
-`drive_force` output where it has one, else the force its velocity loop needs to move the
-reel against its cable's true tension, kernels/drive_torque.drive_force_for_tension) and,
-with `load_cells`, its true tensions as ideal load cells."""
+this plant cannot tell. The dynamic plant's sensors are the simulated plant's, from the same
+code (kernels/plant/tension_sensor.py) and the same scenario fields, sampled once a status
+(in lockstep: each control tick of the plant's clock): each drive's force as its current measures it (the true drive's
+inertia and friction off the model by plant.drive_torque's errors, its filter, noise and
+quantum) and, with `load_cells`, the load cells of plant.load_cell (bias, noise,
+bandwidth). So a rehearsal is as pessimistic as the simulation.
+"""
 
 import math
 
 import numpy as np
 
 from cdpm_drake.hardware.protocol import FAULT_OVERSPEED, MAX_FORCE
-from cdpm_drake.kernels.drive_torque import drive_force_for_tension, drive_model
+from cdpm_drake.kernels.drive_torque import drive_force_for_tension
+from cdpm_drake.kernels.plant.tension_sensor import tension_sensor_tick
 from cdpm_drake.kernels.kinematics import KinematicsError, forward_kinematics, jacobian
 
 
@@ -133,6 +137,10 @@ class ReelBridge:
         with (see the module docstring)."""
         return np.full(self.robot.num_cables, np.nan)
 
+    def reel_speed(self) -> np.ndarray:
+        """The reels' speeds, m/s of cable."""
+        return self.speed.copy()
+
     def load_cell(self) -> np.ndarray:
         """No load cells (NaN)."""
         return np.full(self.robot.num_cables, np.nan)
@@ -164,22 +172,22 @@ class DynamicBridge:
         from pydrake.systems.framework import DiagramBuilder
 
         from cdpm_drake.config import check_dynamic_reels
-        from cdpm_drake.systems.plants.dynamic_plant import build_dynamic_plant, plant_state_now
+        from cdpm_drake.systems.plants.dynamic_plant import (build_dynamic_plant,
+                                                             plant_state_now, sensor_kernel)
 
         scenario = resolved.scenario
         self.robot = robot = resolved.robot
         m = robot.num_cables
         builder = DiagramBuilder()
+        tensions0 = check_dynamic_reels(scenario, robot).tensions
         self._plant = builder.AddNamedSystem("reels", build_dynamic_plant(
-            scenario, robot, resolved.operator, check_dynamic_reels(scenario, robot).tensions,
-            log_truth=False))
+            scenario, robot, resolved.operator, tensions0, log_truth=False))
         builder.ExportInput(self._plant.GetInputPort("reel_velocity_command"), "command")
         self._diagram = builder.Build()
         self._simulator = Simulator(self._diagram)
         self._context = self._simulator.get_mutable_context()
         self._command_port = self._diagram.get_input_port(0)
         self._force_port = self._plant.GetOutputPort("measured_force")
-        self._drive_model = drive_model(robot.dynamics)
         self.load_cells = bool(load_cells)
         self._plant_context = self._plant.GetMyContextFromRoot(self._context)
         self.max_reel_speed = float(scenario.plant.max_reel_speed
@@ -200,6 +208,16 @@ class DynamicBridge:
         self._tensions = slice(*_span(cables.layout["tensions"]))
         self._slack = slice(*_span(cables.layout["slack"]))
         self._rpy = slice(*_span(cables.layout["rpy_true"]))
+        self._drive = slice(*_span(cables.layout["drive_force"]))
+        at = cables.layout["next_reels"][0] + m  # the reels' speeds after the plant step
+        self._next_speeds = slice(at, at + m)
+        # The simulated plant's sensors, from its code and the scenario's fields, ticked
+        # once a status (_sensed): the drives' current (filter,
+        # noise, quantum, the true drives' inertia and friction errors) and the load cells
+        # (bias, noise, bandwidth).
+        self._T = float(scenario.time_step)
+        self._sensor_setup = {kind: sensor_kernel(scenario, robot, tensions0, kind)
+                              for kind in ("drive_torque", "load_cell")}
         self._p_true = slice(*_span(cables.layout["p_WP_true"]))
         p0 = np.asarray(scenario.initial_position, dtype=float)
         L0 = plant_state_now(self._diagram, self._context)["L0"]
@@ -221,6 +239,7 @@ class DynamicBridge:
         self.ceiling = float(scenario.controller.max_tension)
         self._initial = self._context.Clone()       # the start: what reset() goes back to
         self._clear_record()
+        self._reset_sensors()
 
     def describe(self) -> str:
         """The plant it plays, for the emulator's first line."""
@@ -236,7 +255,6 @@ class DynamicBridge:
         # the reels were stopped (disabled or faulted: the drives brake a moving platform and
         # the operator pulls on, which can raise tensions the run itself never saw).
         m = self.robot.num_cables
-        self._accel = np.zeros(m)                   # reel accelerations, m/s^2 (last step)
         self.driven = _Record(m, self.ceiling)
         self.stopped = _Record(m, self.ceiling)
         self.stop_time = None                       # plant time the reels were first stopped, s
@@ -257,6 +275,38 @@ class DynamicBridge:
         self.enabled = False
         self.operator_start = None
         self._clear_record()
+        self._reset_sensors()
+
+    def _reset_sensors(self) -> None:
+        """The sensors' start state: the start tensions as they read them, no tick yet."""
+        self._sensor = {kind: start.copy() for kind, (_, _, start) in self._sensor_setup.items()}
+        self._sensed_at = None                      # the plant time of the last sample, s
+        m = self.robot.num_cables
+        params = self._sensor_setup["drive_torque"][0]
+        self._drive_reading = drive_force_for_tension(
+            self._sensor["drive_torque"][:m], np.zeros(m), np.zeros(m), *params[6:10])
+        self._speed_reading = np.zeros(m)
+
+    def _sense(self) -> None:
+        """One control tick of both sensors on the plant now (tension_sensor_tick, as the
+        dynamic plant's sensor: its inputs the plant step's drive force, the reels' speeds
+        after it and the true tensions). The drives report the measured force itself: the
+        tick's tension turned back into it with the sensor's own model (the inverse of its
+        last step), so the controller converts it with its model and its acceleration."""
+        m = self.robot.num_cables
+        step = self._step_port.Eval(self._cables_context)
+        inputs = np.concatenate([step[self._drive], step[self._next_speeds],
+                                 step[self._tensions]])
+        for kind, (params, bias, _) in self._sensor_setup.items():
+            x = np.concatenate([inputs, self._sensor[kind]])
+            out = np.empty_like(self._sensor[kind])
+            tension_sensor_tick(params, bias, x, out)
+            if kind == "drive_torque":
+                w = x[m:2 * m]
+                accel = (w - x[3 * m + 2 * m:3 * m + 3 * m]) / params[1]
+                self._drive_reading = drive_force_for_tension(out[:m], w, accel, *params[6:10])
+                self._speed_reading = w.copy()
+            self._sensor[kind] = out
 
     def platform(self) -> np.ndarray:
         """The platform centre now (the plant's true position), base frame, m."""
@@ -329,14 +379,23 @@ class DynamicBridge:
         # Whole steps counted in integers: the clock's sums of wall-clock intervals would
         # otherwise land a hair either side of a step.
         steps = math.floor((self.time - self.operator_start) / self._h + 1e-6)
-        if steps * self._h > self.plant_time:
-            # The reels' acceleration over the last plant step (the drives' force at the
-            # sample's instant, not averaged over a bridge tick that may span many steps).
-            if (steps - 1) * self._h > self.plant_time:
-                self._simulator.AdvanceTo((steps - 1) * self._h)
-            w0, t0 = self.speed, self.plant_time
-            self._simulator.AdvanceTo(steps * self._h)
-            self._accel = (self.speed - w0) / (self.plant_time - t0)
+        self._advance(steps * self._h)
+
+    def _sensed(self) -> None:
+        """Sample the sensors when read, once per plant time (the plant runs): one sample a
+        status, so that each status's drive force goes with its reel speed and the speed of
+        the status before (the controller's acceleration), as the simulated sensor's sample
+        a tick goes with its own. In lockstep (one period a status) these are the simulated
+        plant's samples, tick for tick; on wall clock a status that comes late spans more
+        plant time than the sensor's tick assumes."""
+        if self.operator_start is not None and self.plant_time != self._sensed_at:
+            self._sense()
+            self._sensed_at = self.plant_time
+
+    def _advance(self, until: float) -> None:
+        """The plant to plant time `until` (s, a whole plant step), and its record."""
+        if round(until / self._h) * self._h > self.plant_time:
+            self._simulator.AdvanceTo(round(until / self._h) * self._h)
             self._observe()
 
     def _observe(self) -> None:
@@ -353,24 +412,39 @@ class DynamicBridge:
         record = self.stopped if self._reels_stopped else self.driven
         record.observe(T, slack, tilt, self.plant_time)
         self._true_tensions = np.array(T)
+        self._true_pose = (np.array(step[self._p_true]), np.array(step[self._rpy]))
 
     def true_tensions(self) -> np.ndarray:
         """The cables' true tensions now, N (the plant's ground truth)."""
         return self._true_tensions.copy()
 
+    def true_pose(self) -> tuple[np.ndarray, np.ndarray]:
+        """The platform's true pose now: (centre (3,) m, roll-pitch-yaw (3,) rad), base
+        frame (the plant's ground truth)."""
+        p, rpy = self._true_pose
+        return p.copy(), rpy.copy()
+
     def drive_force(self) -> np.ndarray:
-        """Each reel drive's force at the cable now, N, + pays out: what the drive's velocity
-        loop supplies to move its reel at its speed and acceleration (over the last plant
-        step) against its cable's true tension, with the robot file's reel inertia and
-        friction (a drive holding a taut cable at rest: -T). (The dynamic plant keeps its own
-        drive force inside its step and exports no port for it.)"""
-        return drive_force_for_tension(self._true_tensions, self.speed, self._accel,
-                                       *self._drive_model)
+        """Each reel drive's force at the cable as the drive measures it, N, + pays out: the
+        true drive's force (its inertia and friction off the robot file's by the scenario's
+        plant.drive_torque errors) through the current filter, noise and quantum of
+        plant.drive_torque, sampled once a status (the dynamic plant's
+        drive_torque sensor, before its conversion to a tension)."""
+        self._sensed()
+        return self._drive_reading.copy()
+
+    def reel_speed(self) -> np.ndarray:
+        """The reels' speeds sampled with drive_force(), m/s of cable."""
+        self._sensed()
+        return self._speed_reading.copy()
 
     def load_cell(self) -> np.ndarray:
-        """The load cells, N: the true tensions with `load_cells`, else NaN (none)."""
+        """The load cells, N: with `load_cells`, the dynamic plant's load_cell sensor on the
+        true tensions (plant.load_cell: a bias per cell, noise, bandwidth), sampled once a
+        status; else NaN (none)."""
         if self.load_cells:
-            return self.true_tensions()
+            self._sensed()
+            return self._sensor["load_cell"][:self.robot.num_cables].copy()
         return np.full(self.robot.num_cables, np.nan)
 
     def force(self) -> np.ndarray:

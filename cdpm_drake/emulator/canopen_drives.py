@@ -145,11 +145,13 @@ class EmulatedDrives:
     DynamicBridge). `bus`: a python-can Bus (owned: shut down by stop()). Units as
     CanopenReels: counts_per_metre, position_offset (m per cable), velocity_units (target
     velocity units per m/s), force_per_torque_unit (N per unit of torque actual); `period`:
-    the plant's step per SYNC, s. `faults`: [(kind, cable 0-based, after s)]."""
+    the plant's step per SYNC, s. `faults`: [(kind, cable 0-based, after s)]. `lockstep`:
+    the SYNCs are the only clock (SYNCs x period): heartbeats and the faults' `after` count
+    SYNCs, not wall-clock time, so a run against `cdpm run --lockstep` is deterministic."""
 
     def __init__(self, bridge, bus, node_ids, *, counts_per_metre=1_000_000.0,
                  position_offset=None, velocity_units=None, force_per_torque_unit=0.1,
-                 period=0.002, faults=(), record=100_000, log=None):
+                 period=0.002, faults=(), record=100_000, log=None, lockstep=False):
         m = bridge.robot.num_cables
         if len(node_ids) != m:
             raise ValueError(f"node ids must be one per cable ({m}), got {list(node_ids)!r}")
@@ -169,6 +171,7 @@ class EmulatedDrives:
                                  f"{kind!r}")
             if not 0 <= cable < m:
                 raise ValueError(f"fault cable must be in 1..{m}, got {cable + 1}")
+        self.lockstep = bool(lockstep)
         self.bus_off = False
         self.syncs = 0
         self.tpdo_sent = 0
@@ -207,6 +210,8 @@ class EmulatedDrives:
             now = time.monotonic()
             if msg is not None and not self.bus_off and not msg.is_error_frame:
                 self._handle(msg.arbitration_id, bytes(msg.data))
+            if self.lockstep:
+                continue  # heartbeats and faults go with the SYNCs (_sync)
             self._inject(now)
             if not self.bus_off:
                 self._heartbeats(now)
@@ -335,8 +340,14 @@ class EmulatedDrives:
 
     # --- the cycle ---------------------------------------------------------------------------
 
+    def _now(self) -> float:
+        """The drives' clock, s: wall clock, or in lockstep SYNCs x period."""
+        return self.syncs * self.period if self.lockstep else time.monotonic()
+
     def _sync(self) -> None:
         m = len(self.drives)
+        if self.lockstep:
+            self._inject(self._now())
         velocity = np.zeros(m)
         cws, targets = [], []
         for d in self.drives:
@@ -349,7 +360,7 @@ class EmulatedDrives:
             targets.append(target)
         enabled = bool(np.any([d.state == "operation enabled" for d in self.drives]))
         if enabled and self.first_enable_time is None:
-            self.first_enable_time = time.monotonic()
+            self.first_enable_time = self._now()
         before = self.bridge.faults
         self.bridge.set_command(velocity, enable=enabled)
         if self.bridge.faults and not before:  # the plant's own fault (overspeed)
@@ -359,6 +370,8 @@ class EmulatedDrives:
         # The force node first: a controller that waits for the drives' TPDOs has it then.
         self._send_force()
         self.record.append((self.syncs + 1, [d.state for d in self.drives], cws, targets))
+        if self.lockstep and not self.bus_off:
+            self._heartbeats(self._now())  # before the TPDOs: read with them
         for d in self.drives:
             if d.held is not None:  # last SYNC's TPDO, a SYNC late
                 self._send(*d.held, d)
@@ -497,6 +510,10 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--period", type=float, default=None,
                    help="plant step per SYNC, s (default: the scenario's time_step, 0.002)")
     p.add_argument("--duration", type=float, default=None, help="stop after this long, s")
+    p.add_argument("--lockstep", action="store_true",
+                   help="the SYNCs are the drives' only clock: heartbeats and --fault-after "
+                   "count SYNCs x period, so a rehearsal with `cdpm run --lockstep` is "
+                   "deterministic on any host")
     p.add_argument("--rt-priority", type=int, default=0, metavar="N",
                    help="run under SCHED_FIFO at priority N (1..99; needs root or "
                    "CAP_SYS_NICE), as a drive's firmware would; default 0: normal")
@@ -562,7 +579,8 @@ def build_drives(args, log=None) -> EmulatedDrives:
                           velocity_units=velocity_units(config),
                           force_per_torque_unit=config.force_per_torque_unit,
                           period=args.period or period,
-                          faults=[(k, cable, args.fault_after) for k in args.fault], log=log)
+                          faults=[(k, cable, args.fault_after) for k in args.fault], log=log,
+                          lockstep=args.lockstep)
 
 
 def play_force_sensor(args, drives, log=None):

@@ -22,15 +22,22 @@ plant's clock), while the controller drove the reels and, apart, after they were
 Protocol version 2 (the default; `--protocol-version 1` plays a version-1 bridge, to rehearse
 one): each status also carries each drive's force at the cable, the reels' speeds and load
 cells. The kinematic plant has no cable tensions: it sends NaN ("no reading") for the drive
-forces and load cells. The dynamic plant sends each drive's force from the plant and, with
-`--load-cells`, its true tensions as ideal load cells; `--truth-log FILE.npz` keeps what each
-status carried beside the plant's true tensions, to compare with the controller's log.
+forces and load cells. The dynamic plant measures with the simulated plant's own sensors
+(the scenario's plant.drive_torque and plant.load_cell): each drive's force as its current
+reads it and, with `--load-cells`, load cells; `--truth-log FILE.npz` keeps what each status
+carried beside the plant's truth (true tensions, pose, pair distances), to judge the
+controller's log on it.
+
+`--lockstep`: no clock of its own; each command read steps the plant one period and is
+answered by one status, so a rehearsal with `cdpm run --lockstep` is deterministic on any
+host (docs/on_the_robot.md, "Rehearse in lockstep").
 
 Examples:
   cdpm-reel-emulator --robot paper_7cable --start 1.77 3.65 1.22
   cdpm-reel-emulator --scenario exp2_interaction --drop 0.01 --seed 3
   cdpm-reel-emulator --scenario exp2_interaction --plant dynamic
   cdpm-reel-emulator --scenario exp2_interaction --plant dynamic --truth-log truth.npz
+  cdpm-reel-emulator --scenario exp2_interaction --plant dynamic --lockstep
   cdpm-reel-emulator --scenario exp2_interaction --protocol-version 1
   cdpm-reel-emulator --stop --fault-after 2.0
 
@@ -56,7 +63,9 @@ from cdpm_drake.emulator.plant_setup import dynamic_scenario, netft_server
 from cdpm_drake.emulator.server import ReelBridgeServer, count_by_reason, vector_text
 from cdpm_drake.hardware.config import DEFAULT_BRIDGE_PORT
 from cdpm_drake.hardware.priority import set_realtime_priority
+from cdpm_drake.kernels.interference import posed_pair_distances
 from cdpm_drake.kernels.kinematics import cable_lengths
+from cdpm_drake.kernels.rotation import rotations_from_rpy
 
 
 def _port_number(text: str) -> int:
@@ -102,13 +111,15 @@ def build_parser() -> argparse.ArgumentParser:
     g.add_argument("--time-constant", type=float, default=None,
                    help="reel velocity lag, s (default: 0.02; kinematic plant only)")
     g.add_argument("--load-cells", action="store_true",
-                   help="dynamic plant only: report each cable's true tension as its load "
-                   "cell (ideal load cells; default: none, NaN)")
+                   help="dynamic plant only: report load cells, the simulated plant's (the "
+                   "scenario's plant.load_cell: bias, noise, bandwidth; default: none, NaN)")
     g.add_argument("--truth-log", metavar="FILE.npz",
                    help="dynamic plant only: write, when the emulator stops, each version-2 "
-                   "status's bridge time, plant time, the true tensions and the drive forces "
-                   "and reel speeds it carried (keys time, plant_time, tensions, drive_force, "
-                   "reel_speed; the last 10 minutes at 500 Hz)")
+                   "status's bridge time, plant time, the true tensions, the drive forces, "
+                   "reel speeds and load cells it carried, the platform's true pose and every "
+                   "watched pair's true distance (keys time, plant_time, tensions, drive_force, "
+                   "reel_speed, load_cell, p_true, rpy_true, pair_distances_true, pairs; the "
+                   "last 10 minutes at 500 Hz)")
     n = p.add_argument_group("network")
     n.add_argument("--address", default=None,
                    help="address to listen on (default: 127.0.0.1, or the scenario's)")
@@ -126,6 +137,11 @@ def build_parser() -> argparse.ArgumentParser:
     n.add_argument("--command-timeout", type=float, default=0.05,
                    help="raise COMMAND_TIMEOUT when enabled and no command came for this "
                    "long, s (default 0.05)")
+    n.add_argument("--lockstep", action="store_true",
+                   help="no clock of its own: each command read steps the plant one --period "
+                   "and is answered by one status, so a rehearsal with `cdpm run --lockstep` "
+                   "is deterministic on any host, at whatever speed it allows (--duration then "
+                   "counts the bridge's ticks x period)")
     n.add_argument("--duration", type=float, default=None, help="stop after this long, s")
     n.add_argument("--rt-priority", type=int, default=0, metavar="N",
                    help="run under SCHED_FIFO at priority N (1..99; needs root or "
@@ -217,7 +233,8 @@ def build_server(args, log=None) -> ReelBridgeServer:
                             faults=faults, period=args.period, seed=args.seed,
                             controller=controller, command_timeout=args.command_timeout,
                             record=0, log=log, protocol_version=args.protocol_version,
-                            truth=TRUTH_ROWS if args.truth_log else 0)
+                            truth=TRUTH_ROWS if args.truth_log else 0,
+                            lockstep=args.lockstep)
 
 
 def start_netft(args, bridge, log=None):
@@ -235,16 +252,27 @@ TRUTH_ROWS = 300_000
 
 
 def write_truth_log(server, path) -> int:
-    """The server's truth record as an npz at `path` (keys time, plant_time s, tensions,
-    drive_force N, reel_speed m/s; one row per version-2 status sent); returns the rows."""
+    """The server's truth record as an npz at `path`, one row per version-2 status sent:
+    time, plant_time s; tensions (true), drive_force, load_cell (sent) N; reel_speed (sent)
+    m/s; p_true m and rpy_true rad (the platform's true pose); pair_distances_true m, every
+    watched pair's distance on the true, rotated platform (robot.pairs order, cables
+    numbered from 1 in `pairs`). Returns the rows."""
     rows = list(server.truth or ())
-    m = server.bridge.robot.num_cables
-    columns = list(zip(*rows)) if rows else [[]] * 5
+    robot = server.bridge.robot
+    m = robot.num_cables
+    columns = list(zip(*rows)) if rows else [[]] * 8
+    n = len(rows)
+    data = {key: np.array(columns[k], dtype=float).reshape(n, width) for k, key, width in
+            ((2, "tensions", m), (3, "drive_force", m), (4, "reel_speed", m),
+             (5, "p_true", 3), (6, "rpy_true", 3), (7, "load_cell", m))}
+    distances = np.zeros((n, robot.num_pairs))
+    if n and robot.num_pairs:
+        distances, _ = posed_pair_distances(robot, data["p_true"],
+                                            rotations_from_rpy(data["rpy_true"]))
     np.savez(path, time=np.array(columns[0], dtype=float),
-             plant_time=np.array(columns[1], dtype=float),
-             **{key: np.array(columns[k], dtype=float).reshape(len(rows), m) for k, key in
-                ((2, "tensions"), (3, "drive_force"), (4, "reel_speed"))})
-    return len(rows)
+             plant_time=np.array(columns[1], dtype=float), pair_distances_true=distances,
+             pairs=np.asarray(robot.pairs, dtype=int).reshape(-1, 2) + 1, **data)
+    return n
 
 
 def main(argv=None) -> int:
@@ -291,6 +319,7 @@ def _main(argv) -> int:
         f"{server.period * 1e3:g} ms, {server.bridge.describe()}, start "
         f"{vector_text(server.bridge.platform())} m, protocol version "
         f"{server.protocol_version}"
+        + (", lockstep (one plant period per command)" if server.lockstep else "")
         + (f", faults {server.faults.describe()} from {server.faults.after:g} s after the "
            "first enable (one session)" if server.faults.any else ""))
     code = 0
@@ -301,7 +330,7 @@ def _main(argv) -> int:
             code = exit_code(e)
         finally:
             server.stop()
-            now = time.monotonic() - server.start_wall if server.start_wall else 0.0
+            now = server.now()
             if server.session_open:
                 server.close_session(now, "the emulator stopped")
             c = server.counters

@@ -7,6 +7,7 @@ import collections
 import dataclasses
 import errno
 import math
+import select
 import socket
 import threading
 import time
@@ -19,6 +20,9 @@ from cdpm_drake.hardware.link import resolve_ipv4
 from cdpm_drake.hardware.protocol import (FAULT_COMMAND_TIMEOUT, REASONS, VERSION, VERSIONS,
                                           ProtocolError, SequenceTracker, Status,
                                           decode_command, encode_status, next_sequence)
+
+# Longest wait for a command in lockstep before looking at the session's silence, s.
+LOCKSTEP_POLL = 0.05
 
 # Ticks whose compute time the server keeps for its summary (8.7 min at 500 Hz).
 COMPUTE_WINDOW = 1 << 18
@@ -50,7 +54,7 @@ class ReelBridgeServer:
                  faults: FaultPlan = FaultPlan(), period: float = 0.002, seed: int = 0,
                  controller: tuple[str, int] | None = None, command_timeout: float = 0.05,
                  record: int = 100_000, log=None, session_timeout: float = 1.0,
-                 protocol_version: int = VERSION, truth: int = 0):
+                 protocol_version: int = VERSION, truth: int = 0, lockstep: bool = False):
         """`record`: how many received commands to keep in `commands` (tests read them; the
         command-line emulator keeps none). `log(text)` is told what the bridge sees: each
         controller session opened and closed, the first rejected datagram of each reason per
@@ -64,7 +68,13 @@ class ReelBridgeServer:
         statuses carry the plant's drive forces, reel speeds and load cells (`drive_force()`,
         `speed`, `load_cell()` of the bridge plant). `truth`: how many statuses to keep in
         `truth` with the plant's ground truth beside what they carried (a plant with
-        `true_tensions()` only; 0: none)."""
+        `true_tensions()` only; 0: none).
+
+        `lockstep`: the bridge keeps no clock of its own: each valid command read is one
+        tick (the plant stepped one `period` under the command before it, the new command
+        taken, one status sent), so the bridge's time is ticks x period, whatever the wall
+        clock does; the command timeout is off (no time passes without a command) and a
+        session still closes after `session_timeout` s of wall clock without a command."""
         if not (math.isfinite(period) and period > 0):
             raise ValueError(f"period must be a finite number > 0 s, got {period!r}")
         if not (math.isfinite(session_timeout) and session_timeout > 0):
@@ -78,6 +88,7 @@ class ReelBridgeServer:
         self._versions = tuple(v for v in VERSIONS if v <= protocol_version)
         self._status_version = 1         # the session's, until a version-2 command
         self.period = float(period)
+        self.lockstep = bool(lockstep)
         self.command_timeout = float(command_timeout)
         self._faults = faults
         self._rng = np.random.default_rng(seed)
@@ -104,6 +115,7 @@ class ReelBridgeServer:
         self._tracker = SequenceTracker()
         self._last_command = None
         self._last_command_wall = None
+        self._last_command_wall_clock = None  # time.monotonic() of it (lockstep's sessions)
         self._sequence = 0
         self._frozen = None              # the datagram a frozen bridge repeats
         self._held = None                # a status held back for reordering
@@ -118,7 +130,8 @@ class ReelBridgeServer:
         self.tick = 0
         self.commands = collections.deque(maxlen=record)
         # (bridge time s, plant time s, true tensions N, drive_force sent N, reel_speed sent
-        # m/s) per status sent, if asked for and the plant has a ground truth.
+        # m/s, true platform centre m, true roll-pitch-yaw rad, load_cell sent N) per status
+        # sent, if asked for and the plant has a ground truth.
         self.truth = collections.deque(maxlen=truth or None) if (
             truth and hasattr(bridge, "true_tensions")) else None
         # Controller sessions, numbered from 1 (0: none yet); `session_open` while one runs.
@@ -140,6 +153,13 @@ class ReelBridgeServer:
     def address(self) -> tuple[str, int]:
         """(address, port) the bridge listens on."""
         return self._sock.getsockname()
+
+    def now(self) -> float:
+        """The bridge's clock, s: wall time since run() began, or in lockstep ticks x
+        period."""
+        if self.lockstep:
+            return self.tick * self.period
+        return time.monotonic() - self.start_wall if self.start_wall is not None else 0.0
 
     @property
     def faults(self) -> FaultPlan:
@@ -168,12 +188,16 @@ class ReelBridgeServer:
             self.fault_onset = None
             self.fault_onset_tick = None
             if self.start_wall is not None:
-                self.first_enable_time = time.monotonic() - self.start_wall
+                self.first_enable_time = self.now()
 
     # --- the loop ----------------------------------------------------------------------------
 
     def run(self, duration: float | None = None) -> None:
-        """Serve until `duration` s have passed, stop() is called, or forever."""
+        """Serve until `duration` s have passed (of the bridge's clock in lockstep), stop()
+        is called, or forever."""
+        if self.lockstep:
+            self._run_lockstep(duration)
+            return
         self.start_wall = time.monotonic()
         last = 0.0
         deadline = self.start_wall
@@ -209,6 +233,37 @@ class ReelBridgeServer:
                 self.counters["late_ticks"] += 1
                 deadline = time.monotonic()
 
+    def _run_lockstep(self, duration: float | None) -> None:
+        """One tick per valid command, in the order they came (module docstring: lockstep).
+        A datagram that is not a valid command (rejected, foreign, dropped by the fault plan)
+        steps nothing: only the controller's ticks move the plant."""
+        self.start_wall = time.monotonic()
+        last = 0.0
+        while not self._stop.is_set():
+            now = self.tick * self.period
+            if duration is not None and now >= duration:
+                break
+            readable, _, _ = select.select([self._sock], [], [], LOCKSTEP_POLL)
+            wall = time.monotonic()
+            with self._lock:
+                if not readable:
+                    if (self.session_open and self._last_command_wall_clock is not None
+                            and wall - self._last_command_wall_clock > self.session_timeout):
+                        self.close_session(now, f"no command for {self.session_timeout:g} s")
+                    continue
+                command = self._drain(now, one=True)
+                if command is None:
+                    continue
+                self._last_command_wall_clock = wall
+                self.bridge.step(now - last)
+                last = now
+                self.bridge.set_command(command.velocity, command.enable)
+                if command.enable and self.first_enable_time is None:
+                    self.first_enable_time = now
+                self._send_status(now, self._fault_active(now))
+            self.compute.append(time.monotonic() - wall)
+            self.tick += 1
+
     def _fault_active(self, now: float) -> bool:
         plan = self._faults
         if not plan.any or self.first_enable_time is None:
@@ -225,10 +280,14 @@ class ReelBridgeServer:
                 self.bridge.raise_fault(plan.fault_bits)
         return True
 
-    def _drain(self, now: float):
+    def _drain(self, now: float, one: bool = False):
+        """Read the waiting commands (at most 256 datagrams; with `one`, up to the first
+        valid command); the newest valid one, or None."""
         newest = None
         active = self.fault_onset is not None
         for _ in range(256):
+            if one and newest is not None:
+                break
             try:
                 data, sender = self._sock.recvfrom(4096)
             except (BlockingIOError, ConnectionRefusedError):
@@ -357,11 +416,11 @@ class ReelBridgeServer:
             lengths[0] = np.nan
         drive = {}
         if self._status_version >= 2:
-            drive = dict(drive_force=b.drive_force(), reel_speed=b.speed.copy(),
+            drive = dict(drive_force=b.drive_force(), reel_speed=b.reel_speed(),
                          load_cell=b.load_cell())
             if self.truth is not None:
                 self.truth.append((now, b.plant_time, b.true_tensions(), drive["drive_force"],
-                                   drive["reel_speed"]))
+                                   drive["reel_speed"], *b.true_pose(), drive["load_cell"]))
         data = encode_status(Status(
             sequence=self._sequence, time=now, lengths=lengths, force=b.force(),
             faults=b.faults, enabled=b.enabled,
@@ -421,9 +480,7 @@ class ReelBridgeServer:
             return  # stopped before
         if self._thread is None or not self._thread.is_alive():
             with self._lock:
-                now = (time.monotonic() - self.start_wall if self.start_wall is not None
-                       else 0.0)
-                self._drain(now)
+                self._drain(self.now())
         self._sock.close()
 
     def __enter__(self):

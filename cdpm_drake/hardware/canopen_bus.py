@@ -77,13 +77,19 @@ class CanopenMaster:
     with snapshot()): statusword, position (counts), torque (per mille), tpdo_count (TPDOs
     received per drive), still (the drive's latest TPDOs in a row whose position equals the
     one before: counted per frame, so two TPDOs read on one tick, one of them late, count
-    as two), heartbeat_wall (time.monotonic() of the last heartbeat, NaN: none),
+    as two), heartbeat_wall (clock() of the last heartbeat, NaN: none),
     heartbeat_state, and `emcy`, a list of (cable, error code, error register) of the EMCY
     frames with a non-zero code.
     """
 
-    def __init__(self, interface: str, channel: str, bitrate: int, node_ids):
+    def __init__(self, interface: str, channel: str, bitrate: int, node_ids, *,
+                 lockstep_period: float = 0.0, lockstep_wait: float = 2.0):
+        """`lockstep_period` > 0 (s, the SYNC period): lockstep (`clock`, `send_cycle`);
+        `lockstep_wait`: how long a SYNC waits for the answers to the one before, s."""
         self.interface, self.channel, self.bitrate = interface, channel, int(bitrate)
+        self.lockstep = lockstep_period > 0
+        self._lockstep_period = float(lockstep_period)
+        self._lockstep_wait = float(lockstep_wait)
         self.node_ids = [int(i) for i in node_ids]
         m = len(self.node_ids)
         self._cable = {i: k for k, i in enumerate(self.node_ids)}
@@ -108,6 +114,7 @@ class CanopenMaster:
         self.notes: list[str] = []  # what a drive refused that the run does without
         self.polling = False
         self._at_sync = None
+        self._answered = None  # tpdo_count when the last SYNC was sent (lockstep)
         self._handlers = {}
         for node_id in self.node_ids:
             self._handlers[COB_TPDO1 + node_id] = self._on_tpdo
@@ -321,14 +328,51 @@ class CanopenMaster:
     def nmt(self, command: int, node_id: int = 0) -> None:
         self._send(COB_NMT, bytes([command, node_id]))
 
+    def clock(self) -> float:
+        """The watchdogs' clock, s: time.monotonic(), or in lockstep the SYNCs sent x the
+        period (heartbeats are stamped with it, the controller's silences judged on it)."""
+        if self.lockstep:
+            return self.syncs * self._lockstep_period
+        return time.monotonic()
+
+    def await_answers(self) -> None:
+        """Lockstep: wait (lockstep_wait s of wall clock at most) until every drive sent a
+        TPDO since the last SYNC; what came is read into the arrays. A drive that stays
+        silent is left to the watchdog, which counts the SYNCs it missed."""
+        if not self.lockstep or self._answered is None or self.network is None:
+            return
+        deadline = time.monotonic() + self._lockstep_wait
+        while True:
+            self.poll()
+            with self.lock:
+                if (self.tpdo_count > self._answered).all():
+                    return
+            remaining = deadline - time.monotonic()
+            if remaining <= 0:
+                return
+            if self.polling:
+                try:
+                    msg = self.network.bus.recv(min(remaining, 0.05))
+                except Exception:  # a bus gone bad: the silence it makes is judged
+                    return
+                handler = None if msg is None else self._handlers.get(msg.arbitration_id)
+                if handler is not None and not msg.is_error_frame and not msg.is_remote_frame:
+                    handler(msg.arbitration_id, msg.data, msg.timestamp)
+            else:
+                time.sleep(0.0002)
+
     def send_cycle(self, controlwords, velocities) -> None:
         """One RPDO per drive (controlword, target velocity in drive units), then the SYNC
-        on which the drives act on them and answer with their TPDOs."""
+        on which the drives act on them and answer with their TPDOs. In lockstep, first
+        the answers to the SYNC before (await_answers)."""
+        self.await_answers()
         # What came in before this SYNC, for the tick's update to judge (sync_snapshot): the
         # drives answer within a fraction of a period, often before the rest of the tick has
         # run, and a TPDO read on the tick of its own SYNC would make a silence count a tick
         # early (and a TPDO a tick late look like two missing).
-        self._at_sync = (self.snapshot(drain_emcy=False), time.monotonic())
+        self._at_sync = (self.snapshot(drain_emcy=False), self.clock())
+        with self.lock:
+            self._answered = self.tpdo_count.copy()
         for node_id, cw, v in zip(self.node_ids, controlwords, velocities):
             v = int(max(-2**31, min(2**31 - 1, round(float(v)))))
             if self._send(COB_RPDO1 + node_id, struct.pack("<Hi", int(cw), v)):
@@ -337,7 +381,7 @@ class CanopenMaster:
             self.syncs += 1
 
     def sync_snapshot(self):
-        """(snapshot, time.monotonic()) as they were just before the last SYNC was sent, once
+        """(snapshot, clock()) as they were just before the last SYNC was sent, once
         (then None: take a snapshot() instead); the EMCY frames it lists are drained."""
         at, self._at_sync = self._at_sync, None
         if at is not None:
@@ -454,5 +498,5 @@ class CanopenMaster:
         if k is None or len(data) < 1:
             return
         with self.lock:
-            self.heartbeat_wall[k] = time.monotonic()
+            self.heartbeat_wall[k] = self.clock()
             self.heartbeat_state[k] = data[0] & 0x7F

@@ -58,6 +58,11 @@ class CanopenReels:
     # drive silent for two SYNCs is stopped (quick stop with the third SYNC of its silence,
     # disabled with the fourth); 1 would stop the run on every late TPDO.
     missed_tpdo_ticks: int = 2
+    # Rehearsal only, against `cdpm emulate --canopen --lockstep` (`cdpm run --lockstep` sets
+    # it): each tick waits for every drive's TPDO answering its SYNC (up to startup_timeout s
+    # of wall clock) instead of keeping time, and the watchdogs (missed TPDOs, heartbeat)
+    # count ticks, not seconds; the run is then deterministic on any host.
+    lockstep: bool = False
     # Heartbeat producer time written to each drive (0x1017), s; 0: no heartbeat watch.
     heartbeat_period: float = 0.1
     # A drive whose heartbeat is older than this is lost, s (wall clock).
@@ -131,6 +136,8 @@ def check_canopen_reels(config: CanopenReels, m: int, period: float,
         if not _finite(value) or value == 0:
             raise ValueError(f"{field}.{name} must be a finite non-zero number ({unit}), "
                              f"got {value!r}")
+    if not isinstance(config.lockstep, bool):
+        raise ValueError(f"{field}.lockstep must be true or false, got {config.lockstep!r}")
     if config.tension_sensor not in TENSION_SENSORS:
         raise ValueError(f"{field}.tension_sensor must be one of {', '.join(TENSION_SENSORS)}"
                          f", got {config.tension_sensor!r}")

@@ -154,8 +154,11 @@ class CanopenReelsSystem(LeafSystem):
         self._drive_model = drive_model(robot.dynamics, m)
         self._ramp_step = 1.0 if config.ramp_time == 0 else self._T / config.ramp_time
         self._silence = (config.missed_tpdo_ticks - 1) * self._T
+        if config.lockstep:  # ticks are the clock: no catch-up burst to allow for
+            self._silence = 0.0
         self.master = CanopenMaster(config.interface, config.channel, config.bitrate,
-                                    self._ids)
+                                    self._ids, lockstep_period=self._T if config.lockstep
+                                    else 0.0, lockstep_wait=config.startup_timeout)
         self._moving = np.zeros(m)  # consecutive commands >= frozen_speed, same sign
         # The handle's force sensor: the master reads a node on the bus, a NetFTSource a Net
         # F/T; either way `_force_scale` turns its counts into N in the base frame.
@@ -277,7 +280,7 @@ class CanopenReelsSystem(LeafSystem):
         all_tpdos = None  # time.monotonic() when every drive had sent a TPDO
         while True:
             self.master.send_cycle([CW_DISABLE_VOLTAGE] * m, zero)
-            time.sleep(self._T)
+            self._settle()
             sw, pos, torque, count, _, _, hb_state, _ = self.master.snapshot()
             now = time.monotonic()
             silent = [k for k in range(m) if count[k] == 0]
@@ -342,7 +345,7 @@ class CanopenReelsSystem(LeafSystem):
         # lack of a new TPDO is not a miss.
         drives[m:2 * m] = -1.0
         drives[4 * m:5 * m] = np.nan
-        drives[5 * m:] = time.monotonic()
+        drives[5 * m:] = self.master.clock()
         state.get_mutable_discrete_state(self._drives).SetFromVector(drives)
         book = np.zeros(BOOK_SIZE)
         book[ENABLED] = 1.0
@@ -426,6 +429,9 @@ class CanopenReelsSystem(LeafSystem):
         start = time.monotonic()
         reset_edge = np.zeros(m, dtype=bool)
         while True:
+            # In lockstep the enable sequence's SYNCs must not race the drives' answers: the
+            # hand's force on the bus would differ at tick 0 between runs otherwise.
+            self.master.await_answers()
             sw = self.master.snapshot()[0]
             states = [state_name(int(s)) for s in sw]
             if all(s == "operation enabled" for s in states):
@@ -450,13 +456,21 @@ class CanopenReelsSystem(LeafSystem):
                               "operation enabled": CW_ENABLE_OPERATION,
                               "quick stop active": CW_DISABLE_VOLTAGE}.get(s, CW_DISABLE_VOLTAGE))
             self.master.send_cycle(words, np.zeros(m))
+            self._settle()
+
+    def _settle(self) -> None:
+        """After a start-up SYNC: a period for the drives to answer, or in lockstep their
+        answers themselves (so the enable sequence takes the same SYNCs on any host)."""
+        if self.master.lockstep:
+            self.master.await_answers()
+        else:
             time.sleep(self._T)
 
     # --- the tick ----------------------------------------------------------------------------
 
     def _advance(self, context, snap, now):
         """The per-drive state after the bus snapshot `snap` (CanopenMaster.snapshot) read at
-        `now` (time.monotonic()), the speeds before it, which drives sent a new TPDO, and
+        `now` (the master's clock()), the speeds before it, which drives sent a new TPDO, and
         the verdict (reason, cable, detail) on them."""
         m, T = self._m, self._T
         drives = context.get_discrete_state(self._drives).get_value().copy()
@@ -484,7 +498,7 @@ class CanopenReelsSystem(LeafSystem):
         c, m, T = self._config, self._m, self._T
         # The frames as the tick's publish saw them, before its SYNC: a silence counted in
         # SYNC periods, whatever this tick's compute time lets arrive meanwhile.
-        at = self.master.sync_snapshot() or (self.master.snapshot(), time.monotonic())
+        at = self.master.sync_snapshot() or (self.master.snapshot(), self.master.clock())
         snap = at[0]
         drives, speed0, new, (reason, cable, detail) = self._advance(context, *at)
         # TPDOs lost: the SYNCs of the run this update has seen answered (tick k's snapshot,
@@ -559,8 +573,10 @@ class CanopenReelsSystem(LeafSystem):
             # seen the TPDOs that came in during the period just ended: judge them here too,
             # so that a fault stops the drives in place of this tick's command, not the next.
             t = context.get_time()
+            # Lockstep: judged on every answer to the last SYNC, not on those in so far.
+            self.master.await_answers()
             _, _, _, (reason, cable, detail) = self._advance(
-                context, self.master.snapshot(drain_emcy=False), time.monotonic())
+                context, self.master.snapshot(drain_emcy=False), self.master.clock())
             u = self._command.Eval(context)
             bad = ~np.isfinite(u)
             if reason == FAULT_NONE and bad.any():

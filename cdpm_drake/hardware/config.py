@@ -65,6 +65,11 @@ class HardwareReels:
     # with the robot file's reel_drives (inertia, friction); load_cell, the bridge's load
     # cells; none, no tension sensor (NaN, as with a version-1 bridge).
     tension_sensor: str = "drive_torque"
+    # Rehearsal only, against `cdpm emulate --lockstep` (`cdpm run --lockstep` sets it): each
+    # tick waits for the status that answers its command (up to startup_timeout s of wall
+    # clock) instead of keeping time, and the watchdog and resume_within count ticks, not
+    # seconds; the run is then deterministic on any host, at whatever speed it allows.
+    lockstep: bool = False
 
 
 def check_hardware_reels(config: HardwareReels, field: str = "plant") -> None:
@@ -86,6 +91,8 @@ def check_hardware_reels(config: HardwareReels, field: str = "plant") -> None:
     _number(config.ramp_time, f"{field}.ramp_time", "s", positive=False)
     if config.max_length_residual is not None:  # None: derived from the robot
         _number(config.max_length_residual, f"{field}.max_length_residual", "m", positive=True)
+    if not isinstance(config.lockstep, bool):
+        raise ValueError(f"{field}.lockstep must be true or false, got {config.lockstep!r}")
     if config.tension_sensor not in TENSION_SENSORS:
         raise ValueError(f"{field}.tension_sensor must be one of "
                          f"{', '.join(TENSION_SENSORS)}, got {config.tension_sensor!r}")

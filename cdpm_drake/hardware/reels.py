@@ -30,6 +30,11 @@ broken, e.g. an emulator on a virtual machine whose host holds a virtual CPU for
 (measured on the shared VM this was developed on: scripts/bench/soak_realtime.py), would otherwise
 end a person's interaction; the reels stop within the same `watchdog_ticks` either way.
 
+Lockstep (`config.lockstep`, against `cdpm emulate --lockstep`, which steps its plant one
+period per command): each update waits (up to startup_timeout s of wall clock) for the status
+that echoes the last command sent, and the watchdog and resume_within count ticks of the
+context's clock instead of wall-clock seconds; the run is then the same on any host.
+
 Protocol version (hardware/PROTOCOL.md "Versions"): the start-up greetings alternate version 2
 and version 1; the first status that settles it fixes the version for the run (book
 PROTOCOL). With version 2, each status's drive forces, reel speeds and load cells give the
@@ -87,6 +92,10 @@ LONGEST_HOLD = 19     # the longest of those, s (wall clock)
 PROTOCOL = 20         # the protocol version agreed with the bridge at start-up (1 or 2)
 SPEED_TIME = 21       # the `time` of the status whose reel speeds the state holds, s (NaN: none)
 BOOK_SIZE = 22
+
+# Lockstep: how long a start-up greeting waits for its answer before the next, s (a
+# version-1 bridge never answers the version-2 one).
+LOCKSTEP_GREETING = 0.5
 
 # A reel acceleration is taken from two statuses at most this far apart on the bridge's
 # clock, s; further apart (a long silence, a bridge restart) it is unknown (NaN).
@@ -148,6 +157,10 @@ class HardwareReelsSystem(LeafSystem):
         # sends; the watchdog also waits this much wall-clock time so such a burst cannot
         # trip it, while a silent bridge still trips it on the N-th tick.
         self._silence = (config.watchdog_ticks - 1) * self._T
+        # Lockstep (config.lockstep): ticks are the clock; no catch-up burst to allow for.
+        self._lockstep = bool(config.lockstep)
+        if self._lockstep:
+            self._silence = 0.0
         self._link: ReelLink | None = None
         # link.counters.sent right after the last shutdown's copies (None: not stopped yet):
         # like the socket, a fact about the link, not about the controller's state.
@@ -239,7 +252,10 @@ class HardwareReelsSystem(LeafSystem):
             if greeting == 2 and first_v2 is None:
                 first_v2 = sent
             greeting = 1 if greeting == 2 else VERSION
-            link.wait(min(self._T, max(0.0, deadline - time.monotonic())))
+            # In lockstep each greeting is answered (by a bridge of its version) only when
+            # the bridge got to it: wait longer than a period, so one greeting makes one tick.
+            link.wait(min(LOCKSTEP_GREETING if self._lockstep else self._T,
+                          max(0.0, deadline - time.monotonic())))
             status = link.receive(None, VERSIONS)
             version = agreed_version(status, first_v2)
             if version is None and time.monotonic() >= deadline:
@@ -284,7 +300,7 @@ class HardwareReelsSystem(LeafSystem):
         book[COMMAND_ECHO] = -1.0 if status.echo_sequence is None else status.echo_sequence
         book[ENABLED] = 1.0
         book[RAMP] = 0.0
-        book[LAST_STATUS_WALL] = time.monotonic()
+        book[LAST_STATUS_WALL] = context.get_time() if self._lockstep else time.monotonic()
         book[STATUS_TIME] = status.time
         book[COMMANDS_LOST] = status.commands_lost
         state.get_mutable_discrete_state(self._book).SetFromVector(book)
@@ -326,8 +342,13 @@ class HardwareReelsSystem(LeafSystem):
             return  # latched; the next publish ends the run
         link = self._open_link()
         last = int(book[STATUS_SEQ]) if book[HAVE_STATUS] else None
-        status = link.receive(last, (int(book[PROTOCOL]),) if book[PROTOCOL] else VERSIONS)
-        now = time.monotonic()
+        versions = (int(book[PROTOCOL]),) if book[PROTOCOL] else VERSIONS
+        if self._lockstep:
+            status = self._receive_answer(link, last, versions, book)
+            now = context.get_time()  # the watchdog's clock: ticks x period
+        else:
+            status = link.receive(last, versions)
+            now = time.monotonic()
         if status is not None:
             state.get_mutable_vector(self._lengths).SetFromVector(status.lengths)
             state.get_mutable_vector(self._force).SetFromVector(status.force)
@@ -366,6 +387,29 @@ class HardwareReelsSystem(LeafSystem):
             book[RAMP] = min(1.0, book[RAMP] + self._ramp_step)
         state.get_mutable_vector(self._book).SetFromVector(book)
 
+    def _receive_answer(self, link, last, versions, book):
+        """Lockstep: the newest valid status once one answers the last command sent (echoes
+        its sequence), waiting up to startup_timeout s of wall clock for it; whatever came
+        (maybe None) when the time is up. No wait when the last command was answered
+        already (a hold sends nothing)."""
+        target = link.last_sent_sequence
+        echo = int(book[COMMAND_ECHO])
+        newest = None
+        if echo >= 0 and sequence_delta(echo, target) >= 0:
+            return link.receive(last, versions)
+        deadline = time.monotonic() + self._config.startup_timeout
+        while True:
+            status = link.receive(last, versions)
+            if status is not None:
+                newest, last = status, status.sequence
+                if (status.echo_sequence is not None
+                        and sequence_delta(status.echo_sequence, target) >= 0):
+                    return newest
+            remaining = deadline - time.monotonic()
+            if remaining <= 0:
+                return newest
+            link.wait(remaining)
+
     def _measure_tension(self, book, status, speed, tension) -> None:
         """The cables' tensions (N) into `tension` from a new status, by the tension sensor;
         `speed` holds the previous status's reel speeds (m/s) and takes this one's. NaN where a
@@ -381,6 +425,11 @@ class HardwareReelsSystem(LeafSystem):
         dt = status.time - book[SPEED_TIME]  # NaN without an earlier speed
         if 0.0 < dt <= MAX_ACCEL_INTERVAL:
             accel = (w - speed) / dt
+        elif np.isnan(book[SPEED_TIME]):
+            # The first status (start-up, drives disabled): a reel at rest (within the
+            # drives' dead band) is not accelerating, so its tension is known from the first
+            # tick, as the simulated sensor's is; a moving one waits for a second speed.
+            accel = np.where(np.abs(w) <= self._drive_model[3], 0.0, np.nan)
         else:
             accel = np.full(self._m, np.nan)
         tension_from_drive(status.drive_force, w, accel, *self._drive_model, tension)
@@ -404,6 +453,7 @@ class HardwareReelsSystem(LeafSystem):
     def _judge_hold(self, book, status, now, link) -> None:
         """While holding: resume when a status answers the stop in time with nothing lost on
         the way; latch when the time is up or statuses were lost."""
+        # (In lockstep `now` is the context time: resume_within counts ticks.)
         if now - book[HOLD_WALL] > self._config.resume_within:
             book[FAULT] = FAULT_WATCHDOG
         elif link.counters.lost != book[HOLD_LOST]:

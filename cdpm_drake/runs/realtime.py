@@ -32,6 +32,11 @@ about one period minus that tick's compute (~1.8 ms) before the next tick is due
   milliseconds, which delays the next tick (the bridge's statuses wait in the socket): a
   rehearsal feature, not for the robot.
 
+In lockstep (`run(lockstep=True)`, `cdpm run --lockstep`: the plant's `lockstep: true`)
+nothing keeps wall-clock time: Drake runs unpaced and each tick waits for the bridge's answer
+to its command (hardware/reels.py, hardware/canopen_reels.py), so the same scenario gives the
+same log on any host.
+
 Measured (scripts/bench/soak_realtime.py; README, "On the robot", point 4): with this, a tick comes
 late only when the host holds the process's virtual CPU (a higher-priority sentinel thread on
 that CPU is late by the same amount every time); a bridge silenced that way is what the
@@ -76,6 +81,8 @@ class RunResult:
     # False when the run ended before the reels were enabled (no bridge, lengths that do not
     # fit): such a run writes nothing but its report.
     enabled: bool = True
+    # True when the ticks were paced by the bridge's answers (lockstep), not the wall clock.
+    lockstep: bool = False
 
 
 class _StatusPump:
@@ -175,8 +182,12 @@ class StopRequest:
 
 def run(*, scenario: Scenario | ResolvedScenario, out_dir, duration: float | None = None, status=None,
         status_period: float = 1.0, step: float = 0.02, on_view=None,
-        view_period: float = 0.1) -> RunResult:
+        view_period: float = 0.1, lockstep: bool | None = None) -> RunResult:
     """Run the scenario's diagram at real-time rate 1 against the reel bridge.
+
+    `lockstep` (None: the plant's own `lockstep` setting): against `cdpm emulate
+    --lockstep`, each tick waits for the status answering its command and nothing keeps
+    time (the plant's `lockstep: true`; rate unlimited), so the run is deterministic.
 
     `status(text)` receives a one-line live status every `status_period` s of run time,
     from a thread of its own (the module docstring says why); `on_view(diagram, context)` (a
@@ -194,6 +205,10 @@ def run(*, scenario: Scenario | ResolvedScenario, out_dir, duration: float | Non
             "reels and needs plant: !HardwareReels {address: ..., port: ...} or plant: "
             "!CanopenReels {interface: ..., channel: ..., force_sensor: ...} (use `cdpm "
             "simulate` for a simulation, or --scenario-text 'plant: !HardwareReels {}')")
+    if lockstep is not None and lockstep != scenario.plant.lockstep:
+        scenario = dataclasses.replace(
+            scenario, plant=dataclasses.replace(scenario.plant, lockstep=bool(lockstep)))
+        resolved = dataclasses.replace(resolved, scenario=scenario)
     duration = scenario.duration if duration is None else float(duration)
     if not (duration > 0 and np.isfinite(duration)):
         raise ScenarioError(f"duration must be a finite number > 0 s, got {duration!r}")
@@ -224,7 +239,8 @@ def run(*, scenario: Scenario | ResolvedScenario, out_dir, duration: float | Non
     with StopRequest() as stop, _collector_between_steps() as collect:
         try:
             sink.open()  # before the enabling command: it maps ~20 MB (TickLogSink.open)
-            start_realtime(simulator, 1.0)
+            # Lockstep: the bridge's answers pace the ticks, as fast as both can go.
+            start_realtime(simulator, 0.0 if scenario.plant.lockstep else 1.0)
             enabled = True  # initialisation enables the reels or raises
             t, next_status, next_view = 0.0, 0.0, 0.0
             # Whole ticks counted in integers, so the last tick (D * 500 + 1 rows) is reached.
@@ -271,12 +287,14 @@ def run(*, scenario: Scenario | ResolvedScenario, out_dir, duration: float | Non
         for path in (tick_path, scenario_path):
             path.unlink(missing_ok=True)
         return RunResult(log={}, timing={}, link=link, error=error, ending=ending,
-                         log_path=None, tick_log_path=None, signal=stop.signal, enabled=False)
+                         log_path=None, tick_log_path=None, signal=stop.signal, enabled=False,
+                         lockstep=scenario.plant.lockstep)
     log, timing, _ = log_from_tick_log(tick_path, resolved, robot)
     mark_ending(log, ending, error)
     log_path = write_log(log, out)
     return RunResult(log=log, timing=timing, link=link, error=error, ending=ending,
-                     log_path=log_path, tick_log_path=tick_path, signal=stop.signal)
+                     log_path=log_path, tick_log_path=tick_path, signal=stop.signal,
+                     lockstep=scenario.plant.lockstep)
 
 
 def tick_row_bytes(sink) -> int:
@@ -368,6 +386,9 @@ def report_lines(result: RunResult) -> list[str]:
     why = f" by {result.signal}" if result.ending == "interrupted" and result.signal else ""
     lines = [f"run ended: {result.ending}{why}"
              + (f" ({type(result.error).__name__}: {result.error})" if result.error else "")]
+    if result.lockstep:
+        lines.append("lockstep: each tick waited for the bridge's answer to its command; the "
+                     "tick periods below are this host's speed, not the robot's timing")
     if t:
         ms = {k: 1e3 * t[k] for k in ("p50", "p99", "max")}
         lines.append(f"ticks logged {t['ticks']}, missing {t['missing_ticks']}, overruns "

@@ -391,6 +391,30 @@ def test_run_rt_priority_reaches_the_scheduler_call(tmp_path, monkeypatch, bridg
     assert asked == [37]
 
 
+@covers("run --lockstep", "emulate --lockstep")
+def test_run_and_emulate_lockstep_tick_together(tmp_path, capsys):
+    """`cdpm emulate --lockstep`'s server steps once per command; `cdpm run --lockstep`
+    waits for each answer: the emulator's ticks are the run's commands, one for one (the
+    start-up greeting, ticks 0..25 of 0.05 s, the final stop's copies), and the run folder's
+    scenario says lockstep."""
+    server = _server_from("--scenario", "exp1_no_interaction", "--port", 0, "--lockstep")
+    assert server.lockstep
+    server.start()
+    try:
+        out = tmp_path / "o"
+        assert cdpm("run", _scenario_file(tmp_path, duration=0.05), "--scenario-text",
+                    "{plant: !HardwareReels {port: %d, ramp_time: 0.0}}" % server.address[1],
+                    "--lockstep", "--out", out) == 0
+        assert "lockstep: each tick waited for the bridge's answer" in capsys.readouterr().out
+        settle(server)
+    finally:
+        server.stop()
+    log = run_log(out)
+    assert len(log["time"]) == 26
+    assert server.tick == server.counters["commands_received"] == 1 + 26 + 3
+    assert "lockstep: true" in (out / "scenario.yaml").read_text()
+
+
 @covers("run --meshcat")
 def test_run_meshcat_draws_while_it_runs(tmp_path, monkeypatch, bridge):
     view = _CountingView(monkeypatch)
@@ -597,7 +621,7 @@ def test_emulate_rt_priority_reaches_the_scheduler_call(monkeypatch):
 
 @covers("emulate --protocol-version", "emulate --load-cells", "emulate --truth-log")
 def test_emulate_protocol_version_load_cells_and_truth_log_reach_the_server(tmp_path):
-    # Issue 31: the version spoken, ideal load cells on the dynamic plant (its true tensions),
+    # Issue 31: the version spoken, load cells on the dynamic plant (the simulated plant's),
     # and the truth log written when the emulator stops (no status sent here: zero rows).
     v1 = _server_from("--port", 0, "--protocol-version", 1)
     try:
@@ -608,7 +632,17 @@ def test_emulate_protocol_version_load_cells_and_truth_log_reach_the_server(tmp_
                           "--load-cells", "--truth-log", tmp_path / "t.npz", "--port", 0)
     try:
         assert server.protocol_version == 2 and server.truth is not None
-        np.testing.assert_array_equal(server.bridge.load_cell(), server.bridge.true_tensions())
+        # The simulated plant's load cells: the true tensions plus each cell's bias (at
+        # rest, before the plant starts).
+        import dataclasses
+
+        from cdpm_drake.config import DynamicReels
+        from cdpm_drake.systems.plants.dynamic_plant import sensor_kernel
+        true = server.bridge.true_tensions()
+        exp2 = load_scenario("exp2_interaction")
+        _, bias, _ = sensor_kernel(dataclasses.replace(exp2, plant=DynamicReels()),
+                                   scenario_robot(exp2), true, "load_cell")
+        np.testing.assert_allclose(server.bridge.load_cell(), true + bias, rtol=0, atol=1e-9)
     finally:
         server.stop()
     truth = tmp_path / "truth.npz"

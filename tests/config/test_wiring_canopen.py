@@ -104,6 +104,30 @@ def test_units_ids_ramp_and_heartbeat_reach_the_bus():
     np.testing.assert_allclose(tension[still], expected[still], atol=1e-9)
 
 
+@covers(F + "lockstep")
+def test_lockstep_answers_every_sync_before_the_next_and_counts_in_syncs():
+    """`lockstep: true`: against drives in lockstep (heartbeats by SYNC count), the plant's
+    own ticks wait for every drive's answer, so after each tick every drive has answered
+    every SYNC but the last (no helper pacing the ticks here), and its clock and heartbeat
+    stamps are SYNCs x period, not wall-clock seconds."""
+    scenario = _scenario("lockstep: true, ramp_time: 0.0, heartbeat_period: 0.02")
+    sim, reels, drives, _, _ = _rigged(scenario, lockstep=True)
+    master = reels.master
+    try:
+        start_realtime(sim, 0.0)
+        behind = []
+        for k in range(1, 51):
+            sim.AdvanceTo(k * T)
+            behind.append(int(master.syncs - master.tpdo_count.min()))
+        clock, syncs, stamps = master.clock(), master.syncs, master.heartbeat_wall.copy()
+    finally:
+        close(reels, drives)
+    assert master.lockstep and set(behind) == {1}
+    assert clock == syncs * T
+    assert np.isfinite(stamps).all()
+    np.testing.assert_allclose(stamps / T, np.round(stamps / T), atol=1e-6)
+
+
 @covers(F + "tension_sensor")
 def test_tension_sensor_none_gives_nan():
     sim, reels, drives, _, _ = _rigged(_scenario("tension_sensor: none, ramp_time: 0.0"))

@@ -1392,6 +1392,26 @@ def test_hardware_tension_sensor_reaches_the_reels(monkeypatch):
         build_diagram(_hw(47100, tension_sensor="strain_gauge"))
 
 
+@covers("Scenario.plant!HardwareReels.lockstep")
+def test_hardware_lockstep_waits_for_each_answer(tmp_path):
+    """`lockstep: true` in the scenario (no run option): against a lockstep bridge, which
+    steps once per command and answers each, the run completes with one bridge tick per
+    command (the greeting, ticks 0..50 of 0.1 s, the final stop's copies), its watchdog at
+    the default 3 ticks; on wall clock the same watchdog and this shared host's stalls are
+    what test_hardware_watchdog_ticks_is_the_trip_count is about."""
+    server = _bridge(lockstep=True)
+    try:
+        result = _run(tmp_path, _hw(server.address[1], lockstep=True, watchdog_ticks=3))
+        deadline = time.monotonic() + 3.0
+        while server.tick < 1 + 51 + 3 and time.monotonic() < deadline:
+            time.sleep(0.01)
+    finally:
+        server.stop()
+    assert result.ending == "completed", result.error
+    assert len(result.log["time"]) == 51
+    assert server.tick == server.counters["commands_received"] == 1 + 51 + 3
+
+
 @covers("Scenario.plant!HardwareReels.resume_within")
 def test_hardware_resume_within_bounds_the_wait_for_the_bridge_after_a_stop(monkeypatch):
     """The scenario's diagram on a scripted link (tests/helpers_scripted_link.py: one period

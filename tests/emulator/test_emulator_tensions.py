@@ -150,44 +150,73 @@ def _dynamic_resolved():
 
 
 def test_dynamic_drives_hold_their_cables_at_rest():
-    """At rest (no speed, no acceleration, friction's sign 0 at zero speed) each drive holds
-    its cable's tension: F = -T, the true tensions of the start (5..25 N on exp2)."""
-    bridge = E.DynamicBridge(_dynamic_resolved(), load_cells=True)
+    """At rest, before the plant starts (no speed, no acceleration, friction's sign 0 at zero
+    speed), each drive holds its cable's tension: F = -T, the start tensions (5..25 N on
+    exp2) as the sensor's start state reads them; the load cells read them plus each cell's
+    bias (plant.load_cell.bias_std 0.5 N, drawn from the scenario's seed)."""
+    from cdpm_drake.systems.plants.dynamic_plant import sensor_kernel
+
+    resolved = _dynamic_resolved()
+    bridge = E.DynamicBridge(resolved, load_cells=True)
     T = bridge.true_tensions()
     assert T.min() > 1.0
-    np.testing.assert_array_equal(bridge.drive_force(), -T)
-    np.testing.assert_array_equal(bridge.load_cell(), T)
+    np.testing.assert_allclose(bridge.drive_force(), -T, rtol=0, atol=1e-9)
+    _, bias, _ = sensor_kernel(resolved.scenario, resolved.robot, T, "load_cell")
+    assert 0.1 < np.abs(bias).max() < 2.5  # a bias, of the size bias_std says
+    np.testing.assert_allclose(bridge.load_cell(), T + bias, rtol=0, atol=1e-9)
     assert np.isnan(E.DynamicBridge(_dynamic_resolved()).load_cell()).all()
 
 
-def test_dynamic_drive_forces_move_the_reels_against_their_true_tensions():
-    """Driven: each drive's force is J a + b w + F_c sat(w / band) - T, the reel's equation
-    of motion (written out here) with the plant's reel_drives, its speed w, its acceleration a
-    over the last plant step (1 ms) and the plant's true tension T. One bridge stepped 2 ms a
-    tick, its twin 1 ms twice: the twin's speeds between the two steps give a."""
-    resolved = _dynamic_resolved()
-    bridge, twin = E.DynamicBridge(resolved), E.DynamicBridge(resolved)
-    d = resolved.robot.dynamics
-    band = d.coulomb_friction / (d.bandwidth * d.reel_inertia)
-    h = resolved.scenario.plant.time_step
-    assert h == 0.001
-    u = np.array([0.01, -0.02, 0.005, 0.0, 0.015, -0.01, 0.02])
+@pytest.mark.parametrize("sensor", ["drive_torque", "load_cell"])
+def test_the_emulators_sensors_are_the_simulated_plants(sensor):
+    """The dynamic bridge's drive forces and load cells, read tick by tick under a moving
+    command, are the simulated plant's tension sensor's (`cdpm simulate`'s, same scenario):
+    the drive force converted back with the sensor's own model and the speeds' difference
+    over the tick (the controller's conversion) gives the plant's tension_measured of the same
+    tick bit for bit, the load cells equal it; and neither is the truth (the drives' model
+    errors of 20 % / 30 %, 0.3 N noise, 0.02 N quantum; the cells' bias, 0.2 N noise)."""
+    from pydrake.systems.analysis import Simulator
+    from pydrake.systems.framework import DiagramBuilder
+    from pydrake.systems.primitives import ConstantVectorSource
+
+    from cdpm_drake.config import check_dynamic_reels, resolve_scenario
+    from cdpm_drake.kernels.drive_torque import tension_from_drive
+    from cdpm_drake.systems.plants.dynamic_plant import build_dynamic_plant, sensor_kernel
+
+    resolved = resolve_scenario(load_scenario(
+        "exp2_interaction", f"{{plant: !DynamicReels {{tension_sensor: {sensor}}}}}"))
+    sc, robot = resolved.scenario, resolved.robot
+    u = 0.01 * np.sin(np.arange(M) + 1.0)
+    builder = DiagramBuilder()
+    plant = builder.AddSystem(build_dynamic_plant(
+        sc, robot, resolved.operator, check_dynamic_reels(sc, robot).tensions, log_truth=False))
+    source = builder.AddSystem(ConstantVectorSource(u))
+    builder.Connect(source.get_output_port(), plant.GetInputPort("reel_velocity_command"))
+    simulator = Simulator(builder.Build())
+    simulator.Initialize()
+    port = plant.GetOutputPort("tension_measured")
+    plant_context = plant.GetMyContextFromRoot(simulator.get_context())
+    bridge = E.DynamicBridge(resolved, load_cells=sensor == "load_cell")
     bridge.set_command(u, enable=True)
-    twin.set_command(u, enable=True)
-    seen = 0.0
-    for _ in range(60):
-        bridge.step(0.002)
-        twin.step(0.001)
-        w0 = twin.speed
-        twin.step(0.001)
-        w, T = bridge.speed, bridge.true_tensions()
-        np.testing.assert_array_equal(w, twin.speed)
-        a = (w - w0) / h
-        expected = (d.reel_inertia * a + d.viscous_friction * w
-                    + d.coulomb_friction * np.clip(w / band, -1, 1) - T)
-        np.testing.assert_allclose(bridge.drive_force(), expected, rtol=1e-9, atol=1e-9)
-        seen = max(seen, np.abs(expected + T).max())
-    assert seen > 0.1  # the motion terms mattered (the reels accelerate from rest)
+    T = sc.time_step
+    model = sensor_kernel(sc, robot, bridge.true_tensions(), "drive_torque")[0][6:10]
+    previous, errors = None, []
+    for k in range(60):
+        force, speed = bridge.drive_force(), bridge.reel_speed()
+        if sensor == "drive_torque":
+            read = np.empty(M)
+            tension_from_drive(force, speed, (speed - previous) / T if k else np.zeros(M),
+                               *model, read)
+        else:
+            read = bridge.load_cell()
+        previous = speed
+        simulator.AdvanceTo((k + 1) * T)  # the plant's sensor's sample of tick k, held
+        if k:  # (tick 0: no earlier speed for the conversion's acceleration)
+            np.testing.assert_array_equal(read, port.Eval(plant_context))
+        errors.append(read - bridge.true_tensions())
+        bridge.step(T)
+    assert np.sqrt(np.mean(np.square(errors))) > 0.1
+    assert np.ptp(np.array(previous)) > 0.001  # the reels moved
 
 
 # --- the command line ------------------------------------------------------------------------
@@ -227,7 +256,13 @@ def test_the_truth_log_keeps_what_each_status_carried(tmp_path):
     assert rows == len(truth["time"]) >= 5
     assert truth["tensions"].shape == truth["drive_force"].shape == (rows, M)
     # At rest: the drives hold the cables (F = -T), and the last row is the last status sent.
-    np.testing.assert_array_equal(truth["drive_force"], -truth["tensions"])
+    np.testing.assert_allclose(truth["drive_force"], -truth["tensions"], rtol=0, atol=1e-9)
+    # Beside them, the platform's true pose and each watched pair's true distance there
+    # (exp2's start: level, the pairs 60-ish mm and more apart).
+    assert truth["p_true"].shape == truth["rpy_true"].shape == (rows, 3)
+    np.testing.assert_allclose(truth["p_true"][-1], bridge.platform(), rtol=0, atol=1e-9)
+    assert truth["pair_distances_true"].shape == (rows, len(truth["pairs"]))
+    assert truth["pair_distances_true"].min() > 0.05
     assert status.version == 2
     assert np.any(np.all(truth["drive_force"] == status.drive_force, axis=1))
 
@@ -236,17 +271,18 @@ def test_the_truth_log_keeps_what_each_status_carried(tmp_path):
 
 
 def _run_against_dynamic_emulator(tmp_path, extra=()):
-    """`cdpm emulate --scenario exp2_interaction --plant dynamic --truth-log` (a process of
-    its own) and `cdpm run exp2_interaction` against it for 2 s with tension_measured logged;
-    returns (run's exit code, run folder, emulator stdout). Watchdogs widened to 1 s: this
-    test is about the tensions, not the timing."""
+    """`cdpm emulate --scenario exp2_interaction --plant dynamic --lockstep --truth-log` (a
+    process of its own) and `cdpm run exp2_interaction --lockstep` against it for 2 s with
+    tension_measured logged; returns (run's exit code, run folder, emulator stdout). In
+    lockstep: this test is about the tensions, not the timing (the wall-clock runs' own
+    tests are in tests/hardware and test_emulator.py)."""
     from cdpm_drake.cli import main
 
     out_dir, truth = tmp_path / "run", tmp_path / "truth.npz"
     emulator = subprocess.Popen(
         [sys.executable, "-m", "cdpm_drake.emulator", "--scenario", "exp2_interaction",
          "--plant", "dynamic", "--port", "0", "--duration", "300", "--command-timeout", "1.0",
-         "--truth-log", str(truth), *extra],
+         "--lockstep", "--truth-log", str(truth), *extra],
         stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, preexec_fn=default_signals)
     code = None
     try:
@@ -254,7 +290,8 @@ def _run_against_dynamic_emulator(tmp_path, extra=()):
         assert ready, "the emulator did not start within 180 s"
         line = emulator.stdout.readline()
         port = int(re.search(r"on 127\.0\.0\.1:(\d+), period 2 ms", line).group(1))
-        code = main(["run", "exp2_interaction", "--duration", "2", "--out", str(out_dir),
+        code = main(["run", "exp2_interaction", "--lockstep", "--duration", "2", "--out",
+                     str(out_dir),
                      "--scenario-text", f"{{plant: !HardwareReels {{port: {port}, "
                      "watchdog_ticks: 500, ramp_time: 0.0}, "
                      # The sensor measured here, not damped: with the damping the truth
@@ -317,89 +354,39 @@ def _conversions_matched(log, truth, robot, gaps=50):
     return int(matched.sum()), len(rows)
 
 
-def test_cdpm_run_logs_tension_measured_from_what_the_emulator_sent(tmp_path):
-    """The drive-torque sensor end to end, in real time: the emulator's dynamic plant sends
-    each drive's force, the controller converts it back with the robot file's reel model and
-    logs it. Every logged value is the exact conversion of forces and speeds the emulator
-    sent (from its truth log), in version 2, NaN only where no acceleration exists.
+def test_cdpm_run_logs_tension_measured_that_follows_the_emulators_truth(tmp_path):
+    """The drive-torque sensor end to end: the emulator's dynamic plant sends each drive's
+    force as the simulated plant's sensor measures it, the controller converts it back with
+    the robot file's reel model and logs it.
 
-    How close that conversion is to the plant's true tensions depends on the clock here:
-    measured RMS 0.05-0.11 N on an idle host, 0.26-0.38 N with some load, 2-8 N (correlation
-    down to 0) at a load of 7 on 2 cores, where the emulator's ticks come so irregularly that
-    the acceleration from two statuses is wrong. That comparison is made on the bridge's own
-    clock below (test_the_drive_torque_conversion_follows_the_emulators_truth_in_lockstep);
-    here it is printed on failure. A run that a stall ended (the watchdog) or that left too
-    few ticks with a reading is repeated, up to three times in all; a failure names every
-    attempt's numbers."""
+    Every logged value is the conversion of forces and speeds the emulator sent (exact, from
+    its truth log). Against the plant's true tensions (`_compare`), as far off as `cdpm
+    simulate`'s own sensor on the same scenario is (measured there: RMS 0.30 N, largest 1.2 N,
+    correlation 0.76-0.99 per cable, mean error within 0.05 N; here 0.30 N, 1.3 N,
+    0.53-0.99): RMS within 0.5 N, correlation above 0.5 (cable 1, whose truth moves least,
+    has the lowest), unbiased within 0.2 N; and not the truth copied (RMS above 0.1 N: the
+    model's 20 % / 30 % errors, 0.3 N noise). The ideal drive forces this emulator sent before
+    gave an RMS of 0.05-0.11 N: a rehearsal more optimistic than the simulation."""
     from cdpm_drake.config import scenario_robot
 
     robot = scenario_robot(load_scenario("exp2_interaction"))
-    tried = []  # each attempt's numbers, for the assertions' messages
-    for attempt in range(ATTEMPTS):
-        code, out_dir, out, truth_path = _run_against_dynamic_emulator(tmp_path / f"a{attempt}")
-        if code != 0 and attempt < ATTEMPTS - 1:
-            continue  # a stall that ended the run (the watchdog): not what this test is about
-        assert code == 0, out
-        log, truth = np.load(out_dir / "log.npz"), np.load(truth_path)
-        rms, worst, corr, lags, rows = _compare(log, truth)
-        matched, finite = _conversions_matched(log, truth, robot)
-        silences = int(np.sum(np.diff(truth["time"]) > 0.1))
-        tried.append(dict(rms=round(rms, 3), worst=round(worst, 2), corr=round(min(corr), 3),
-                          lags=lags, rows=rows, matched=matched, finite=finite,
-                          silences=silences,
-                          tick_gap=round(float(np.diff(log["wall"]).max()), 3)))
-        if rows > 900 and finite >= 0.9 * (len(log["time"]) - 1 - silences):
-            break
+    code, out_dir, out, truth_path = _run_against_dynamic_emulator(tmp_path / "a")
+    assert code == 0, out
+    log, truth = np.load(out_dir / "log.npz"), np.load(truth_path)
+    rms, worst, corr, lags, rows = _compare(log, truth)
     assert "session 1: speaking protocol version 2" in out
-    # Only the first tick is NaN (no earlier reel speed for an acceleration).
-    assert np.isnan(log["tension_measured"][0]).all() and rows > 900, tried
-    # Every value the exact conversion of what was sent; NaN only at the first tick and
-    # after a silence of the bridge longer than 0.1 s (a host stall: no acceleration then).
-    # On a loaded host a status can come too late for its tick (the tick then reads none:
-    # NaN); most ticks read one.
-    assert matched == finite >= 0.9 * (len(log["time"]) - 1 - silences), tried
-    # Not the truth copied: the conversion's model (acceleration from two statuses) differs.
-    assert rms > 1e-4, tried
-
-
-def test_the_drive_torque_conversion_follows_the_emulators_truth_in_lockstep():
-    """The comparison with the truth that the real-time test above cannot make on a busy host
-    (there the emulator's ticks come irregularly and the acceleration from two statuses is
-    off by the irregularity: RMS 2-6 N at a load of 7 on 2 cores), made on the bridge's own
-    clock: the emulator's dynamic plant (exp2, the hand pushing from 0.2 s) stepped exactly
-    2 ms a tick under the reel commands the controller gave on the dynamic plant (a
-    simulation of the same scenario: consistent commands), each status converted as `cdpm
-    run` converts it (kernels.drive_torque with the robot file's reel_drives, the
-    acceleration from the last two statuses' speeds). Measured: RMS error 0.0026 N,
-    correlation 0.999998 on every cable, means within 0.003 N, against a truth that moves by
-    2.1 N (median std); the bounds (0.01 N, 0.999, 0.01 N) are tighter than the real-time
-    run's could be and hold on any host (no clock in the loop)."""
-    from cdpm_drake.kernels.drive_torque import drive_model, tension_from_drive
-    from cdpm_drake.runs.simulate import simulate
-
-    resolved = _dynamic_resolved()
-    commands = simulate(scenario=resolved, duration=2.0).log["reel_velocity"]
-    bridge = E.DynamicBridge(resolved)
-    model = drive_model(resolved.robot.dynamics)
-    T = 0.002
-    measured, truth, previous = [], [], None
-    for u in commands:
-        bridge.set_command(u, enable=True)
-        bridge.step(T)
-        w = bridge.speed.copy()
-        if previous is not None:
-            out = np.empty(M)
-            tension_from_drive(bridge.drive_force(), w, (w - previous) / T, *model, out)
-            measured.append(out)
-            truth.append(bridge.true_tensions().copy())
-        previous = w
-    measured, truth = np.array(measured), np.array(truth)
-    run = slice(25, None)  # from 0.05 s, as the real-time comparison
-    error = measured[run] - truth[run]
-    rms = float(np.sqrt(np.mean(error ** 2)))
-    corr = [np.corrcoef(measured[run, i], truth[run, i])[0, 1] for i in range(M)]
-    assert np.median(truth[run].std(axis=0)) > 0.3  # the truth moves: a comparison that says something
-    assert rms < 0.01, (rms, corr)
-    assert min(corr) > 0.999, (rms, corr)
-    np.testing.assert_allclose(measured[run].mean(axis=0), truth[run].mean(axis=0), atol=0.01)
-    assert rms > 1e-6  # the conversion's acceleration (two statuses) is not the plant's
+    # No NaN: the first status (reels at rest, no earlier speed) is read at zero acceleration.
+    assert np.isfinite(log["tension_measured"]).all() and rows > 900
+    # Every value after it the exact conversion of what was sent.
+    matched, finite = _conversions_matched(log, truth, robot, gaps=1)
+    assert matched == finite - 1 == len(log["time"]) - 1
+    pt, T = truth["plant_time"], truth["tensions"]
+    run = (pt > 0.05) & (pt < 1.9)
+    # The truth moves (0.25-1.9 N std per cable measured: a comparison that says something).
+    assert np.median(T[run].std(axis=0)) > 0.3
+    assert 0.1 < rms < 0.5, (rms, worst, corr, lags)
+    assert min(corr) > 0.5, (rms, worst, corr, lags)
+    measured = log["tension_measured"]
+    t = log["time"]
+    mean_measured = np.nanmean(measured[(t > 0.05) & (t < 1.9)], axis=0)
+    np.testing.assert_allclose(mean_measured, T[run].mean(axis=0), atol=0.2)

@@ -132,8 +132,14 @@ def test_drive_torque_is_the_reels_equation_of_motion(monkeypatch, robot, p0):
     simulator, reels, link = _scripted(monkeypatch, robot, p0)
     assert reels.book(reels.GetMyContextFromRoot(simulator.get_context()))[
         "protocol_version"] == 2
-    # The first status has no earlier speed: no acceleration, no tension yet.
-    assert np.isnan(_tension(simulator, reels)).all()
+    # The first status has no earlier speed: a reel within the drives' dead band (at rest,
+    # as before enabling) is taken as not accelerating; a moving one has no tension yet.
+    first, w0 = _tension(simulator, reels), _speed(0)
+    still = np.abs(w0) <= robot.dynamics.dead_band
+    assert still.any() and not still.all()  # the scripted speeds have both
+    assert np.isnan(first[~still]).all()
+    np.testing.assert_allclose(first[still], _expected(robot, _force(0), w0, w0, T)[still],
+                               rtol=1e-9, atol=1e-9)
     signatures = len(drive_torque.tension_from_drive.signatures)
     for k in range(1, 40):
         simulator.AdvanceTo(k * T)

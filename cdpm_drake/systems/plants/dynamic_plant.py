@@ -265,12 +265,27 @@ def tension_sensor(scenario, robot, tensions0):
     """The dynamic plant's tension sensor tick (a KernelSystem over
     tension_sensor.tension_sensor_tick) and its start state, for the scenario's
     plant.tension_sensor (drive_torque or load_cell), at start tensions (m,) N."""
+    m = robot.num_cables
+    params, bias, start = sensor_kernel(scenario, robot, tensions0,
+                                        scenario.plant.tension_sensor)
+    n = start.size
+    params, bias = owned(params), owned(bias)
+    kernel = bind(tension_sensor_tick, params, bias, np.zeros(3 * m + n),
+                  np.empty(n))
+    return KernelSystem(3 * m + n, n, kernel, (params, bias)), start
+
+
+def sensor_kernel(scenario, robot, tensions0, kind: str):
+    """tension_sensor_tick's (params, bias (m,) N, start state) for a `kind` of sensor
+    (drive_torque or load_cell) with the scenario's plant settings (plant.drive_torque or
+    plant.load_cell, random_seed), at start tensions (m,) N: what the dynamic plant's sensor
+    runs, and what the emulator's dynamic bridge reports through (emulator/bridges.py)."""
     cfg = scenario.plant
     m = robot.num_cables
     T = scenario.time_step
     d = robot.dynamics
     seed = int(scenario.random_seed)
-    if cfg.tension_sensor == "drive_torque":
+    if kind == "drive_torque":
         s = cfg.drive_torque
         params = sensor_params(DRIVE_TORQUE, time_step=T, seed=seed, noise_std=s.noise_std,
                                quantum=s.quantum, time_constant=s.filter_time_constant,
@@ -286,15 +301,10 @@ def tension_sensor(scenario, robot, tensions0):
         # stream: a stream of its own).
         bias = s.bias_std * np.random.default_rng([seed, 31]).standard_normal(m)
         filtered = np.asarray(tensions0, dtype=float)
-    layout = sensor_layout(m)
-    n = sum(size for _, size in layout.values())
     # The first reading (logged at t = 0): the start tensions as the sensor reads them.
     start = np.concatenate([np.asarray(tensions0, dtype=float) + bias, filtered, np.zeros(m),
                             [0.0]])
-    params, bias = owned(params), owned(bias)
-    kernel = bind(tension_sensor_tick, params, bias, np.zeros(3 * m + n),
-                  np.empty(n))
-    return KernelSystem(3 * m + n, n, kernel, (params, bias)), start
+    return params, bias, start
 
 
 def _plant_of(diagram):
