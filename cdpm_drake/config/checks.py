@@ -8,7 +8,7 @@ import math
 
 import numpy as np
 
-from cdpm_drake.config.plants import SimulatedReels
+from cdpm_drake.config.plants import ENCODER_ZEROS, DynamicReels, SimulatedReels
 from cdpm_drake.config.scenario import Controller, Scenario, ScenarioError
 from cdpm_drake.config.yaml_io import is_number
 from cdpm_drake.robot import Robot, robot_statics
@@ -252,6 +252,9 @@ def check_dynamic_reels(scenario: Scenario, robot: Robot, defaulted=()):
     if cfg.max_reel_speed is not None:
         check_positive(cfg.max_reel_speed, "plant.max_reel_speed")
     check_positive(cfg.max_length_residual, "plant.max_length_residual")
+    if cfg.encoder_zero not in ENCODER_ZEROS:
+        raise ScenarioError(f"plant.encoder_zero must be one of {list(ENCODER_ZEROS)}, got "
+                            f"{cfg.encoder_zero!r}")
     start = start_text(scenario, robot, defaulted)
     p0 = np.asarray(scenario.initial_position if scenario.initial_position is not None
                     else default_start(robot), dtype=float)
@@ -291,3 +294,29 @@ def check_dynamic_reels(scenario: Scenario, robot: Robot, defaulted=()):
             + (f"; {cfg.time_step!r} s is plant.time_step's default"
                if _default_note(cfg, "time_step") else ""))
     return dist
+
+
+def homing_tensions(scenario: Scenario, robot: Robot):
+    """The tensions (m,) N the plant's homing leaves the cables at, by the statics of the
+    start pose, where the controller reconciles the encoders' zero with the cables' stretch
+    (kernels/encoder_zero.py); None where the plant's lengths need no reconciling (the
+    kinematic plant's rigid cables, a dynamic plant whose encoders read unstretched
+    lengths). The dynamic plant: its start distribution (check_dynamic_reels); the real
+    reels: the least-norm distribution that holds the level platform's weight at the start
+    with every cable at least the plant's homing_min_tension."""
+    from cdpm_drake.kernels.tension import gravity_wrench, wrench_matrix
+    from cdpm_drake.robot.tension_program import tension_distribution
+
+    cfg = scenario.plant
+    if isinstance(cfg, SimulatedReels):
+        return None
+    if isinstance(cfg, DynamicReels):
+        if cfg.encoder_zero != "homed":
+            return None
+        return np.asarray(check_dynamic_reels(scenario, robot).tensions, dtype=float)
+    floor = float(cfg.homing_min_tension)
+    p0 = np.asarray(scenario.initial_position if scenario.initial_position is not None
+                    else default_start(robot), dtype=float)
+    return np.asarray(tension_distribution(wrench_matrix(robot, p0),
+                                           gravity_wrench(robot.dynamics.mass),
+                                           floor).tensions, dtype=float)

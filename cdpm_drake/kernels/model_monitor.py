@@ -47,8 +47,8 @@ REASONS = ("ok", "slack cable", "lengths no longer fit the pose", "hand force ca
 
 # Parameters (a flat array, `monitor_params`).
 (M_EA, M_SLACK_TENSION, M_SLACK_LENGTH, M_FIT, M_UNHOLDABLE, M_TICKS, M_ESTIMATE, M_FULL,
- M_MASS, M_HANDLE, M_ROWS, M_HOLDABLE, M_SLACK_TICKS, M_MEASURED) = (
-    0, 1, 2, 3, 4, 5, 6, 7, 8, 9, 12, 13, 14, 15)
+ M_MASS, M_HANDLE, M_ROWS, M_HOLDABLE, M_SLACK_TICKS, M_MEASURED, M_RECONCILING) = (
+    0, 1, 2, 3, 4, 5, 6, 7, 8, 9, 12, 13, 14, 15, 16)
 
 
 class ModelFault(RuntimeError):
@@ -58,25 +58,30 @@ class ModelFault(RuntimeError):
 
 def monitor_params(robot, *, EA, slack_tension, slack_length, fit_tolerance, unholdable,
                    ticks, estimate: bool, full_pose: bool, rows: int, holdable: float,
-                   slack_ticks: int, measured_slack: float = 0.0) -> np.ndarray:
+                   slack_ticks: int, measured_slack: float = 0.0,
+                   reconciling: bool = False) -> np.ndarray:
     """The monitor's parameters: EA (N; 0: no modelled stretch), the thresholds (N, m, m, N),
     the ticks a condition must last, whether there is a tension estimate and a full pose,
     the platform's mass (kg) and handle (m, platform frame), the wrench rows (3 or 6), the t*
-    (N) from which the cables hold the hand and the ticks a slack cable must last there, and
-    the measured tension (N) below which a cable is slack (0: the monitor reads no measured
-    tensions)."""
+    (N) from which the cables hold the hand and the ticks a slack cable must last there, the
+    measured tension (N) below which a cable is slack (0: the monitor reads no measured
+    tensions), and whether it reads the encoder zero's `reconciled` flag (lengths from homed
+    encoders: no slack is judged on the lengths or the estimate before it is 1)."""
     d = robot.dynamics
     return np.array([EA, slack_tension, slack_length, fit_tolerance, unholdable, ticks,
                      1.0 if estimate else 0.0, 1.0 if full_pose else 0.0, d.mass, *d.handle,
-                     rows, holdable, slack_ticks, measured_slack], dtype=float)
+                     rows, holdable, slack_ticks, measured_slack,
+                     1.0 if reconciling else 0.0], dtype=float)
 
 
-def monitor_sizes(m: int, full_pose: bool, estimate: bool, measured: bool = False) -> dict:
+def monitor_sizes(m: int, full_pose: bool, estimate: bool, measured: bool = False,
+                  reconciling: bool = False) -> dict:
     """x: lengths (m), p (3), F_H (3), and R (9) for the full pose, the tension estimate (m)
-    with one, the measured tensions (m) with them, then the memory: counters (3); out:
-    status (1), cable (1, 1-based, 0 none), value (1: the number behind it, N or m), t* (1,
-    N), residual (m, m), next memory (3)."""
-    x = m + 6 + (9 if full_pose else 0) + (m if estimate else 0) + (m if measured else 0)
+    with one, the measured tensions (m) with them, the encoder zero's reconciled flag (1)
+    with it, then the memory: counters (3); out: status (1), cable (1, 1-based, 0 none),
+    value (1: the number behind it, N or m), t* (1, N), residual (m, m), next memory (3)."""
+    x = (m + 6 + (9 if full_pose else 0) + (m if estimate else 0) + (m if measured else 0)
+         + (1 if reconciling else 0))
     return {"x": x + 3, "out": m + 7, "memory": 3, "memory_at": m + 4}
 
 
@@ -84,8 +89,11 @@ def monitor_sizes(m: int, full_pose: bool, estimate: bool, measured: bool = Fals
 def monitor_tick(reels, attachments, params, scratch, x, out):
     """One tick (module docstring). x = [l (m) m, p (3) m, F_H (3) N, (full pose:) R (9),
     (with a tension estimate:) T_est (m) N, (params[M_MEASURED] > 0:) T_measured (m) N,
-    memory: ticks of slack, misfit, unholdable (3)]; a cable with a finite measured tension
-    is slack below params[M_MEASURED], whatever the estimate says;
+    (params[M_RECONCILING] > 0:) reconciled (1), memory: ticks of slack, misfit, unholdable
+    (3)]; a cable with a finite measured tension is slack below params[M_MEASURED],
+    whatever the estimate says; while `reconciled` is 0 (the encoders' zero not yet
+    reconciled with the cables' stretch, encoder_zero.py) the lengths and the estimate
+    judge no cable slack;
     out = [status, cable (1-based), value, t* (N), residual (m) m, next memory (3)];
     scratch: kinetostatics.margin_scratch(m). The status is the condition that has lasted
     its ticks (a fault), OK otherwise; where several have, the first of SLACK, MISFIT,
@@ -111,6 +119,9 @@ def monitor_tick(reels, attachments, params, scratch, x, out):
     measured_slack = params[M_MEASURED]
     measured = measured_slack > 0.0
     k_measured = k + m if estimate else k
+    # Before the encoders' zero is reconciled, the lengths (and the estimate on them) may be
+    # off by the cables' whole stretch at the homing: no slack is judged on them.
+    settled = not (params[M_RECONCILING] != 0.0 and x[x.shape[0] - 4] == 0.0)
     mem = x[x.shape[0] - 3:]
     EA = params[M_EA]
     w = np.empty(6)
@@ -132,6 +143,8 @@ def monitor_tick(reels, attachments, params, scratch, x, out):
             if t_measured < measured_slack and (slack_cable < 0 or
                                                 t_measured < slack_value):
                 slack_cable, slack_value = i, t_measured
+        elif not settled:
+            pass
         elif estimate:
             if T[i] < -params[M_SLACK_TENSION] and (slack_cable < 0 or T[i] < slack_value):
                 slack_cable, slack_value = i, T[i]
