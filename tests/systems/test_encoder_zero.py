@@ -3,6 +3,8 @@ the start pose (as a robot's after its homing), and the controller's encoder zer
 cable's stretch at the homing off them, from the first measured tensions or the statics, so
 that the full pose's tension estimate starts at the plant's true tensions. No wall clock."""
 
+import dataclasses
+
 import numpy as np
 import pytest
 from pydrake.systems.analysis import Simulator
@@ -112,3 +114,61 @@ def test_full_pose_tension_control_on_homed_encoders_starts_without_a_slack_faul
     monkeypatch.setattr(diagram_module, "homing_tensions", lambda scenario, robot: None)
     estimate = simulate(scenario=scenario).log["tension_estimate"][0]
     assert int(np.argmin(estimate)) == 5 and estimate[5] < -9.0
+
+
+# --- the reel bridge: the same reconciliation on the real-time plant, scripted ---------------
+
+
+def _measuring_link(lengths, tensions):
+    """A scripted reel link (tests/helpers_scripted_link.py) whose bridge speaks version 2:
+    every status carries each drive's force at rest, -T (a drive holding a taut cable still),
+    and load cells reading T, for true tensions T."""
+    from helpers_scripted_link import ScriptedLink, answering
+
+    class MeasuringLink(ScriptedLink):
+        def _status(self, skipped, echo, faults, last):
+            status = super()._status(skipped, echo, faults, last)
+            return dataclasses.replace(status, version=2, drive_force=-tensions,
+                                       reel_speed=np.zeros(len(tensions)),
+                                       load_cell=tensions.copy())
+
+    return MeasuringLink(lengths, answering)
+
+
+@pytest.mark.parametrize("sensor", ["none", "drive_torque", "load_cell"])
+def test_the_reel_bridges_start_is_reconciled_on_its_measured_tensions(sensor, monkeypatch):
+    """`!HardwareReels` on a scripted version-2 link (no sockets, no clock), the platform at
+    exp2's start with true tensions T: the distribution on a 12 N floor, not the homing's
+    default 5 N. The drive torque has no reading at the first status (no acceleration yet):
+    the encoder zero takes the statics there, then the measured T at the second; the load
+    cells read T at once; without a sensor the statics (the 5 N floor) are all there is. The
+    full pose's estimate after 20 ticks (40 ms): T within 0.05 N with a sensor (the first
+    tick's statics decay at 0.4 a tick), the statics without one."""
+    from pydrake.systems.analysis import Simulator
+
+    from cdpm_drake.config import homing_tensions
+    from cdpm_drake.diagram import block_output_port, build_diagram
+    from cdpm_drake.hardware.config import HardwareReels
+    from cdpm_drake.kernels.kinematics import cable_lengths
+    from cdpm_drake.kernels.tension import gravity_wrench, wrench_matrix
+    from cdpm_drake.robot.tension_program import tension_distribution
+    from helpers_scripted_link import install
+
+    scenario = load_scenario("exp2_interaction", f"{{plant: !HardwareReels {{tension_sensor: "
+                                                 f"{sensor}, ramp_time: 0.0}}, {FULL}}}")
+    robot = scenario_robot(scenario)
+    p0 = np.asarray(scenario.initial_position, dtype=float)
+    T = tension_distribution(wrench_matrix(robot, p0), gravity_wrench(robot.dynamics.mass),
+                             12.0).tensions
+    statics = homing_tensions(scenario, robot)
+    assert np.max(np.abs(statics - T)) > 5.0  # the two differ
+    diagram = build_diagram(scenario)
+    install(monkeypatch, diagram.GetSubsystemByName("reels"),
+            _measuring_link(cable_lengths(robot, p0), T))
+    simulator = Simulator(diagram)
+    simulator.Initialize()
+    simulator.AdvanceTo(0.04)
+    port = block_output_port(diagram, "tension_distribution", "tension_estimate")
+    estimate = port.Eval(port.get_system().GetMyContextFromRoot(simulator.get_context()))
+    expected = statics if sensor == "none" else T
+    np.testing.assert_allclose(estimate, expected, rtol=0, atol=0.05)
