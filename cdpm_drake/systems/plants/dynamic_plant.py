@@ -230,8 +230,8 @@ def build_dynamic_plant(scenario, robot, operator, start_tensions, *, log_truth=
                     mbp.get_applied_generalized_force_input_port())
     builder.Connect(route.GetOutputPort("next_reels"), drives.get_input_port())
     if offset.any():
-        zero = builder.AddNamedSystem("encoder_zero", ConstantVectorSource(offset))
-        homed = builder.AddNamedSystem("encoder_homed", Adder(2, m))
+        zero = builder.AddNamedSystem("encoder_offset", ConstantVectorSource(offset))
+        homed = builder.AddNamedSystem("encoders_homed", Adder(2, m))
         builder.Connect(route.GetOutputPort("unstretched_lengths"), homed.get_input_port(0))
         builder.Connect(zero.get_output_port(), homed.get_input_port(1))
         builder.Connect(homed.get_output_port(), encoders.get_input_port())
