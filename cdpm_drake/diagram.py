@@ -477,20 +477,21 @@ def _add_tension_damping(builder, blocks, resolved, command, lengths, tensions, 
 
 
 # Ticks the encoder zero waits for a first measured tension of every cable before it takes
-# the statics where one is missing (tension control on a plant that measures tensions): the
-# reel bridge's drive torque needs two statuses (an acceleration), CANopen's two TPDOs after
-# a speed; a reading the drives never give must not hold the start up. The controllers
-# without tension control take the statics alone (window 0): they model no tension, and a
-# zero that moved after their length loop latched its offsets would move the reels.
+# the statics where one is missing (a plant that measures tensions): the reel bridge's drive
+# torque needs two statuses (an acceleration), CANopen's two TPDOs after a speed; a reading
+# the drives never give must not hold the start up.
 RECONCILE_WINDOW = 10
 
 
 def _add_encoder_zero(builder, blocks, resolved, plant, tension_control):
     """The encoder zero (systems/encoder_zero.py) after a plant whose encoders are homed
-    (config.homing_tensions); returns the lengths the controller reads and the block's
-    reconciled flag (the plant's own lengths and None for the other plants)."""
+    (config.homing_tensions), for the controller that models the cables' stretch (the full
+    pose with tension control: its fit, estimate and length targets take unstretched
+    lengths); returns the lengths the controller reads and the block's reconciled flag. The
+    other controllers take the cables as rigid, and homed encoders read rigid lengths: they
+    read the plant's own (None for the flag)."""
     scenario, robot = resolved.scenario, resolved.robot
-    home = homing_tensions(scenario, robot)
+    home = homing_tensions(scenario, robot) if tension_control else None
     if home is None:
         return plant.GetOutputPort("cable_lengths"), None
     measures = (_senses_tensions(scenario.plant, plant)
@@ -498,7 +499,7 @@ def _add_encoder_zero(builder, blocks, resolved, plant, tension_control):
     block = blocks["encoder_zero"] = FlatBlock(
         builder, "encoder_zero", KERNEL_BLOCK_MAIN, lambda b: build_encoder_zero(
             b, robot, home_tensions=home, time_step=resolved.time_step,
-            window=(RECONCILE_WINDOW if measures else 1) if tension_control else 0))
+            window=RECONCILE_WINDOW if measures else 1))
     block.connect_input(plant.GetOutputPort("cable_lengths"), "encoder_lengths")
     block.connect_input(plant.GetOutputPort(TENSION_PORT), "tension_measured")
     return block.GetOutputPort("cable_lengths"), block.GetOutputPort("reconciled")

@@ -37,8 +37,8 @@ def encoder_zero_sizes(m: int) -> dict:
 
 @_jit
 def encoder_zero_tick(params, x, out):
-    """params = [EA N, window (ticks; 0: the statics alone), T_home (m, N: the homing's
-    tensions by the statics)];
+    """params = [EA N, window (ticks, >= 1), T_home (m, N: the homing's tensions by the
+    statics)];
     x = [encoders (m, m), T_measured (m, N; NaN: no reading), memory: stretch (m, m), ticks
     (1), reconciled (1)]; out = [lengths (m, m: the encoders less the homing's stretch),
     reconciled (1), next memory (m + 2)].
@@ -47,8 +47,8 @@ def encoder_zero_tick(params, x, out):
     has a reading (reconciled from then on); at the `window`-th tick without one, from the
     measured tension where a cable has one and the statics where not (reconciled); before
     that, from the statics alone (not yet reconciled: a plant that measures tensions may not
-    have its first reading at the first tick). With window 0, from the statics at the first
-    tick. Once reconciled the stretch is held. Returns 1 when reconciled, else 0."""
+    have its first reading at the first tick). Once reconciled the stretch is held. Returns
+    1 when reconciled, else 0."""
     m = (x.shape[0] - 2) // 3
     EA, window = params[0], params[1]
     home = params[2:2 + m]
@@ -62,13 +62,13 @@ def encoder_zero_tick(params, x, out):
         for i in range(m):
             stretch[i] = x[mem + i]
     else:
-        every = window > 0.0
+        every = True
         for i in range(m):
             if not math.isfinite(measured[i]):
                 every = False
         T = np.empty(m)
         for i in range(m):
-            use = window > 0.0 and math.isfinite(measured[i]) and (every or ticks >= window)
+            use = math.isfinite(measured[i]) and (every or ticks >= window)
             T[i] = measured[i] if use else home[i]
         homing_stretch(enc, T, EA, stretch)
         reconciled = every or ticks >= window

@@ -669,9 +669,7 @@ def test_friction_compensation_makes_up_the_drives_dead_band():
         return (np.einsum("kij,kj->ki", jacobian(robot, log["p"]), log["velocity"])
                 + 40.0 * e + FRICTION_SHARE * band * np.tanh(e / FRICTION_ERROR))
 
-    # The encoders unstretched: the log's lengths are then the ones the mapping reads.
-    s = dataclasses.replace(push([2.0, 0, 0]),
-                            plant=scenario_module.DynamicReels(encoder_zero="unstretched"),
+    s = dataclasses.replace(push([2.0, 0, 0]), plant=scenario_module.DynamicReels(),
                             initial_position=list(P_EXP2))
     robot = scenario_robot(s)
     on = sim(s, 0.2)
@@ -1440,20 +1438,23 @@ def test_hardware_homing_fields_reach_the_lengths_and_the_encoder_zero(monkeypat
 @covers("Scenario.plant!DynamicReels.encoder_zero",
         "Scenario.plant!CanopenReels.homing_min_tension")
 def test_encoder_zero_and_canopen_homing_tension_reach_the_encoder_zero_block():
-    """encoder_zero: homed (default) puts the encoder zero after the dynamic plant, on the
-    plant's start distribution; unstretched leaves it out (the plant then reads unstretched
-    lengths: tests/systems/test_encoder_zero.py). A !CanopenReels plant's homing tensions take
-    its homing_min_tension as their floor."""
+    """encoder_zero: homed (default) puts the encoder zero after the dynamic plant for the
+    full pose with tension control, on the plant's start distribution (the controllers that
+    take the cables as rigid read the homed lengths as they are); unstretched leaves it out
+    (the plant then reads unstretched lengths: tests/systems/test_encoder_convention.py). A
+    !CanopenReels plant's homing tensions take its homing_min_tension as their floor."""
     from cdpm_drake.config import DynamicReels, check_dynamic_reels, homing_tensions
     from cdpm_drake.diagram import build_diagram
     from cdpm_drake.hardware.canopen_config import CanopenReels
 
-    homed = _dynamic()
+    full = scenario_module.Controller(pose="full", tension_control=True)
+    homed = dataclasses.replace(_dynamic(), controller=full)
     robot = scenario_robot(homed)
     np.testing.assert_array_equal(homing_tensions(homed, robot),
                                   check_dynamic_reels(homed, robot).tensions)
     assert build_diagram(homed).HasSubsystemNamed("encoder_zero")
-    unstretched = _dynamic(encoder_zero="unstretched")
+    assert not build_diagram(_dynamic()).HasSubsystemNamed("encoder_zero")
+    unstretched = dataclasses.replace(_dynamic(encoder_zero="unstretched"), controller=full)
     assert homing_tensions(unstretched, robot) is None
     assert not build_diagram(unstretched).HasSubsystemNamed("encoder_zero")
     for floor in (5.0, 9.0):

@@ -76,11 +76,3 @@ def test_without_a_reading_the_statics_reconcile_at_the_window():
     np.testing.assert_allclose(seen[2][0], rigid / (1 + expected / EA), rtol=0, atol=1e-15)
     np.testing.assert_allclose(seen[3][0], seen[2][0], rtol=0, atol=0)
 
-
-def test_window_0_takes_the_statics_whatever_is_measured():
-    rigid = np.array([1.2, 2.5, 3.1, 0.8])
-    home = np.array([12.0, 7.0, 30.0, 5.0])
-    seen = _ticks([rigid] * 2, [np.full(M, 40.0)] * 2, home, window=0)
-    for lengths, flag, status in seen:
-        np.testing.assert_allclose(lengths, rigid / (1 + home / EA), rtol=0, atol=1e-15)
-        assert flag == 1.0 and status == 1

@@ -52,37 +52,15 @@ def _graph(diagram):
     return systems, edges
 
 
-def _without_encoder_zero(systems, edges):
-    """A diagram's graph (`_graph`, built unfused) as it would be without the encoder zero:
-    its systems gone, what it fed read from the plant's cable_lengths, the monitor's
-    `reconciled` input gone."""
-    zero = {name for name in systems if name.startswith("encoder_zero")}
-    systems = {name: (tuple(p for p in ins if p != "reconciled"), outs)
-               for name, (ins, outs) in systems.items() if name not in zero}
-    out = set()
-    for src, src_port, dst, dst_port in edges:
-        if dst in zero or dst_port == "reconciled":
-            continue
-        if src in zero:
-            src, src_port = "reels", "cable_lengths"
-        out.add((src, src_port, dst, dst_port))
-    return systems, out
-
-
 def test_simulated_and_hardware_diagrams_differ_only_in_the_plant():
     # The tension damping (on by default) is in the real reels' diagram only: the kinematic
-    # plant has no tensions to measure. Without it the two are one diagram, but for the
-    # encoder zero between the real reels and the blocks (the kinematic plant's cables are
-    # rigid: nothing stretches).
+    # plant has no tensions to measure. Without it the two are one diagram.
     scenario = load_scenario("exp2_interaction", "{controller: {tension_damping: "
                              "{enabled: false}}}")
-    options = BuildOptions(fuse_wiring=False)
-    sim = build_diagram(dataclasses.replace(scenario, plant=SimulatedReels()), options)
-    hw = build_diagram(dataclasses.replace(scenario, plant=HardwareReels()), options)
+    sim = build_diagram(dataclasses.replace(scenario, plant=SimulatedReels()))
+    hw = build_diagram(dataclasses.replace(scenario, plant=HardwareReels()))
     sim_systems, sim_edges = _graph(sim)
     hw_systems, hw_edges = _graph(hw)
-    assert "encoder_zero" in hw_systems and "encoder_zero" not in sim_systems
-    hw_systems, hw_edges = _without_encoder_zero(hw_systems, hw_edges)
     assert sim_systems.keys() == hw_systems.keys()
     assert sim_edges == hw_edges
     for name in sim_systems:
@@ -120,10 +98,9 @@ def test_committed_overview_fits_the_readme_and_is_shown_there():
         # graphviz needs that width, and the README's column shows it at ~70 %, the SVG at
         # full size a click away. The bound keeps it from growing further unnoticed. The
         # tension damping block between the mapping and the reels (every plant with a
-        # tension_measured port): 1133 x 798 pt; the encoder zero between the real reels and
-        # the blocks that read their lengths: 910 pt high.
+        # tension_measured port): 1133 x 798 pt.
         assert width <= 1.75 * README_WIDTH_PT, (name, width)
-        assert height <= 950, (name, height)
+        assert height <= 900, (name, height)
     assert "](diagrams/controller_simulated_overview.svg)" in readme
     assert "diagrams/controller_simulated.svg" in readme  # the full-depth one, linked beside
 
