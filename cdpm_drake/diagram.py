@@ -13,8 +13,9 @@ from pydrake.systems.primitives import Adder, ConstantVectorSource, VectorLogSin
 
 from cdpm_drake.config import (DynamicReels as DynamicReelsConfig, ResolvedScenario, Scenario,
                        SimulatedReels as SimulatedReelsConfig, check_dynamic_reels,
-                       resolve_scenario)
+                       homing_tensions, resolve_scenario)
 from cdpm_drake.systems.admittance import ADMITTANCE_MAIN, build_admittance
+from cdpm_drake.systems.encoder_zero import build_encoder_zero
 from cdpm_drake.systems.force_sensor import FORCE_SENSOR_MAIN, build_force_sensor
 from cdpm_drake.systems.forward_kinematics import FORWARD_KINEMATICS_MAIN, build_forward_kinematics
 from cdpm_drake.systems.interference_force import INTERFERENCE_FORCE_MAIN, build_interference_force
@@ -136,7 +137,7 @@ def build_diagram(scenario: Scenario | ResolvedScenario,
     controller = scenario.controller
     full = controller.pose == "full"
     tension_control = full and controller.tension_control
-    lengths = plant.GetOutputPort("cable_lengths")
+    lengths, reconciled = _add_encoder_zero(builder, blocks, resolved, plant, tension_control)
     if full:
         fk = blocks["forward_kinematics"] = FlatBlock(
             builder, "forward_kinematics", KERNEL_BLOCK_MAIN,
@@ -255,7 +256,7 @@ def build_diagram(scenario: Scenario | ResolvedScenario,
                            force_sensor.GetOutputPort("F_H"), T,
                            plant.GetOutputPort(TENSION_PORT)
                            if _senses_tensions(scenario.plant, plant) else None,
-                           slack_from_tensions=damped)
+                           slack_from_tensions=damped, reconciled=reconciled)
 
     wirings = {}
     if options.loggers:
@@ -483,11 +484,41 @@ def overload_tension(scenario) -> float:
     return float(scenario.model_monitor.overload) * float(scenario.controller.max_tension)
 
 
+# Ticks the encoder zero waits for a first measured tension of every cable before it takes
+# the statics where one is missing (a plant that measures tensions): the reel bridge's drive
+# torque needs two statuses (an acceleration), CANopen's two TPDOs after a speed; a reading
+# the drives never give must not hold the start up.
+RECONCILE_WINDOW = 10
+
+
+def _add_encoder_zero(builder, blocks, resolved, plant, tension_control):
+    """The encoder zero (systems/encoder_zero.py) after a plant whose encoders are homed
+    (config.homing_tensions), for the controller that models the cables' stretch (the full
+    pose with tension control: its fit, estimate and length targets take unstretched
+    lengths); returns the lengths the controller reads and the block's reconciled flag. The
+    other controllers take the cables as rigid, and homed encoders read rigid lengths: they
+    read the plant's own (None for the flag)."""
+    scenario, robot = resolved.scenario, resolved.robot
+    home = homing_tensions(scenario, robot) if tension_control else None
+    if home is None:
+        return plant.GetOutputPort("cable_lengths"), None
+    measures = (_senses_tensions(scenario.plant, plant)
+                and getattr(scenario.plant, "tension_sensor", "none") != "none")
+    block = blocks["encoder_zero"] = FlatBlock(
+        builder, "encoder_zero", KERNEL_BLOCK_MAIN, lambda b: build_encoder_zero(
+            b, robot, home_tensions=home, time_step=resolved.time_step,
+            window=RECONCILE_WINDOW if measures else 1))
+    block.connect_input(plant.GetOutputPort("cable_lengths"), "encoder_lengths")
+    block.connect_input(plant.GetOutputPort(TENSION_PORT), "tension_measured")
+    return block.GetOutputPort("cable_lengths"), block.GetOutputPort("reconciled")
+
+
 def _add_model_monitor(builder, blocks, resolved, lengths, p_WP, R_WP, F_H, T,
-                       tensions=None, slack_from_tensions=True):
+                       tensions=None, slack_from_tensions=True, reconciled=None):
     """The model monitor (model_monitor.py) on the measurements and the estimates; tensions:
     the plant's measured tensions, where it may have some: an overload there is a fault, and
-    with slack_from_tensions (the tension damping on) a slack reading too."""
+    with slack_from_tensions (the tension damping on) a slack reading too; reconciled: the
+    encoder zero's flag, where there is one."""
     from cdpm_drake.kernels.kinetostatics import wrench_rows
     from cdpm_drake.kernels.model_monitor import monitor_params
 
@@ -502,7 +533,8 @@ def _add_model_monitor(builder, blocks, resolved, lengths, p_WP, R_WP, F_H, T,
         full_pose=R_WP is not None, rows=wrench_rows(robot),
         holdable=float(mon.holdable), slack_ticks=mon.slack_ticks,
         measured_slack=float(mon.measured_slack) if slacks else 0.0,
-        overload=overload_tension(scenario) if tensions is not None else 0.0)
+        overload=overload_tension(scenario) if tensions is not None else 0.0,
+        reconciling=reconciled is not None)
     # Slack from measured tensions with tension control only: its target keeps every cable
     # at tension_floor (4 N) or more, so a reading under measured_slack (1 N) is a slack
     # cable; the translating controller keeps no floor (a cable may hold 0.6 N, taut). An
@@ -512,7 +544,7 @@ def _add_model_monitor(builder, blocks, resolved, lengths, p_WP, R_WP, F_H, T,
     block = blocks["model_monitor"] = FlatBlock(
         builder, "model_monitor", KERNEL_BLOCK_MAIN, lambda b: build_model_monitor(
             b, robot, params=params, full_pose=R_WP is not None, estimate=estimate,
-            time_step=T, measured=measured))
+            time_step=T, measured=measured, reconciling=reconciled is not None))
     block.connect_input(lengths, "cable_lengths")
     block.connect_input(p_WP, "p_WP")
     block.connect_input(F_H, "F_H")
@@ -523,6 +555,8 @@ def _add_model_monitor(builder, blocks, resolved, lengths, p_WP, R_WP, F_H, T,
                             "tension_estimate")
     if measured:
         block.connect_input(tensions, "tension_measured")
+    if reconciled is not None:
+        block.connect_input(reconciled, "reconciled")
 
 
 def _add_pose_blocks(builder, blocks, resolved, fk, force_sensor, lengths, velocity_command,

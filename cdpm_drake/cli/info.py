@@ -88,6 +88,8 @@ def info(*, robot: str = "paper_7cable", swaps=None, plot_dir=None, grid_step: f
     path, grid, t_grid, grid_text, solved = _print_statics(r, scenario, grid_step, out,
                                                            base=base)
     _print_wrench_feasibility(r, grid, t_grid, grid_text, out, solved)
+    if scenario is not None and refused is None:
+        _print_homing(r, resolved.scenario, out)
     if plot_dir is None:
         return []
     from cdpm_drake.views.workspace_plots import plot_workspace
@@ -212,6 +214,32 @@ def _info_target(name):
         return load_robot(text), None, None
     raise RobotError(f"unknown robot or scenario {text!r}; built-in robots: {robot_names()}, "
                      f"built-in scenarios: {scenario_names()} (or give a path to a .yaml file)")
+
+
+def _print_homing(r, scenario, out) -> None:
+    """The homing at the scenario's start (docs/on_the_robot.md): each encoder's reading
+    there, the rigid length of its cable; the tensions the controller takes the homing to
+    leave (the least-norm distribution holding the level platform with every cable at least
+    the plant's homing_min_tension, 5 N by default) and the stretch they give."""
+    from cdpm_drake.kernels.kinematics import cable_lengths
+    from cdpm_drake.kernels.tension import gravity_wrench, wrench_matrix
+    from cdpm_drake.robot.tension_program import tension_distribution
+
+    p0 = np.asarray(scenario.initial_position, dtype=float)
+    floor = float(getattr(scenario.plant, "homing_min_tension", 5.0))
+    dist = tension_distribution(wrench_matrix(r, p0), gravity_wrench(r.dynamics.mass), floor)
+    if not dist.feasible:
+        return
+    rigid = cable_lengths(r, p0)
+    T = dist.tensions
+    stretch = rigid * T / (r.dynamics.EA + T)
+    print(f"homing at the start {format_vector(p0)} m, level (docs/on_the_robot.md): set each "
+          f"encoder to read the rigid length there, the cables taut at the tensions below "
+          f"(every cable >= homing_min_tension = {floor:g} N; the controller takes them where "
+          f"it measures none):", file=out)
+    print(format_table(["cable", "encoder reads (m)", "tension (N)", "stretch (mm)"],
+                       [(i + 1, f"{rigid[i]:.5f}", f"{T[i]:.2f}", f"{1000 * stretch[i]:.3f}")
+                        for i in range(r.num_cables)]), file=out)
 
 
 def _print_statics(r, scenario, step, out, base=None):

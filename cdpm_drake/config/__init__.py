@@ -16,7 +16,8 @@ directory; `--scenario-text` overlays a YAML snippet for one-off changes.
 The names below are the package's API for the other layers.
 """
 
-from cdpm_drake.config.checks import UnholdableRobot, check_duration, check_dynamic_reels
+from cdpm_drake.config.checks import (UnholdableRobot, check_duration, check_dynamic_reels,
+                                      homing_tensions)
 from cdpm_drake.config.load import (load_resolved_scenario, load_scenario, resolve_scenario_path,
                                     scenario_names)
 from cdpm_drake.config.load_warnings import (sensor_range_text, warn_reel_saturation,
@@ -44,7 +45,7 @@ __all__ = [
     "ResolvedScenario", "resolve_scenario", "check_scenario", "scenario_robot",
     "scenario_operator", "interference_params",
     # Checks and warnings (checks.py, load_warnings.py).
-    "check_duration", "check_dynamic_reels", "UnholdableRobot",
+    "check_duration", "check_dynamic_reels", "homing_tensions", "UnholdableRobot",
     "warn_reel_saturation", "warn_unreachable_d_u", "sensor_range_text",
     # YAML (yaml_io.py).
     "INTERNAL_FIELDS", "check_yaml", "with_line", "explain_load_error", "scenario_to_yaml",

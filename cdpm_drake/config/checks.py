@@ -8,7 +8,7 @@ import math
 
 import numpy as np
 
-from cdpm_drake.config.plants import SimulatedReels
+from cdpm_drake.config.plants import ENCODER_ZEROS, DynamicReels, SimulatedReels
 from cdpm_drake.config.scenario import Controller, Scenario, ScenarioError
 from cdpm_drake.config.yaml_io import is_number
 from cdpm_drake.robot import Robot, robot_statics
@@ -283,6 +283,9 @@ def check_dynamic_reels(scenario: Scenario, robot: Robot, defaulted=()):
     if cfg.max_reel_speed is not None:
         check_positive(cfg.max_reel_speed, "plant.max_reel_speed")
     check_positive(cfg.max_length_residual, "plant.max_length_residual")
+    if cfg.encoder_zero not in ENCODER_ZEROS:
+        raise ScenarioError(f"plant.encoder_zero must be one of {list(ENCODER_ZEROS)}, got "
+                            f"{cfg.encoder_zero!r}")
     start = start_text(scenario, robot, defaulted)
     p0 = np.asarray(scenario.initial_position if scenario.initial_position is not None
                     else default_start(robot), dtype=float)
@@ -345,7 +348,10 @@ def check_start_fits_translation(scenario: Scenario, robot: Robot, p0, tensions,
         """Each cable's residual of the level fit to the start lengths turned by rpy, m."""
         R0 = rotation_from_rpy(rpy)
         rigid = np.linalg.norm(robot.reels - (p0 + robot.attachments @ R0.T), axis=1)
-        lengths = rigid / (1.0 + np.asarray(tensions, dtype=float) / robot.dynamics.EA)
+        # Homed encoders read the rigid lengths at the start; unstretched ones less the
+        # start stretch.
+        lengths = (rigid if getattr(cfg, "encoder_zero", "homed") == "homed" else
+                   rigid / (1.0 + np.asarray(tensions, dtype=float) / robot.dynamics.EA))
         p = forward_kinematics(robot, lengths, p_guess=p0, max_residual=math.inf)
         return np.abs(np.linalg.norm(robot.reels - (p + robot.attachments), axis=1) - lengths)
 
@@ -367,3 +373,29 @@ def check_start_fits_translation(scenario: Scenario, robot: Robot, p0, tensions,
         f"{cable + 1}; plant.max_length_residual {1000 * float(cfg.max_length_residual):g} "
         f"mm): give a smaller plant.initial_rpy, or controller.pose: full to estimate the "
         "orientation too")
+
+
+def homing_tensions(scenario: Scenario, robot: Robot):
+    """The tensions (m,) N the plant's homing leaves the cables at, by the statics of the
+    start pose, where the controller reconciles the encoders' zero with the cables' stretch
+    (kernels/encoder_zero.py); None where the plant's lengths need no reconciling (the
+    kinematic plant's rigid cables, a dynamic plant whose encoders read unstretched
+    lengths). The dynamic plant: its start distribution (check_dynamic_reels); the real
+    reels: the least-norm distribution that holds the level platform's weight at the start
+    with every cable at least the plant's homing_min_tension."""
+    from cdpm_drake.kernels.tension import gravity_wrench, wrench_matrix
+    from cdpm_drake.robot.tension_program import tension_distribution
+
+    cfg = scenario.plant
+    if isinstance(cfg, SimulatedReels):
+        return None
+    if isinstance(cfg, DynamicReels):
+        if cfg.encoder_zero != "homed":
+            return None
+        return np.asarray(check_dynamic_reels(scenario, robot).tensions, dtype=float)
+    floor = float(cfg.homing_min_tension)
+    p0 = np.asarray(scenario.initial_position if scenario.initial_position is not None
+                    else default_start(robot), dtype=float)
+    return np.asarray(tension_distribution(wrench_matrix(robot, p0),
+                                           gravity_wrench(robot.dynamics.mass),
+                                           floor).tensions, dtype=float)

@@ -57,6 +57,7 @@ class LoadCellSensor:
 
 
 TENSION_SENSORS = ("drive_torque", "load_cell", "none")
+ENCODER_ZEROS = ("homed", "unstretched")
 
 
 @dataclasses.dataclass
@@ -88,6 +89,11 @@ class DynamicReels:
     # output, sampled at the control tick): drive_torque (the reel drives' force), load_cell
     # (a cell per cable), none (encoders and the handle's sensor only: NaN).
     tension_sensor: str = "drive_torque"
+    # What the encoders read (the cable_lengths output): homed, as a robot's encoders after
+    # its homing (the rigid length of each cable at the start pose, the unstretched length
+    # plus the start stretch, and each reel's payout from there); unstretched, each reel's
+    # payout of unstretched cable (no homing: for tests of the models that take it).
+    encoder_zero: str = "homed"
     drive_torque: DriveTorqueSensor = dataclasses.field(default_factory=DriveTorqueSensor)
     load_cell: LoadCellSensor = dataclasses.field(default_factory=LoadCellSensor)
 

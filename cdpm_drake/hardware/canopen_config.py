@@ -89,6 +89,9 @@ class CanopenReels:
     # Largest forward-kinematics residual accepted for the measured lengths, m; None (the
     # default): derived from the robot's cables, as HardwareReels.max_length_residual.
     max_length_residual: typing.Optional[float] = None
+    # The tensions the homing leaves the cables at, as the controller takes them where the
+    # drives measure none at start-up (as HardwareReels.homing_min_tension), N.
+    homing_min_tension: float = 5.0
 
 
 def resolved_node_ids(config: CanopenReels, m: int) -> list[int]:
@@ -128,6 +131,10 @@ def check_canopen_reels(config: CanopenReels, m: int, period: float,
     if len(offsets) != m or not all(math.isfinite(x) for x in offsets):
         raise ValueError(f"{field}.position_offset must have {m} finite lengths in m (one "
                          f"per cable), got {list(config.position_offset)!r}")
+    value = config.homing_min_tension
+    if not _finite(value) or value < 0:
+        raise ValueError(f"{field}.homing_min_tension must be a finite number >= 0 N, got "
+                         f"{value!r}")
     for name, unit in (("counts_per_metre", "counts/m"), ("force_per_torque_unit", "N"),
                        ("velocity_units_per_mps", "units per m/s")):
         value = getattr(config, name)

@@ -70,6 +70,40 @@ class HardwareReels:
     # clock) instead of keeping time, and the watchdog and resume_within count ticks, not
     # seconds; the run is then deterministic on any host, at whatever speed it allows.
     lockstep: bool = False
+    # The homing (docs/on_the_robot.md): each cable's length, m, added to what the bridge
+    # reports for it, so that the lengths read the rigid cable lengths of the start pose
+    # after the homing; empty: all 0 (the bridge's lengths are taken as they are).
+    position_offset: list[float] = dataclasses.field(default_factory=list)
+    # The tensions the homing leaves the cables at, as the controller takes them where the
+    # bridge measures none at start-up (tension_sensor none, a reading missing): the
+    # least-norm distribution that holds the level platform's weight at the start pose with
+    # every cable at least this, N (as !DynamicReels' min_tension, which the emulator plays).
+    homing_min_tension: float = 5.0
+
+
+def resolved_position_offset(config, m: int) -> list[float]:
+    """The plant's position_offset (m per cable; empty: all 0), as m floats."""
+    offsets = config.position_offset
+    return [float(x) for x in offsets] if offsets else [0.0] * m
+
+
+def check_homing(config, m: int, field: str = "plant") -> None:
+    """The homing fields a reel plant (!HardwareReels, !CanopenReels) shares: ValueError
+    naming the field and the value."""
+    offsets = config.position_offset
+    if not isinstance(offsets, (list, tuple)) or (offsets and (
+            len(offsets) != m or not all(_finite_number(x) for x in offsets))):
+        raise ValueError(f"{field}.position_offset must be empty or have {m} finite lengths "
+                         f"in m (one per cable), got {offsets!r}")
+    value = config.homing_min_tension
+    if not _finite_number(value) or value < 0:
+        raise ValueError(f"{field}.homing_min_tension must be a finite number >= 0 N, got "
+                         f"{value!r}")
+
+
+def _finite_number(value) -> bool:
+    return (isinstance(value, (int, float)) and not isinstance(value, bool)
+            and math.isfinite(value))
 
 
 def check_hardware_reels(config: HardwareReels, field: str = "plant") -> None:

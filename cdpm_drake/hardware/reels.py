@@ -59,7 +59,8 @@ from pydrake.systems.framework import LeafSystem
 
 from cdpm_drake.kernels.drive_torque import drive_model, tension_from_drive
 from cdpm_drake.kernels.kinematics import KinematicsError, cable_lengths, forward_kinematics
-from cdpm_drake.hardware.config import HardwareReels, check_hardware_reels
+from cdpm_drake.hardware.config import (HardwareReels, check_hardware_reels, check_homing,
+                                        resolved_position_offset)
 from cdpm_drake.hardware.link import ReelLink
 from cdpm_drake.robot.stretch import derived_length_residual
 from cdpm_drake.hardware.protocol import (VERSION, VERSIONS, fault_names, next_sequence,
@@ -147,6 +148,9 @@ class HardwareReelsSystem(LeafSystem):
         self._config = config
         self._T = float(time_step)
         self._m = m = robot.num_cables
+        check_homing(config, m)
+        # The homing's offsets, added to every status's lengths (docs/on_the_robot.md).
+        self._offset = np.array(resolved_position_offset(config, m))
         self._vmax = float(robot.limits.max_reel_speed)
         # The controller's model of its reel drives (robot file reel_drives), at the cable,
         # its kernel compiled now (not on the real-time path).
@@ -270,22 +274,23 @@ class HardwareReelsSystem(LeafSystem):
                 f"refusing to enable the reels: the reel bridge reports fault bits "
                 f"{status.faults:#06x} ({', '.join(fault_names(status.faults))}) at startup",
                 context.get_time())
+        lengths = status.lengths + self._offset
         try:
-            p = forward_kinematics(self._robot, status.lengths,
-                                   max_residual=c.max_length_residual)
+            p = forward_kinematics(self._robot, lengths, max_residual=c.max_length_residual)
         except KinematicsError as e:
             self.shutdown()
             raise ReelFault(
                 f"refusing to enable the reels: the measured cable lengths "
-                f"{np.round(status.lengths, 4).tolist()} m do not fit robot "
-                f"{self._robot.name!r} ({self._robot.source}) within max_length_residual = "
-                f"{c.max_length_residual:g} m: {e}. Check the robot file, the cable numbering "
-                f"and the encoders' zero offsets.", context.get_time()) from None
+                f"{np.round(lengths, 4).tolist()} m (the bridge's plus position_offset) do "
+                f"not fit robot {self._robot.name!r} ({self._robot.source}) within "
+                f"max_length_residual = {c.max_length_residual:g} m: {e}. Check the robot "
+                f"file, the cable numbering and the homing (position_offset).",
+                context.get_time()) from None
         problem = start_pose_problem(self._robot, p)
         if problem:
             self.shutdown()
             raise ReelFault(f"refusing to enable the reels: {problem}", context.get_time())
-        state.get_mutable_discrete_state(self._lengths).SetFromVector(status.lengths)
+        state.get_mutable_discrete_state(self._lengths).SetFromVector(lengths)
         state.get_mutable_discrete_state(self._force).SetFromVector(status.force)
         speed = state.get_mutable_discrete_state(self._speed).get_mutable_value()
         tension = state.get_mutable_discrete_state(self._tension).get_mutable_value()
@@ -350,7 +355,7 @@ class HardwareReelsSystem(LeafSystem):
             status = link.receive(last, versions)
             now = time.monotonic()
         if status is not None:
-            state.get_mutable_vector(self._lengths).SetFromVector(status.lengths)
+            state.get_mutable_vector(self._lengths).SetFromVector(status.lengths + self._offset)
             state.get_mutable_vector(self._force).SetFromVector(status.force)
             self._measure_tension(
                 book, status, state.get_mutable_vector(self._speed).get_mutable_value(),

@@ -52,8 +52,8 @@ REASONS = ("ok", "slack cable", "lengths no longer fit the pose", "hand force ca
 
 # Parameters (a flat array, `monitor_params`).
 (M_EA, M_SLACK_TENSION, M_SLACK_LENGTH, M_FIT, M_UNHOLDABLE, M_TICKS, M_ESTIMATE, M_FULL,
- M_MASS, M_HANDLE, M_ROWS, M_HOLDABLE, M_SLACK_TICKS, M_MEASURED, M_OVERLOAD) = (
-    0, 1, 2, 3, 4, 5, 6, 7, 8, 9, 12, 13, 14, 15, 16)
+ M_MASS, M_HANDLE, M_ROWS, M_HOLDABLE, M_SLACK_TICKS, M_MEASURED, M_OVERLOAD,
+ M_RECONCILING) = (0, 1, 2, 3, 4, 5, 6, 7, 8, 9, 12, 13, 14, 15, 16, 17)
 # The memory: ticks of slack, misfit, unholdable, overload.
 MEMORY = 4
 
@@ -66,25 +66,31 @@ class ModelFault(RuntimeError):
 def monitor_params(robot, *, EA, slack_tension, slack_length, fit_tolerance, unholdable,
                    ticks, estimate: bool, full_pose: bool, rows: int, holdable: float,
                    slack_ticks: int, measured_slack: float = 0.0,
-                   overload: float = 0.0) -> np.ndarray:
+                   overload: float = 0.0, reconciling: bool = False) -> np.ndarray:
     """The monitor's parameters: EA (N; 0: no modelled stretch), the thresholds (N, m, m, N),
     the ticks a condition must last, whether there is a tension estimate and a full pose,
     the platform's mass (kg) and handle (m, platform frame), the wrench rows (3 or 6), the t*
-    (N) from which the cables hold the hand and the ticks a slack cable must last there, and
-    the measured tension (N) below which a cable is slack (0: no slack from measured
-    tensions), and the measured tension (N) above which a cable is overloaded (0: none)."""
+    (N) from which the cables hold the hand and the ticks a slack cable must last there, the
+    measured tension (N) below which a cable is slack (0: no slack from measured tensions),
+    the measured tension (N) above which a cable is overloaded (0: none), and whether it
+    reads the encoder zero's `reconciled` flag (lengths from homed encoders: no slack is
+    judged on the lengths or the estimate before it is 1)."""
     d = robot.dynamics
     return np.array([EA, slack_tension, slack_length, fit_tolerance, unholdable, ticks,
                      1.0 if estimate else 0.0, 1.0 if full_pose else 0.0, d.mass, *d.handle,
-                     rows, holdable, slack_ticks, measured_slack, overload], dtype=float)
+                     rows, holdable, slack_ticks, measured_slack, overload,
+                     1.0 if reconciling else 0.0], dtype=float)
 
 
-def monitor_sizes(m: int, full_pose: bool, estimate: bool, measured: bool = False) -> dict:
+def monitor_sizes(m: int, full_pose: bool, estimate: bool, measured: bool = False,
+                  reconciling: bool = False) -> dict:
     """x: lengths (m), p (3), F_H (3), and R (9) for the full pose, the tension estimate (m)
-    with one, the measured tensions (m) with them, then the memory: counters (MEMORY);
-    out: status (1), cable (1, 1-based, 0 none), value (1: the number behind it, N or m), t*
-    (1, N), residual (m, m), next memory (MEMORY)."""
-    x = m + 6 + (9 if full_pose else 0) + (m if estimate else 0) + (m if measured else 0)
+    with one, the measured tensions (m) with them, the encoder zero's reconciled flag (1)
+    with it, then the memory: counters (MEMORY); out: status (1), cable (1, 1-based, 0
+    none), value (1: the number behind it, N or m), t* (1, N), residual (m, m), next memory
+    (MEMORY)."""
+    x = (m + 6 + (9 if full_pose else 0) + (m if estimate else 0) + (m if measured else 0)
+         + (1 if reconciling else 0))
     return {"x": x + MEMORY, "out": m + 4 + MEMORY, "memory": MEMORY, "memory_at": m + 4}
 
 
@@ -92,9 +98,12 @@ def monitor_sizes(m: int, full_pose: bool, estimate: bool, measured: bool = Fals
 def monitor_tick(reels, attachments, params, scratch, x, out):
     """One tick (module docstring). x = [l (m) m, p (3) m, F_H (3) N, (full pose:) R (9),
     (with a tension estimate:) T_est (m) N, (params[M_MEASURED] > 0 or params[M_OVERLOAD]
-    > 0:) T_measured (m) N, memory: ticks of slack, misfit, unholdable, overload (MEMORY)];
-    a cable with a finite measured tension is slack below params[M_MEASURED] (where > 0),
-    whatever the estimate says, and overloaded above params[M_OVERLOAD] (where > 0);
+    > 0:) T_measured (m) N, (params[M_RECONCILING] > 0:) reconciled (1), memory: ticks of
+    slack, misfit, unholdable, overload (MEMORY)]; a cable with a finite measured tension is
+    slack below params[M_MEASURED] (where > 0), whatever the estimate says, and overloaded
+    above params[M_OVERLOAD] (where > 0); while `reconciled` is 0 (the encoders' zero not
+    yet reconciled with the cables' stretch, encoder_zero.py) the lengths and the estimate
+    judge no cable slack;
     out = [status, cable (1-based), value, t* (N), residual (m) m, next memory (MEMORY)];
     scratch: kinetostatics.margin_scratch(m). The status is the condition that has lasted
     its ticks (a fault), OK otherwise; where several have, the first of OVERLOAD, SLACK,
@@ -122,7 +131,10 @@ def monitor_tick(reels, attachments, params, scratch, x, out):
     measured = measured_slack > 0.0
     overload = params[M_OVERLOAD]
     k_measured = k + m if estimate else k
-    mem = x[x.shape[0] - 4:]
+    # Before the encoders' zero is reconciled, the lengths (and the estimate on them) may be
+    # off by the cables' whole stretch at the homing: no slack is judged on them.
+    settled = not (params[M_RECONCILING] != 0.0 and x[x.shape[0] - MEMORY - 1] == 0.0)
+    mem = x[x.shape[0] - MEMORY:]
     EA = params[M_EA]
     w = np.empty(6)
     held_wrench(R, params[M_MASS:M_MASS + 4], F, np.zeros(3), w)
@@ -147,6 +159,8 @@ def monitor_tick(reels, attachments, params, scratch, x, out):
             if t_measured < measured_slack and (slack_cable < 0 or
                                                 t_measured < slack_value):
                 slack_cable, slack_value = i, t_measured
+        elif not settled:
+            pass
         elif estimate:
             if T[i] < -params[M_SLACK_TENSION] and (slack_cable < 0 or T[i] < slack_value):
                 slack_cable, slack_value = i, T[i]

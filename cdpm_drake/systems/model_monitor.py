@@ -15,17 +15,18 @@ class ModelMonitorSolve(KernelSystem):
 
 
 def build_model_monitor(builder, robot, *, params, full_pose, estimate, time_step,
-                        measured=False):
+                        measured=False, reconciling=False):
     """model_monitor.monitor_tick as a block; it raises ModelFault (naming the cable, the
     reason and the numbers) when a condition has lasted its ticks. Inputs cable_lengths (m,
     m), p_WP (3, m), F_H (3, N), and for the full pose R_WP (9), with a tension estimate
     tension_estimate (m, N); outputs status (1), cable (1, 1-based, 0 none), t_star (1, N: at
     the estimated pose with the measured hand force), residual (m, m: each cable's length
     residual at the estimated pose). measured: an input tension_measured (m, N; NaN where
-    a cable has no reading), read where params says (model_monitor.monitor_params)."""
+    a cable has no reading), read where params says (model_monitor.monitor_params).
+    reconciling: an input reconciled (1: the encoder zero's flag; params must say so too)."""
     m = robot.num_cables
-    s = monitor_sizes(m, full_pose, estimate, measured)
-    measured_at = s["x"] - s["memory"] - m
+    s = monitor_sizes(m, full_pose, estimate, measured, reconciling)
+    measured_at = s["x"] - s["memory"] - m - (1 if reconciling else 0)
     reels, attachments = owned(robot.reels), owned(robot.attachments)
     par = owned(params)
     scratch = margin_scratch(m)
@@ -56,6 +57,8 @@ def build_model_monitor(builder, robot, *, params, full_pose, estimate, time_ste
         inputs.append(("tension_estimate", m))
     if measured:
         inputs.append(("tension_measured", m))
+    if reconciling:
+        inputs.append(("reconciled", 1))
     build_kernel_block(
         builder, ModelMonitorSolve(s["x"], s["out"], check, (reels, attachments, par, scratch),
                                    ok=OK, failed=failed),

@@ -808,8 +808,10 @@ def _start_geometry(scenario):
 def test_cables_EA_sets_the_start_stretch(tmp_path):
     """EA 41 kN (default 70 kN): the plant pays out L0 with L - L0 = T L0 / EA at the start
     distribution T (tension.py's unstretched_lengths, solved here by hand: L0 = L EA/(EA + T)),
-    the encoders log that L0, and the cables' elastic law gives back T from it."""
-    s = _dynamic(robot=_paper_with(tmp_path, "cables: {EA: 41000.0}"), lock_rotation=True)
+    the encoders log that L0 (encoder_zero: unstretched; homed ones read L), and the cables'
+    elastic law gives back T from it."""
+    s = _dynamic(robot=_paper_with(tmp_path, "cables: {EA: 41000.0}"), lock_rotation=True,
+                 encoder_zero="unstretched")
     L, _, T0 = _start_geometry(s)
     log = sim(s, 0.004)
     L0 = L * 41000.0 / (41000.0 + T0)
@@ -952,16 +954,17 @@ def test_dynamic_plant_max_length_residual_bounds_the_forward_kinematics_misfit(
     """The start's encoder lengths L0 = L EA/(EA + T) (unstretched) do not fit a rigid
     translating platform: forward_kinematics' best fit leaves 0.70 mm on cable 4 (re-measured
     for issue 18's recalibrated robot). A limit of 0.65 mm refuses them; 0.75 mm accepts (the
-    default 20 mm would accept both)."""
-    s = _dynamic()
+    default 20 mm would accept both). The encoders read unstretched here (`encoder_zero:
+    unstretched`); homed ones read the rigid lengths at the start, which fit exactly."""
+    s = _dynamic(encoder_zero="unstretched")
     L, _, T0 = _start_geometry(s)
     L0 = L * 70000.0 / (70000.0 + T0)
     with pytest.raises(KinematicsError, match=r"residual of 0\.700\d mm on cable 4"):
         forward_kinematics(scenario_robot(s), L0, max_residual=0.00065)
     forward_kinematics(scenario_robot(s), L0, max_residual=0.00075)
     with pytest.raises(KinematicsError, match=r"allowed 0\.65 mm"):
-        sim(_dynamic(max_length_residual=0.00065), 0.004)
-    sim(_dynamic(max_length_residual=0.00075), 0.004)
+        sim(_dynamic(max_length_residual=0.00065, encoder_zero="unstretched"), 0.004)
+    sim(_dynamic(max_length_residual=0.00075, encoder_zero="unstretched"), 0.004)
 
 
 def _first_step_angular_velocity(tmp_path, platform, force, name):
@@ -1444,6 +1447,93 @@ def test_hardware_resume_within_bounds_the_wait_for_the_bridge_after_a_stop(monk
                 simulator.AdvanceTo(0.2)
 
 
+@covers("Scenario.plant!HardwareReels.position_offset",
+        "Scenario.plant!HardwareReels.homing_min_tension")
+def test_hardware_homing_fields_reach_the_lengths_and_the_encoder_zero(monkeypatch):
+    """A bridge whose encoders read 0.1-0.7 m short of the start pose's rigid lengths, on a
+    scripted link (no sockets, no clock): position_offset brings its lengths to the rigid
+    ones (without it the start check refuses them), and the encoder zero takes off each
+    cable's stretch under the homing's tensions: the least-norm distribution holding the
+    platform's weight at P0 with every cable >= homing_min_tension = 8 N (checked here by its
+    balance and its floor), l T / (EA + T). The full pose's estimate starts on it."""
+    from pydrake.systems.analysis import Simulator
+
+    from cdpm_drake.config import homing_tensions
+    from cdpm_drake.diagram import block_output_port, build_diagram
+    from cdpm_drake.hardware.reels import ReelFault
+    from cdpm_drake.kernels.tension import gravity_wrench, wrench_matrix
+    from helpers_scripted_link import ScriptedLink, answering, install
+
+    robot = load_robot("paper_7cable")
+    rigid = cable_lengths(robot, np.array(P0))
+    offset = np.linspace(0.1, 0.7, robot.num_cables)
+    full = scenario_module.Controller(pose="full", tension_control=True)
+
+    def run(**fields):
+        scenario = dataclasses.replace(_hw(47100, tension_sensor="none", **fields),
+                                       controller=full)
+        diagram = build_diagram(scenario)
+        install(monkeypatch, diagram.GetSubsystemByName("reels"),
+                ScriptedLink(rigid - offset, answering))
+        simulator = Simulator(diagram)
+        simulator.Initialize()
+        simulator.AdvanceTo(0.01)
+        context = simulator.get_context()
+
+        def value(block, name):
+            port = block_output_port(diagram, block, name)
+            return port.Eval(port.get_system().GetMyContextFromRoot(context)).copy()
+
+        return scenario, {name: value(block, name) for block, name in (
+            ("reels", "cable_lengths"), ("encoder_zero", "homing_stretch"),
+            ("tension_distribution", "tension_estimate"))}
+
+    with pytest.raises(ReelFault, match="position_offset"):
+        run()
+    scenario, out = run(position_offset=offset.tolist(), homing_min_tension=8.0)
+    np.testing.assert_allclose(out["cable_lengths"], rigid, rtol=0, atol=1e-12)
+    T = homing_tensions(scenario, robot)
+    assert np.min(T) == pytest.approx(8.0, abs=1e-9)
+    np.testing.assert_allclose(wrench_matrix(robot, np.array(P0)) @ T,
+                               -gravity_wrench(robot.dynamics.mass), atol=1e-9)
+    EA = robot.dynamics.EA
+    np.testing.assert_allclose(out["homing_stretch"], rigid * T / (EA + T), rtol=0, atol=1e-15)
+    np.testing.assert_allclose(out["tension_estimate"], T, atol=1e-6)
+    # The default floor (5 N) is another distribution.
+    default = homing_tensions(dataclasses.replace(scenario, plant=HardwareReels()), robot)
+    assert np.max(np.abs(default - T)) > 1.0
+
+
+@covers("Scenario.plant!DynamicReels.encoder_zero",
+        "Scenario.plant!CanopenReels.homing_min_tension")
+def test_encoder_zero_and_canopen_homing_tension_reach_the_encoder_zero_block():
+    """encoder_zero: homed (default) puts the encoder zero after the dynamic plant for the
+    full pose with tension control, on the plant's start distribution (the controllers that
+    take the cables as rigid read the homed lengths as they are); unstretched leaves it out
+    (the plant then reads unstretched lengths: tests/systems/test_encoder_convention.py). A
+    !CanopenReels plant's homing tensions take its homing_min_tension as their floor."""
+    from cdpm_drake.config import DynamicReels, check_dynamic_reels, homing_tensions
+    from cdpm_drake.diagram import build_diagram
+    from cdpm_drake.hardware.canopen_config import CanopenReels
+
+    full = scenario_module.Controller(pose="full", tension_control=True)
+    homed = dataclasses.replace(_dynamic(), controller=full)
+    robot = scenario_robot(homed)
+    np.testing.assert_array_equal(homing_tensions(homed, robot),
+                                  check_dynamic_reels(homed, robot).tensions)
+    assert build_diagram(homed).HasSubsystemNamed("encoder_zero")
+    assert not build_diagram(_dynamic()).HasSubsystemNamed("encoder_zero")
+    unstretched = dataclasses.replace(_dynamic(encoder_zero="unstretched"), controller=full)
+    assert homing_tensions(unstretched, robot) is None
+    assert not build_diagram(unstretched).HasSubsystemNamed("encoder_zero")
+    for floor in (5.0, 9.0):
+        T = homing_tensions(base(plant=CanopenReels(homing_min_tension=floor)), robot)
+        assert np.min(T) == pytest.approx(floor, abs=1e-9)
+    with pytest.raises(ScenarioError, match="plant.encoder_zero"):
+        check_dynamic_reels(dataclasses.replace(homed, plant=DynamicReels(
+            encoder_zero="rigid")), robot)
+
+
 # --- bad values are refused by field name, for every checked field -------------------------------
 
 
@@ -1751,12 +1841,13 @@ def test_the_monitor_stops_a_cable_measured_above_its_overload():
 
 def _sensed(duration=0.1, damping=False, **plant):
     """exp2's start on the dynamic plant under a hand, full pose and tension control, the
-    damping off unless asked (then the sensor cannot change the motion: runs compare)."""
+    damping off unless asked (then the sensor cannot change the motion: runs compare; the
+    encoders unstretched, else the first measured tensions would set the encoders' zero)."""
     c = scenario_module.Controller(
         pose="full", tension_control=True,
         tension_damping=scenario_module.TensionDamping(enabled=damping))
     return sim(dataclasses.replace(
-        _dynamic(**plant), controller=c,
+        _dynamic(**({"encoder_zero": "unstretched"} | plant)), controller=c,
         operator=ScriptedOperator(times=[0.0, 0.05], forces=[[0.0, 0.0, 0.0], [6.0, -4.0, 3.0]])),
         duration)
 

@@ -23,27 +23,29 @@ def _robot():
 
 
 def _run(robot, frames, *, estimate=False, EA=70000.0, F=(0.0, 0.0, 0.0), measured=None,
-         overload=0.0, measured_slack=None):
+         overload=0.0, measured_slack=None, reconciled=None):
     """Feed frames [(lengths, p, T_est)] through the monitor tick by tick (its memory carried
     as the block's delay does), the hand force F (N) at every tick; measured: the measured
-    tensions (N, NaN: no reading) of every tick, read below 1 N as slack; returns (status,
+    tensions (N, NaN: no reading) of every tick, read below 1 N as slack; reconciled: the
+    encoder zero's flag at each tick (None: the monitor reads none); returns (status,
     cable, value, t*) of each tick."""
     m = robot.num_cables
-    s = monitor_sizes(m, False, estimate, measured is not None)
+    s = monitor_sizes(m, False, estimate, measured is not None, reconciled is not None)
     params = monitor_params(robot, EA=EA, slack_tension=2.0, slack_length=0.003,
                             fit_tolerance=0.01, unholdable=1.0, ticks=TICKS,
                             estimate=estimate, full_pose=False, rows=6, holdable=HOLDABLE,
                             slack_ticks=SLACK_TICKS,
                             measured_slack=(0.0 if measured is None else 1.0)
                             if measured_slack is None else measured_slack,
-                            overload=overload)
+                            overload=overload, reconciling=reconciled is not None)
     scratch = margin_scratch(m)
     memory = np.zeros(s["memory"])
     out = np.empty(s["out"])
     seen = []
-    for lengths, p, T_est in frames:
+    for k, (lengths, p, T_est) in enumerate(frames):
         x = np.concatenate([lengths, p, F] + ([T_est] if estimate else [])
-                           + ([measured] if measured is not None else []) + [memory])
+                           + ([measured] if measured is not None else [])
+                           + ([[reconciled[k]]] if reconciled is not None else []) + [memory])
         status = monitor_tick(robot.reels, robot.attachments, params, scratch, x, out)
         memory = out[s["memory_at"]:s["memory_at"] + s["memory"]].copy()
         seen.append((int(status), int(out[1]), float(out[2]), float(out[3])))
@@ -141,6 +143,32 @@ def test_lengths_far_from_the_pose_are_a_misfit_and_an_unholdable_hand_is_named(
     assert all(s == OK for s, *_ in seen[:-1])
     F, t = _force_with_t_star(robot, P, -0.9, -0.1)  # within 1 N of holding it
     assert all(s == OK for s, *_ in _run(robot, [(L, P, None)] * (2 * TICKS), F=F))
+
+
+def test_no_slack_is_judged_before_the_encoder_zero_is_reconciled():
+    """Homed encoders read each cable's stretch at the homing more than the unstretched
+    lengths the estimate takes until the encoder zero has reconciled them: an estimate of
+    -5 N on cable 7 (below -slack_tension) counts from the first reconciled tick only. At P
+    the weight alone leaves t* = 16.5 N: the slack must last SLACK_TICKS ticks; without the
+    flag it faults SLACK_TICKS ticks from the start, with it 10 ticks later; the lengths'
+    slack (no estimate: a cable 5 mm longer than the pose explains) waits alike."""
+    robot = _robot()
+    EA = 70000.0
+    T_bad = np.full(7, 20.0)
+    T_bad[6] = -5.0
+    bad = (pose_lengths(robot, P, np.eye(3)) / (1 + T_bad / EA), P, T_bad)
+    n = SLACK_TICKS + 12
+    flags = [0.0] * 10 + [1.0] * (n - 10)
+    for estimate, frame, cable in ((True, bad, 7), (False, None, 1)):
+        if frame is None:
+            L = pose_lengths(robot, P, np.eye(3))
+            L[0] += 0.005
+            frame = (L, P, None)
+        plain = [s for s, *_ in _run(robot, [frame] * n, estimate=estimate)]
+        waited = _run(robot, [frame] * n, estimate=estimate, reconciled=flags)
+        assert plain.index(SLACK) == SLACK_TICKS - 1
+        assert [s for s, *_ in waited].index(SLACK) == 10 + SLACK_TICKS - 1
+        assert waited[-1][1] == cable
 
 
 def test_fault_messages_name_the_cable_the_reason_and_the_duration():

@@ -21,7 +21,7 @@ from pydrake.multibody.plant import DiscreteContactApproximation, MultibodyPlant
 from pydrake.multibody.tree import (FixedOffsetFrame, PrismaticJoint, RotationalInertia,
                                     SpatialInertia)
 from pydrake.systems.framework import DiagramBuilder, LeafSystem
-from pydrake.systems.primitives import ConstantVectorSource, VectorLogSink
+from pydrake.systems.primitives import Adder, ConstantVectorSource, VectorLogSink
 
 from cdpm_drake.kernels.plant.cable_net import (cable_net_params, cable_net_step, cable_tensions, input_layout,
                       reel_step, state_layout, step_layout)
@@ -190,11 +190,12 @@ def build_dynamic_plant(scenario, robot, operator, start_tensions, *, log_truth=
         locked_rotation=R0 if cfg.lock_rotation else None,
         inertia_error=float(drive.inertia_error), friction_error=float(drive.friction_error)))
     # The drives' state [L0, reel speeds] in C++, fed back from the cables' step at the
-    # plant's rate; the encoders: L0 sampled at each control tick and held (the controller
-    # reads them at its own rate).
+    # plant's rate; the encoders: L0 plus their zero's offset (encoder_offset), sampled at
+    # each control tick and held (the controller reads them at its own rate).
     drives = builder.AddNamedSystem("reel_state", unit_delay(
         2 * m, h, np.concatenate([L0, np.zeros(m)])))
-    encoders = builder.AddNamedSystem("encoders", unit_delay(m, T, L0))
+    offset = encoder_offset(cfg, lengths0, L0)
+    encoders = builder.AddNamedSystem("encoders", unit_delay(m, T, L0 + offset))
     # One C++ Selector stacks the cables' inputs and routes the pieces of the drives' state
     # and of the cables' step (one evaluation of the Python step per plant step, whoever reads
     # which piece).
@@ -228,7 +229,14 @@ def build_dynamic_plant(scenario, robot, operator, start_tensions, *, log_truth=
     builder.Connect(route.GetOutputPort("generalized_force"),
                     mbp.get_applied_generalized_force_input_port())
     builder.Connect(route.GetOutputPort("next_reels"), drives.get_input_port())
-    builder.Connect(route.GetOutputPort("unstretched_lengths"), encoders.get_input_port())
+    if offset.any():
+        zero = builder.AddNamedSystem("encoder_offset", ConstantVectorSource(offset))
+        homed = builder.AddNamedSystem("encoders_homed", Adder(2, m))
+        builder.Connect(route.GetOutputPort("unstretched_lengths"), homed.get_input_port(0))
+        builder.Connect(zero.get_output_port(), homed.get_input_port(1))
+        builder.Connect(homed.get_output_port(), encoders.get_input_port())
+    else:
+        builder.Connect(route.GetOutputPort("unstretched_lengths"), encoders.get_input_port())
 
     builder.ExportInput(route.GetInputPort("reel_velocity_command"), "reel_velocity_command")
     builder.ExportOutput(encoders.get_output_port(), "cable_lengths")
@@ -259,6 +267,16 @@ def build_dynamic_plant(scenario, robot, operator, start_tensions, *, log_truth=
                           "reads": {k: sorted({index[src] for src, _, _ in pieces})
                                     for k, (_, pieces) in enumerate(outputs)}}
     return plant
+
+
+def encoder_offset(cfg, rigid0, L0) -> np.ndarray:
+    """What the dynamic plant's encoders add to each reel's payout of unstretched cable, m:
+    by cfg.encoder_zero (DynamicReels), homed: each cable's stretch at the start, rigid0 - L0
+    (its rigid length at the start pose less its unstretched length: the encoders read the
+    rigid lengths there, as a robot's after its homing); unstretched: 0."""
+    if cfg.encoder_zero == "homed":
+        return np.asarray(rigid0, dtype=float) - np.asarray(L0, dtype=float)
+    return np.zeros(len(L0))
 
 
 def tension_sensor(scenario, robot, tensions0):
@@ -391,5 +409,5 @@ def latest_ground_truth(diagram, context) -> dict | None:
 
 
 __all__ = ["CableNet", "GROUND_TRUTH", "build_dynamic_plant", "cable_tensions",
-           "ground_truth_log", "ground_truth_now", "latest_ground_truth", "plant_state_now",
-           "reel_step", "reserve_ground_truth", "unstretched_lengths"]
+           "encoder_offset", "ground_truth_log", "ground_truth_now", "latest_ground_truth",
+           "plant_state_now", "reel_step", "reserve_ground_truth", "unstretched_lengths"]
