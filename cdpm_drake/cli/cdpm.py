@@ -162,6 +162,9 @@ def build_parser() -> argparse.ArgumentParser:
                    help="the run's folder (holding ticks.bin and scenario.yaml), or "
                         "runs/<name> for its latest run")
 
+    from cdpm_drake.cli.calibrate import add_parser as calibrate_parser
+    calibrate_parser(sub)
+
     sub.add_parser("list", help="list the built-in robots, scenarios and sweeps",
                    description="List the robots, scenarios and sweeps shipped with the "
                                "package, one line each; use them by name from any "
@@ -289,6 +292,8 @@ def _command(name: str):
         from cdpm_drake.cli.recover import cmd_recover as command
     elif name == "list":
         from cdpm_drake.cli.listing import cmd_list as command
+    elif name == "calibrate":
+        from cdpm_drake.cli.calibrate import cmd_calibrate as command
     else:  # `emulate` is handed to the emulator before parsing
         raise AssertionError(f"no module for the command {name!r}")
     return command
