@@ -488,7 +488,9 @@ def _add_model_monitor(builder, blocks, resolved, lengths, p_WP, R_WP, F_H, T,
     estimate = "tension_distribution" in blocks
     params = monitor_params(
         robot, EA=robot.dynamics.EA if estimate else 0.0, slack_tension=mon.slack_tension,
-        slack_length=mon.slack_length, fit_tolerance=mon.fit_tolerance,
+        # A calibrated file's geometry uncertainty widens the length bounds it judges by.
+        slack_length=mon.slack_length + resolved.length_margin,
+        fit_tolerance=mon.fit_tolerance + resolved.length_margin,
         unholdable=mon.unholdable, ticks=mon.ticks, estimate=estimate,
         full_pose=R_WP is not None, rows=wrench_rows(robot),
         holdable=float(mon.holdable), slack_ticks=mon.slack_ticks,

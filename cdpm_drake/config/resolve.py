@@ -60,6 +60,10 @@ class ResolvedScenario:
     true_robot: typing.Any = None
     # Each encoder's zero error after the homing, m (m,); None: none.
     encoder_zero_error: typing.Any = None
+    # What the robot file's stated geometry uncertainty adds (a calibrated file's): to each
+    # pair's d_min, m (P,), and to the model monitor's length bounds, m; zeros without one.
+    d_min_margin: typing.Any = None
+    length_margin: float = 0.0
 
     @property
     def time_step(self) -> float:
@@ -180,6 +184,8 @@ def _resolve(scenario: Scenario, source: str) -> ResolvedScenario:
         params = interference_params(scenario, robot)
     check_safety(scenario)
     d_min = pair_d_min(scenario, robot)
+    d_min_margin, length_margin = uncertainty_margins(robot)
+    d_min = d_min + d_min_margin
     limits = scenario.limits
     plant = scenario.plant
     simulated = isinstance(plant, SimulatedReels)
@@ -207,7 +213,8 @@ def _resolve(scenario: Scenario, source: str) -> ResolvedScenario:
         # Read right after the robot and the operator were loaded from them.
         files={field: path.read_bytes() for field, path in scenario_files(scenario).items()},
         true_robot=true_robot if model_error else None,
-        encoder_zero_error=zero_error if model_error else None)
+        encoder_zero_error=zero_error if model_error else None,
+        d_min_margin=d_min_margin, length_margin=length_margin)
 
 
 def _or(value, default):
@@ -348,6 +355,27 @@ def _override_position(n: int, override: PairLogistic, robot: Robot) -> int:
         raise ScenarioError(
             f"interference.pairs[{n}].pair = {override.pair!r} is not a cable pair of "
             f"robot {robot.name!r}; valid pairs: {robot.pairs}") from None
+
+
+# A robot file that states its geometry's uncertainty (calibration: reels_std,
+# attachments_std) widens the margins by this many standard deviations (2: 97.7 % one-sided
+# for a Gaussian error).
+UNCERTAINTY_SIGMAS = 2.0
+
+
+def uncertainty_margins(robot: Robot) -> tuple[np.ndarray, float]:
+    """(what each watched pair's d_min gains, m (P,); what the model monitor's length bounds
+    gain, m) from the robot's stated geometry uncertainty: UNCERTAINTY_SIGMAS times a pair's
+    distance's standard deviation (the two cables' lines move independently, each by at most
+    the larger of its end points' standard deviations: the closest points are convex
+    combinations of the end points) and times the largest cable's. Zeros without one."""
+    P = robot.num_pairs
+    if robot.uncertainty is None:
+        return np.zeros(P), 0.0
+    sigma = robot.uncertainty.cable_std()
+    i, j = robot.pair_index
+    pair = UNCERTAINTY_SIGMAS * np.hypot(sigma[i], sigma[j])
+    return pair, float(UNCERTAINTY_SIGMAS * np.max(sigma))
 
 
 # d_min where the scenario leaves it out: this far under d_l, m (Logistic.d_min).

@@ -52,6 +52,10 @@ class CalibrationResult:
     offsets: np.ndarray           # (R, m) c_i per run: reading minus unstretched length, m
     reels_std: np.ndarray         # (m, 3) from the data alone (inf: not identified), m
     attachments_std: np.ndarray   # (m, 3); 0 where not fitted
+    # The same in the frame the gauge holds (relative to the homing pose and the file's
+    # orientation): how well the geometry is known relative to itself.
+    reels_std_in_frame: np.ndarray
+    attachments_std_in_frame: np.ndarray
     offsets_std: np.ndarray       # (R, m)
     positions: np.ndarray         # (K, 3) fitted poses
     rotations: np.ndarray         # (K, 3, 3)
@@ -295,11 +299,18 @@ def calibrate(reels, attachments, lengths, positions, rotations=None, *, tension
     H_post = J.T @ J
     H_post[:n_geo, :n_geo] += np.diag(1.0 / prior_std ** 2)
     std = np.sqrt(np.clip(np.diag(np.linalg.inv(schur(H_post))) * scale, 0.0, None))
+    # ... and in the frame the gauge holds (the homing pose and the file's orientation): how
+    # well the geometry is known relative to itself, what the cables' distances depend on.
+    H_post += G.T @ G
+    std_in_frame = np.sqrt(np.clip(np.diag(np.linalg.inv(schur(H_post))) * scale, 0.0, None))
     names = parameter_names(m, fit_attachments, runs)
     unidentified = [names[k] for k in range(n_geo) if not std[k] <= identified_std]
     resid = e - predicted(a, b, np.zeros(m), p, R, stretch) - c[run]
     result = CalibrationResult(
         reels=a, attachments=b, offsets=c, reels_std=std[:3 * m].reshape(m, 3),
+        reels_std_in_frame=std_in_frame[:3 * m].reshape(m, 3),
+        attachments_std_in_frame=(std_in_frame[at_b:at_b + 3 * m].reshape(m, 3)
+                                  if fit_attachments else np.zeros((m, 3))),
         attachments_std=(std[at_b:at_b + 3 * m].reshape(m, 3) if fit_attachments
                          else np.zeros((m, 3))),
         offsets_std=std[at_c:n_geo].reshape(runs, m), positions=p, rotations=R,

@@ -214,10 +214,12 @@ def robot_from_schema(schema: RobotSchema, source: str = "<code>") -> Robot:
 def geometry_uncertainty(cal, m: int, src: str):
     """A calibrated file's stated uncertainty as a GeometryUncertainty, None where the file
     states none. RobotError naming the field for a bad shape or value."""
-    if not cal.reels_std and not cal.attachments_std:
+    if not any((cal.reels_std, cal.attachments_std, cal.reels_std_in_frame,
+                cal.attachments_std_in_frame)):
         return None
     arrays = {}
-    for field in ("reels_std", "attachments_std"):
+    for field in ("reels_std", "attachments_std", "reels_std_in_frame",
+                  "attachments_std_in_frame"):
         value = getattr(cal, field)
         if not value:
             arrays[field] = np.zeros((m, 3))
@@ -227,5 +229,9 @@ def geometry_uncertainty(cal, m: int, src: str):
             raise RobotError(f"{src}: calibration.{field} must be {m} rows of 3 finite "
                              f"standard deviations >= 0 m (row i: cable i+1), got {value!r}")
         arrays[field] = arr
-    return GeometryUncertainty(reels_std=arrays["reels_std"],
-                               attachments_std=arrays["attachments_std"])
+    # The margins need the cables' uncertainty relative to each other: the in-frame one
+    # where the file states it.
+    relative = any((cal.reels_std_in_frame, cal.attachments_std_in_frame))
+    suffix = "_in_frame" if relative else ""
+    return GeometryUncertainty(reels_std=arrays["reels_std" + suffix],
+                               attachments_std=arrays["attachments_std" + suffix])

@@ -91,6 +91,12 @@ class CalibrationSchema:
     # cable i+1); empty: not stated.
     reels_std: list[list[float]] = dataclasses.field(default_factory=list)
     attachments_std: list[list[float]] = dataclasses.field(default_factory=list)
+    # The same relative to the frame the homing pose and the file's orientation define (a
+    # translating platform's lengths cannot see a turn of that whole frame): how well the
+    # cables are known relative to each other, which is what their distances depend on and
+    # what the margins use. Empty: as above.
+    reels_std_in_frame: list[list[float]] = dataclasses.field(default_factory=list)
+    attachments_std_in_frame: list[list[float]] = dataclasses.field(default_factory=list)
     # Each encoder's offset found (reading minus the unstretched length at the homing), m,
     # and its standard deviation, m (the first run's).
     encoder_offsets: list[float] = dataclasses.field(default_factory=list)

@@ -163,6 +163,7 @@ def calibrate_runs(paths, robot_ref, settings: CalibrationSettings = Calibration
     inverse = np.argsort(order0)
     result.attachments = result.attachments[inverse]
     result.attachments_std = result.attachments_std[inverse]
+    result.attachments_std_in_frame = result.attachments_std_in_frame[inverse]
     return CalibrationRun(robot=robot, robot_path=robot_path, sources=sources, result=result,
                           poses=K, full_pose=bool(full), stretch=bool(stretch),
                           problems=_problems(robot, result, settings))
@@ -213,7 +214,7 @@ def report(cal: CalibrationRun, settings: CalibrationSettings) -> list[str]:
              f", {'measured tensions for the stretch' if cal.stretch else 'no stretch'}; "
              f"encoder noise {settings.encoder_std * 1e3:g} mm; identified: standard "
              f"deviation <= {settings.identified_std * 1e3:g} mm"]
-    lines.append("cable  reel exit moved (mm)       std (mm)  offset (mm)  std   "
+    lines.append("cable  reel exit moved (mm)       std (mm) in frame  offset (mm)  std   "
                  "misfit before/after (mm RMS)")
     unidentified = set(res.unidentified)
     runs = res.offsets.shape[0]
@@ -224,7 +225,8 @@ def report(cal: CalibrationRun, settings: CalibrationSettings) -> list[str]:
         offset_star = "*" if offset in unidentified else ""
         lines.append(
             f"{i + 1:>5}  [{d[0]:+6.2f} {d[1]:+6.2f} {d[2]:+6.2f}]  "
-            f"{np.max(res.reels_std[i]) * 1e3:7.2f}{reel_star:1}  "
+            f"{np.max(res.reels_std[i]) * 1e3:7.2f}{reel_star:1} "
+            f"{np.max(res.reels_std_in_frame[i]) * 1e3:7.2f}  "
             f"{res.offsets[0, i] * 1e3:+10.3f}  {res.offsets_std[0, i] * 1e3:5.2f}"
             f"{offset_star:1}  {res.residual_before[i] * 1e3:7.3f} / "
             f"{res.residual_after[i] * 1e3:.3f}")
@@ -242,7 +244,9 @@ def report(cal: CalibrationRun, settings: CalibrationSettings) -> list[str]:
     if not cal.full_pose:
         lines.append("a translating platform's lengths cannot see a turn of the whole base "
                      "frame about the homing pose: it is held at the file's, so the reel "
-                     "exits' standard deviations include the file's own uncertainty of it")
+                     "exits' standard deviations include the file's own uncertainty of it; "
+                     "'in frame': relative to that frame, how well the cables are known "
+                     "relative to each other (what their distances, and the margins, use)")
     return lines
 
 
@@ -281,6 +285,10 @@ def calibrated_yaml(cal: CalibrationRun, settings: CalibrationSettings) -> str:
         "reels_std": rows(res.reels_std, 7),
         "attachments_std": (rows(res.attachments_std, 7) if res.fit_attachments else
                             [[0.0, 0.0, 0.0]] * cal.robot.num_cables),
+        "reels_std_in_frame": rows(res.reels_std_in_frame, 7),
+        "attachments_std_in_frame": (rows(res.attachments_std_in_frame, 7)
+                                     if res.fit_attachments else
+                                     [[0.0, 0.0, 0.0]] * cal.robot.num_cables),
         "encoder_offsets": [round(float(x), 7) for x in res.offsets[0]],
         "encoder_offsets_std": [round(float(x), 7) for x in res.offsets_std[0]],
         "residual_before": [round(float(x), 7) for x in res.residual_before],
@@ -288,7 +296,9 @@ def calibrated_yaml(cal: CalibrationRun, settings: CalibrationSettings) -> str:
         "not_identified": list(res.unidentified),
     }
     if not res.fit_attachments and cal.robot.uncertainty is not None:
-        raw["calibration"]["attachments_std"] = rows(cal.robot.uncertainty.attachments_std, 7)
+        # Not fitted: the file's own stated uncertainty of them stands.
+        for key in ("attachments_std", "attachments_std_in_frame"):
+            raw["calibration"][key] = rows(cal.robot.uncertainty.attachments_std, 7)
     head = (f"# {cal.robot.name}, calibrated by `cdpm calibrate` from {len(cal.sources)} "
             f"run(s) ({cal.poses} poses) on {raw['calibration']['created']}; the original: "
             f"{cal.robot_path}.\n# Its comments are not kept; the calibration section says "
