@@ -16,6 +16,12 @@ def cmd_calibrate(args) -> int:
     from cdpm_drake.runs.calibrate import (CalibrationSettings, calibrate_runs, calibrated_path,
                                            calibrated_yaml, report)
 
+    if args.write_motion is not None:
+        return _write_motion(args)
+    if not args.runs:
+        raise CliError("give the runs to calibrate from (RUN ...), or --write-motion FILE "
+                       "for a calibration motion of the robot")
+
     for name in ("encoder_std", "reels_prior", "attachments_prior", "offsets_prior",
                  "min_spacing", "max_speed"):
         value = getattr(args, name)
@@ -56,6 +62,31 @@ def cmd_calibrate(args) -> int:
     return 0
 
 
+def _write_motion(args) -> int:
+    """`--write-motion FILE`: a calibration motion scenario for the robot."""
+    import numpy as np
+
+    from cdpm_drake.robot import load_robot
+    from cdpm_drake.runs.calibrate import calibration_motion_yaml
+
+    robot = load_robot(args.robot)
+    start = None
+    if args.start is not None:
+        start = np.asarray(args.start, dtype=float)
+        if not robot.workspace.contains(start):
+            raise CliError(f"--start {args.start!r} m is outside robot {robot.name!r}'s "
+                           f"workspace box (lower {robot.workspace.lower.tolist()}, upper "
+                           f"{robot.workspace.upper.tolist()})")
+    out = args.write_motion
+    if out.exists() and not args.force:
+        raise CliError(f"{str(out)!r} exists; give another file, or --force to replace it")
+    check_writable_dir(out.parent if str(out.parent) else Path("."), "--write-motion's folder")
+    ref = args.robot if not Path(args.robot).suffix else str(Path(args.robot).resolve())
+    out.write_text(calibration_motion_yaml(ref, robot, start=start))
+    print(f"calibration motion: {out} (cdpm simulate {out}, or cdpm run it against the robot)")
+    return 0
+
+
 def add_parser(sub) -> None:
     p = sub.add_parser(
         "calibrate", help="fit the robot file's geometry to runs' encoder lengths",
@@ -70,8 +101,15 @@ def add_parser(sub) -> None:
                     "writing nothing, logs of another robot, too few poses, a misfit above "
                     "the encoders' noise, a correction beyond the prior. "
                     "docs/calibration.md gives the procedure.")
-    p.add_argument("runs", nargs="+", type=Path, metavar="RUN",
+    p.add_argument("runs", nargs="*", type=Path, metavar="RUN",
                    help="a run folder, its log.npz, or runs/<name> (its latest run)")
+    p.add_argument("--write-motion", type=Path, default=None, metavar="FILE",
+                   help="instead of fitting: write a calibration motion scenario for --robot "
+                        "(poses spread over its workspace box where its cables hold the "
+                        "platform), to run first")
+    p.add_argument("--start", type=float, nargs=3, default=None, metavar=("X", "Y", "Z"),
+                   help="--write-motion's start (the homing pose), m (default: the box's "
+                        "centre)")
     p.add_argument("--robot", required=True,
                    help="the robot file the runs used (a built-in name or a YAML path)")
     p.add_argument("--out", type=Path, default=None,

@@ -42,6 +42,11 @@ class SimulatedReels:
     robot: str = ""
     # Seeded differences from that robot (on top of `robot`).
     model_error: ModelError = dataclasses.field(default_factory=ModelError)
+    # Largest residual of the controller's forward kinematics on the encoder lengths, m,
+    # above which the run stops (as max_length_residual of the real reels). None: 1 um on the
+    # exact plant; with model error, the real reels' default (5 mm plus the stretch of the
+    # longest cable at the tension ceiling).
+    max_length_residual: typing.Optional[float] = None
 
 
 @dataclasses.dataclass

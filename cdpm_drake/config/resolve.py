@@ -192,7 +192,10 @@ def _resolve(scenario: Scenario, source: str) -> ResolvedScenario:
     true_robot, zero_error = plant_robot(scenario, robot)
     model_error = true_robot is not robot or bool(np.any(zero_error))
     fk_residual = 1e-6 if simulated else float(getattr(plant, "max_length_residual", 0.005))
-    if simulated and model_error:
+    if simulated and plant.max_length_residual is not None:
+        check_positive(plant.max_length_residual, "plant.max_length_residual")
+        fk_residual = float(plant.max_length_residual)
+    elif simulated and model_error:
         # The encoders no longer fit the file's geometry exactly: the robot's bound, as on
         # the real reels (5 mm plus the stretch of the longest cable at the ceiling).
         from cdpm_drake.robot.stretch import derived_length_residual

@@ -87,7 +87,7 @@ def _skew(w):
                      np.stack([-w[..., 1], w[..., 0], z], -1)], -2)
 
 
-def _exp(phi):
+def rotation_exp_batch(phi):
     """(K, 3) rotation vectors -> (K, 3, 3) rotations (Rodrigues)."""
     theta = np.linalg.norm(phi, axis=-1)[..., None, None]
     K = _skew(phi)
@@ -269,7 +269,7 @@ def calibrate(reels, attachments, lengths, positions, rotations=None, *, tension
             poses = step[n_geo:].reshape(free.size, dof)
             p[free] += poses[:, :3]
             if full:
-                R[free] = _exp(poses[:, 3:]) @ R[free]
+                R[free] = rotation_exp_batch(poses[:, 3:]) @ R[free]
             r_new, J_new = jacobian()
             new = cost(r_new)
             if new <= current:
@@ -341,3 +341,46 @@ def select_poses(times, positions, lengths, *, speeds=None, min_spacing=0.03,
         keep = np.linspace(0, len(chosen) - 1, max_poses).round().astype(int)
         chosen = [chosen[i] for i in keep]
     return np.array(chosen, dtype=int)
+
+
+def calibration_tour(robot, start, *, poses: int = 16, floor: float = 8.0, grid: int = 7,
+                     inset: float = 0.12):
+    """Waypoints (poses + 1, 3) m for a calibration motion from `start`: `poses` points
+    spread over the workspace box (inset by `inset` of its size on each side), each where the
+    cables hold the level platform with every tension at least `floor` N (t*, statics.py),
+    picked farthest-first (the spread identifies the geometry) and visited nearest-first (a
+    short tour). RobotError-free: fewer points where fewer hold."""
+    from cdpm_drake.robot.statics import holding_tension
+
+    lo, hi = robot.workspace.lower, robot.workspace.upper
+    axes = [np.linspace(l + inset * (h - l), h - inset * (h - l), grid) for l, h in zip(lo, hi)]
+    candidates = np.stack(np.meshgrid(*axes, indexing="ij"), -1).reshape(-1, 3)
+    held = candidates[holding_tension(robot, candidates) >= floor]
+    chosen = [np.asarray(start, dtype=float)]
+    for _ in range(min(poses, len(held))):
+        d = np.min(np.linalg.norm(held[:, None] - np.array(chosen)[None], axis=2), axis=1)
+        chosen.append(held[np.argmax(d)])
+    points = np.array(chosen)
+    order, left = [0], set(range(1, len(points)))
+    while left:
+        last = points[order[-1]]
+        k = min(left, key=lambda j: (np.linalg.norm(points[j] - last), j))
+        order.append(k)
+        left.remove(k)
+    return points[order]
+
+
+def tour_schedule(points, *, speed: float = 0.25, shortest: float = 2.5, dwell: float = 2.0):
+    """(waypoints, times) of a spring hand that moves the platform along `points` at about
+    `speed` m/s (each leg at least `shortest` s) and holds it `dwell` s at each: every point
+    twice, at its arrival and its departure."""
+    waypoints, times = [points[0], points[0]], [0.0, 1.0]
+    t = 1.0
+    for a, b in zip(points[:-1], points[1:]):
+        t += max(shortest, float(np.linalg.norm(b - a)) / speed)
+        waypoints.append(b)
+        times.append(round(t, 1))
+        t += dwell
+        waypoints.append(b)
+        times.append(round(t, 1))
+    return np.round(np.array(waypoints), 2), times

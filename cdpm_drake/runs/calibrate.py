@@ -304,3 +304,60 @@ def calibrated_yaml(cal: CalibrationRun, settings: CalibrationSettings) -> str:
             f"{cal.robot_path}.\n# Its comments are not kept; the calibration section says "
             "what the fit found and how well the data knew it (docs/calibration.md).\n")
     return head + yaml.safe_dump(raw, sort_keys=False, default_flow_style=None, width=100)
+
+
+MOTION_HEADER = """\
+# A calibration motion for robot {name!r} (written by `cdpm calibrate --write-motion`): a
+# person (a spring hand) leads the platform slowly through {count} poses spread over its
+# workspace box, each held {dwell:g} s, so that `cdpm calibrate` can fit the reel exits and the
+# encoder offsets to the redundant cable lengths (docs/calibration.md). The poses keep
+# t* >= {floor:g} N (the cables hold the platform there with margin) and the cables unswapped;
+# the safety filter stays on. Run it against the robot with `cdpm run` (with the robot's
+# plant), or in simulation against a robot that differs from its file (plant: model_error,
+# or plant.robot).
+"""
+
+
+def calibration_motion_yaml(robot_ref: str, robot, *, start=None, poses: int = 16,
+                            floor: float = 8.0, dwell: float = 2.0, plant: str = "") -> str:
+    """A scenario YAML that tours `robot` for a calibration (calibration_tour,
+    tour_schedule); `robot_ref` is how the scenario names the robot, `plant` the plant's YAML
+    (default: the kinematic plant)."""
+    from cdpm_drake.robot.calibration import calibration_tour, tour_schedule
+
+    start = robot.workspace.center if start is None else np.asarray(start, dtype=float)
+    points = calibration_tour(robot, start, poses=poses, floor=floor)
+    waypoints, times = tour_schedule(points, dwell=dwell)
+    lines = [MOTION_HEADER.format(name=robot.name, count=len(points) - 1, dwell=dwell,
+                                  floor=floor).rstrip("\n"),
+             f"name: calibration_motion",
+             f'description: "A slow tour of {len(points) - 1} poses through the workspace, '
+             f'each held {dwell:g} s, for cdpm calibrate"',
+             f"robot: {robot_ref}",
+             f"initial_position: {np.round(start, 4).tolist()}",
+             f"duration: {round(times[-1] + 1.0, 1)}",
+             "time_step: 0.002",
+             "admittance: {mass: 6.25, damping: 6.25}",
+             "interference:",
+             "  default: {d_l: 0.05, d_u: 0.061, F_u: 2.0, eps: 0.1}",
+             "operator: !SpringHandOperator",
+             "  waypoints:"]
+    lines += [f"    - {[float(x) for x in w]}" for w in waypoints]
+    lines += [f"  times: {[float(t) for t in times]}",
+              "  stiffness: 60.0",
+              "  damping: 6.0",
+              "  max_force: 5.0",
+              "# The file's geometry is what is uncertain here: a file off by centimetres "
+              "leaves lengths",
+              "# millimetres to centimetres off its poses, which the model monitor would take "
+              "for slack",
+              "# (3 mm) or a broken model (10 mm), and the forward kinematics for an "
+              "inconsistent robot",
+              "# (5 mm and the stretch). These bounds are widened to what a file measured "
+              "with a tape may",
+              "# be off (the plant's max_length_residual: set it on your robot's plant too); "
+              "the motion",
+              "# is slow and the hand gentle (5 N at most).",
+              "model_monitor: {slack_length: 0.02, fit_tolerance: 0.04}",
+              f"plant: {plant or '!SimulatedReels {max_length_residual: 0.04}'}"]
+    return "\n".join(lines) + "\n"

@@ -7,8 +7,8 @@ import numpy as np
 import pytest
 
 from cdpm_drake.robot import load_robot
-from cdpm_drake.robot.calibration import (CalibrationError, CalibrationPrior, _exp, calibrate,
-                                          predicted, select_poses)
+from cdpm_drake.robot.calibration import (CalibrationError, CalibrationPrior, calibrate,
+                                          predicted, rotation_exp_batch, select_poses)
 
 
 def _skew(w):
@@ -26,14 +26,14 @@ def _synthetic(robot, *, K=40, reels_std=0.01, attachments_std=0.0, offsets_std=
     P = robot.workspace.center + rng.uniform(-1, 1, (K, 3)) * (hi - lo) * spread
     phi = rng.normal(0, rotation_std, (K, 3)) if rotation_std else np.zeros((K, 3))
     phi[0] = 0.0
-    R = _exp(phi)
+    R = rotation_exp_batch(phi)
     stretch = np.ones((K, m)) if tensions is None else 1.0 / (1.0 + tensions / EA)
     e = predicted(truth["reels"], truth["attachments"], truth["offsets"], P, R, stretch)
     e = e + rng.normal(0, noise, e.shape)
     # First guesses as a controller on the file would have them: 1 cm and 10 mrad off.
     guess_p = P + rng.normal(0, 0.01, P.shape)
     guess_p[0] = P[0]
-    guess_R = _exp(phi + (rng.normal(0, 0.01, phi.shape) if rotation_std else 0.0))
+    guess_R = rotation_exp_batch(phi + (rng.normal(0, 0.01, phi.shape) if rotation_std else 0.0))
     guess_R[0] = R[0]
     return truth, e, P, R, guess_p, guess_R
 
@@ -54,7 +54,7 @@ def test_a_turn_about_the_homing_pose_changes_no_length_of_a_translating_platfor
     about p0 keeps ||a_i - p_k - b_i||."""
     robot = load_robot("paper_7cable")
     p = robot.workspace.center + np.array([[0.0, 0.0, 0.0], [0.3, -0.2, 0.1], [-0.4, 0.5, 0.3]])
-    Q = _exp(np.array([[0.02, -0.01, 0.03]]))[0]
+    Q = rotation_exp_batch(np.array([[0.02, -0.01, 0.03]]))[0]
     a2 = p[0] + (robot.reels - robot.attachments - p[0]) @ Q.T + robot.attachments
     p2 = p[0] + (p - p[0]) @ Q.T
     I = np.broadcast_to(np.eye(3), (3, 3, 3))

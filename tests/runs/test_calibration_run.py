@@ -180,3 +180,23 @@ def test_a_calibrated_file_widens_the_pair_floor_by_its_uncertainty(calibration)
     np.testing.assert_allclose(resolved.d_min_margin, expected, rtol=1e-9)
     plain = resolve_scenario(load_scenario("exp2_interaction"))
     np.testing.assert_allclose(resolved.d_min, plain.d_min + expected, rtol=1e-12)
+
+
+def test_the_shipped_calibration_motion_is_the_generators(tmp_path):
+    """calibration_motion.yaml is what `cdpm calibrate --write-motion` writes for the built-in
+    robot from its start; its poses are held by the cables (t* >= 8 N at each, statics.py)
+    and spread over the box."""
+    from cdpm_drake.data import SCENARIOS_DIR
+    from cdpm_drake.robot import load_robot
+    from cdpm_drake.robot.statics import holding_tension
+
+    out = tmp_path / "motion.yaml"
+    assert cdpm(["calibrate", "--write-motion", str(out), "--robot", "paper_7cable",
+                 "--start", "1.75", "2.4", "1.35"]) == 0
+    assert out.read_text() == (SCENARIOS_DIR / "calibration_motion.yaml").read_text()
+    scenario = load_scenario(str(out))
+    points = np.asarray(scenario.operator.waypoints)
+    robot = load_robot("paper_7cable")
+    assert holding_tension(robot, points).min() >= 8.0 - 1e-9
+    span = points.max(axis=0) - points.min(axis=0)
+    assert np.all(span >= 0.6 * (robot.workspace.upper - robot.workspace.lower))
