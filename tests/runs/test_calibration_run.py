@@ -200,3 +200,14 @@ def test_the_shipped_calibration_motion_is_the_generators(tmp_path):
     assert holding_tension(robot, points).min() >= 8.0 - 1e-9
     span = points.max(axis=0) - points.min(axis=0)
     assert np.all(span >= 0.6 * (robot.workspace.upper - robot.workspace.lower))
+
+
+def test_calibrate_refuses_a_correction_beyond_the_prior(calibration, tmp_path, capsys):
+    """A file stated to be right within 1 mm per axis (--reels-prior 0.001) whose exits are
+    off by ~1 cm: the fit's corrections exceed 4 x that, named per reel; nothing written."""
+    tmp, run, _ = calibration
+    out = tmp_path / "x.yaml"
+    code = cdpm(["calibrate", str(run), "--robot", "paper_7cable", "--out", str(out),
+                 "--reels-prior", "0.001"])
+    err = capsys.readouterr().err
+    assert code == 1 and "more than 4 x the prior's 1 mm" in err and not out.exists()
