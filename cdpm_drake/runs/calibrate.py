@@ -191,9 +191,12 @@ def _problems(robot, result, settings) -> list:
                             f"{settings.max_prior_sigmas:g} x the prior's {prior * 1e3:g} mm "
                             "per axis allows: check the file (a wrong row or sign) or widen "
                             "the prior")
-    names = parameter_names(robot.num_cables, result.fit_attachments, result.offsets.shape[0])
-    if len(result.unidentified) == len(names):
-        problems.append("the data identify no parameter: " + _smallest(result))
+    # The data must have taught something: some parameter known, in the frame the gauge
+    # holds, to better than half of what the file claimed.
+    learnt = [np.min(result.reels_std_in_frame) < 0.5 * settings.prior.reels_std,
+              np.min(result.offsets_std) < 0.5 * settings.prior.offsets_std]
+    if not any(learnt):
+        problems.append("the data tell nothing the file did not: " + _smallest(result))
     return problems
 
 

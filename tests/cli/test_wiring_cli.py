@@ -933,7 +933,7 @@ def test_calibrate_writes_where_asked_and_only_then(calibration_log, tmp_path, c
         "calibrate --offsets-prior", "calibrate --max-poses", "calibrate --min-spacing",
         "calibrate --max-speed", "calibrate --attachments")
 def test_calibrate_settings_reach_the_fit(calibration_log, spy_settings, capsys):
-    # (40 poses of 0.2 mm readings identify too little to write: exit 1, report printed.)
+    # (40 poses of 0.2 mm readings may identify too little to write: exit 1 then.)
     assert cdpm("calibrate", calibration_log, "--robot", "paper_7cable", "--dry-run",
                 "--encoder-std", "2e-4", "--reels-prior", "0.03", "--attachments-prior",
                 "0.01", "--offsets-prior", "0.02", "--max-poses", "40", "--min-spacing",
