@@ -126,7 +126,7 @@ class Sensor:
 
 @dataclasses.dataclass
 class TensionDamping:
-    """The tension damping block between the Jacobian mapping and the reels (issue 31): each
+    """The tension damping block between the Jacobian mapping and the reels: each
     reel pays out cable in proportion to its measured tension's high-passed part, a damper in
     series with its cable. Its gain and filter come from the robot's stiffness and mass and
     the loop's delays (kernels/tension_damping.damping_gains), not from this file."""

@@ -50,7 +50,7 @@ class HardwareReels:
     # the run the controller stops. None (the default): derived from the robot's cables, 5 mm
     # (the encoders' zero, the geometry's errors) plus the stretch controller.max_tension gives
     # the longest cable in the workspace box, which the translating, inextensible model sees
-    # as misfit (robot.stretch.derived_length_residual; 12.3 mm on paper_7cable).
+    # as misfit (robot.stretch.derived_length_residual; docs/on_the_robot.md gives exp2's).
     max_length_residual: typing.Optional[float] = None
     # Copies of the final zero-velocity, enable-off command sent by shutdown() (UDP may
     # drop one; the bridge ignores the repeats' identical content).

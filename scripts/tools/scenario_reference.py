@@ -27,7 +27,7 @@ OUT = REPO / "docs" / "scenario_reference.md"
 
 # Units as the comments write them, longest first so that "m/s^2" is not read as "m".
 UNITS = ("m/s of cable", "m/s^2", "m/s", "N s/m", "N/m", "kg m^2", "kg", "rad/s", "rad",
-         "1/s", "samples", "ticks", "N", "m", "s")
+         "1/s", "Hz", "samples", "ticks", "N", "m", "s")
 _UNIT_RE = re.compile(r"(?:,|\bin)\s+(" + "|".join(re.escape(u) for u in UNITS)
                       + r")(?=[\s.,;:()]|$)")
 

@@ -16,6 +16,17 @@ FLAT = " ".join(README.split())  # line breaks fall anywhere in prose
 ON_THE_ROBOT = " ".join(page("on_the_robot").split())
 
 
+def test_the_readme_names_the_drake_release_pyproject_pins():
+    import re
+    from pathlib import Path
+
+    pyproject = (Path(__file__).resolve().parents[2] / "pyproject.toml").read_text()
+    pin = re.search(r'"(drake>=[0-9.]+)"', pyproject).group(1)
+    assert f"`{pin}`" in FLAT, pin
+    # The platforms below are that release's wheels: one version in both places.
+    assert len(set(re.findall(r"drake>=([0-9.]+)", FLAT))) == 1
+
+
 def test_the_readme_states_the_supported_platforms():
     # Drake 1.51's wheels on PyPI: manylinux_2_34_x86_64 for cp310..cp314, macosx_15_0_arm64
     # for cp313 and cp314 (nothing for Windows, Linux arm64 or Intel Macs).
