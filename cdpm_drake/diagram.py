@@ -24,7 +24,8 @@ from cdpm_drake.systems.kernel_system import KERNEL_BLOCK_MAIN
 from cdpm_drake.systems.kinetostatic_force import build_kinetostatic_force
 from cdpm_drake.systems.model_monitor import build_model_monitor
 from cdpm_drake.systems.orientation_hold import build_orientation_hold
-from cdpm_drake.systems.plants.simulated_reels import add_measured_force, add_simulated_world
+from cdpm_drake.systems.plants.simulated_reels import (add_encoder_offset, add_measured_force,
+                                                       add_simulated_world)
 from cdpm_drake.systems.pose_forward_kinematics import build_pose_forward_kinematics
 from cdpm_drake.systems.pose_jacobian_mapping import build_pose_jacobian_mapping
 from cdpm_drake.systems.posed_interference_force import build_posed_interference_force
@@ -528,7 +529,9 @@ def _add_model_monitor(builder, blocks, resolved, lengths, p_WP, R_WP, F_H, T,
     slacks = tensions is not None and slack_from_tensions and estimate
     params = monitor_params(
         robot, EA=robot.dynamics.EA if estimate else 0.0, slack_tension=mon.slack_tension,
-        slack_length=mon.slack_length, fit_tolerance=mon.fit_tolerance,
+        # A calibrated file's geometry uncertainty widens the length bounds it judges by.
+        slack_length=mon.slack_length + resolved.length_margin,
+        fit_tolerance=mon.fit_tolerance + resolved.length_margin,
         unholdable=mon.unholdable, ticks=mon.ticks, estimate=estimate,
         full_pose=R_WP is not None, rows=wrench_rows(robot),
         holdable=float(mon.holdable), slack_ticks=mon.slack_ticks,
@@ -666,8 +669,10 @@ def make_plant(scenario: Scenario | ResolvedScenario, robot=None):
         return build_simulated_plant(resolved)
     if isinstance(cfg, DynamicReelsConfig):
         from cdpm_drake.systems.plants.dynamic_plant import build_dynamic_plant
-        return build_dynamic_plant(resolved.scenario, resolved.robot, resolved.operator,
-                                   check_dynamic_reels(resolved.scenario, resolved.robot).tensions)
+        true = resolved.plant_robot
+        return build_dynamic_plant(resolved.scenario, true, resolved.operator,
+                                   check_dynamic_reels(resolved.scenario, true).tensions,
+                                   encoder_offset=encoder_homing_offset(resolved))
     from cdpm_drake.hardware.config import HardwareReels
     from cdpm_drake.hardware.reels import HardwareReelsSystem
 
@@ -680,11 +685,28 @@ def make_plant(scenario: Scenario | ResolvedScenario, robot=None):
     raise TypeError(f"unknown plant {type(cfg).__name__!r}")
 
 
+def encoder_homing_offset(resolved: ResolvedScenario):
+    """What a homing at the start pose adds to the plant's encoder readings when the plant
+    plays another robot than the controller's (plant.robot, plant.model_error): the homing
+    writes the controller's rigid lengths of the start pose where the plant's are, plus each
+    encoder's zero error. None without model error."""
+    if resolved.true_robot is None:
+        return None
+    from cdpm_drake.kernels.pose import pose_lengths
+    from cdpm_drake.kernels.rotation import rotation_from_rpy
+
+    scenario = resolved.scenario
+    p0 = np.asarray(scenario.initial_position, dtype=float)
+    R0 = rotation_from_rpy(getattr(scenario.plant, "initial_rpy", [0.0, 0.0, 0.0]))
+    return (pose_lengths(resolved.robot, p0, R0) - pose_lengths(resolved.true_robot, p0, R0)
+            + resolved.encoder_zero_error)
+
+
 def build_simulated_plant(scenario: Scenario | ResolvedScenario, robot=None) -> Diagram:
     """Simulated reels, the simulated person and sensor noise: the world, with the same ports
     as the real reels."""
     resolved = resolve_scenario(scenario)
-    scenario, robot = resolved.scenario, resolved.robot
+    scenario, robot = resolved.scenario, resolved.plant_robot
     cfg = scenario.plant
     T = scenario.time_step
     builder = DiagramBuilder()
@@ -694,7 +716,13 @@ def build_simulated_plant(scenario: Scenario | ResolvedScenario, robot=None) -> 
         builder, robot, resolved.operator, initial_position=scenario.initial_position,
         time_step=T, time_constant=cfg.time_constant, max_reel_speed=resolved.max_reel_speed)
     builder.ExportInput(command, "reel_velocity_command")
-    builder.ExportOutput(world["cable_lengths"], "cable_lengths")
+    builder.ExportOutput(add_encoder_offset(builder, world["cable_lengths"],
+                                            encoder_homing_offset(resolved)), "cable_lengths")
+    if resolved.true_robot is not None:
+        # The controller's estimate is no longer the truth: log the true pose (the
+        # translating platform's, level) as the dynamic plant does.
+        from cdpm_drake.systems.plants.dynamic_plant import add_pose_truth_log
+        add_pose_truth_log(builder, world["p_WP_true"], T)
     force = world["hand_force"]
     add_measured_force(builder, force, scenario, T)
     # Kinematic reels have no tensions: the sensor reads NaN.

@@ -167,6 +167,9 @@ def build_parser() -> argparse.ArgumentParser:
                    help="the run's folder (holding ticks.bin and scenario.yaml), or "
                         "runs/<name> for its latest run")
 
+    from cdpm_drake.cli.calibrate import add_parser as calibrate_parser
+    calibrate_parser(sub)
+
     sub.add_parser("warm", help="compile every kernel the commands need, once (numba)",
                    description="Compile the per-tick math (numba kernels) of every command "
                                "in one step, a line per group with its time, so that no "
@@ -299,6 +302,8 @@ def _command(name: str):
         from cdpm_drake.cli.recover import cmd_recover as command
     elif name == "list":
         from cdpm_drake.cli.listing import cmd_list as command
+    elif name == "calibrate":
+        from cdpm_drake.cli.calibrate import cmd_calibrate as command
     elif name == "warm":
         from cdpm_drake.cli.warm import cmd_warm as command
     else:  # `emulate` is handed to the emulator before parsing

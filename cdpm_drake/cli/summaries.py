@@ -184,6 +184,10 @@ def safety_filter_summary(log) -> str:
         text += _closest_to_d_min(log)
     if np.isfinite(kappa).any():
         text += f"; smallest kinetostatic margin {kappa[np.isfinite(kappa)].min():.2f} N"
+    if "d_min_uncertainty" in log:
+        extra = 1000 * np.asarray(log["d_min_uncertainty"], dtype=float)
+        text += (f"; the robot file's stated geometry uncertainty raised d_min by "
+                 f"{format_number(extra.min())}-{format_number(extra.max())} mm (2 sigma)")
     return text
 
 

@@ -11,6 +11,25 @@ import typing
 
 
 @dataclasses.dataclass
+class ModelError:
+    """How the simulated robot differs from the controller's robot file: seeded Gaussian
+    perturbations, one standard deviation each (0: exact). A real robot matches its file to
+    millimetres or centimetres (a tape or a laser tracker, swivel pulleys, a homing)."""
+
+    # Each reel exit a_i moved by this, per axis, base frame, m.
+    reels_std: float = 0.0
+    # Each attachment point b_i moved by this, per axis, platform frame, m.
+    attachments_std: float = 0.0
+    # Each encoder's zero off by this after the homing, m of cable.
+    encoder_offset_std: float = 0.0
+    # The cables' stiffness EA and the platform's mass off by this fraction (dynamic plant).
+    EA_rel_std: float = 0.0
+    mass_rel_std: float = 0.0
+    # The seed of the draw; None: the scenario's random_seed.
+    seed: typing.Optional[int] = None
+
+
+@dataclasses.dataclass
 class SimulatedReels:
     """Simulated reels: integrate the reel velocity commands to cable lengths at 500 Hz."""
 
@@ -18,6 +37,16 @@ class SimulatedReels:
     time_constant: float = 0.0
     # Reel speed limit, m/s of cable; None takes the robot file's max_reel_speed.
     max_reel_speed: typing.Optional[float] = None
+    # The robot the plant plays, when it is not the controller's: a built-in name or a robot
+    # YAML path (the scenario's swaps applied to it too); "" the scenario's robot.
+    robot: str = ""
+    # Seeded differences from that robot (on top of `robot`).
+    model_error: ModelError = dataclasses.field(default_factory=ModelError)
+    # Largest residual of the controller's forward kinematics on the encoder lengths, m,
+    # above which the run stops (as max_length_residual of the real reels). None: 1 um on the
+    # exact plant; with model error, the real reels' default (5 mm plus the stretch of the
+    # longest cable at the tension ceiling).
+    max_length_residual: typing.Optional[float] = None
 
 
 @dataclasses.dataclass
@@ -96,6 +125,10 @@ class DynamicReels:
     encoder_zero: str = "homed"
     drive_torque: DriveTorqueSensor = dataclasses.field(default_factory=DriveTorqueSensor)
     load_cell: LoadCellSensor = dataclasses.field(default_factory=LoadCellSensor)
+    # The robot the plant plays, when it is not the controller's (as SimulatedReels.robot).
+    robot: str = ""
+    # Seeded differences from that robot (as SimulatedReels.model_error).
+    model_error: ModelError = dataclasses.field(default_factory=ModelError)
 
 
 def _plant_types():

@@ -56,10 +56,25 @@ class ResolvedScenario:
     # The contents of the files the scenario reads, as loaded ({"robot": bytes,
     # "operator.path": bytes}, scenario_files): what a run folder keeps a copy of.
     files: dict = dataclasses.field(default_factory=dict)
+    # The robot the simulated plant plays (plant.robot, plant.model_error; the scenario's
+    # swaps applied); None: `robot` itself, the controller's.
+    true_robot: typing.Any = None
+    # Each encoder's zero error after the homing, m (m,); None: none.
+    encoder_zero_error: typing.Any = None
+    # What the robot file's stated geometry uncertainty adds (a calibrated file's): to each
+    # pair's d_min, m (P,), and to the model monitor's length bounds, m; zeros without one.
+    d_min_margin: typing.Any = None
+    length_margin: float = 0.0
 
     @property
     def time_step(self) -> float:
         return self.scenario.time_step
+
+    @property
+    def plant_robot(self) -> Robot:
+        """The robot the plant plays: `true_robot` where the plant has model error, else the
+        controller's."""
+        return self.robot if self.true_robot is None else self.true_robot
 
 
 def resolve_scenario(scenario, source: str = "<scenario>") -> ResolvedScenario:
@@ -173,17 +188,29 @@ def _resolve(scenario: Scenario, source: str) -> ResolvedScenario:
     check_safety(scenario)
     d_min = pair_d_min(scenario, robot)
     check_pairs_separable(scenario, robot)
+    d_min_margin, length_margin = uncertainty_margins(robot)
+    d_min = d_min + d_min_margin
     limits = scenario.limits
     plant = scenario.plant
     simulated = isinstance(plant, SimulatedReels)
+    true_robot, zero_error = plant_robot(scenario, robot)
+    model_error = true_robot is not robot or bool(np.any(zero_error))
+    fk_residual = 1e-6 if simulated else float(getattr(plant, "max_length_residual", 0.005))
+    if simulated and plant.max_length_residual is not None:
+        check_positive(plant.max_length_residual, "plant.max_length_residual")
+        fk_residual = float(plant.max_length_residual)
+    elif simulated and model_error:
+        # The encoders no longer fit the file's geometry exactly: the robot's bound, as on
+        # the real reels (5 mm plus the stretch of the longest cable at the ceiling).
+        from cdpm_drake.robot.stretch import derived_length_residual
+        fk_residual = derived_length_residual(robot, scenario.controller.max_tension)
     return ResolvedScenario(
         scenario=scenario, robot=robot, interference=params, operator=operator,
         max_velocity=float(_or(limits.max_velocity, robot.limits.max_velocity)),
         max_acceleration=float(_or(limits.max_acceleration, robot.limits.max_acceleration)),
         max_reel_speed=float(_or(getattr(plant, "max_reel_speed", None),
                                  robot.limits.max_reel_speed)),
-        fk_max_residual=1e-6 if simulated else float(getattr(plant, "max_length_residual",
-                                                             0.005)),
+        fk_max_residual=fk_residual,
         # The kinematic plant's reels have no friction: nothing to make up there.
         dead_band=(robot.dynamics.dead_band if scenario.controller.friction_compensation
                    and float(scenario.controller.length_gain) > 0 and not simulated
@@ -191,7 +218,10 @@ def _resolve(scenario: Scenario, source: str) -> ResolvedScenario:
         d_min=d_min,
         defaulted=defaulted,
         # Read right after the robot and the operator were loaded from them.
-        files={field: path.read_bytes() for field, path in scenario_files(scenario).items()})
+        files={field: path.read_bytes() for field, path in scenario_files(scenario).items()},
+        true_robot=true_robot if model_error else None,
+        encoder_zero_error=zero_error if model_error else None,
+        d_min_margin=d_min_margin, length_margin=length_margin)
 
 
 def check_name(name, folder: str = "runs/<name>/") -> None:
@@ -211,11 +241,44 @@ def _or(value, default):
     return default if value is None else value
 
 
-def scenario_robot(scenario: Scenario) -> Robot:
-    """The scenario's robot with its cable swaps applied."""
+def plant_robot(scenario: Scenario, robot: Robot) -> tuple[Robot, np.ndarray]:
+    """(the robot the simulated plant plays, each encoder's zero error (m,) m): the
+    controller's `robot` unless the plant names another (`plant.robot`) or perturbs it
+    (`plant.model_error`). ScenarioError naming the field."""
+    from cdpm_drake.robot.perturb import check_model_error, has_model_error, perturbed_robot
+
+    plant = scenario.plant
+    zero = np.zeros(robot.num_cables)
+    if not isinstance(plant, (SimulatedReels, DynamicReels)):
+        return robot, zero
+    try:
+        check_model_error(plant.model_error)
+    except ValueError as e:
+        raise ScenarioError(str(e)) from None
+    true = robot
+    if plant.robot:
+        true = scenario_robot(scenario, plant.robot, field="plant.robot")
+        if true.num_cables != robot.num_cables:
+            raise ScenarioError(f"plant.robot {plant.robot!r} has {true.num_cables} cables; "
+                                f"the controller's robot {robot.name!r} has "
+                                f"{robot.num_cables}: the plant must play the same robot, "
+                                "as built")
+    if not has_model_error(plant.model_error):
+        return true, zero
+    seed = plant.model_error.seed
+    try:
+        return perturbed_robot(true, plant.model_error,
+                               scenario.random_seed if seed is None else seed)
+    except RobotError as e:
+        raise ScenarioError(str(e)) from None
+
+
+def scenario_robot(scenario: Scenario, ref=None, field: str = "robot") -> Robot:
+    """The scenario's robot (or the robot `ref` names, as the scenario's field `field`) with
+    the scenario's cable swaps applied."""
     from cdpm_drake.robot import ROBOTS_DIR, is_path_like
 
-    ref = scenario.robot
+    ref = scenario.robot if ref is None else ref
     if is_path_like(ref):
         # Loaded scenarios hold absolute paths; one built in code resolves against base_dir.
         if scenario.base_dir and not Path(ref).is_absolute():
@@ -225,7 +288,7 @@ def scenario_robot(scenario: Scenario) -> Robot:
     try:
         robot = load_robot(ref)
     except RobotError as e:
-        raise ScenarioError(f"robot: {e}") from None
+        raise ScenarioError(f"{field}: {e}") from None
     check_swaps(scenario.swaps)
     for k, swap in enumerate(scenario.swaps):
         try:
@@ -342,6 +405,27 @@ def _override_position(n: int, override: PairLogistic, robot: Robot) -> int:
             f"robot {robot.name!r}; valid pairs: {robot.pairs}") from None
 
 
+# A robot file that states its geometry's uncertainty (calibration: reels_std,
+# attachments_std) widens the margins by this many standard deviations (2: 97.7 % one-sided
+# for a Gaussian error).
+UNCERTAINTY_SIGMAS = 2.0
+
+
+def uncertainty_margins(robot: Robot) -> tuple[np.ndarray, float]:
+    """(what each watched pair's d_min gains, m (P,); what the model monitor's length bounds
+    gain, m) from the robot's stated geometry uncertainty: UNCERTAINTY_SIGMAS times a pair's
+    distance's standard deviation (the two cables' lines move independently, each by at most
+    the larger of its end points' standard deviations: the closest points are convex
+    combinations of the end points) and times the largest cable's. Zeros without one."""
+    P = robot.num_pairs
+    if robot.uncertainty is None:
+        return np.zeros(P), 0.0
+    sigma = robot.uncertainty.cable_std()
+    i, j = robot.pair_index
+    pair = UNCERTAINTY_SIGMAS * np.hypot(sigma[i], sigma[j])
+    return pair, float(UNCERTAINTY_SIGMAS * np.max(sigma))
+
+
 # d_min where the scenario leaves it out: this far under d_l, m (Logistic.d_min).
 D_MIN_BELOW_D_L = 0.0
 
@@ -400,6 +484,9 @@ def scenario_files(scenario: Scenario) -> dict:
         files["robot"] = _under(scenario.robot, base)
     if isinstance(scenario.operator, CsvOperator) and scenario.operator.path:
         files["operator.path"] = _under(scenario.operator.path, base)
+    plant_ref = getattr(scenario.plant, "robot", "")
+    if isinstance(plant_ref, str) and plant_ref and is_path_like(plant_ref):
+        files["plant.robot"] = _under(plant_ref, base)
     return files
 
 

@@ -205,10 +205,14 @@ def fault_message(status: int, cable: int, value: float, *, ticks: int, time_ste
         what = (f"its measured tension is {value:.2f} N" if measured else
                 f"its tension estimate is {value:.2f} N" if estimate else
                 f"it is {1000 * -value:.2f} mm longer than the estimated pose explains")
-        return f"cable {cable} is slack: {what} {lasting}, {where}"
+        # A length that disagrees from the start may be the file's geometry, not slack.
+        hint = ("" if measured or estimate else
+                " (or the robot file's geometry is off by millimetres: cdpm calibrate)")
+        return f"cable {cable} is slack: {what} {lasting}, {where}{hint}"
     if status == MISFIT:
         return (f"the cable lengths no longer fit the estimated pose: cable {cable} is "
-                f"{1000 * value:+.2f} mm off it {lasting}, {where}")
+                f"{1000 * value:+.2f} mm off it {lasting}, {where} (a slipped or broken "
+                "encoder, or a robot file whose geometry is off: cdpm calibrate)")
     if status == UNHOLDABLE:
         force = "" if F_H is None else (
             f" {np.round(np.asarray(F_H, dtype=float), 2).tolist()} N")

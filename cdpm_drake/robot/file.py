@@ -10,10 +10,14 @@ from pathlib import Path
 # Shipped robot descriptions are package data, so a wheel (not only an editable install) has
 # them; the repository's hardware/robots, next to the reel link protocol, links here.
 from cdpm_drake.data import ROBOTS_DIR
-from cdpm_drake.robot.model import (Dynamics, Robot, RobotError, RobotLimits, Workspace,
+import numpy as np
+
+from cdpm_drake.robot.model import (Dynamics, GeometryUncertainty, Robot, RobotError,
+                                    RobotLimits, Workspace,
                                     as_points, as_vector, is_finite, is_sequence, plain,
                                     validate_dynamics)
-from cdpm_drake.robot.schema import (REQUIRED_FIELDS, CablesSchema, LimitsSchema,
+from cdpm_drake.robot.schema import (REQUIRED_FIELDS, CablesSchema, CalibrationSchema,
+                                     LimitsSchema,
                                      PlatformSchema, ReelDrivesSchema, RobotSchema,
                                      WorkspaceSchema)
 from cdpm_drake.robot.statics_checks import frame_warnings, report_statics
@@ -106,7 +110,8 @@ def load_robot(path: str | Path) -> Robot:
             raise RobotError(f"{src}: missing required field workspace.{k}")
     _check_keys(raw["workspace"], WorkspaceSchema, "workspace.", src)
     for key, section in (("limits", LimitsSchema), ("platform", PlatformSchema),
-                         ("cables", CablesSchema), ("reel_drives", ReelDrivesSchema)):
+                         ("cables", CablesSchema), ("reel_drives", ReelDrivesSchema),
+                         ("calibration", CalibrationSchema)):
         if key in raw and not isinstance(raw[key], dict):
             raise RobotError(f"{src}: {key} must be a mapping with fields "
                              f"{[f.name for f in dataclasses.fields(section)]}, got "
@@ -209,6 +214,7 @@ def robot_from_schema(schema: RobotSchema, source: str = "<code>") -> Robot:
         cable_diameter=schema.cable_diameter,
         ignore_pairs=tuple(tuple(p) for p in schema.ignore_pairs),
         source=source,
+        uncertainty=geometry_uncertainty(schema.calibration, len(schema.reels), source),
         dynamics=Dynamics(
             mass=schema.platform.mass, inertia=schema.platform.inertia,
             handle=schema.platform.handle, EA=schema.cables.EA, damping=schema.cables.damping,
@@ -216,3 +222,29 @@ def robot_from_schema(schema: RobotSchema, source: str = "<code>") -> Robot:
             viscous_friction=schema.reel_drives.viscous_friction,
             coulomb_friction=schema.reel_drives.coulomb_friction),
     )
+
+
+def geometry_uncertainty(cal, m: int, src: str):
+    """A calibrated file's stated uncertainty as a GeometryUncertainty, None where the file
+    states none. RobotError naming the field for a bad shape or value."""
+    if not any((cal.reels_std, cal.attachments_std, cal.reels_std_in_frame,
+                cal.attachments_std_in_frame)):
+        return None
+    arrays = {}
+    for field in ("reels_std", "attachments_std", "reels_std_in_frame",
+                  "attachments_std_in_frame"):
+        value = getattr(cal, field)
+        if not value:
+            arrays[field] = np.zeros((m, 3))
+            continue
+        arr = np.asarray(value, dtype=float)
+        if arr.shape != (m, 3) or not np.all(np.isfinite(arr)) or np.any(arr < 0):
+            raise RobotError(f"{src}: calibration.{field} must be {m} rows of 3 finite "
+                             f"standard deviations >= 0 m (row i: cable i+1), got {value!r}")
+        arrays[field] = arr
+    # The margins need the cables' uncertainty relative to each other: the in-frame one
+    # where the file states it.
+    relative = any((cal.reels_std_in_frame, cal.attachments_std_in_frame))
+    suffix = "_in_frame" if relative else ""
+    return GeometryUncertainty(reels_std=arrays["reels_std" + suffix],
+                               attachments_std=arrays["attachments_std" + suffix])

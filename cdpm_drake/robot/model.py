@@ -10,6 +10,7 @@ the robot file's raw-field checks (file.py).
 
 import dataclasses
 import math
+import typing
 
 import numpy as np
 
@@ -126,6 +127,21 @@ def validate_dynamics(d: Dynamics, src: str) -> Dynamics:
 
 
 @dataclasses.dataclass(frozen=True, eq=False)
+class GeometryUncertainty:
+    """How well the geometry is known (a calibrated file's calibration section): one standard
+    deviation per axis of each reel exit (base frame) and attachment point (platform frame),
+    (m, 3) m."""
+
+    reels_std: np.ndarray
+    attachments_std: np.ndarray
+
+    def cable_std(self) -> np.ndarray:
+        """(m,) m: each cable's end points' combined standard deviation, the larger axis of
+        each point (a bound on how far the cable's line may sit from the file's)."""
+        return np.hypot(np.max(self.reels_std, axis=1), np.max(self.attachments_std, axis=1))
+
+
+@dataclasses.dataclass(frozen=True, eq=False)
 class Robot:
     """A translational cable robot.
 
@@ -143,6 +159,8 @@ class Robot:
     source: str = "<code>"
     # Mass, inertia, cable and reel-drive parameters of the dynamic plant.
     dynamics: Dynamics = Dynamics()
+    # A calibrated file's stated uncertainty of the geometry; None: not stated.
+    uncertainty: typing.Optional[GeometryUncertainty] = None
 
     def __post_init__(self):
         reels = as_points(self.reels, "reels", self.source)
@@ -215,7 +233,12 @@ class Robot:
                                  f"1..{self.num_cables}")
         b = self.attachments.copy()
         b[[i - 1, j - 1]] = b[[j - 1, i - 1]]
-        return dataclasses.replace(self, attachments=b,
+        uncertainty = self.uncertainty
+        if uncertainty is not None:  # each point keeps its own uncertainty
+            b_std = uncertainty.attachments_std.copy()
+            b_std[[i - 1, j - 1]] = b_std[[j - 1, i - 1]]
+            uncertainty = dataclasses.replace(uncertainty, attachments_std=b_std)
+        return dataclasses.replace(self, attachments=b, uncertainty=uncertainty,
                                    name=f"{self.name}_swap{i}{j}")
 
     def describe_pair(self, k: int) -> str:

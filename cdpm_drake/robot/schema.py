@@ -75,6 +75,40 @@ class ReelDrivesSchema:
 
 
 @dataclasses.dataclass
+class CalibrationSchema:
+    """What `cdpm calibrate` wrote: where the geometry came from and how well the data knew
+    it. The uncertainties widen the controller's margins (docs/calibration.md)."""
+
+    # The logs the fit read, and when it ran (UTC, ISO 8601).
+    calibrated_from: list[str] = dataclasses.field(default_factory=list)
+    created: str = ""
+    # The file the fit started from.
+    original: str = ""
+    # Poses fitted, and one encoder reading's noise the fit assumed, m.
+    poses: int = 0
+    encoder_std: float = 0.0
+    # One standard deviation of each reel exit and attachment point, per axis, m (row i:
+    # cable i+1); empty: not stated.
+    reels_std: list[list[float]] = dataclasses.field(default_factory=list)
+    attachments_std: list[list[float]] = dataclasses.field(default_factory=list)
+    # The same relative to the frame the homing pose and the file's orientation define (a
+    # translating platform's lengths cannot see a turn of that whole frame): how well the
+    # cables are known relative to each other, which is what their distances depend on and
+    # what the margins use. Empty: as above.
+    reels_std_in_frame: list[list[float]] = dataclasses.field(default_factory=list)
+    attachments_std_in_frame: list[list[float]] = dataclasses.field(default_factory=list)
+    # Each encoder's offset found (reading minus the unstretched length at the homing), m,
+    # and its standard deviation, m (the first run's).
+    encoder_offsets: list[float] = dataclasses.field(default_factory=list)
+    encoder_offsets_std: list[float] = dataclasses.field(default_factory=list)
+    # RMS of each cable's misfit before and after the fit, m.
+    residual_before: list[float] = dataclasses.field(default_factory=list)
+    residual_after: list[float] = dataclasses.field(default_factory=list)
+    # The parameters the data did not identify (their standard deviation above the bound).
+    not_identified: list[str] = dataclasses.field(default_factory=list)
+
+
+@dataclasses.dataclass
 class RobotSchema:
     # A short identifier, e.g. paper_7cable.
     name: str = ""
@@ -95,6 +129,8 @@ class RobotSchema:
     platform: PlatformSchema = dataclasses.field(default_factory=PlatformSchema)
     cables: CablesSchema = dataclasses.field(default_factory=CablesSchema)
     reel_drives: ReelDrivesSchema = dataclasses.field(default_factory=ReelDrivesSchema)
+    # Written by `cdpm calibrate`; absent in a file measured by hand.
+    calibration: CalibrationSchema = dataclasses.field(default_factory=CalibrationSchema)
 
 
 REQUIRED_FIELDS = ("name", "reels", "attachments", "workspace")

@@ -192,8 +192,15 @@ def assemble_log(time_column, signals: dict, scenario: Scenario | ResolvedScenar
     log["pairs"] = np.array(robot.pairs, dtype=int).reshape(P, 2)
     params = resolved.interference
     if "p_true" in log and "rpy_true" in log:
-        log.update(true_pair_distances(robot, log["p_true"], log["rpy_true"],
+        # On the robot the plant plays (its true geometry where it differs from the file).
+        log.update(true_pair_distances(resolved.plant_robot, log["p_true"], log["rpy_true"],
                                        None if params is None else params.d_u))
+    if resolved.true_robot is not None:
+        log["reels_true"] = resolved.true_robot.reels.copy()
+        log["attachments_true"] = resolved.true_robot.attachments.copy()
+        log["encoder_zero_error"] = np.asarray(resolved.encoder_zero_error, dtype=float)
+        log["EA_true"] = np.array(float(resolved.true_robot.dynamics.EA))
+        log["mass_true"] = np.array(float(resolved.true_robot.dynamics.mass))
     if params is not None:
         for key in ("d_l", "d_u", "F_u", "eps"):
             log[key] = np.asarray(getattr(params, key), dtype=float)
@@ -212,6 +219,13 @@ def assemble_log(time_column, signals: dict, scenario: Scenario | ResolvedScenar
     # not the filter ran, like d_l and d_u).
     if resolved.d_min is not None and len(resolved.d_min) == P:
         log["d_min"] = np.asarray(resolved.d_min, dtype=float)
+        if resolved.d_min_margin is not None and np.any(resolved.d_min_margin):
+            # What the robot file's stated uncertainty added to d_min (the summary says it).
+            log["d_min_uncertainty"] = np.asarray(resolved.d_min_margin, dtype=float)
+    # Where the platform started (the homing pose on a robot): what a calibration fixes.
+    log["initial_position"] = np.asarray(scenario.initial_position, dtype=float)
+    log["initial_rpy"] = np.asarray(getattr(scenario.plant, "initial_rpy", [0.0, 0.0, 0.0]),
+                                    dtype=float)
     log["reels"] = robot.reels.copy()
     log["attachments"] = robot.attachments.copy()
     log["workspace_lower"] = robot.workspace.lower.copy()

@@ -10,6 +10,7 @@ from cdpm_drake.config import resolve_scenario, scenario_to_yaml
 # The copies of a scenario's own files in the run folders (write_run_scenario).
 RUN_ROBOT_FILE = "robot.yaml"
 RUN_FORCE_FILE = "force.csv"
+RUN_PLANT_ROBOT_FILE = "plant_robot.yaml"
 
 
 def write_run_scenario(out_dir, scenario, **changes) -> Path:
@@ -22,7 +23,8 @@ def write_run_scenario(out_dir, scenario, **changes) -> Path:
     resolved = resolve_scenario(scenario)
     out = Path(out_dir)
     recorded = dataclasses.replace(resolved.scenario, **changes)
-    names = {"robot": RUN_ROBOT_FILE, "operator.path": RUN_FORCE_FILE}
+    names = {"robot": RUN_ROBOT_FILE, "operator.path": RUN_FORCE_FILE,
+             "plant.robot": RUN_PLANT_ROBOT_FILE}
     for field, data in resolved.files.items():
         (out / names[field]).write_bytes(data)
     if "robot" in resolved.files:
@@ -30,6 +32,9 @@ def write_run_scenario(out_dir, scenario, **changes) -> Path:
     if "operator.path" in resolved.files:
         recorded = dataclasses.replace(recorded, operator=dataclasses.replace(
             recorded.operator, path=RUN_FORCE_FILE))
+    if "plant.robot" in resolved.files:
+        recorded = dataclasses.replace(recorded, plant=dataclasses.replace(
+            recorded.plant, robot=RUN_PLANT_ROBOT_FILE))
     path = out / "scenario.yaml"
     path.write_text(scenario_to_yaml(recorded))
     return path

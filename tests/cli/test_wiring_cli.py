@@ -902,3 +902,94 @@ def test_info_describes_the_robot_given(capsys, write_robot, valid_spec):
     c = np.array([2.0, 1.5, 1.5])
     for a, b in zip(valid_spec["reels"], valid_spec["attachments"]):
         assert f"{np.linalg.norm(c + b - np.array(a)):.4f}" in out
+
+
+# --- calibrate -------------------------------------------------------------------------------
+
+
+@pytest.fixture(scope="module")
+def calibration_log(tmp_path_factory):
+    """The calibration motion on a robot whose exits are off by ~1 cm: a run folder to
+    calibrate from (tests/runs/test_calibration_run.py checks the fit's numbers; here, that
+    each option reaches it)."""
+    folder = tmp_path_factory.mktemp("calibrate") / "run"
+    assert cdpm("simulate", "calibration_motion", "--no-progress",
+                "--out", folder, "--scenario-text",
+                "{plant: !SimulatedReels {max_length_residual: 0.04, model_error: "
+                "{reels_std: 0.01, encoder_offset_std: 0.003}}}") == 0
+    return folder
+
+
+@pytest.fixture
+def spy_settings(monkeypatch):
+    """The CalibrationSettings each calibrate call received (the real fit still runs)."""
+    import cdpm_drake.runs.calibrate as C
+
+    seen = []
+    real = C.calibrate_runs
+
+    def spy(paths, robot_ref, settings):
+        seen.append((paths, robot_ref, settings))
+        return real(paths, robot_ref, settings)
+
+    monkeypatch.setattr(C, "calibrate_runs", spy)
+    return seen
+
+
+@covers("calibrate <runs>", "calibrate --robot")
+def test_calibrate_reads_the_runs_against_the_robot_given(calibration_log, tmp_path, capsys):
+    """The run's exits are paper_7cable's: against cube_8cable it is another robot."""
+    assert cdpm("calibrate", calibration_log, "--robot", "cube_8cable", "--out",
+                tmp_path / "c.yaml") == 1
+    assert "another robot" in capsys.readouterr().err
+    assert cdpm("calibrate", calibration_log, "--robot", "paper_7cable", "--dry-run") == 0
+    out = capsys.readouterr().out
+    assert "robot 'paper_7cable'" in out and "from 1 run(s)" in out
+
+
+@covers("calibrate --out", "calibrate --force", "calibrate --dry-run")
+def test_calibrate_writes_where_asked_and_only_then(calibration_log, tmp_path, capsys):
+    out = tmp_path / "cal.yaml"
+    assert cdpm("calibrate", calibration_log, "--robot", "paper_7cable", "--out", out,
+                "--dry-run") == 0
+    assert not out.exists() and "would write" in capsys.readouterr().out
+    assert cdpm("calibrate", calibration_log, "--robot", "paper_7cable", "--out", out) == 0
+    assert load_robot(out).uncertainty is not None
+    out.write_text("# changed by hand\n" + out.read_text())
+    assert cdpm("calibrate", calibration_log, "--robot", "paper_7cable", "--out", out) == 2
+    assert out.read_text().startswith("# changed by hand")
+    assert cdpm("calibrate", calibration_log, "--robot", "paper_7cable", "--out", out,
+                "--force") == 0
+    assert not out.read_text().startswith("# changed by hand")
+
+
+@covers("calibrate --encoder-std", "calibrate --reels-prior", "calibrate --attachments-prior",
+        "calibrate --offsets-prior", "calibrate --max-poses", "calibrate --min-spacing",
+        "calibrate --max-speed", "calibrate --attachments")
+def test_calibrate_settings_reach_the_fit(calibration_log, spy_settings, capsys):
+    # (40 poses of 0.2 mm readings may identify too little to write: exit 1 then.)
+    assert cdpm("calibrate", calibration_log, "--robot", "paper_7cable", "--dry-run",
+                "--encoder-std", "2e-4", "--reels-prior", "0.03", "--attachments-prior",
+                "0.01", "--offsets-prior", "0.02", "--max-poses", "40", "--min-spacing",
+                "0.05", "--max-speed", "0.2", "--attachments") in (0, 1)
+    (_, ref, s), = spy_settings
+    assert ref == "paper_7cable"
+    assert (s.encoder_std, s.prior.reels_std, s.prior.attachments_std, s.prior.offsets_std,
+            s.max_poses, s.min_spacing, s.max_speed, s.fit_attachments) == (
+        2e-4, 0.03, 0.01, 0.02, 40, 0.05, 0.2, True)
+    out = capsys.readouterr().out
+    # At most 40 poses; the attachments are fitted only with the full pose (this log is the
+    # translating controller's), so the report lists none.
+    poses = int(out.split(" poses from")[0].split()[-1])
+    assert poses <= 40 and "attachment 1:" not in out and "encoder noise 0.2 mm" in out
+
+
+@covers("calibrate --write-motion", "calibrate --start")
+def test_calibrate_writes_a_motion_from_the_start_given(tmp_path):
+    out = tmp_path / "m.yaml"
+    assert cdpm("calibrate", "--write-motion", out, "--robot", "cube_8cable", "--start",
+                "1.0", "1.1", "1.2") == 0
+    scenario = load_scenario(str(out))
+    assert scenario.initial_position == [1.0, 1.1, 1.2]
+    assert scenario.operator.waypoints[0] == [1.0, 1.1, 1.2]
+    assert scenario_robot(scenario).name == "cube_8cable"

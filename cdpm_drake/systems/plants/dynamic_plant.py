@@ -33,7 +33,7 @@ from cdpm_drake.kernels.plant.tension_sensor import (DRIVE_TORQUE, LOAD_CELL, se
                                                      sensor_params, tension_sensor_tick)
 from cdpm_drake.systems.kernel_system import KernelSystem
 from cdpm_drake.systems.wiring import unit_delay, wiring
-from cdpm_drake.systems.plants.simulated_reels import add_measured_force
+from cdpm_drake.systems.plants.simulated_reels import add_encoder_offset, add_measured_force
 
 # The plant's logged ground truth: the keys of the log (docs/LOG_FORMAT.md), in the order the
 # plant's logger `log_truth` holds them (each a piece of the cables' step, cables.step_layout).
@@ -125,7 +125,8 @@ class CableNet(LeafSystem):
             prerequisites_of_calc={self.time_ticket(), self._inputs.ticket()})
 
 
-def build_dynamic_plant(scenario, robot, operator, start_tensions, *, log_truth=True):
+def build_dynamic_plant(scenario, robot, operator, start_tensions, *, log_truth=True,
+                        encoder_offset=None):
     """The `!DynamicReels` plant as a Diagram named `reels`, with the ports in PLANT_PORTS.
 
     `operator` is the scenario's operator model (operators.py), `start_tensions` (m,) N the
@@ -133,7 +134,8 @@ def build_dynamic_plant(scenario, robot, operator, start_tensions, *, log_truth=
     step): the unstretched lengths are set so the platform starts in equilibrium at the
     scenario's initial_position and plant.initial_rpy. `log_truth=False` leaves out the
     ground-truth logger (a plant that runs for hours, as in the emulator, reads
-    ground_truth_now instead).
+    ground_truth_now instead). `encoder_offset` (m,) m is added to every encoder reading (a
+    homing on another robot's geometry: see diagram.encoder_homing_offset).
     """
     cfg = scenario.plant
     d = robot.dynamics
@@ -239,7 +241,8 @@ def build_dynamic_plant(scenario, robot, operator, start_tensions, *, log_truth=
         builder.Connect(route.GetOutputPort("unstretched_lengths"), encoders.get_input_port())
 
     builder.ExportInput(route.GetInputPort("reel_velocity_command"), "reel_velocity_command")
-    builder.ExportOutput(encoders.get_output_port(), "cable_lengths")
+    builder.ExportOutput(add_encoder_offset(builder, encoders.get_output_port(),
+                                            encoder_offset), "cable_lengths")
     add_measured_force(builder, route.GetOutputPort("measured_force"), scenario, T)
     # After measured_force: the plants' ports in one order (the real reels' too).
     if sensing:
@@ -369,8 +372,19 @@ def _plant_logger(diagram):
     return plant.GetSubsystemByName(TRUTH_LOG)
 
 
+def add_pose_truth_log(builder, p_true, time_step) -> None:
+    """Log a translating plant's true position (the kinematic plant's, when it plays another
+    robot than the controller's) in the ground-truth logger the dynamic plant has: its rows
+    read back as p_true and a level rpy_true."""
+    logger = builder.AddNamedSystem(TRUTH_LOG, VectorLogSink(3, time_step))
+    builder.Connect(p_true, logger.get_input_port())
+
+
 def _split_truth(rows: np.ndarray) -> dict:
-    """{GROUND_TRUTH key: columns} of the logger's rows (T, 2 m + 6)."""
+    """{GROUND_TRUTH key: columns} of the logger's rows (T, 2 m + 6); a translating plant's
+    (T, 3) rows are its position alone (add_pose_truth_log)."""
+    if rows.shape[1] == 3:
+        return {"p_true": rows, "rpy_true": np.zeros_like(rows)}
     m = (rows.shape[1] - 6) // 2
     out, k = {}, 0
     for key, width in _truth_widths(m).items():

@@ -2,7 +2,7 @@
 
 import numpy as np
 from pydrake.systems.framework import Diagram, LeafSystem
-from pydrake.systems.primitives import Adder
+from pydrake.systems.primitives import Adder, ConstantVectorSource
 
 from cdpm_drake.kernels.call import bind, owned
 from cdpm_drake.kernels.kinematics import cable_lengths, forward_kinematics, simulated_reel_step_stacked
@@ -218,3 +218,18 @@ def add_measured_force(builder, force, scenario, time_step):
         builder.Connect(noise.GetOutputPort("noise"), noisy.get_input_port(1))
         force = noisy.get_output_port()
     builder.ExportOutput(force, "measured_force")
+
+
+def add_encoder_offset(builder, lengths, offset):
+    """`lengths` (the encoders' output port) plus a constant `offset` (m,) m, the encoders'
+    zero after a homing that does not match the plant's geometry; `lengths` itself when
+    `offset` is None (no system added: the exact plant stays as it was)."""
+    if offset is None:
+        return lengths
+    m = lengths.size()
+    zero = builder.AddNamedSystem("encoder_zero", ConstantVectorSource(
+        np.asarray(offset, dtype=float).reshape(m)))
+    homed = builder.AddNamedSystem("encoders_homed", Adder(2, m))
+    builder.Connect(lengths, homed.get_input_port(0))
+    builder.Connect(zero.get_output_port(), homed.get_input_port(1))
+    return homed.get_output_port()
