@@ -24,6 +24,7 @@ import pytest
 from conftest import default_signals
 
 from cdpm_drake.config import DynamicReels, load_scenario, resolve_scenario
+from cdpm_drake.emulator import parity
 from cdpm_drake.emulator.bridges import DynamicBridge, ReelBridge
 from cdpm_drake.emulator.faults import FaultPlan
 from cdpm_drake.emulator.server import ReelBridgeServer
@@ -154,26 +155,14 @@ def test_the_lockstep_watchdog_counts_ticks(tmp_path):
 
 def _canopen_run(tmp_path, name, *, duration=0.3, faults=()):
     pytest.importorskip("can")
-    import can
-
-    from cdpm_drake.emulator.canopen_drives import EmulatedDrives
-    from cdpm_drake.hardware.canopen_config import (CanopenReels, resolved_node_ids,
-                                                    resolved_offsets, velocity_units)
+    from cdpm_drake.hardware.canopen_config import CanopenReels
     from cdpm_drake.hardware.force_config import CanopenForceSensor
 
     sc = load_scenario("exp2_interaction")
     bridge = DynamicBridge(resolve_scenario(dataclasses.replace(sc, plant=DynamicReels())))
     config = CanopenReels(interface="virtual", channel=f"lockstep-{next(_channels)}",
                           ramp_time=0.0, force_sensor=CanopenForceSensor(node_id=20))
-    m = bridge.robot.num_cables
-    bus = can.Bus(interface="virtual", channel=config.channel, receive_own_messages=False)
-    drives = EmulatedDrives(bridge, bus, resolved_node_ids(config, m),
-                            counts_per_metre=config.counts_per_metre,
-                            position_offset=resolved_offsets(config, m),
-                            velocity_units=velocity_units(config),
-                            force_per_torque_unit=config.force_per_torque_unit,
-                            faults=faults, lockstep=True)
-    drives.play_force_sensor(config.force_sensor).start()
+    drives = parity.canopen_drives(bridge, config, faults=faults)
     try:
         result = run(scenario=dataclasses.replace(sc, plant=config), out_dir=tmp_path / name,
                      duration=duration, lockstep=True)
@@ -247,78 +236,23 @@ def _lockstep_cli_run(tmp_path, overlay, duration):
 
 @pytest.mark.parametrize("overlay", ["{method: promise}", "{method: paper}"])
 def test_a_lockstep_rehearsal_reproduces_the_simulation(tmp_path, overlay):
-    """exp2's first 2 s, `cdpm simulate` on the dynamic plant against `cdpm run --lockstep`
-    on `cdpm emulate --plant dynamic --lockstep`: the same end, the smallest true tension
-    within 0.5 N, the largest within 5 %, the true closest approach within 0.5 mm, the true
-    path within 1 mm (the tolerances the rehearsal promises). Measured: 0.00 N, 0.1 %,
-    0.17 mm, 0.14 mm over 3 s. They differ at all because the real-time path reads the
-    hand's force a tick later than the simulation's plant hands it to the controller
-    (each command uses the status read on the tick before), and because the emulator's
-    encoders count from the start pose where the simulation's report unstretched lengths."""
-    from cdpm_drake.runs.log import true_pair_distances
-    from cdpm_drake.runs.simulate import simulate
-
+    """exp2's first 2 s through the command line: `cdpm simulate` on the dynamic plant
+    against `cdpm run --lockstep` on `cdpm emulate --plant dynamic --lockstep --truth-log`
+    (a process of its own), judged on the truth log it writes: the same end, the smallest
+    true tension within 0.5 N, the largest within 5 %, the true closest approach within
+    0.5 mm, the true path within 1 mm (the tolerances the rehearsal promises; every
+    experiment, controller and bus in process: test_parity.py). They differ at all because
+    the real-time path reads the hand's force a tick later than the simulation's plant hands
+    it to the controller (each command uses the status read on the tick before)."""
     duration = 2.0
     code, log, truth = _lockstep_cli_run(tmp_path, overlay, duration)
-    scenario = load_scenario("exp2_interaction", overlay)
-    dynamic = resolve_scenario(dataclasses.replace(scenario, plant=DynamicReels()))
-    sim = simulate(scenario=dynamic, duration=duration).log
     assert code == 0 and str(log["ending"]) == "completed"
-    assert str(sim.get("ending", "completed")) == "completed"
     keep = truth["plant_time"] <= duration + 1e-9
-    plant_time = truth["plant_time"][keep]
-    true_T = truth["tensions"][keep]
-    assert abs(true_T.min() - sim["tensions"].min()) <= 0.5
-    assert abs(true_T.max() - sim["tensions"].max()) <= 0.05 * sim["tensions"].max()
-    d_sim = true_pair_distances(dynamic.robot, sim["p_true"], sim["rpy_true"])
-    d_sim = d_sim["pair_distances_true"]
-    assert abs(truth["pair_distances_true"][keep].min() - d_sim.min()) <= 0.5e-3
-    path = np.stack([np.interp(sim["time"], plant_time, truth["p_true"][keep][:, i])
-                     for i in range(3)], axis=1)
-    assert np.linalg.norm(path - sim["p_true"], axis=1).max() <= 1e-3
-    # The platform went somewhere: a path within 1 mm of a platform at rest says nothing.
-    assert np.linalg.norm(sim["p_true"][-1] - sim["p_true"][0]) > 0.01
-
-
-def test_on_the_simulations_encoder_zero_the_full_pose_with_tension_control_matches(tmp_path):
-    """exp2 with the full pose and tension control on the drive-torque sensor, lockstep
-    against the dynamic bridge in process, its encoders zeroed where the simulation's plant
-    zeroes its own (whichever convention that is: the offset is taken from the simulation's
-    first logged lengths): the parity tolerances hold (measured over 3 s: minimum tension
-    5.00 both, largest 73.2 / 74.0 N, closest approach within 0.01 mm, path 0.14 mm). What
-    this isolates: with the emulator's encoders zeroed at the rigid start pose and a
-    simulation reporting unstretched lengths, the same run ends on a cable it takes for slack
-    (exp2 over 3 s: at 2.48 s, 160 N on a cable, the path 38 mm off); the real-time path, its
-    sensors and its timing are not the cause."""
-    from cdpm_drake.runs.log import true_pair_distances
-    from cdpm_drake.runs.simulate import simulate
-
-    duration = 2.0
-    overlay = "{plant: !DynamicReels {}, controller: {pose: full, tension_control: true}}"
+    truth = {k: truth[k][keep] for k in ("plant_time", "tensions", "p_true",
+                                          "pair_distances_true")}
     scenario = load_scenario("exp2_interaction", overlay)
-    resolved = resolve_scenario(scenario)
-    sim = simulate(scenario=resolved, duration=duration).log
-    bridge = DynamicBridge(resolved)
-    bridge.encoder_offset = sim["lengths"][0] - (bridge.lengths - bridge.encoder_offset)
-    server = ReelBridgeServer(bridge, lockstep=True, truth=10_000, record=0).start()
-    try:
-        result = run(scenario=dataclasses.replace(scenario, plant=HardwareReels(
-            port=server.address[1], ramp_time=0.0)), out_dir=tmp_path / "run",
-            duration=duration, lockstep=True)
-    finally:
-        server.stop()
-    assert result.ending == "completed", result.error
-    rows = [r for r in server.truth if r[1] <= duration + 1e-9]
-    plant_time = np.array([r[1] for r in rows])
-    tensions = np.array([r[2] for r in rows])
-    p_true = np.array([r[5] for r in rows])
-    rpy_true = np.array([r[6] for r in rows])
-    robot = resolved.robot
-    assert abs(tensions.min() - sim["tensions"].min()) <= 0.5
-    assert abs(tensions.max() - sim["tensions"].max()) <= 0.05 * sim["tensions"].max()
-    closest = true_pair_distances(robot, p_true, rpy_true)["pair_distances_true"].min()
-    closest_sim = true_pair_distances(robot, sim["p_true"], sim["rpy_true"])[
-        "pair_distances_true"].min()
-    assert abs(closest - closest_sim) <= 0.5e-3
-    path = np.stack([np.interp(sim["time"], plant_time, p_true[:, i]) for i in range(3)], 1)
-    assert np.linalg.norm(path - sim["p_true"], axis=1).max() <= 1e-3
+    sim = parity.simulated(dataclasses.replace(scenario, plant=DynamicReels()), duration)
+    r = parity.compare(sim, log, truth)
+    assert r["same_end"] and parity.within(r), r
+    # The platform went somewhere: a path within 1 mm of a platform at rest says nothing.
+    assert r["moved"] > 0.01
