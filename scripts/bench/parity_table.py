@@ -75,6 +75,8 @@ def main(argv=None) -> int:
     args = p.parse_args(argv)
     if not args.duration > 0:
         p.error(f"--duration must be > 0 s, got {args.duration!r}")
+    if args.write_docs and sorted(args.experiments) != sorted(parity.EXPERIMENTS):
+        p.error("--write-docs writes the whole table: give every experiment (the default)")
     print(parity.HEADER, flush=True)
     results = table(args.duration, args.experiments,
                     say=lambda line: print(line, flush=True))
