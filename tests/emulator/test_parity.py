@@ -32,8 +32,10 @@ DURATION = 3.0
 # (5 mm/s over UDP), held against the length loop, and the path drifts. Not the cause
 # alone, each measured on exp3 / exp1 over 3 s: 1e8 counts per metre (6.07 mm), the
 # emulator inverting its drive force with the position-difference speeds and 0.01 N torque
-# units (5.74 / 1.49 mm), 0.01 N units alone (exp1 1.10 mm); and over UDP, no reel speed
-# for the first 3 statuses keeps exp3 within (0.24 mm).
+# units (5.74 / 1.49 mm), 0.01 N units alone (exp1 1.10 mm), 1e8 counts per metre with
+# 0.01 N units (5.91 / 1.10 mm); over UDP, exp3 stays within with no reel speed for the
+# first 3 statuses (0.24 mm), lengths rounded to 1 um (0.26 mm) or the hand force to
+# 0.01 N (0.21 mm): not the quantization, not the late start alone.
 OFF = {
     ("exp1_no_interaction", "full+tc, drive torque", "canopen"):
         "path 1.205 mm off (tolerance 1 mm); smallest T -0.166 N, largest +0.12 %, "
