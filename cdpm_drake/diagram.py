@@ -672,7 +672,7 @@ def make_plant(scenario: Scenario | ResolvedScenario, robot=None):
         true = resolved.plant_robot
         return build_dynamic_plant(resolved.scenario, true, resolved.operator,
                                    check_dynamic_reels(resolved.scenario, true).tensions,
-                                   encoder_offset=encoder_homing_offset(resolved))
+                                   homing_offset=encoder_homing_offset(resolved))
     from cdpm_drake.hardware.config import HardwareReels
     from cdpm_drake.hardware.reels import HardwareReelsSystem
 

@@ -126,7 +126,7 @@ class CableNet(LeafSystem):
 
 
 def build_dynamic_plant(scenario, robot, operator, start_tensions, *, log_truth=True,
-                        encoder_offset=None):
+                        homing_offset=None):
     """The `!DynamicReels` plant as a Diagram named `reels`, with the ports in PLANT_PORTS.
 
     `operator` is the scenario's operator model (operators.py), `start_tensions` (m,) N the
@@ -134,7 +134,7 @@ def build_dynamic_plant(scenario, robot, operator, start_tensions, *, log_truth=
     step): the unstretched lengths are set so the platform starts in equilibrium at the
     scenario's initial_position and plant.initial_rpy. `log_truth=False` leaves out the
     ground-truth logger (a plant that runs for hours, as in the emulator, reads
-    ground_truth_now instead). `encoder_offset` (m,) m is added to every encoder reading (a
+    ground_truth_now instead). `homing_offset` (m,) m is added to every encoder reading (a
     homing on another robot's geometry: see diagram.encoder_homing_offset).
     """
     cfg = scenario.plant
@@ -242,7 +242,7 @@ def build_dynamic_plant(scenario, robot, operator, start_tensions, *, log_truth=
 
     builder.ExportInput(route.GetInputPort("reel_velocity_command"), "reel_velocity_command")
     builder.ExportOutput(add_encoder_offset(builder, encoders.get_output_port(),
-                                            encoder_offset), "cable_lengths")
+                                            homing_offset), "cable_lengths")
     add_measured_force(builder, route.GetOutputPort("measured_force"), scenario, T)
     # After measured_force: the plants' ports in one order (the real reels' too).
     if sensing:

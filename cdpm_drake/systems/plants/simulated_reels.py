@@ -227,9 +227,9 @@ def add_encoder_offset(builder, lengths, offset):
     if offset is None:
         return lengths
     m = lengths.size()
-    zero = builder.AddNamedSystem("encoder_zero", ConstantVectorSource(
+    zero = builder.AddNamedSystem("homing_offset", ConstantVectorSource(
         np.asarray(offset, dtype=float).reshape(m)))
-    homed = builder.AddNamedSystem("encoders_homed", Adder(2, m))
+    homed = builder.AddNamedSystem("encoders_homed_on_file", Adder(2, m))
     builder.Connect(lengths, homed.get_input_port(0))
     builder.Connect(zero.get_output_port(), homed.get_input_port(1))
     return homed.get_output_port()
