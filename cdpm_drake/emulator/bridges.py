@@ -24,7 +24,8 @@ import numpy as np
 from cdpm_drake.hardware.protocol import FAULT_OVERSPEED, MAX_FORCE
 from cdpm_drake.kernels.drive_torque import drive_force_for_tension
 from cdpm_drake.kernels.plant.tension_sensor import tension_sensor_tick
-from cdpm_drake.kernels.kinematics import KinematicsError, forward_kinematics, jacobian
+from cdpm_drake.kernels.kinematics import (KinematicsError, cable_lengths, forward_kinematics,
+                                        jacobian)
 
 
 def _span(layout_entry) -> tuple[int, int]:
@@ -52,6 +53,11 @@ class ReelBridge:
         # robot's geometry: the file's, where this bridge plays the robot as built).
         self.encoder_offset = (np.zeros(robot.num_cables) if encoder_offset is None
                                else np.asarray(encoder_offset, dtype=float))
+        # Commands computed on another robot's geometry (the file's, homed on) pay out
+        # lengths this robot's rigid platform cannot take: its taut cables settle where they
+        # agree best (the forward kinematics, then its lengths), as the in-process kinematic
+        # plant does; on its own geometry the commands agree with it to round-off.
+        self._settle = encoder_offset is not None
         if self.lengths.shape != (robot.num_cables,):
             raise ValueError(f"initial_lengths must have {robot.num_cables} entries (one per "
                              f"cable), got shape {self.lengths.shape!r}")
@@ -136,6 +142,9 @@ class ReelBridge:
             self.lengths += c * dt
             self.speed = c.copy()
         self.time += dt
+        if self._settle:
+            self.p = self._best_fit(self.p)
+            self.lengths = cable_lengths(self.robot, self.p)
         if self.force_fn is not None:
             self.p = self._best_fit(self.p)
             self.v = np.linalg.lstsq(jacobian(self.robot, self.p), self.speed, rcond=None)[0]

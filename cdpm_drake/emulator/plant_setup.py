@@ -23,7 +23,7 @@ def dynamic_scenario(args, robot, start):
     plant = scenario.plant if isinstance(scenario.plant, DynamicReels) else DynamicReels()
     if args.scenario and getattr(args, "robot", None):
         # The robot as built (--robot) under the scenario's file: the plant plays it.
-        plant = dc.replace(plant, robot=args.robot)
+        plant = dc.replace(plant, robot=command_line_robot(args.robot))
     operator = scenario.operator
     if getattr(args, "force", None) is not None:
         operator = ScriptedOperator(times=[0.0], forces=[[float(f) for f in args.force]])
@@ -59,7 +59,7 @@ def robot_as_built(args, scenario, robot):
     if not (args.scenario and getattr(args, "robot", None)):
         return robot
     try:
-        true = scenario_robot(scenario, args.robot, field="--robot")
+        true = scenario_robot(scenario, command_line_robot(args.robot), field="--robot")
     except ScenarioError as e:
         raise ValueError(str(e)) from None
     if true.num_cables != robot.num_cables:
@@ -81,3 +81,13 @@ def homing_offset(file_robot, robot, start):
         return None
     start = np.asarray(start, dtype=float)
     return cable_lengths(file_robot, start) - cable_lengths(robot, start)
+
+
+def command_line_robot(ref: str) -> str:
+    """A --robot given on the command line: a built-in name as it is, a path made absolute
+    from the current folder (a scenario's own paths count from the scenario's folder)."""
+    from pathlib import Path
+
+    from cdpm_drake.robot import is_path_like
+
+    return str(Path(ref).resolve()) if is_path_like(ref) else ref

@@ -57,3 +57,34 @@ def test_the_robot_as_built_is_homed_on_the_file(true_file, plant):
 def test_a_robot_of_another_cable_count_is_refused(true_file):
     with pytest.raises(ValueError, match=r"--robot 'cube_8cable' has 8 cables"):
         _server("--scenario", "exp2_interaction", "--robot", "cube_8cable", "--port", "0")
+
+
+def test_the_robot_as_built_s_cables_settle_on_its_geometry(true_file):
+    """Commands computed on the file pay out lengths the true robot cannot take: its taut
+    cables settle where they agree best, so its encoders read its own geometry (less the
+    homing's offset) at its true pose, not the commands' sum; that is what makes the
+    encoders tell the file's error (the self-calibration's data)."""
+    server = _server("--scenario", "exp2_interaction", "--robot", str(true_file), "--port",
+                     "0")
+    try:
+        bridge = server.bridge
+        file_robot = scenario_robot(load_scenario("exp2_interaction"))
+        start = bridge.platform()
+        J = np.array([(file_robot.reels[i] - start - file_robot.attachments[i])
+                      / cable_lengths(file_robot, start)[i] for i in range(7)])
+        bridge.set_command(-J @ np.array([0.2, -0.1, 0.05]), enable=True)
+        for _ in range(1000):
+            bridge.step(0.002)
+        p = bridge.platform()
+        assert np.linalg.norm(p - start) > 0.3  # it moved
+        np.testing.assert_allclose(bridge.encoder_lengths() - bridge.encoder_offset,
+                                   cable_lengths(bridge.robot, p), atol=1e-9)
+        # The file's geometry no longer explains the readings (millimetres off): the file's
+        # error shows.
+        from cdpm_drake.kernels.kinematics import forward_kinematics
+        q = forward_kinematics(file_robot, bridge.encoder_lengths(), p_guess=p,
+                               max_residual=np.inf)
+        misfit = np.abs(cable_lengths(file_robot, q) - bridge.encoder_lengths()).max()
+        assert misfit > 1e-3, misfit
+    finally:
+        server.stop()
