@@ -326,8 +326,9 @@ def kinetostatic_block_params(resolved):
     scenario, robot = resolved.scenario, resolved.robot
     c, f = scenario.controller, scenario.safety_filter.kinetostatic_force
     return kinetostatic_params(
-        robot, floor=float(scenario.safety_filter.kinetostatic_floor),
-        ceiling=float(c.max_tension),
+        # A calibrated file's stated uncertainty raises the floor (resolve.py).
+        robot, floor=float(scenario.safety_filter.kinetostatic_floor)
+        + resolved.kinetostatic_margin, ceiling=float(c.max_tension),
         rows=wrench_rows(robot), barrier=True, t_l=f.t_l, t_u=f.t_u, F_u=f.F_u, eps=f.eps,
         force=f.enabled, a_brake=filter_braking(resolved),
         time_step=resolved.time_step, ripple=RIPPLE,

@@ -187,7 +187,10 @@ def safety_filter_summary(log) -> str:
     if "d_min_uncertainty" in log:
         extra = 1000 * np.asarray(log["d_min_uncertainty"], dtype=float)
         text += (f"; the robot file's stated geometry uncertainty raised d_min by "
-                 f"{format_number(extra.min())}-{format_number(extra.max())} mm (2 sigma)")
+                 f"{format_number(extra.min())}-{format_number(extra.max())} mm"
+                 + (f" and the kinetostatic floor by "
+                    f"{float(log['kinetostatic_floor_uncertainty']):.2f} N"
+                    if "kinetostatic_floor_uncertainty" in log else "") + " (2 sigma)")
     return text
 
 

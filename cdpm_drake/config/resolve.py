@@ -65,6 +65,9 @@ class ResolvedScenario:
     # pair's d_min, m (P,), and to the model monitor's length bounds, m; zeros without one.
     d_min_margin: typing.Any = None
     length_margin: float = 0.0
+    # ... and to the safety filter's kinetostatic floor, N (the tensions computed on a
+    # geometry known to sigma are off by as much).
+    kinetostatic_margin: float = 0.0
 
     @property
     def time_step(self) -> float:
@@ -190,6 +193,7 @@ def _resolve(scenario: Scenario, source: str) -> ResolvedScenario:
     check_pairs_separable(scenario, robot)
     d_min_margin, length_margin = uncertainty_margins(robot)
     d_min = d_min + d_min_margin
+    kinetostatic_margin = kinetostatic_uncertainty(robot, scenario)
     limits = scenario.limits
     plant = scenario.plant
     simulated = isinstance(plant, SimulatedReels)
@@ -221,7 +225,8 @@ def _resolve(scenario: Scenario, source: str) -> ResolvedScenario:
         files={field: path.read_bytes() for field, path in scenario_files(scenario).items()},
         true_robot=true_robot if model_error else None,
         encoder_zero_error=zero_error if model_error else None,
-        d_min_margin=d_min_margin, length_margin=length_margin)
+        d_min_margin=d_min_margin, length_margin=length_margin,
+        kinetostatic_margin=kinetostatic_margin)
 
 
 def check_name(name, folder: str = "runs/<name>/") -> None:
@@ -424,6 +429,21 @@ def uncertainty_margins(robot: Robot) -> tuple[np.ndarray, float]:
     i, j = robot.pair_index
     pair = UNCERTAINTY_SIGMAS * np.hypot(sigma[i], sigma[j])
     return pair, float(UNCERTAINTY_SIGMAS * np.max(sigma))
+
+
+def kinetostatic_uncertainty(robot: Robot, scenario: Scenario) -> float:
+    """What the robot's stated geometry uncertainty adds to the kinetostatic floor, N:
+    UNCERTAINTY_SIGMAS times the tensions' first-order error at the start pose with every
+    tension at the controller's ceiling (kinetostatics.geometry_tension_error); 0 without
+    one."""
+    if robot.uncertainty is None:
+        return 0.0
+    from cdpm_drake.kernels.kinetostatics import geometry_tension_error, wrench_rows
+
+    p0 = np.asarray(scenario.initial_position, dtype=float)
+    return UNCERTAINTY_SIGMAS * geometry_tension_error(
+        robot, p0, wrench_rows(robot), robot.uncertainty.cable_std(),
+        float(scenario.controller.max_tension))
 
 
 # d_min where the scenario leaves it out: this far under d_l, m (Logistic.d_min).

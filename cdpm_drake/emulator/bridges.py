@@ -24,7 +24,8 @@ import numpy as np
 from cdpm_drake.hardware.protocol import FAULT_OVERSPEED, MAX_FORCE
 from cdpm_drake.kernels.drive_torque import drive_force_for_tension
 from cdpm_drake.kernels.plant.tension_sensor import tension_sensor_tick
-from cdpm_drake.kernels.kinematics import KinematicsError, forward_kinematics, jacobian
+from cdpm_drake.kernels.kinematics import (KinematicsError, cable_lengths, forward_kinematics,
+                                        jacobian)
 
 
 def _span(layout_entry) -> tuple[int, int]:
@@ -45,9 +46,18 @@ class ReelBridge:
     """
 
     def __init__(self, robot, initial_lengths, force=None, time_constant: float = 0.02,
-                 max_reel_speed: float | None = None):
+                 max_reel_speed: float | None = None, encoder_offset=None):
         self.robot = robot
         self.lengths = np.array(initial_lengths, dtype=float)
+        # What the encoders read beyond the reels' true lengths, m (a homing on another
+        # robot's geometry: the file's, where this bridge plays the robot as built).
+        self.encoder_offset = (np.zeros(robot.num_cables) if encoder_offset is None
+                               else np.asarray(encoder_offset, dtype=float))
+        # Commands computed on another robot's geometry (the file's, homed on) pay out
+        # lengths this robot's rigid platform cannot take: its taut cables settle where they
+        # agree best (the forward kinematics, then its lengths), as the in-process kinematic
+        # plant does; on its own geometry the commands agree with it to round-off.
+        self._settle = encoder_offset is not None
         if self.lengths.shape != (robot.num_cables,):
             raise ValueError(f"initial_lengths must have {robot.num_cables} entries (one per "
                              f"cable), got shape {self.lengths.shape!r}")
@@ -90,6 +100,10 @@ class ReelBridge:
         """The platform centre now (the best fit to the reels' lengths), base frame, m."""
         return self._best_fit(self.p)
 
+    def encoder_lengths(self) -> np.ndarray:
+        """What the encoders read now, m: the reels' lengths plus the encoders' offset."""
+        return self.lengths + self.encoder_offset
+
     def _best_fit(self, guess):
         try:
             return forward_kinematics(self.robot, self.lengths, p_guess=guess,
@@ -128,6 +142,9 @@ class ReelBridge:
             self.lengths += c * dt
             self.speed = c.copy()
         self.time += dt
+        if self._settle:
+            self.p = self._best_fit(self.p)
+            self.lengths = cable_lengths(self.robot, self.p)
         if self.force_fn is not None:
             self.p = self._best_fit(self.p)
             self.v = np.linalg.lstsq(jacobian(self.robot, self.p), self.speed, rcond=None)[0]
@@ -176,7 +193,9 @@ class DynamicBridge:
                                                              plant_state_now, sensor_kernel)
 
         scenario = resolved.scenario
-        self.robot = robot = resolved.robot
+        # The robot it plays: the scenario's, or the robot as built (plant.robot,
+        # plant.model_error), homed on the scenario's file as a real robot is.
+        self.robot = robot = resolved.plant_robot
         m = robot.num_cables
         builder = DiagramBuilder()
         tensions0 = check_dynamic_reels(scenario, robot).tensions
@@ -223,10 +242,15 @@ class DynamicBridge:
         L0 = plant_state_now(self._diagram, self._context)["L0"]
         from cdpm_drake.kernels.rotation import rotation_from_rpy
 
-        rigid = np.linalg.norm(robot.reels - (p0 + robot.attachments
+        # The homing writes the file's rigid lengths of the start pose (the controller's
+        # robot: the one played, unless the plant plays the robot as built).
+        homed = resolved.robot
+        rigid = np.linalg.norm(homed.reels - (p0 + homed.attachments
                                               @ rotation_from_rpy(scenario.plant.initial_rpy).T),
                                axis=1)
         self.encoder_offset = rigid - L0
+        if resolved.encoder_zero_error is not None:
+            self.encoder_offset = self.encoder_offset + resolved.encoder_zero_error
         if length_offset is not None:
             self.encoder_offset = self.encoder_offset + np.asarray(length_offset, dtype=float)
         self.enabled = False
@@ -317,6 +341,10 @@ class DynamicBridge:
         """The encoders, m: each reel's payout L0, zeroed at the start pose."""
         state = self._state_context.get_discrete_state_vector().value()
         return state[self._L0] + self.encoder_offset
+
+    def encoder_lengths(self) -> np.ndarray:
+        """What the encoders read now, m (`lengths`: zeroed at the start pose)."""
+        return self.lengths
 
     @property
     def speed(self) -> np.ndarray:

@@ -331,7 +331,7 @@ class EmulatedDrives:
     def _position(self, d: Drive) -> int:
         if d.frozen is not None:
             return d.frozen
-        x = (self.bridge.lengths[d.cable] - self.offset[d.cable]) * self.counts
+        x = (self.bridge.encoder_lengths()[d.cable] - self.offset[d.cable]) * self.counts
         return int(max(-2**31, min(2**31 - 1, round(float(x)))))
 
     def _torque(self, d: Drive) -> int:
@@ -498,7 +498,9 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--scenario", help="robot, start, operator and the bus settings of its "
                    "plant: !CanopenReels from this scenario (name or path)")
     p.add_argument("--scenario-text", help="YAML overlay applied to --scenario")
-    p.add_argument("--robot", help="built-in robot name or robot YAML path")
+    p.add_argument("--robot", help="built-in robot name or robot YAML path; with --scenario: "
+                   "the robot as built, played under the scenario's file (encoders homed on "
+                   "the file at the start)")
     p.add_argument("--start", nargs=3, type=float, metavar=("X", "Y", "Z"),
                    help="platform start, base frame, m (default: the scenario's or the centre)")
     p.add_argument("--plant", choices=("kinematic", "dynamic"), default="kinematic")
@@ -535,7 +537,8 @@ def build_drives(args, log=None) -> EmulatedDrives:
                            "clone)") from None
 
     from cdpm_drake.emulator.bridges import DynamicBridge, ReelBridge
-    from cdpm_drake.emulator.plant_setup import dynamic_scenario
+    from cdpm_drake.emulator.plant_setup import (dynamic_scenario, homing_offset,
+                                                 robot_as_built)
     from cdpm_drake.hardware.canopen_config import (CanopenReels, resolved_node_ids,
                                                     resolved_offsets, velocity_units)
     from cdpm_drake.kernels.kinematics import cable_lengths, jacobian
@@ -557,12 +560,16 @@ def build_drives(args, log=None) -> EmulatedDrives:
         start = args.start
     start = np.asarray(start, dtype=float)
     m = robot.num_cables
+    file_robot = robot
+    if args.scenario and args.robot:  # the robot as built, under the scenario's file
+        robot = robot_as_built(args, scenario, file_robot)
     if args.plant == "dynamic":
         args.force = None
-        bridge = DynamicBridge(dynamic_scenario(args, robot, start))
+        bridge = DynamicBridge(dynamic_scenario(args, file_robot, start))
     else:
         bridge = ReelBridge(robot, cable_lengths(robot, start), force=force,
-                            time_constant=args.time_constant)
+                            time_constant=args.time_constant,
+                            encoder_offset=homing_offset(file_robot, robot, start))
     # Compile (or load) the kinematics a SYNC uses now, not on the first SYNC enabled: a
     # first call takes tens of ms, which the controller would see as silent drives.
     jacobian(robot, bridge.platform())

@@ -59,7 +59,8 @@ import numpy as np
 
 from cdpm_drake.emulator.bridges import DynamicBridge, ReelBridge
 from cdpm_drake.emulator.faults import FaultPlan
-from cdpm_drake.emulator.plant_setup import dynamic_scenario, netft_server
+from cdpm_drake.emulator.plant_setup import (dynamic_scenario, homing_offset, netft_server,
+                                             robot_as_built)
 from cdpm_drake.emulator.server import ReelBridgeServer, count_by_reason, vector_text
 from cdpm_drake.hardware.config import DEFAULT_BRIDGE_PORT
 from cdpm_drake.hardware.priority import set_realtime_priority
@@ -92,8 +93,10 @@ def build_parser() -> argparse.ArgumentParser:
     g.add_argument("--scenario", help="take robot, cable swaps, start position, operator and "
                    "bridge address/port from this scenario (name or path)")
     g.add_argument("--scenario-text", help="YAML overlay applied to --scenario")
-    g.add_argument("--robot", help="built-in robot name or robot YAML path "
-                   "(default: paper_7cable, or the scenario's)")
+    g.add_argument("--robot", help="built-in robot name or robot YAML path (default: "
+                   "paper_7cable, or the scenario's); with --scenario: the robot as built, "
+                   "played under the scenario's file (its encoders homed on the file at the "
+                   "start: a rehearsal of a robot that differs from its file)")
     g.add_argument("--start", nargs=3, type=float, metavar=("X", "Y", "Z"),
                    help="platform start position, base frame, m (default: workspace centre, "
                    "or the scenario's); the reels' initial lengths follow by inverse kinematics")
@@ -181,9 +184,11 @@ def build_server(args, log=None) -> ReelBridgeServer:
     else:
         robot = load_robot(args.robot or "paper_7cable")
         start = robot.workspace.center
+    file_robot = robot
     if args.scenario and args.robot:
-        raise ValueError("give either --scenario or --robot, not both (the scenario names "
-                         "its robot)")
+        # The robot as built: the scenario's file is the controller's; the emulator plays
+        # --robot, its encoders homed on the file (plant_setup.robot_as_built).
+        robot = robot_as_built(args, scenario, file_robot)
     if args.start is not None:
         start = args.start
         box = robot.workspace
@@ -217,7 +222,7 @@ def build_server(args, log=None) -> ReelBridgeServer:
         if args.time_constant is not None:
             raise ValueError("--time-constant sets the kinematic plant's lag; the dynamic "
                              "plant's drives come from the robot file's reel_drives section")
-        bridge = DynamicBridge(dynamic_scenario(args, robot, start),
+        bridge = DynamicBridge(dynamic_scenario(args, file_robot, start),
                                length_offset=lengths - cable_lengths(robot, np.asarray(
                                    start, dtype=float)), load_cells=args.load_cells)
     else:
@@ -227,7 +232,8 @@ def build_server(args, log=None) -> ReelBridgeServer:
                 raise ValueError(f"{flag} needs --plant dynamic: the kinematic plant's cables "
                                  "are rigid and carry no tension")
         bridge = ReelBridge(robot, lengths, force=force, time_constant=0.02
-                            if args.time_constant is None else args.time_constant)
+                            if args.time_constant is None else args.time_constant,
+                            encoder_offset=homing_offset(file_robot, robot, start))
     return ReelBridgeServer(bridge, address=(args.address or address,
                                              args.port if args.port is not None else port),
                             faults=faults, period=args.period, seed=args.seed,

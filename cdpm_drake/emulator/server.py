@@ -411,7 +411,7 @@ class ReelBridgeServer:
         b = self.bridge
         self._sequence = next_sequence(self._sequence)
         c = self._last_command
-        lengths = b.lengths.copy()
+        lengths = np.array(b.encoder_lengths(), dtype=float)
         if plan.nan:
             lengths[0] = np.nan
         drive = {}

@@ -81,6 +81,22 @@ def braking_swing(robot, p, rows: int, a: float) -> float:
     return 2.0 * mass * _force_share(robot, p, rows) * float(a)
 
 
+def geometry_tension_error(robot, p, rows: int, sigma, ceiling: float) -> float:
+    """How far the cables' tensions computed on the file's geometry may be off the true ones,
+    N, at the level platform at p, to first order, when each cable's line is known to sigma
+    (m,) m and every tension is at most `ceiling` N: a line moved by sigma_j turns its unit
+    vector by sigma_j / L_j, so the wrench of the tensions is off by at most sum_j ceiling
+    sigma_j / L_j, which the tensions take up through W^+ (max_i |W^+_i| over the wrench
+    matrix's first `rows` rows)."""
+    from cdpm_drake.kernels.tension import wrench_matrix
+
+    p = np.asarray(p, dtype=float)
+    W = wrench_matrix(robot, p)[:rows]
+    share = float(np.linalg.norm(np.linalg.pinv(W), axis=1).max())
+    L = np.linalg.norm(robot.reels - (p + robot.attachments), axis=1)
+    return share * float(np.sum(float(ceiling) * np.asarray(sigma, dtype=float) / L))
+
+
 def _force_share(robot, p, rows: int) -> float:
     """max_i |W^+_i| over the force columns (N of tension per N of force on the platform, the
     level platform at p; the wrench matrix's first `rows` rows, minimum-norm)."""

@@ -222,6 +222,7 @@ def assemble_log(time_column, signals: dict, scenario: Scenario | ResolvedScenar
         if resolved.d_min_margin is not None and np.any(resolved.d_min_margin):
             # What the robot file's stated uncertainty added to d_min (the summary says it).
             log["d_min_uncertainty"] = np.asarray(resolved.d_min_margin, dtype=float)
+            log["kinetostatic_floor_uncertainty"] = np.array(resolved.kinetostatic_margin)
     # Where the platform started (the homing pose on a robot): what a calibration fixes.
     log["initial_position"] = np.asarray(scenario.initial_position, dtype=float)
     log["initial_rpy"] = np.asarray(getattr(scenario.plant, "initial_rpy", [0.0, 0.0, 0.0]),

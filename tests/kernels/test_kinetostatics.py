@@ -277,3 +277,35 @@ def test_the_soft_margin_turns_its_slope_smoothly_where_the_hard_one_kinks():
             assert jump_soft.max() < jump_hard.max() / 10.0, (direction, jump_soft.max(),
                                                               jump_hard.max())
     assert found  # the path has a kink to smooth
+
+
+def test_the_geometry_tension_error_bounds_the_tensions_change():
+    """kinetostatics.geometry_tension_error against the change itself: moving every cable's
+    reel exit by up to sigma (random directions) changes the wrench matrix, and the
+    tensions that balance the same wrench (minimum-norm change from a distribution at the
+    ceiling) move by no more than the bound, and by a good part of it in the worst draw."""
+    from cdpm_drake.kernels.kinetostatics import geometry_tension_error, wrench_rows
+    from cdpm_drake.kernels.tension import wrench_matrix
+    from cdpm_drake.robot import load_robot
+    import dataclasses
+
+    robot = load_robot("cube_8cable")
+    p = robot.workspace.center
+    rows = wrench_rows(robot)
+    sigma = np.full(robot.num_cables, 1e-3)
+    ceiling = 100.0
+    bound = geometry_tension_error(robot, p, rows, sigma, ceiling)
+    W = wrench_matrix(robot, p)[:rows]
+    T = np.full(robot.num_cables, ceiling)
+    w = W @ T
+    rng = np.random.default_rng(4)
+    worst = 0.0
+    for _ in range(200):
+        d = rng.normal(size=(robot.num_cables, 3))
+        d *= (sigma / np.linalg.norm(d, axis=1))[:, None]
+        moved = dataclasses.replace(robot, reels=robot.reels + d)
+        W2 = wrench_matrix(moved, p)[:rows]
+        dT = np.linalg.pinv(W2) @ (w - W2 @ T)  # the smallest change that balances w again
+        worst = max(worst, np.abs(dT).max())
+    assert worst <= bound, (worst, bound)
+    assert worst >= 0.1 * bound, (worst, bound)  # a bound, not a wild overestimate

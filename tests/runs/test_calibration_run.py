@@ -211,3 +211,25 @@ def test_calibrate_refuses_a_correction_beyond_the_prior(calibration, tmp_path, 
                  "--reels-prior", "0.001"])
     err = capsys.readouterr().err
     assert code == 1 and "more than 4 x the prior's 1 mm" in err and not out.exists()
+
+
+def test_a_calibrated_file_raises_the_kinetostatic_floor_by_its_tension_error(calibration):
+    """The kinetostatic floor the filter keeps gains 2 x geometry_tension_error at the start
+    pose (tests/kernels/test_kinetostatics.py checks that bound against perturbed robots)."""
+    from cdpm_drake.diagram import kinetostatic_block_params
+    from cdpm_drake.kernels.kinetostatics import geometry_tension_error, wrench_rows
+
+    tmp, run, out = calibration
+    resolved = resolve_scenario(load_scenario("exp2_interaction", f"{{robot: {out}}}"))
+    plain = resolve_scenario(load_scenario("exp2_interaction"))
+    robot = resolved.robot
+    expected = 2.0 * geometry_tension_error(
+        robot, np.asarray(resolved.scenario.initial_position), wrench_rows(robot),
+        robot.uncertainty.cable_std(), float(resolved.scenario.controller.max_tension))
+    assert resolved.kinetostatic_margin == pytest.approx(expected, rel=1e-12) and expected > 0
+    assert plain.kinetostatic_margin == 0.0
+    from cdpm_drake.kernels.kinetostatics import P_FLOOR
+
+    floor = float(resolved.scenario.safety_filter.kinetostatic_floor)
+    assert kinetostatic_block_params(resolved)[P_FLOOR] == pytest.approx(floor + expected)
+    assert kinetostatic_block_params(plain)[P_FLOOR] == floor

@@ -227,4 +227,9 @@ MUTANTS = [
       "    d_min = d_min + 0.0 * d_min_margin\n",
       "a calibrated file's stated uncertainty never widens the pair floor",
       ("tests/runs/test_calibration_run.py",)),
+    M("uncertainty_kinetostatic_margin_dropped", "cdpm_drake/diagram.py",
+      "        + resolved.kinetostatic_margin, ceiling=float(c.max_tension),",
+      "        , ceiling=float(c.max_tension),",
+      "a calibrated file's stated uncertainty never raises the kinetostatic floor",
+      ("tests/runs/test_calibration_run.py",)),
 ]
