@@ -673,7 +673,7 @@ def make_plant(scenario: Scenario | ResolvedScenario, robot=None):
         true = resolved.plant_robot
         return build_dynamic_plant(resolved.scenario, true, resolved.operator,
                                    check_dynamic_reels(resolved.scenario, true).tensions,
-                                   homing_offset=encoder_homing_offset(resolved))
+                                   homing_offset=resolved.homing_offset)
     from cdpm_drake.hardware.config import HardwareReels
     from cdpm_drake.hardware.reels import HardwareReelsSystem
 
@@ -684,23 +684,6 @@ def make_plant(scenario: Scenario | ResolvedScenario, robot=None):
         from cdpm_drake.hardware.canopen_reels import CanopenReelsSystem
         return CanopenReelsSystem(resolved.robot, cfg, time_step=resolved.time_step)
     raise TypeError(f"unknown plant {type(cfg).__name__!r}")
-
-
-def encoder_homing_offset(resolved: ResolvedScenario):
-    """What a homing at the start pose adds to the plant's encoder readings when the plant
-    plays another robot than the controller's (plant.robot, plant.model_error): the homing
-    writes the controller's rigid lengths of the start pose where the plant's are, plus each
-    encoder's zero error. None without model error."""
-    if resolved.true_robot is None:
-        return None
-    from cdpm_drake.kernels.pose import pose_lengths
-    from cdpm_drake.kernels.rotation import rotation_from_rpy
-
-    scenario = resolved.scenario
-    p0 = np.asarray(scenario.initial_position, dtype=float)
-    R0 = rotation_from_rpy(getattr(scenario.plant, "initial_rpy", [0.0, 0.0, 0.0]))
-    return (pose_lengths(resolved.robot, p0, R0) - pose_lengths(resolved.true_robot, p0, R0)
-            + resolved.encoder_zero_error)
 
 
 def build_simulated_plant(scenario: Scenario | ResolvedScenario, robot=None) -> Diagram:
@@ -718,7 +701,7 @@ def build_simulated_plant(scenario: Scenario | ResolvedScenario, robot=None) -> 
         time_step=T, time_constant=cfg.time_constant, max_reel_speed=resolved.max_reel_speed)
     builder.ExportInput(command, "reel_velocity_command")
     builder.ExportOutput(add_encoder_offset(builder, world["cable_lengths"],
-                                            encoder_homing_offset(resolved)), "cable_lengths")
+                                            resolved.homing_offset), "cable_lengths")
     if resolved.true_robot is not None:
         # The controller's estimate is no longer the truth: log the true pose (the
         # translating platform's, level) as the dynamic plant does.

@@ -56,6 +56,9 @@ def info(*, robot: str = "paper_7cable", swaps=None, plot_dir=None, grid_step: f
     if scenario is not None or swaps:
         shown = scenario.swaps if scenario is not None else swaps
         print(f"swapped cables: {', '.join(f'{i}-{j}' for i, j in shown) or 'none'}", file=out)
+    if r.calibration is not None:
+        for line in calibration_lines(r):
+            print(line, file=out)
     if refused is not None:
         print(f"refused: `cdpm simulate` would refuse this scenario's run (and `cdpm "
               f"emulate` its dynamic plant): {refused}", file=out)
@@ -447,3 +450,30 @@ def _check_swaps_option(name, swaps) -> None:
     except (ScenarioError, RobotError) as e:
         text = str(e).replace("swaps[", "--swaps[")
         raise CliError(text) from None
+
+
+def calibration_lines(robot) -> list[str]:
+    """What a calibrated robot file says of its calibration (its `calibration:` section)."""
+    cal = robot.calibration
+    after = max(cal["residual_after"], default=float("nan"))
+    before = max(cal["residual_before"], default=float("nan"))
+    lines = [f"calibrated by cdpm calibrate on {cal['created'] or '?'} from "
+             f"{len(cal['calibrated_from'])} run(s), {cal['poses']} poses (the original: "
+             f"{cal['original'] or '?'}); encoder noise taken as "
+             f"{1000 * cal['encoder_std']:g} mm; misfit {1000 * before:.3f} -> "
+             f"{1000 * after:.3f} mm RMS (largest cable)"]
+    if robot.uncertainty is not None:
+        lines.append(f"geometry uncertainty (1 sigma, as the margins use it): reel exits up "
+                     f"to {1000 * robot.uncertainty.reels_std.max():.2f} mm, attachment "
+                     f"points up to {1000 * robot.uncertainty.attachments_std.max():.2f} mm; "
+                     f"the reel exits absolute: up to "
+                     f"{1000 * max((max(r) for r in cal['reels_std']), default=0.0):.1f} mm")
+    offsets = [f"{1000 * c:+.2f}" for c in cal["encoder_offsets"]]
+    spread = max(cal["encoder_offsets_std"], default=0.0)
+    lines.append(f"encoder offsets found (mm, cable 1..{len(offsets)}): {', '.join(offsets)} "
+                 f"(+-{1000 * spread:.2f} mm); not identified by the data: "
+                 f"{len(cal['not_identified'])} parameter(s)"
+                 + (f" ({', '.join(cal['not_identified'][:3])}"
+                    f"{', ...' if len(cal['not_identified']) > 3 else ''})"
+                    if cal["not_identified"] else ""))
+    return lines

@@ -74,6 +74,22 @@ class ResolvedScenario:
         return self.scenario.time_step
 
     @property
+    def homing_offset(self):
+        """What a homing at the start pose adds to the plant's encoder readings when the
+        plant plays another robot than the controller's (plant.robot, plant.model_error):
+        the homing writes the controller's rigid lengths of the start pose where the plant's
+        are, plus each encoder's zero error, m (m,). None without model error."""
+        if self.true_robot is None:
+            return None
+        from cdpm_drake.kernels.pose import pose_lengths
+        from cdpm_drake.kernels.rotation import rotation_from_rpy
+
+        p0 = np.asarray(self.scenario.initial_position, dtype=float)
+        R0 = rotation_from_rpy(getattr(self.scenario.plant, "initial_rpy", [0.0, 0.0, 0.0]))
+        return (pose_lengths(self.robot, p0, R0) - pose_lengths(self.true_robot, p0, R0)
+                + self.encoder_zero_error)
+
+    @property
     def plant_robot(self) -> Robot:
         """The robot the plant plays: `true_robot` where the plant has model error, else the
         controller's."""

@@ -215,6 +215,8 @@ def robot_from_schema(schema: RobotSchema, source: str = "<code>") -> Robot:
         ignore_pairs=tuple(tuple(p) for p in schema.ignore_pairs),
         source=source,
         uncertainty=geometry_uncertainty(schema.calibration, len(schema.reels), source),
+        calibration=(dataclasses.asdict(schema.calibration)
+                     if schema.calibration.calibrated_from else None),
         dynamics=Dynamics(
             mass=schema.platform.mass, inertia=schema.platform.inertia,
             handle=schema.platform.handle, EA=schema.cables.EA, damping=schema.cables.damping,

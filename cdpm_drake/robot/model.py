@@ -161,6 +161,9 @@ class Robot:
     dynamics: Dynamics = Dynamics()
     # A calibrated file's stated uncertainty of the geometry; None: not stated.
     uncertainty: typing.Optional[GeometryUncertainty] = None
+    # A calibrated file's calibration section as written (schema.CalibrationSchema's fields),
+    # for what `cdpm info` says of it; None: a file measured by hand.
+    calibration: typing.Optional[dict] = None
 
     def __post_init__(self):
         reels = as_points(self.reels, "reels", self.source)

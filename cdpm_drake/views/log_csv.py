@@ -92,6 +92,10 @@ RUN_CONSTANTS = {
     "workspace_lower": "m", "workspace_upper": "m", "robot_name": "-", "scenario_name": "-",
     "ending": "-", "fault_time": "s", "fault_message": "-", "watchdog_limit": "s",
     "controller_min_tension": "N", "controller_max_tension": "N",
+    # The homing pose; a plant that plays the robot as built (docs/calibration.md).
+    "initial_position": "m", "initial_rpy": "rad", "reels_true": "m",
+    "attachments_true": "m", "encoder_zero_error": "m", "EA_true": "N", "mass_true": "kg",
+    "d_min_uncertainty": "m", "kinetostatic_floor_uncertainty": "N",
 }
 _PARTS = {"xyz": ("x", "y", "z"), "rpy": ("roll", "pitch", "yaw")}
 _INTEGERS = ("0/1", TENSION_STATUS, CABLE_NUMBER, FILTER_STATUS, FILTER_BINDING,

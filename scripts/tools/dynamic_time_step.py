@@ -23,6 +23,7 @@ import time
 from pathlib import Path
 
 import numpy as np
+import yaml
 
 ROOT = Path(__file__).resolve().parents[2]
 sys.path.insert(0, str(ROOT))
@@ -46,8 +47,13 @@ def energy_error(h: float) -> tuple[float, float]:
     """(largest |E - E0| / E_knock, E_knock J) of the undamped plant knocked, over 4 s."""
     with tempfile.TemporaryDirectory() as tmp:
         robot_file = Path(tmp) / "undamped.yaml"
-        robot_file.write_text(ROBOT.read_text() + "\ncables: {damping: 0.0}\nreel_drives: "
-                              "{viscous_friction: 0.0, coulomb_friction: 0.0}\n")
+        # The file's cables and reel_drives sections replaced, not repeated (a robot file
+        # refuses a key written twice).
+        raw = yaml.safe_load(ROBOT.read_text())
+        raw["cables"] = {**raw.get("cables", {}), "damping": 0.0}
+        raw["reel_drives"] = {**raw.get("reel_drives", {}), "viscous_friction": 0.0,
+                              "coulomb_friction": 0.0}
+        robot_file.write_text(yaml.safe_dump(raw))
         scenario = load_scenario("exp2_interaction", f"{{robot: {robot_file}, swaps: [[1, 3]], "
                                  "operator: !NoOperator {}, interference: {enabled: false}, "
                                  f"plant: !DynamicReels {{time_step: {h}}}}}")

@@ -45,6 +45,11 @@ CASES = {
                 (["EMPTY"], 1, "has no ticks.bin"),
                 ([], 2, "the following arguments are required: RUN_DIR")],
     "list": [(["extra"], 2, "unrecognized arguments: extra")],
+    "calibrate": [(["MISSING", "--robot", "paper_7cable"], 1, "does not exist"),
+                  (["EMPTY", "--robot", "MISSING/robot.yaml"], 1, "does not exist"),
+                  (["EMPTY", "--robot", "paper_7cable", "--max-poses", "1"], 2,
+                   "--max-poses must be within")],
+    "warm": [(["--bogus"], 2, "unrecognized arguments: --bogus")],
 }
 
 

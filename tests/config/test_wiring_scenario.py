@@ -32,8 +32,8 @@ from cdpm_drake.kernels.kinematics import KinematicsError, cable_lengths, forwar
 from cdpm_drake.kernels.plant.operators import CsvOperator, NoOperator, ScriptedOperator, SpringHandOperator
 from cdpm_drake.runs.realtime import run as realtime_run
 from cdpm_drake.robot import RobotSchema, load_robot
-from cdpm_drake.config import (Admittance, Interference, Limits, Logistic, ModelMonitor,
-                                 PairLogistic, SafetyFilter, Scenario, ScenarioError, Sensor,
+from cdpm_drake.config import (Admittance, DynamicReels, Interference, Limits, Logistic,
+                                 ModelMonitor, PairLogistic, SafetyFilter, Scenario, ScenarioError, Sensor,
                                  SimulatedReels, WallForce, load_scenario, scenario_robot)
 from cdpm_drake.runs.log import save_log
 from cdpm_drake.runs.simulate import simulate
@@ -1945,3 +1945,111 @@ def test_the_tension_damping_settings_reach_its_block():
     first, second = one["reel_velocity_damping"][:2], scaled["reel_velocity_damping"][:2]
     assert np.abs(first).max() > 1e-6
     np.testing.assert_allclose(second, 2.5 * first, rtol=1e-9, atol=1e-15)
+
+
+# --- the robot as built, a calibrated file ---------------------------------------------------
+
+
+@covers("Scenario.plant!SimulatedReels.robot", "Scenario.plant!DynamicReels.robot")
+def test_plant_robot_is_the_robot_the_plant_plays(tmp_path):
+    """The plant plays plant.robot (exits moved 1 cm here) under the controller's file: the
+    log's true geometry is that file's, the controller's the scenario's."""
+    robot = load_robot("paper_7cable")
+    spec = RobotSchema(name="as_built", reels=(robot.reels + 0.01).tolist(),
+                       attachments=robot.attachments.tolist())
+    spec.workspace.lower, spec.workspace.upper = (robot.workspace.lower.tolist(),
+                                                  robot.workspace.upper.tolist())
+    path = tmp_path / "as_built.yaml"
+    path.write_text(to_yaml(dataclasses.asdict(spec)) + "\n")
+    for plant in (SimulatedReels(robot=str(path)), DynamicReels(robot=str(path))):
+        resolved = scenario_module.resolve_scenario(base(plant=plant))
+        np.testing.assert_allclose(resolved.plant_robot.reels, robot.reels + 0.01)
+        np.testing.assert_array_equal(resolved.robot.reels, robot.reels)
+    log = sim(base(plant=SimulatedReels(robot=str(path))), 0.02)
+    np.testing.assert_allclose(log["reels_true"], robot.reels + 0.01)
+
+
+_ERROR_FIELDS = ("reels_std", "attachments_std", "encoder_offset_std", "EA_rel_std",
+                 "mass_rel_std", "seed")
+
+
+@covers(*[f"Scenario.plant!{p}.model_error.{f}" for p in ("SimulatedReels", "DynamicReels")
+          for f in _ERROR_FIELDS])
+@pytest.mark.parametrize("plant", [SimulatedReels, DynamicReels])
+def test_each_model_error_field_reaches_its_part_of_the_true_robot(plant):
+    """Each standard deviation moves its own part only (the draw's order is fixed), the seed
+    changes the draw and repeats it."""
+    from cdpm_drake.config.plants import ModelError
+
+    robot = load_robot("paper_7cable")
+
+    def true(**error):
+        resolved = scenario_module.resolve_scenario(base(plant=plant(
+            model_error=ModelError(**error))))
+        t = resolved.plant_robot
+        return t, resolved.encoder_zero_error
+
+    t, z = true(reels_std=0.01)
+    assert np.abs(t.reels - robot.reels).max() > 1e-3 and np.all(t.attachments == robot.attachments)
+    assert not np.any(z) and t.dynamics.EA == robot.dynamics.EA
+    t, z = true(attachments_std=0.005)
+    assert np.abs(t.attachments - robot.attachments).max() > 1e-4 and np.all(t.reels == robot.reels)
+    t, z = true(encoder_offset_std=0.003)
+    assert np.abs(z).max() > 1e-4 and np.all(t.reels == robot.reels)
+    t, _ = true(EA_rel_std=0.2)
+    assert t.dynamics.EA != robot.dynamics.EA and t.dynamics.mass == robot.dynamics.mass
+    t, _ = true(mass_rel_std=0.1)
+    assert t.dynamics.mass != robot.dynamics.mass and t.dynamics.EA == robot.dynamics.EA
+    a, _ = true(reels_std=0.01, seed=1)
+    b, _ = true(reels_std=0.01, seed=2)
+    c, _ = true(reels_std=0.01, seed=1)
+    assert np.any(a.reels != b.reels) and np.all(a.reels == c.reels)
+
+
+@covers("Scenario.plant!SimulatedReels.max_length_residual")
+def test_simulated_max_length_residual_is_the_forward_kinematics_bound():
+    exact = scenario_module.resolve_scenario(base())
+    assert exact.fk_max_residual == 1e-6
+    given = scenario_module.resolve_scenario(base(plant=SimulatedReels(max_length_residual=0.03)))
+    assert given.fk_max_residual == 0.03
+    with pytest.raises(ScenarioError, match=r"plant\.max_length_residual"):
+        scenario_module.resolve_scenario(base(plant=SimulatedReels(max_length_residual=-1.0)))
+
+
+_CALIBRATION_FIELDS = ("calibrated_from", "created", "original", "poses", "encoder_std",
+                       "reels_std", "attachments_std", "reels_std_in_frame",
+                       "attachments_std_in_frame", "encoder_offsets", "encoder_offsets_std",
+                       "residual_before", "residual_after", "not_identified")
+
+
+@covers(*[f"RobotSchema.calibration.{f}" for f in _CALIBRATION_FIELDS])
+def test_a_calibration_section_reaches_the_margins_and_cdpm_info(tmp_path, capsys):
+    """The in-frame standard deviations are what the margins use (the absolute ones where a
+    file states only those); every field shows in `cdpm info`."""
+    from cdpm_drake.cli.cdpm import main as cdpm
+
+    robot = load_robot("paper_7cable")
+    spec = dataclasses.asdict(RobotSchema(name="calibrated", reels=robot.reels.tolist(),
+                                          attachments=robot.attachments.tolist()))
+    spec["workspace"] = {"lower": robot.workspace.lower.tolist(),
+                         "upper": robot.workspace.upper.tolist()}
+    spec["calibration"] = {
+        "calibrated_from": ["runs/a", "runs/b"], "created": "2026-01-02T03:04:05+00:00",
+        "original": "orig.yaml", "poses": 77, "encoder_std": 2e-4,
+        "reels_std": [[0.02, 0.02, 0.02]] * 7, "attachments_std": [[0.0, 0.0, 0.0]] * 7,
+        "reels_std_in_frame": [[0.0004, 0.0005, 0.0003]] * 7,
+        "attachments_std_in_frame": [[0.0001, 0.0, 0.0]] * 7,
+        "encoder_offsets": [0.001] * 7, "encoder_offsets_std": [0.0003] * 7,
+        "residual_before": [0.004] * 7, "residual_after": [0.0001] * 7,
+        "not_identified": ["reel 1 x", "reel 2 x"]}
+    path = tmp_path / "calibrated.yaml"
+    path.write_text(to_yaml(spec) + "\n")
+    loaded = load_robot(path)
+    np.testing.assert_allclose(loaded.uncertainty.cable_std(), np.hypot(0.0005, 0.0001))
+    assert cdpm(["info", str(path), "--grid", "0.5"]) == 0
+    out = capsys.readouterr().out
+    for text in ("2026-01-02T03:04:05+00:00", "from 2 run(s), 77 poses", "orig.yaml",
+                 "0.2 mm", "misfit 4.000 -> 0.100 mm", "reel exits up to 0.50 mm",
+                 "attachment points up to 0.10 mm", "absolute: up to 20.0 mm",
+                 "+1.00, +1.00", "(+-0.30 mm)", "2 parameter(s) (reel 1 x, reel 2 x)"):
+        assert text in out, (text, out[:2000])

@@ -135,7 +135,7 @@ def build_dynamic_plant(scenario, robot, operator, start_tensions, *, log_truth=
     scenario's initial_position and plant.initial_rpy. `log_truth=False` leaves out the
     ground-truth logger (a plant that runs for hours, as in the emulator, reads
     ground_truth_now instead). `homing_offset` (m,) m is added to every encoder reading (a
-    homing on another robot's geometry: see diagram.encoder_homing_offset).
+    homing on another robot's geometry: ResolvedScenario.homing_offset).
     """
     cfg = scenario.plant
     d = robot.dynamics
