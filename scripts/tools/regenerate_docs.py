@@ -621,6 +621,15 @@ def replace_block(text: str, name: str, body: str) -> str:
 
 
 def main(argv=None) -> int:
+    """The script, its warnings quiet (the runs' own warnings are not news here) and loud
+    again after: a test that calls it in-process must not silence the tests after it."""
+    try:
+        return _main(argv)
+    finally:
+        logging.disable(logging.NOTSET)
+
+
+def _main(argv=None) -> int:
     parser = argparse.ArgumentParser(description=__doc__,
                                      formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--only", action="append", metavar="NAME",
