@@ -162,7 +162,11 @@ def canopen_drives(bridge, config, faults=()):
     """`cdpm emulate --canopen --lockstep`'s drives for `config` (a CanopenReels on
     python-can's virtual bus, with its force sensor) on `bridge`'s plant, with `faults`
     (EmulatedDrives'), started: .stop() them."""
-    import can
+    try:
+        import can
+    except ImportError:
+        raise RuntimeError("the CANopen rows need the python-can package: pip install "
+                           "'cdpm_drake[canopen]'") from None
 
     from cdpm_drake.emulator.canopen_drives import EmulatedDrives
     from cdpm_drake.hardware.canopen_config import (resolved_node_ids, resolved_offsets,

@@ -91,11 +91,20 @@ def test_cdpm_run_against_emulated_canopen_drives(tmp_path):
     # quiet host: 0.015 N at most at the same tick, with the hand up to 1.4 N.
     from cdpm_drake.config import load_scenario, scenario_operator
     hand = scenario_operator(load_scenario("exp2_interaction")).force
-    expected = np.array([hand(t, p, v) for t, p, v in zip(log["time"], log["p"],
-                                                          log["velocity"])])
+    # The hand's damping acts on the platform's own velocity, which lags the commanded one
+    # by the emulated reels' 20 ms (the commanded velocity put up to 0.09 N of the hand's
+    # 6 N s/m damping between the two): its velocity from the logged positions.
+    T = float(log["time"][1] - log["time"][0])
+    moving = np.gradient(np.asarray(log["p"], dtype=float), T, axis=0)
+    expected = np.array([hand(t, p, v) for t, p, v in zip(log["time"], log["p"], moving)])
     assert np.linalg.norm(expected, axis=1).max() > 1.0
-    off = np.min([np.abs(log["F_measured"][3:-1] - expected[3 + lag:n - 1 + lag]).max(axis=1)
-                  for lag in (-3, -2, -1, 0, 1)], axis=0)
+    # A frame is late by as many ticks as the host stalled the run (its longest tick gap on
+    # the wall clock; under CI's load a 20 ms stall made a sample 9 ticks old): the lags
+    # looked at cover that, never fewer than 3.
+    stalled = int(np.ceil(np.max(np.diff(np.asarray(log["wall"], dtype=float))) / T))
+    late = max(3, stalled)
+    off = np.min([np.abs(log["F_measured"][late:-1] - expected[late + lag:n - 1 + lag])
+                  .max(axis=1) for lag in range(-late, 2)], axis=0)
     assert off.max() <= 0.03, np.sort(off)[-10:]
     # The drives integrate their target velocities one plant step per SYNC (lag 0); the
     # command logged at tick k goes out with SYNC k, and the drives' answer to it is read
