@@ -90,17 +90,25 @@ def yaml_line(keys, *, filename=None, data=None) -> int | None:
     return line
 
 
+def _yaml_nodes(filename, data):
+    """The YAML file's or text's node tree (None when it is empty, unreadable or does not
+    parse: the loader says why)."""
+    import yaml
+
+    try:
+        text = data if data is not None else open(filename, encoding="utf-8").read()
+        return yaml.compose(text, Loader=yaml.SafeLoader)
+    except (OSError, yaml.YAMLError, UnicodeDecodeError):
+        return None
+
+
 def duplicate_yaml_keys(*, filename=None, data=None) -> list[str]:
     """Each key written twice in one mapping of a YAML file or text, as `'key' (path) on lines
     A and B`; [] when there is none or the YAML does not parse (the loader says why). YAML
     loaders keep the last one silently, so a value the user wrote is lost."""
     import yaml
 
-    try:
-        text = data if data is not None else open(filename, encoding="utf-8").read()
-        root = yaml.compose(text, Loader=yaml.SafeLoader)
-    except (OSError, yaml.YAMLError, UnicodeDecodeError):
-        return []
+    root = _yaml_nodes(filename, data)
     found = []
 
     def walk(node, path):
@@ -131,11 +139,7 @@ def quoted_numbers(*, filename=None, data=None) -> list[tuple[str, int, str]]:
     word, so a value the user quoted (perhaps meaning something else) passes unseen."""
     import yaml
 
-    try:
-        text = data if data is not None else open(filename, encoding="utf-8").read()
-        root = yaml.compose(text, Loader=yaml.SafeLoader)
-    except (OSError, yaml.YAMLError, UnicodeDecodeError):
-        return []
+    root = _yaml_nodes(filename, data)
     found = []
 
     def walk(node, path):

@@ -16,6 +16,24 @@ COMPILE_NOTICE = ("cdpm: compiling the per-tick math this command needs for the 
 COMPILE_NOTICE_SAID = "CDPM_COMPILE_NOTICE_SAID"
 
 
+def listen_to_compiles(on_compile):
+    """Calls `on_compile()` at each of numba's compilations (its "numba:compile" event: a cache
+    miss, never a load from the cache) until the returned context is exited; it is entered
+    here."""
+    from numba.core import event
+
+    class _Listener(event.Listener):
+        def on_start(self, ev):
+            on_compile()
+
+        def on_end(self, ev):
+            pass
+
+    installed = event.install_listener("numba:compile", _Listener())
+    installed.__enter__()
+    return installed
+
+
 class compile_notice:
     """Within the block, the first compilation of a kernel (numba's "numba:compile" event:
     a cache miss, never a load from the cache) prints COMPILE_NOTICE once on `stream`, so the
@@ -34,25 +52,20 @@ class compile_notice:
 
     def __enter__(self):
         try:
-            from numba.core import event
+            from numba.core import event  # noqa: F401
         except ImportError:  # no numba event API: no notice, nothing else changes
             return self
         notice = self
 
-        class _Listener(event.Listener):
-            def on_start(self, ev):
-                if not notice.said:
-                    import os
+        def on_compile():
+            if not notice.said:
+                import os
 
-                    notice.said = True
-                    os.environ[COMPILE_NOTICE_SAID] = "1"
-                    print(COMPILE_NOTICE, file=notice._stream or sys.stderr, flush=True)
+                notice.said = True
+                os.environ[COMPILE_NOTICE_SAID] = "1"
+                print(COMPILE_NOTICE, file=notice._stream or sys.stderr, flush=True)
 
-            def on_end(self, ev):
-                pass
-
-        self._installed = event.install_listener("numba:compile", _Listener())
-        self._installed.__enter__()
+        self._installed = listen_to_compiles(on_compile)
         return self
 
     def __exit__(self, *exc):

@@ -11,7 +11,7 @@ import io
 import sys
 import time
 
-from cdpm_drake.cli.compile_notice import FIRST_COMPILE
+from cdpm_drake.cli.compile_notice import FIRST_COMPILE, listen_to_compiles
 
 # (what the group is, the commands that need it, scenario, overlay); a scenario of None is
 # the workspace statics of `cdpm info`. The other variants need nothing more (the paper's
@@ -39,20 +39,11 @@ class _Counter:
         self.count = 0
 
     def __enter__(self):
-        from numba.core import event
-
-        counter = self
-
-        class _Listener(event.Listener):
-            def on_start(self, ev):
-                counter.count += 1
-
-            def on_end(self, ev):
-                pass
-
-        self._installed = event.install_listener("numba:compile", _Listener())
-        self._installed.__enter__()
+        self._installed = listen_to_compiles(self._count)
         return self
+
+    def _count(self):
+        self.count += 1
 
     def __exit__(self, *exc):
         self._installed.__exit__(*exc)
