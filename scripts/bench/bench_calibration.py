@@ -10,9 +10,10 @@ homing pose and the file's orientation define: a translating platform's lengths 
 turn of that whole frame), how many of them the report calls identified and whether those are
 within 2 mm; then the same with 3 poses measured externally (the plant's true pose at 3 of
 the motion's holds, the largest triangle among those where it is still, plus 0.2 mm noise:
-`--measured-poses`), which fix the turn. On paper_7cable also the promise on experiments 2 and 3 (cables pushed
-together): the true closest approach below d_l and whether the run stopped, with the file,
-with the calibrated geometry alone and with it and its uncertainty (the widened margins).
+`--measured-poses`), which fix the turn. On paper_7cable also the promise on experiments 2
+and 3 (cables pushed together): the true closest approach below d_l and whether the run
+stopped, with the file, with the calibrated geometry alone and with it and its uncertainty
+(the widened margins).
 
     python scripts/bench/bench_calibration.py [--seeds N] [--robots a,b] [--no-promise]
 

@@ -1970,7 +1970,7 @@ def test_plant_robot_is_the_robot_the_plant_plays(tmp_path):
 
 
 _ERROR_FIELDS = ("reels_std", "attachments_std", "encoder_offset_std", "EA_rel_std",
-                 "mass_rel_std", "seed")
+                 "mass_rel_std", "com_std", "seed")
 
 
 @covers(*[f"Scenario.plant!{p}.model_error.{f}" for p in ("SimulatedReels", "DynamicReels")
@@ -2000,6 +2000,14 @@ def test_each_model_error_field_reaches_its_part_of_the_true_robot(plant):
     assert t.dynamics.EA != robot.dynamics.EA and t.dynamics.mass == robot.dynamics.mass
     t, _ = true(mass_rel_std=0.1)
     assert t.dynamics.mass != robot.dynamics.mass and t.dynamics.EA == robot.dynamics.EA
+    assert np.all(t.dynamics.com == 0.0)
+    t, _ = true(com_std=0.01)
+    assert np.abs(t.dynamics.com).max() > 1e-4 and t.dynamics.mass == robot.dynamics.mass
+    assert np.all(t.reels == robot.reels)
+    # Drawn last: the reels' draw is the one before the centre of mass existed.
+    r, _ = true(reels_std=0.01, seed=4)
+    rc, _ = true(reels_std=0.01, com_std=0.01, seed=4)
+    assert np.all(r.reels == rc.reels) and np.any(rc.dynamics.com != 0)
     a, _ = true(reels_std=0.01, seed=1)
     b, _ = true(reels_std=0.01, seed=2)
     c, _ = true(reels_std=0.01, seed=1)
