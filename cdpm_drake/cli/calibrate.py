@@ -36,7 +36,7 @@ def cmd_calibrate(args) -> int:
                                attachments_std=args.attachments_prior,
                                offsets_std=args.offsets_prior))
     try:
-        cal = calibrate_runs(args.runs, args.robot, settings)
+        cal = calibrate_runs(args.runs, args.robot, settings, args.measured_poses)
     except CalibrationError as e:
         raise InputError(str(e)) from None
     for line in report(cal, settings):
@@ -119,6 +119,12 @@ def add_parser(sub) -> None:
     p.add_argument("--dry-run", action="store_true", help="fit and report, write nothing")
     p.add_argument("--attachments", action="store_true",
                    help="fit the attachment points too (logs of the full pose only)")
+    p.add_argument("--measured-poses", type=Path, default=None, metavar="FILE",
+                   help="externally measured platform positions (laser tracker, motion "
+                        "capture) at a few held poses of the runs, base frame (YAML: poses: "
+                        "[{time or index, position, std, run}]; docs/calibration.md): they "
+                        "fix the base frame's turn a translating platform's lengths cannot "
+                        "see, so the exits' absolute positions can be identified")
     p.add_argument("--encoder-std", type=float, default=1e-4, metavar="M",
                    help="one encoder reading's noise, m (default 1e-4)")
     p.add_argument("--reels-prior", type=float, default=0.05, metavar="M",

@@ -476,4 +476,7 @@ def calibration_lines(robot) -> list[str]:
                  + (f" ({', '.join(cal['not_identified'][:3])}"
                     f"{', ...' if len(cal['not_identified']) > 3 else ''})"
                     if cal["not_identified"] else ""))
+    if cal.get("measured_poses"):
+        lines.append(f"base frame's turn from externally measured poses: "
+                     f"{cal['measured_poses']}")
     return lines

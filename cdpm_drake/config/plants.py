@@ -25,6 +25,9 @@ class ModelError:
     # The cables' stiffness EA and the platform's mass off by this fraction (dynamic plant).
     EA_rel_std: float = 0.0
     mass_rel_std: float = 0.0
+    # The platform's centre of mass off its centre by this, per axis, platform frame, m
+    # (dynamic plant: under gravity it tilts the platform and shifts the tensions).
+    com_std: float = 0.0
     # The seed of the draw; None: the scenario's random_seed.
     seed: typing.Optional[int] = None
 

@@ -20,6 +20,14 @@ regular; what the data identify is read off the data alone (the information with
 a parameter whose standard deviation from the data exceeds `identified_std` is reported as not
 identified.
 
+Externally measured poses (a laser tracker, motion capture: positions in the base frame with
+their standard deviations) are residuals too. A translating platform's lengths cannot see a
+turn of every a_i - b_i about the homing pose; measured poses can: 2 or more, off one line
+through the homing pose, fix the turn (the homing pose keeps the frame's position: held, it
+also lets a single wrong measurement show instead of tilting the frame, which 3 poses alone
+could not tell from a turn). The fit then holds no turn, and the exits' absolute standard
+deviations come from the data.
+
 Solved by Gauss-Newton with a Levenberg-Marquardt damping and Huber weights (a robust loss:
 a reading `huber` sigmas off counts linearly), re-linearising each pose's rotation at its
 current estimate so that the Jacobian is exact.
@@ -65,6 +73,12 @@ class CalibrationResult:
     unidentified: list            # names of parameters the data do not identify
     iterations: int
     fit_attachments: bool
+    # What fixes the base frame: "homing" (the homing poses, and for a translating platform
+    # the file's turn), "homing+measured" (the homing poses and the measured poses' turn).
+    gauge: str = "homing"
+    # Per measured pose: the fitted pose minus the measured position (M, 3), m.
+    measured_residual: np.ndarray = dataclasses.field(
+        default_factory=lambda: np.zeros((0, 3)))
 
 
 
@@ -105,10 +119,41 @@ def predicted(reels, attachments, offsets, positions, rotations, stretch):
     return np.linalg.norm(d, axis=-1) * stretch + offsets[None]
 
 
+# Measured poses closer than this to one line (m) cannot fix the turn about it.
+MIN_OFF_LINE = 0.05
+
+
+def _off_line(points) -> float:
+    """How far the points reach off their best straight line, m (0 for fewer than 3)."""
+    points = np.asarray(points, dtype=float)
+    if len(points) < 3:
+        return 0.0
+    centred = points - points.mean(axis=0)
+    _, _, vt = np.linalg.svd(centred)
+    off = centred - np.outer(centred @ vt[0], vt[0])
+    return float(np.max(np.linalg.norm(off, axis=1)))
+
+
+def measured_gauge(measured_positions, homing_positions) -> str:
+    """What the measured poses fix: "homing+measured" (off one line through the homing
+    poses: the turn; the homing poses keep the position); CalibrationError saying what
+    would stay held otherwise."""
+    P = np.asarray(measured_positions, dtype=float).reshape(-1, 3)
+    H = np.asarray(homing_positions, dtype=float).reshape(-1, 3)
+    spread = _off_line(np.vstack([P, H]))
+    if len(P) >= 2 and spread >= MIN_OFF_LINE:
+        return "homing+measured"
+    raise CalibrationError(
+        f"{len(P)} measured pose(s) with the homing pose reach {spread * 1e3:.1f} mm off one "
+        f"straight line (at least 2 poses and {MIN_OFF_LINE * 1e3:.0f} mm needed): the turn "
+        "of the base frame about that line would still be held at the file's; measure at "
+        "least 2 poses off one line through the homing pose")
+
+
 def calibrate(reels, attachments, lengths, positions, rotations=None, *, tensions=None,
               EA=None, run=None, fit_attachments=False, encoder_std=1e-4,
               prior=CalibrationPrior(), identified_std=5e-4, huber=3.0,
-              max_iterations=50) -> CalibrationResult:
+              max_iterations=50, measured=None) -> CalibrationResult:
     """Fit the geometry to encoder readings at K poses.
 
     reels, attachments: (m, 3) the file's geometry (the start of the fit and the prior's
@@ -120,6 +165,9 @@ def calibrate(reels, attachments, lengths, positions, rotations=None, *, tension
     its first pose, which is known and stays fixed (the gauge of the base frame), and has its
     own encoder offsets (its homing's).
     encoder_std: one reading's noise, m (the residuals are weighed by it).
+    measured: None, or (index (M,) of the pose measured, position (M, 3) m base frame,
+    std (M,) m): externally measured positions; they release the turn the lengths cannot see
+    (measured_gauge; CalibrationError when too few or on one line).
     """
     a0 = np.array(reels, dtype=float)
     b0 = np.array(attachments, dtype=float)
@@ -139,6 +187,15 @@ def calibrate(reels, attachments, lengths, positions, rotations=None, *, tension
     run = np.zeros(K, dtype=int) if run is None else np.asarray(run, dtype=int)
     runs = int(run.max()) + 1
     first = np.array([int(np.flatnonzero(run == r)[0]) for r in range(runs)])
+    gauge = "homing"
+    if measured is not None:
+        m_idx = np.asarray(measured[0], dtype=int)
+        m_pos = np.asarray(measured[1], dtype=float).reshape(-1, 3)
+        m_std = np.asarray(measured[2], dtype=float)
+        gauge = measured_gauge(m_pos, p[first])
+    else:
+        m_idx, m_pos, m_std = np.zeros(0, dtype=int), np.zeros((0, 3)), np.zeros(0)
+    M = m_idx.size
     free = np.setdiff1d(np.arange(K), first)
     stretch = np.ones((K, m))
     if tensions is not None:
@@ -151,8 +208,8 @@ def calibrate(reels, attachments, lengths, positions, rotations=None, *, tension
     at_c = at_b + (3 * m if fit_attachments else 0)
     n_geo = at_c + runs * m
     n = n_geo + dof * free.size
-    gauge_count = 6 if fit_attachments else (0 if full else 3)
-    if K * m < n - gauge_count:
+    gauge_count = 6 if fit_attachments else (0 if full or gauge != "homing" else 3)
+    if K * m + 3 * M < n - gauge_count:
         need = int(np.ceil((n_geo - gauge_count) / max(m - dof, 1))) + runs
         raise CalibrationError(f"{K} poses give {K * m} encoder readings for {n} unknowns "
                                f"({n_geo} geometry, {dof} per pose after each run's first): "
@@ -205,7 +262,17 @@ def calibrate(reels, attachments, lengths, positions, rotations=None, *, tension
             J[k, :, col:col + 3] = dLdp[k]
             if full:
                 J[k, :, col + 3:col + 6] = dLdphi[k]
-        return r.ravel(), J.reshape(K * m, n)
+        r, J = r.ravel(), J.reshape(K * m, n)
+        if M:
+            # The measured positions: p_k - measured, in their own sigmas.
+            r_m = ((p[m_idx] - m_pos) / m_std[:, None]).ravel()
+            J_m = np.zeros((M, 3, n))
+            for j, k in enumerate(m_idx):
+                col = col_of_pose[k]
+                if col >= 0:
+                    J_m[j, :, col:col + 3] = np.eye(3) / m_std[j]
+            r, J = np.concatenate([r, r_m]), np.vstack([J, J_m.reshape(3 * M, n)])
+        return r, J
 
     # The gauge rows' weight: far stiffer than any reading (in sigmas per metre).
     gauge_weight = 1e3 / encoder_std
@@ -225,7 +292,7 @@ def calibrate(reels, attachments, lengths, positions, rotations=None, *, tension
                 G[:3, cols] = np.eye(3)
                 G[3:, cols] = _skew(b0[i] - centre)
             return G * gauge_weight
-        if full:
+        if full or gauge != "homing":
             return np.zeros((0, n))
         G = np.zeros((3, n))
         for i in range(m):
@@ -292,7 +359,7 @@ def calibrate(reels, attachments, lengths, positions, rotations=None, *, tension
     # What the data identify: the data's information, no prior, the gauge's directions left
     # out (they carry none).
     eig = np.linalg.eigvalsh(schur(J.T @ J))[::-1][:n_geo - G.shape[0]]
-    chi2 = float(np.sum(r * r)) / max(K * m - n + G.shape[0], 1)
+    chi2 = float(np.sum(r * r)) / max(K * m + 3 * M - n + G.shape[0], 1)
     scale = max(1.0, chi2)
     # The standard deviations: the data's information and the prior's (the prior alone
     # bounds the gauge's directions: there a parameter is as uncertain as the file says).
@@ -317,7 +384,8 @@ def calibrate(reels, attachments, lengths, positions, rotations=None, *, tension
         residual_before=residual_before,
         residual_after=np.sqrt(np.mean(resid ** 2, axis=0)),
         singular_values=np.sqrt(np.clip(eig, 0.0, None)) * encoder_std,
-        unidentified=unidentified, iterations=it, fit_attachments=fit_attachments)
+        unidentified=unidentified, iterations=it, fit_attachments=fit_attachments,
+        gauge=gauge, measured_residual=p[m_idx] - m_pos)
     return result
 
 

@@ -64,6 +64,9 @@ class Dynamics:
         default_factory=lambda: np.array(PlatformSchema().inertia))
     handle: np.ndarray = dataclasses.field(
         default_factory=lambda: np.array(PlatformSchema().handle))
+    # Centre of mass, platform frame, m: the centre for a robot file; a robot as built
+    # (robot/perturb.py) may have it elsewhere.
+    com: np.ndarray = dataclasses.field(default_factory=lambda: np.zeros(3))
     EA: float = CablesSchema.EA
     damping: float = CablesSchema.damping
     bandwidth: float = ReelDrivesSchema.bandwidth

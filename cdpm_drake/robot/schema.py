@@ -106,6 +106,9 @@ class CalibrationSchema:
     residual_after: list[float] = dataclasses.field(default_factory=list)
     # The parameters the data did not identify (their standard deviation above the bound).
     not_identified: list[str] = dataclasses.field(default_factory=list)
+    # The externally measured poses that fixed the base frame ("": none; the homing pose and,
+    # for a translating platform, the file's turn fixed it).
+    measured_poses: str = ""
 
 
 @dataclasses.dataclass

@@ -38,6 +38,8 @@ class CalibrationSettings:
     max_residual_sigmas: float = 5.0
     # ... or when a correction exceeds this many prior standard deviations.
     max_prior_sigmas: float = 4.0
+    # ... or when a measured pose is farther than this many of its std from the fitted pose.
+    max_measured_sigmas: float = 5.0
 
 
 @dataclasses.dataclass
@@ -52,6 +54,9 @@ class CalibrationRun:
     full_pose: bool
     stretch: bool                 # measured tensions used for the cables' stretch
     problems: list                # why the fit must not be written ([] when it may)
+    # The externally measured poses: their file, and per pose (its description, its std m).
+    measured_file: str = ""
+    measured: list = dataclasses.field(default_factory=list)
 
 
 def _attachment_order(log_b, file_b, path) -> np.ndarray:
@@ -93,17 +98,26 @@ def _read(path, robot):
                                   robot.attachments, target)
 
 
-def calibrate_runs(paths, robot_ref, settings: CalibrationSettings = CalibrationSettings()
-                   ) -> CalibrationRun:
+def calibrate_runs(paths, robot_ref, settings: CalibrationSettings = CalibrationSettings(),
+                   measured_poses=None) -> CalibrationRun:
     """Fit `robot_ref`'s geometry (a name or a file) to the encoder lengths of the runs at
-    `paths` (run folders, log.npz files, runs/<name>)."""
+    `paths` (run folders, log.npz files, runs/<name>); `measured_poses`: a file of externally
+    measured poses (runs/measured_poses.py), or None."""
     from cdpm_drake.kernels.rotation import rotations_from_rpy
+    from cdpm_drake.runs.measured_poses import describe, load_measured_poses, measured_sample
 
     robot_path = resolve_robot_path(robot_ref)
     robot = load_robot(robot_path)
     if not paths:
         raise CalibrationError("give at least one run's log to calibrate from")
     m = robot.num_cables
+    measured = [] if measured_poses is None else load_measured_poses(measured_poses)
+    for j, pose in enumerate(measured):
+        if pose.run > len(paths):
+            raise CalibrationError(f"{describe(pose, j)}: run {pose.run}, but "
+                                   f"{len(paths)} run(s) given")
+    m_index = [0] * len(measured)
+    count = 0
     lengths, positions, rotations, tensions, runs, sources = [], [], [], [], [], []
     full = stretch = None
     order0 = None
@@ -125,6 +139,13 @@ def calibrate_runs(paths, robot_ref, settings: CalibrationSettings = Calibration
         e = np.asarray(log["lengths"], dtype=float)
         keep = select_poses(t, p, e, min_spacing=settings.min_spacing,
                             max_speed=settings.max_speed, max_poses=settings.max_poses)
+        mine = [j for j, pose in enumerate(measured) if pose.run == r + 1]
+        samples = [measured_sample(measured[j], j, t, p, resolve_latest(Path(path)))
+                   for j in mine]
+        keep = np.union1d(keep, np.asarray(samples, dtype=int)).astype(int)
+        for j, k in zip(mine, samples):
+            m_index[j] = count + int(np.searchsorted(keep, k))
+        count += keep.size
         rpy = np.asarray(log["rpy"], dtype=float).copy() if has_rpy else None
         # The first pose is the homing pose: where the run started, known (the estimate
         # there is the file's geometry's, off by the very errors the fit is after).
@@ -159,20 +180,32 @@ def calibrate_runs(paths, robot_ref, settings: CalibrationSettings = Calibration
         tensions=np.vstack(tensions) if stretch else None, EA=robot.dynamics.EA,
         run=np.concatenate(runs), fit_attachments=settings.fit_attachments and full,
         encoder_std=settings.encoder_std, prior=settings.prior,
-        identified_std=settings.identified_std)
+        identified_std=settings.identified_std,
+        measured=((np.array(m_index), np.array([x.position for x in measured], dtype=float),
+                   np.array([x.std for x in measured], dtype=float)) if measured else None))
     inverse = np.argsort(order0)
     result.attachments = result.attachments[inverse]
     result.attachments_std = result.attachments_std[inverse]
     result.attachments_std_in_frame = result.attachments_std_in_frame[inverse]
+    described = [(describe(x, j), float(x.std)) for j, x in enumerate(measured)]
     return CalibrationRun(robot=robot, robot_path=robot_path, sources=sources, result=result,
                           poses=K, full_pose=bool(full), stretch=bool(stretch),
-                          problems=_problems(robot, result, settings))
+                          problems=_problems(robot, result, settings, described),
+                          measured_file=str(measured_poses) if measured else "",
+                          measured=described)
 
 
-def _problems(robot, result, settings) -> list:
+def _problems(robot, result, settings, measured=()) -> list:
     """Why the fit must not be written: a misfit above the encoders' resolution, a correction
-    beyond the prior, nothing identified."""
+    beyond the prior, nothing identified, a measured pose far from the fitted one."""
     problems = []
+    for (what, std), d in zip(measured, result.measured_residual):
+        off = float(np.linalg.norm(d))
+        if off > settings.max_measured_sigmas * std * np.sqrt(3):
+            problems.append(f"{what} is {off * 1e3:.2f} mm from the fitted pose, more than "
+                            f"{settings.max_measured_sigmas:g} x its std {std * 1e3:g} mm per "
+                            "axis: an outlier (a mistyped coordinate, a time off the "
+                            "platform's dwell, another frame); correct or remove it")
     bound = settings.max_residual_sigmas * settings.encoder_std
     for i, rms in enumerate(result.residual_after):
         if rms > bound:
@@ -244,12 +277,20 @@ def report(cal: CalibrationRun, settings: CalibrationSettings) -> list[str]:
                      f"parameters; "
                      f"{_smallest(res)}): their values stay near the file's, their "
                      "uncertainty is written with them")
-    if not cal.full_pose:
+    for (what, std), d in zip(cal.measured, res.measured_residual):
+        lines.append(f"{what}: the fitted pose is {np.linalg.norm(d) * 1e3:.3f} mm from it "
+                     f"(its std {std * 1e3:g} mm per axis)")
+    if res.gauge == "homing+measured":
+        lines.append(f"the base frame's turn is the measured poses' ({cal.measured_file}), "
+                     "its position the homing pose's: the reel exits' standard deviations "
+                     "are absolute")
+    elif not cal.full_pose:
         lines.append("a translating platform's lengths cannot see a turn of the whole base "
                      "frame about the homing pose: it is held at the file's, so the reel "
                      "exits' standard deviations include the file's own uncertainty of it; "
                      "'in frame': relative to that frame, how well the cables are known "
-                     "relative to each other (what their distances, and the margins, use)")
+                     "relative to each other (what their distances, and the margins, use);"
+                     " --measured-poses fixes it")
     return lines
 
 
@@ -298,6 +339,8 @@ def calibrated_yaml(cal: CalibrationRun, settings: CalibrationSettings) -> str:
         "residual_after": [round(float(x), 7) for x in res.residual_after],
         "not_identified": list(res.unidentified),
     }
+    if cal.measured_file:
+        raw["calibration"]["measured_poses"] = cal.measured_file
     if not res.fit_attachments and cal.robot.uncertainty is not None:
         # Not fitted: the file's own stated uncertainty of them stands.
         for key in ("attachments_std", "attachments_std_in_frame"):

@@ -201,6 +201,7 @@ def assemble_log(time_column, signals: dict, scenario: Scenario | ResolvedScenar
         log["encoder_zero_error"] = np.asarray(resolved.encoder_zero_error, dtype=float)
         log["EA_true"] = np.array(float(resolved.true_robot.dynamics.EA))
         log["mass_true"] = np.array(float(resolved.true_robot.dynamics.mass))
+        log["com_true"] = np.asarray(resolved.true_robot.dynamics.com, dtype=float).copy()
     if params is not None:
         for key in ("d_l", "d_u", "F_u", "eps"):
             log[key] = np.asarray(getattr(params, key), dtype=float)

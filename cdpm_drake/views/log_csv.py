@@ -95,6 +95,7 @@ RUN_CONSTANTS = {
     # The homing pose; a plant that plays the robot as built (docs/calibration.md).
     "initial_position": "m", "initial_rpy": "rad", "reels_true": "m",
     "attachments_true": "m", "encoder_zero_error": "m", "EA_true": "N", "mass_true": "kg",
+    "com_true": "m",
     "d_min_uncertainty": "m", "kinetostatic_floor_uncertainty": "N",
 }
 _PARTS = {"xyz": ("x", "y", "z"), "rpy": ("roll", "pitch", "yaw")}

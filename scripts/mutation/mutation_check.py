@@ -34,7 +34,16 @@ ROOT = Path(__file__).resolve().parents[2]
 # the files tests read); not the virtual environment, git, caches or run outputs.
 COPY = ("cdpm_drake", "hardware", "tests", "scripts", "docs", "diagrams",
         "README.md", "pyproject.toml")
-IGNORE = shutil.ignore_patterns("__pycache__", "*.pyc", ".pytest_cache", "runs", "*.egg-info")
+_IGNORE = shutil.ignore_patterns("__pycache__", "*.pyc", ".pytest_cache", "*.egg-info")
+
+
+def IGNORE(folder, names):
+    """What copytree leaves out: caches, and run outputs (a `runs` folder of run folders); not
+    the package cdpm_drake/runs or the tests' tests/runs, which hold Python files."""
+    skip = set(_IGNORE(folder, names))
+    if "runs" in names and not any(Path(folder, "runs").glob("*.py")):
+        skip.add("runs")
+    return skip
 # One pytest run may not take longer than this (a mutant that hangs the suite is killed).
 TIMEOUT = 900.0
 

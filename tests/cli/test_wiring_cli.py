@@ -928,9 +928,9 @@ def spy_settings(monkeypatch):
     seen = []
     real = C.calibrate_runs
 
-    def spy(paths, robot_ref, settings):
+    def spy(paths, robot_ref, settings, measured_poses=None):
         seen.append((paths, robot_ref, settings))
-        return real(paths, robot_ref, settings)
+        return real(paths, robot_ref, settings, measured_poses)
 
     monkeypatch.setattr(C, "calibrate_runs", spy)
     return seen
@@ -982,6 +982,17 @@ def test_calibrate_settings_reach_the_fit(calibration_log, spy_settings, capsys)
     # translating controller's), so the report lists none.
     poses = int(out.split(" poses from")[0].split()[-1])
     assert poses <= 40 and "attachment 1:" not in out and "encoder noise 0.2 mm" in out
+
+
+@covers("calibrate --measured-poses")
+def test_calibrate_reads_the_measured_poses_given(calibration_log, tmp_path, capsys):
+    """One measured pose (its time in the log's hold at the start) cannot fix the frame's
+    turn: the refusal says so, which only the file's poses reaching the fit can cause."""
+    poses = tmp_path / "poses.yaml"
+    poses.write_text("poses:\n  - {time: 0.5, position: [1.75, 2.4, 1.35], std: 0.0002}\n")
+    assert cdpm("calibrate", calibration_log, "--robot", "paper_7cable", "--dry-run",
+                "--measured-poses", poses) == 1
+    assert "1 measured pose(s)" in capsys.readouterr().err
 
 
 @covers("calibrate --write-motion", "calibrate --start")

@@ -1970,7 +1970,7 @@ def test_plant_robot_is_the_robot_the_plant_plays(tmp_path):
 
 
 _ERROR_FIELDS = ("reels_std", "attachments_std", "encoder_offset_std", "EA_rel_std",
-                 "mass_rel_std", "seed")
+                 "mass_rel_std", "com_std", "seed")
 
 
 @covers(*[f"Scenario.plant!{p}.model_error.{f}" for p in ("SimulatedReels", "DynamicReels")
@@ -2000,6 +2000,14 @@ def test_each_model_error_field_reaches_its_part_of_the_true_robot(plant):
     assert t.dynamics.EA != robot.dynamics.EA and t.dynamics.mass == robot.dynamics.mass
     t, _ = true(mass_rel_std=0.1)
     assert t.dynamics.mass != robot.dynamics.mass and t.dynamics.EA == robot.dynamics.EA
+    assert np.all(t.dynamics.com == 0.0)
+    t, _ = true(com_std=0.01)
+    assert np.abs(t.dynamics.com).max() > 1e-4 and t.dynamics.mass == robot.dynamics.mass
+    assert np.all(t.reels == robot.reels)
+    # Drawn last: the reels' draw is the one before the centre of mass existed.
+    r, _ = true(reels_std=0.01, seed=4)
+    rc, _ = true(reels_std=0.01, com_std=0.01, seed=4)
+    assert np.all(r.reels == rc.reels) and np.any(rc.dynamics.com != 0)
     a, _ = true(reels_std=0.01, seed=1)
     b, _ = true(reels_std=0.01, seed=2)
     c, _ = true(reels_std=0.01, seed=1)
@@ -2019,7 +2027,8 @@ def test_simulated_max_length_residual_is_the_forward_kinematics_bound():
 _CALIBRATION_FIELDS = ("calibrated_from", "created", "original", "poses", "encoder_std",
                        "reels_std", "attachments_std", "reels_std_in_frame",
                        "attachments_std_in_frame", "encoder_offsets", "encoder_offsets_std",
-                       "residual_before", "residual_after", "not_identified")
+                       "residual_before", "residual_after", "not_identified",
+                       "measured_poses")
 
 
 @covers(*[f"RobotSchema.calibration.{f}" for f in _CALIBRATION_FIELDS])
@@ -2041,7 +2050,7 @@ def test_a_calibration_section_reaches_the_margins_and_cdpm_info(tmp_path, capsy
         "attachments_std_in_frame": [[0.0001, 0.0, 0.0]] * 7,
         "encoder_offsets": [0.001] * 7, "encoder_offsets_std": [0.0003] * 7,
         "residual_before": [0.004] * 7, "residual_after": [0.0001] * 7,
-        "not_identified": ["reel 1 x", "reel 2 x"]}
+        "not_identified": ["reel 1 x", "reel 2 x"], "measured_poses": "tracker.yaml"}
     path = tmp_path / "calibrated.yaml"
     path.write_text(to_yaml(spec) + "\n")
     loaded = load_robot(path)
@@ -2051,5 +2060,6 @@ def test_a_calibration_section_reaches_the_margins_and_cdpm_info(tmp_path, capsy
     for text in ("2026-01-02T03:04:05+00:00", "from 2 run(s), 77 poses", "orig.yaml",
                  "0.2 mm", "misfit 4.000 -> 0.100 mm", "reel exits up to 0.50 mm",
                  "attachment points up to 0.10 mm", "absolute: up to 20.0 mm",
-                 "+1.00, +1.00", "(+-0.30 mm)", "2 parameter(s) (reel 1 x, reel 2 x)"):
+                 "+1.00, +1.00", "(+-0.30 mm)", "2 parameter(s) (reel 1 x, reel 2 x)",
+                 "measured poses: tracker.yaml"):
         assert text in out, (text, out[:2000])

@@ -233,3 +233,136 @@ def test_a_calibrated_file_raises_the_kinetostatic_floor_by_its_tension_error(ca
     floor = float(resolved.scenario.safety_filter.kinetostatic_floor)
     assert kinetostatic_block_params(resolved)[P_FLOOR] == pytest.approx(floor + expected)
     assert kinetostatic_block_params(plain)[P_FLOOR] == floor
+
+
+def _dwell_poses(log, count=3, noise=2e-4, seed=0):
+    """`count` of the shipped motion's holds (0.3 s before each departure), those where the
+    plant's TRUE platform is still (< 2 mm/s), the set farthest apart (the largest triangle),
+    as a laser tracker would measure them: the true position plus `noise` per axis."""
+    import itertools
+
+    from cdpm_drake.data import SCENARIOS_DIR
+
+    times = np.asarray(load_scenario(str(SCENARIOS_DIR / "calibration_motion.yaml"))
+                       .operator.times)[3::2] - 0.3
+    t, p = log["time"], log["p_true"]
+    k = np.array([int(np.argmin(np.abs(t - x))) for x in times])
+    still = np.linalg.norm(p[k + 50] - p[k - 50], axis=1) / (t[k + 50] - t[k - 50]) < 2e-3
+    k, times = k[still], times[still]
+    best = max(itertools.combinations(range(len(k)), count),
+               key=lambda c: np.linalg.norm(np.cross(p[k[c[1]]] - p[k[c[0]]],
+                                                     p[k[c[2]]] - p[k[c[0]]])))
+    rng = np.random.default_rng(seed)
+    return [{"time": float(times[j]), "position": (p[k[j]] + rng.normal(0, noise, 3)).tolist(),
+             "std": noise, "_true": p[k[j]]} for j in best]
+
+
+def _write_poses(path, poses):
+    path.write_text(yaml.safe_dump({"poses": [{k: v for k, v in x.items() if k != "_true"}
+                                              for x in poses]}))
+    return path
+
+
+def test_measured_poses_identify_the_exits_absolutely(calibration, tmp_path):
+    """Three poses measured off the plant's TRUE pose with 0.2 mm noise fix the frame's turn:
+    every exit within 2 mm of the truth (the log's reels_true) and reported identified;
+    without them the same fit leaves the turn at the file's and identifies none (the fit
+    assumes its default 0.1 mm encoders; measured: errors 0.1-0.2 mm, stds 0.33-0.43 mm)."""
+    from cdpm_drake.runs.calibrate import CalibrationSettings, calibrate_runs
+
+    tmp, run, _ = calibration
+    log = load_log(run)
+    poses = _write_poses(tmp_path / "poses.yaml", _dwell_poses(log))
+    settings = CalibrationSettings()
+    with_poses = calibrate_runs([run], "paper_7cable", settings, poses)
+    without = calibrate_runs([run], "paper_7cable", settings)
+    err = np.linalg.norm(with_poses.result.reels - log["reels_true"], axis=1)
+    assert err.max() < 2e-3, err
+    assert with_poses.result.gauge == "homing+measured" and not with_poses.problems
+    assert not [n for n in with_poses.result.unidentified if n.startswith("reel")]
+    assert np.all(with_poses.result.reels_std <= 5e-4)
+    # Without: the turn is held, every exit reported not identified (and 2-6 mm off).
+    assert all(f"reel {i} x" in without.result.unidentified for i in range(1, 8))
+    assert np.linalg.norm(without.result.reels - log["reels_true"], axis=1).max() > 2e-3
+    # The encoder offsets stay within 1 mm of the homing's truth.
+    p0 = np.asarray(log["initial_position"])
+    c_true = (np.linalg.norm(log["reels"] - p0 - log["attachments"], axis=1)
+              - np.linalg.norm(log["reels_true"] - p0 - log["attachments_true"], axis=1)
+              + log["encoder_zero_error"])
+    assert np.abs(with_poses.result.offsets[0] - c_true).max() < 1e-3
+
+
+def test_measured_poses_file_is_written_into_the_calibrated_robot(calibration, tmp_path,
+                                                                  capsys):
+    """Through the command: the report says the measured poses define the frame; the
+    calibrated file names the poses' file and lists no exit as not identified."""
+    tmp, run, _ = calibration
+    poses = _write_poses(tmp_path / "poses.yaml", _dwell_poses(load_log(run)))
+    out = tmp_path / "cal.yaml"
+    assert cdpm(["calibrate", str(run), "--robot", "paper_7cable", "--out", str(out),
+                 "--measured-poses", str(poses)]) == 0
+    assert "the base frame's turn is the measured poses'" in \
+        capsys.readouterr().out
+    cal = yaml.safe_load(out.read_text())["calibration"]
+    assert cal["measured_poses"] == str(poses)
+    assert not [n for n in cal["not_identified"] if n.startswith("reel")]
+
+
+def _refusal(run, poses, tmp_path, capsys):
+    out = tmp_path / "never.yaml"
+    code = cdpm(["calibrate", str(run), "--robot", "paper_7cable", "--out", str(out),
+                 "--measured-poses", str(poses)])
+    assert code == 1 and not out.exists()
+    return capsys.readouterr().err
+
+
+def test_a_measured_pose_far_from_the_fit_is_named(calibration, tmp_path, capsys):
+    """One coordinate mistyped by 5 mm (25 of its sigmas): refused, that pose named."""
+    tmp, run, _ = calibration
+    poses = _dwell_poses(load_log(run))
+    poses[1]["position"][2] += 0.005
+    err = _refusal(run, _write_poses(tmp_path / "p.yaml", poses), tmp_path, capsys)
+    assert f"measured pose 2 (run 1, t = {poses[1]['time']:g} s) is" in err
+    assert "outlier" in err and "measured pose 1 (" not in err
+
+
+@pytest.mark.parametrize("change, message", [
+    ({"time": 500.0}, r"measured pose 1: time 500 s is outside the log of run 1"),
+    ({"std": 0}, r"poses\[0\]\.std must be a number > 0 \(m\), got 0"),
+    ({"run": 2}, r"measured pose 1 \(run 2, .*\): run 2, but 1 run\(s\) given"),
+])
+def test_bad_measured_poses_are_refused_naming_the_field(calibration, tmp_path, capsys,
+                                                         change, message):
+    import re
+
+    tmp, run, _ = calibration
+    poses = _dwell_poses(load_log(run))
+    poses[0].update(change)
+    err = _refusal(run, _write_poses(tmp_path / "p.yaml", poses), tmp_path, capsys)
+    assert re.search(message, err), err
+
+
+def test_a_measured_pose_while_moving_is_refused(calibration, tmp_path, capsys):
+    """A time where the platform travels (the log's fastest moment): not quasi-static."""
+    tmp, run, _ = calibration
+    log = load_log(run)
+    poses = _dwell_poses(log)
+    t = log["time"]
+    speed = np.linalg.norm(np.gradient(log["p"], t, axis=0), axis=1)
+    poses[2]["time"] = float(t[np.argmax(speed[100:-100]) + 100])
+    err = _refusal(run, _write_poses(tmp_path / "p.yaml", poses), tmp_path, capsys)
+    assert "measured pose 3" in err and "not quasi-static" in err
+
+
+def test_two_measured_poses_on_a_line_with_the_homing_pose_are_refused(calibration,
+                                                                        tmp_path, capsys):
+    """The homing pose and two poses along one line: the turn about it stays held."""
+    tmp, run, _ = calibration
+    log = load_log(run)
+    poses = _dwell_poses(log)[:2]
+    p0 = np.asarray(log["initial_position"])
+    for s, x in zip((0.3, 0.6), poses):
+        x["position"] = (p0 + s * (poses[0]["_true"] - p0)).tolist()
+    err = _refusal(run, _write_poses(tmp_path / "p.yaml", poses), tmp_path, capsys)
+    assert "2 measured pose(s) with the homing pose reach 0.0 mm off one straight line" in err
+    assert "would still be held" in err

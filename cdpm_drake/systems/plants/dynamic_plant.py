@@ -158,7 +158,7 @@ def build_dynamic_plant(scenario, robot, operator, start_tensions, *, log_truth=
     mbp.SetUseSampledOutputPorts(False)
     I = d.inertia
     inertia = SpatialInertia.MakeFromCentralInertia(
-        d.mass, np.zeros(3),
+        d.mass, np.asarray(d.com, dtype=float),
         RotationalInertia(I[0, 0], I[1, 1], I[2, 2], I[0, 1], I[0, 2], I[1, 2]))
     body = mbp.AddRigidBody("platform", inertia)
     if cfg.lock_rotation:
