@@ -379,10 +379,16 @@ class EmulatedDrives:
             cws.append(cw)
             targets.append(target)
         enabled = bool(np.any([d.state == "operation enabled" for d in self.drives]))
+        hold = False
         if enabled and self.first_enable_time is None:
             self.first_enable_time = self._now()
+            # The SYNC that first enables a drive ends the enable sequence, not the run's
+            # first: the reels are held over it (target velocity 0 there) and the plant's clock
+            # (and the hand's) starts with the next SYNC, as the UDP bridge's with the first
+            # enabling command, so the controller's first tick reads the plant at time 0.
+            hold = True
         before = self.bridge.faults
-        self.bridge.set_command(velocity, enable=enabled)
+        self.bridge.set_command(velocity, enable=enabled and not hold)
         if self.bridge.faults and not before:  # the plant's own fault (overspeed)
             for d in self.drives:
                 self._drive_fault(d, 0x8400)

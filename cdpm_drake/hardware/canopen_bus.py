@@ -433,6 +433,14 @@ class CanopenMaster:
                 del self.emcy[:len(at[0][7])]
         return at
 
+    def answered_snapshot(self):
+        """Lockstep: (snapshot, clock()) once every drive answered the last SYNC sent
+        (await_answers), the EMCY frames drained; the one kept before that SYNC
+        (sync_snapshot) is dropped."""
+        self._at_sync = None
+        self.await_answers()
+        return self.snapshot(), self.clock()
+
     def _send(self, cob_id: int, data: bytes) -> bool:
         network = self.network
         if network is None:

@@ -207,6 +207,7 @@ class CanopenReelsSystem(LeafSystem):
         # positions read), clock() of the last new TPDO; the same three of TPDO2.
         self._drives = self.DeclareDiscreteState(np.zeros(DRIVE_BLOCKS * m))
         self._count_start2 = np.zeros(m)
+        self._enable_positions = []
         # The force sensor: samples counted, ticks without a new one, time.monotonic() of
         # the last new one.
         self._sensor = self.DeclareDiscreteState(np.zeros(3))
@@ -367,7 +368,8 @@ class CanopenReelsSystem(LeafSystem):
         samples, force, _ = self._force_sample()
         state.get_mutable_discrete_state(self._force).SetFromVector(force)
         state.get_mutable_discrete_state(self._sensor).SetFromVector(
-            [samples, -1.0, time.monotonic()])  # tick 0 follows no SYNC of the run
+            # Tick 0 follows no SYNC of the run (in lockstep it reads its own SYNC's).
+            [samples, 0.0 if self.master.lockstep else -1.0, time.monotonic()])
         drives = np.zeros(DRIVE_BLOCKS * m).reshape(DRIVE_BLOCKS, m)
         drives[D_COUNT], drives[D_POSITION], drives[D_STILL] = count, pos, still
         drives[D_COUNT2] = count2
@@ -375,13 +377,19 @@ class CanopenReelsSystem(LeafSystem):
         self._count_start2 = count2.astype(float)
         self.lost_tpdos = 0
         # Tick 0 follows no SYNC of the run (the enable sequence's were answered above): its
-        # lack of a new TPDO is not a miss.
-        drives[D_MISSED] = drives[D_MISSED2] = -1.0
-        # A measured speed (the drives at rest, disabled): the first tick's acceleration is
-        # known, as the simulated sensor's; from positions, the second tick's speed.
-        mapped = self.master.velocity_mapped
-        drives[D_SPEED] = np.where(mapped, vel / self._vel_units, np.nan)
+        # lack of a new TPDO is not a miss; in lockstep it reads the answers to its own.
+        drives[D_MISSED] = drives[D_MISSED2] = 0.0 if self.master.lockstep else -1.0
+        drives[D_SPEED] = self._start_speed(vel, pos, count)
         drives[D_HEARD] = drives[D_HEARD2] = self.master.clock()
+        # The tensions before the first tick, as the simulated sensor's first sample: the
+        # reels at rest (within the drives' dead band) are not accelerating; a moving one
+        # waits for a second speed.
+        if c.tension_sensor == "drive_torque":
+            w = drives[D_SPEED]
+            accel = np.where(np.abs(w) <= self._drive_model[3], 0.0, np.nan)
+            tension_from_drive(torque * c.force_per_torque_unit, w, accel, *self._drive_model,
+                               state.get_mutable_discrete_state(self._tension)
+                               .get_mutable_value())
         drives = drives.ravel()
         state.get_mutable_discrete_state(self._drives).SetFromVector(drives)
         book = np.zeros(BOOK_SIZE)
@@ -389,6 +397,17 @@ class CanopenReelsSystem(LeafSystem):
         state.get_mutable_discrete_state(self._book).SetFromVector(book)
         self._stopped = self._quick_stopped = False
         self._fault = None
+
+    def _start_speed(self, vel, pos, count) -> np.ndarray:
+        """The reels' speeds at the end of the start-up, m/s: velocity actual where mapped,
+        else the difference of the last two positions the enable sequence read (NaN if no
+        TPDO came between them)."""
+        speed = np.full(self._m, np.nan)
+        if len(self._enable_positions) == 2:
+            pos0, count0 = self._enable_positions[0]
+            span = self._T * np.maximum(count - count0, 1)
+            speed = np.where(count > count0, (pos - pos0) / self._counts / span, np.nan)
+        return np.where(self.master.velocity_mapped, vel / self._vel_units, speed)
 
     def _tare_force(self, t) -> None:
         """The handle's sensor's first samples, `tare_samples` of them averaged as its bias
@@ -465,11 +484,14 @@ class CanopenReelsSystem(LeafSystem):
         c, m = self._config, self._m
         start = time.monotonic()
         reset_edge = np.zeros(m, dtype=bool)
+        self._enable_positions = []  # (position, TPDOs counted) of each snapshot
         while True:
             # In lockstep the enable sequence's SYNCs must not race the drives' answers: the
             # hand's force on the bus would differ at tick 0 between runs otherwise.
             self.master.await_answers()
-            sw = self.master.snapshot()[0]
+            snap = self.master.snapshot()
+            sw = snap[0]
+            self._enable_positions = [*self._enable_positions[-1:], (snap[1], snap[3])]
             states = [state_name(int(s)) for s in sw]
             if all(s == "operation enabled" for s in states):
                 return
@@ -543,18 +565,26 @@ class CanopenReelsSystem(LeafSystem):
         if book[FAULT] != FAULT_NONE:
             return  # latched; the next publish ends the run
         c, m = self._config, self._m
-        # The frames as the tick's publish saw them, before its SYNC: a silence counted in
-        # SYNC periods, whatever this tick's compute time lets arrive meanwhile.
-        at = self.master.sync_snapshot() or (self.master.snapshot(), self.master.clock())
+        if self.master.lockstep:
+            # The answers to the SYNC this tick's publish just sent, as HardwareReels' lockstep
+            # update reads the status answering its own command: the rehearsal's loop has the
+            # simulation's one-tick latency (tick k's command from the plant at t_k).
+            at = self.master.answered_snapshot()
+        else:
+            # The frames as the tick's publish saw them, before its SYNC: a silence counted
+            # in SYNC periods, whatever this tick's compute time lets arrive meanwhile.
+            at = self.master.sync_snapshot() or (self.master.snapshot(), self.master.clock())
         snap = at[0]
         drives, accel, new, (reason, cable, detail) = self._advance(context, *at)
         # TPDOs lost: the SYNCs of the run this update has seen answered (tick k's snapshot,
-        # taken before its own SYNC, answers SYNCs 1..k: none on tick 0) less the TPDOs that
-        # came for them, per drive. A TPDO a tick late is read with the next: not lost.
+        # taken before its own SYNC, answers SYNCs 1..k: none on tick 0; in lockstep 0..k)
+        # less the TPDOs that came for them, per drive. A TPDO a tick late is read with the
+        # next: not lost.
+        expected = book[TICKS] + float(self.master.lockstep)
         answered = drives[0:m] - self._count_start
         answered2 = drives[D_COUNT2 * m:(D_COUNT2 + 1) * m] - self._count_start2
-        self.lost_tpdos = int(np.maximum(0.0, book[TICKS] - answered).sum()
-                              + np.maximum(0.0, book[TICKS] - answered2)[
+        self.lost_tpdos = int(np.maximum(0.0, expected - answered).sum()
+                              + np.maximum(0.0, expected - answered2)[
                                   self.master.velocity_mapped].sum())
         pos, torque = snap[1], snap[2]
         speed = drives[D_SPEED * m:(D_SPEED + 1) * m]
@@ -625,11 +655,13 @@ class CanopenReelsSystem(LeafSystem):
             # Drake runs this tick's update right after this publish, so the update has not
             # seen the TPDOs that came in during the period just ended: judge them here too,
             # so that a fault stops the drives in place of this tick's command, not the next.
+            # In lockstep the update before has judged every answer to the last SYNC: no
+            # SYNC since, nothing new to judge (a silence would count twice).
             t = context.get_time()
-            # Lockstep: judged on every answer to the last SYNC, not on those in so far.
-            self.master.await_answers()
-            _, _, _, (reason, cable, detail) = self._advance(
-                context, self.master.snapshot(drain_emcy=False), self.master.clock())
+            reason, cable, detail = FAULT_NONE, -1, 0.0
+            if not self.master.lockstep:
+                _, _, _, (reason, cable, detail) = self._advance(
+                    context, self.master.snapshot(drain_emcy=False), self.master.clock())
             u = self._command.Eval(context)
             bad = ~np.isfinite(u)
             if reason == FAULT_NONE and bad.any():
