@@ -66,7 +66,7 @@ def _rig(robot, bridge=None, time_step=PERIOD, **overrides):
                                       ramp_time=0.0, force_sensor=bus_sensor(),
                                       lockstep=True), **overrides))
     return rig(robot, config, U, bridge=bridge or _TorqueBridge(robot), time_step=time_step,
-               lockstep=True, **drive_args)
+               lockstep=config.lockstep, **drive_args)
 
 
 def _run(sim, reels, drives, until):
@@ -116,6 +116,12 @@ def test_velocity_actual_is_mapped_into_tpdo2_and_is_the_reels_true_speed(robot,
             assert drives.fault_syncs["late_tpdo"] > 0 and drives.drives[1].held == []
     finally:
         close(reels, drives)
+    if not faults:
+        # In lockstep the update of tick k reads the answers to its own SYNC: after
+        # AdvanceTo(n T) (publish n sent SYNC n, the update of n - 1 ran) the run's SYNCs
+        # 0..n - 1 are answered, n per drive.
+        run = counts - reels._count_start2
+        assert (run == np.arange(1, len(run) + 1)[:, None]).all(), run[:3]
     truth = np.array(bridge.speeds)  # one step per SYNC, from the first after NMT start
     # The n-th TPDO2 of a drive answers the n-th SYNC: its velocity actual is the plant's
     # speed after that SYNC's step, truth[n - 1].
@@ -197,13 +203,15 @@ def test_a_lost_tpdo2_is_a_fault_and_stops_the_drives_within_3_ticks(robot):
     """The drive of cable 2 stops sending TPDO2 (its TPDO1 goes on): after missed_tpdo_ticks
     = 2 ticks without one the run stops, naming it; target velocity 0 on every drive with
     the SYNC of the tick that sees it, disabled with the next (the drives' record), as for a
-    lost TPDO (test_canopen.py: 3 and 4 SYNCs after the last one before the fault)."""
-    sim, reels, drives, _, _ = _rig(robot, faults=[("lost_tpdo2", 1, 0.1)])
+    lost TPDO (test_canopen.py: 3 and 4 SYNCs after the last one before the fault). On the
+    wall clock, paced by helpers_canopen.lockstep (in lockstep each missing answer is waited
+    for, startup_timeout s)."""
+    sim, reels, drives, _, _ = _rig(robot, faults=[("lost_tpdo2", 1, 0.1)], lockstep=False)
     try:
         start_realtime(sim, 0.0)
         with pytest.raises(ReelFault, match=r"no TPDO2 \(velocity actual\) from the drive of "
                            r"cable 2 \(node 2\) for 2 ticks \(missed_tpdo_ticks = 2\)"):
-            lockstep(sim, reels, drives, 1.0, T=PERIOD)
+            lockstep(sim, reels, drives, 0.4, T=PERIOD)
         # The two SYNCs the update saw unanswered by cable 2's TPDO2.
         assert reels.lost_tpdos == 2
     finally:
