@@ -13,8 +13,10 @@ Events at the control rate (period `time_step`), as HardwareReelsSystem's:
   statusword. A drive in Fault is refused unless `fault_reset: true`.
 * discrete update at t_k: reads the drives' TPDOs, EMCY and heartbeats as they were when
   the tick's publish sent its SYNC (CanopenMaster.sync_snapshot: what came in over the
-  period just ended, not what this tick's own SYNC brought back meanwhile) into the lengths
-  and tensions, and judges them: a drive's fault bit or any state but operation
+  period just ended, not what this tick's own SYNC brought back meanwhile; in lockstep, the
+  answers to the tick's own SYNC, CanopenMaster.answered_snapshot) into the lengths and
+  tensions (the reel speed from velocity actual where TPDO2 is mapped, else from positions),
+  and judges them: a drive's fault bit or any state but operation
   enabled, an EMCY with an error code, no TPDO (or no TPDO2 from a drive that maps it) for
   `missed_tpdo_ticks` ticks (and as many
   periods less one of wall time, as HardwareReels's watchdog: a catch-up burst after a stall
@@ -23,9 +25,9 @@ Events at the control rate (period `time_step`), as HardwareReelsSystem's:
   before, counted per frame by the bus, or as many as 3 counts take at `frozen_speed`, while
   commanded at least `frozen_speed` the same way for 10 ticks more), a CAN send error
   (bus-off). Any of them latches the fault.
-* publish at t_k: judges the TPDOs received since the last update the same way (Drake runs
-  the update at t_k right after this publish: without it a fault would stop the drives a
-  tick later). Running: one RPDO per drive (enable operation, ramp x reel_velocity_command
+* publish at t_k: on the wall clock, judges the TPDOs received since the last update the
+  same way (Drake runs the update at t_k right after this publish: without it a fault would
+  stop the drives a tick later; in lockstep no SYNC went out since the update). Running: one RPDO per drive (enable operation, ramp x reel_velocity_command
   in drive units) and a SYNC. After a fault (or a non-finite command), the stop, one SYNC a
   tick as ever (a CSV drive watches the SYNC period): this tick's RPDOs carry target
   velocity 0 with quick stop, the next tick's target velocity 0 with disable voltage (to
