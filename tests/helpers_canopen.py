@@ -24,11 +24,13 @@ def fresh_channel() -> str:
     return f"canopen-test-{next(_channels)}"
 
 
-def rig(robot, config, u, *, bridge=None, faults=(), drive_ids=None, **drive_args):
+def rig(robot, config, u, *, bridge=None, faults=(), drive_ids=None, time_step=T,
+        **drive_args):
     """(simulator, reels system, drives, bridge, start lengths): `config` a CanopenReels on a
     virtual channel, a constant command `u` (m/s per cable), the drives (node ids
     `drive_ids`, default config's) in front of `bridge` (default: ideal ReelBridge at the
-    workspace centre), running in a thread: stop them with close(reels, drives)."""
+    workspace centre), running in a thread: stop them with close(reels, drives). The
+    control period and the drives' plant step: `time_step` s."""
     import can
     from pydrake.systems.analysis import Simulator
     from pydrake.systems.framework import DiagramBuilder
@@ -49,17 +51,17 @@ def rig(robot, config, u, *, bridge=None, faults=(), drive_ids=None, **drive_arg
     # `force_bias`, N in its axes, a zero offset of its own).
     from cdpm_drake.hardware.force_config import CanopenForceSensor
     bias = drive_args.pop("force_bias", (0.0, 0.0, 0.0))
-    drives = EmulatedDrives(bridge, bus, ids, faults=faults, **drive_args)
+    drives = EmulatedDrives(bridge, bus, ids, faults=faults, period=time_step, **drive_args)
     if isinstance(config.force_sensor, CanopenForceSensor):
         drives.play_force_sensor(config.force_sensor, bias)
     b = DiagramBuilder()
-    reels = b.AddSystem(CanopenReelsSystem(robot, config, time_step=T))
+    reels = b.AddSystem(CanopenReelsSystem(robot, config, time_step=time_step))
     source = b.AddSystem(ConstantVectorSource(np.asarray(u, dtype=float)))
     b.Connect(source.get_output_port(), reels.get_input_port())
     return Simulator(b.Build()), reels, drives.start(), bridge, L0
 
 
-def lockstep(sim, reels, drives, until):
+def lockstep(sim, reels, drives, until, T=T):
     """Advance tick by tick to `until` s, each tick taking at least T of wall time, and
     before the next tick wait (0.1 s at most) until the drives acted on every SYNC sent (and
     so sent their TPDOs): the ticks of a host that answers in time, whatever the load of this

@@ -3,19 +3,23 @@
 
 Each drive is a CANopen node: NMT (start, stop, pre-operational, reset), an SDO server
 (expedited transfers) over an object dictionary with the communication and mapping objects
-(0x1400/0x1600, 0x1800/0x1A00, 0x1017) and the drive objects (0x6040, 0x6041, 0x6060/0x6061,
+(0x1400/0x1600, 0x1800/0x1A00, 0x1801/0x1A01, 0x1017) and the drive objects (0x6040, 0x6041, 0x6060/0x6061,
 0x6064, 0x6077, 0x606C, 0x60FF), the CiA 402 state machine, mode 9 (cyclic synchronous
 velocity) only, synchronous RPDOs and TPDOs as mapped by the controller (read from 0x1600 /
 0x1A00 when the node is started), a heartbeat producer and EMCY. Until the controller maps
 them, TPDO1 carries statusword and position only: a controller that skips the mapping does
-not get the torque it expects.
+not get the torque it expects; TPDO2 (COB-ID 0x280 + node id) is disabled (bit 31 of
+0x1801:1) and empty until the controller maps it (`tpdo2=False`: a drive without 0x1801 /
+0x1A01, which aborts their SDO transfers).
 
 On each SYNC the drives act on the RPDOs received since the last one (controlword: the state
 machine; target velocity: followed in operation enabled, 0 otherwise), the plant behind them
 (emulator/bridges.py: ReelBridge kinematic or DynamicBridge dynamic, as `cdpm emulate`) steps
 one control period, and each started drive sends its TPDO: statusword, position actual =
 (cable length - position_offset) x counts_per_metre, torque actual = drive force at the cable /
-force_per_torque_unit (0 when the plant has none). A plant step per SYNC, not per wall-clock
+force_per_torque_unit (0 when the plant has none); then TPDO2 if mapped and valid: velocity
+actual = the reel's speed sampled with the torque (the plant's bridge.reel_speed()) x
+velocity_units. A plant step per SYNC, not per wall-clock
 interval: the lengths are the sum of the commanded velocities times the period, whatever the
 host's timing.
 
@@ -24,9 +28,10 @@ drive reached operation enabled): drive_fault (the drive goes to Fault and sends
 fault_bit (the drive goes to Fault without an EMCY: only its statusword tells), late_tpdo
 (the drive's next TPDO is held back and sent a SYNC late, just before the following one; with
 another kind on the same cable: the first TPDO that shows the fault comes late), lost_tpdo (the drive stops sending TPDOs; heartbeats go on), frozen_position (position actual
-stops changing), dead_node (the node sends nothing and ignores the bus; its reel stops),
+stops changing and velocity actual, from the same encoder, reads 0), dead_node (the node sends nothing and ignores the bus; its reel stops),
 bus_off (every node leaves the bus: nothing sent or received; the reels stop),
-force_silent (the handle's force sensor node stops sending its TPDO).
+force_silent (the handle's force sensor node stops sending its TPDO). TPDO2 goes with
+TPDO1: held back, lost or silent with it; lost_tpdo2 (the drive stops sending TPDO2 alone).
 
 The handle's force sensor, when the scenario's plant has `force_sensor: !CanopenForceSensor
 {...}`: a node that NMT starts like the drives and that sends, after each SYNC's plant step,
@@ -52,7 +57,8 @@ from cdpm_drake.hardware.canopen_bus import (COB_EMCY, COB_HEARTBEAT, COB_NMT, C
                                              NMT_START, NMT_STOP)
 
 FAULT_KINDS = ("drive_fault", "fault_bit", "late_tpdo", "lost_tpdo", "frozen_position",
-               "dead_node", "bus_off", "force_silent")
+               "dead_node", "bus_off", "force_silent", "lost_tpdo2")
+COB_TPDO2, COB_INVALID = 0x280, 0x80000000
 # Statuswords of the states (bit 9 remote, bit 4 voltage enabled where it is).
 SW = {"switch on disabled": 0x0250, "ready to switch on": 0x0231, "switched on": 0x0233,
       "operation enabled": 0x0237, "quick stop active": 0x0217, "fault": 0x0218}
@@ -60,12 +66,13 @@ SW = {"switch on disabled": 0x0250, "ready to switch on": 0x0231, "switched on":
 OBJECTS = {(0x1000, 0): ("<I", False), (0x1017, 0): ("<H", True),
            (0x1400, 1): ("<I", True), (0x1400, 2): ("<B", True),
            (0x1800, 1): ("<I", True), (0x1800, 2): ("<B", True),
+           (0x1801, 1): ("<I", True), (0x1801, 2): ("<B", True),
            (0x6040, 0): ("<H", True), (0x6041, 0): ("<H", False), (0x6060, 0): ("<b", True),
            (0x6061, 0): ("<b", False), (0x6064, 0): ("<i", False), (0x606C, 0): ("<i", False),
            (0x6077, 0): ("<h", False), (0x60FF, 0): ("<i", True),
            (0x60C2, 1): ("<B", True), (0x60C2, 2): ("<b", True)}  # stored, not used: one
 # plant step of --period per SYNC
-for _map in (0x1600, 0x1A00):
+for _map in (0x1600, 0x1A00, 0x1A01):
     OBJECTS[(_map, 0)] = ("<B", True)
     for _sub in range(1, 9):
         OBJECTS[(_map, _sub)] = ("<I", True)
@@ -75,31 +82,38 @@ NMT_STATE = {"pre-operational": 0x7F, "operational": 0x05, "stopped": 0x04}
 
 
 class Drive:
-    """One emulated CiA 402 drive (node `node_id`, cable `cable`, 0-based)."""
+    """One emulated CiA 402 drive (node `node_id`, cable `cable`, 0-based); `tpdo2`: whether
+    it has a second TPDO (0x1801/0x1A01)."""
 
-    def __init__(self, node_id: int, cable: int):
-        self.node_id, self.cable = node_id, cable
+    def __init__(self, node_id: int, cable: int, tpdo2: bool = True):
+        self.node_id, self.cable, self.has_tpdo2 = node_id, cable, bool(tpdo2)
         self.od = {(0x1000, 0): 0x00020192, (0x1017, 0): 0,
                    (0x1400, 1): 0x200 + node_id, (0x1400, 2): 255,
                    (0x1800, 1): 0x180 + node_id, (0x1800, 2): 255,
                    (0x1600, 0): 2, (0x1600, 1): 0x60400010, (0x1600, 2): 0x60FF0020,
                    (0x1A00, 0): 2, (0x1A00, 1): 0x60410010, (0x1A00, 2): 0x60640020,
+                   (0x1801, 1): COB_INVALID | (COB_TPDO2 + node_id), (0x1801, 2): 255,
+                   (0x1A01, 0): 0,
                    (0x6040, 0): 0, (0x6060, 0): 0, (0x60FF, 0): 0,
                    (0x60C2, 1): 1, (0x60C2, 2): -3}
         self.nmt = "pre-operational"
         self.state = "switch on disabled"
         self.previous_cw = 0
         self.rpdo, self.tpdo = [], []   # mapped (index, format) lists, fixed at NMT start
+        self.tpdo2 = []                 # TPDO2's, if valid
+        self.lost_tpdo2 = False
         self.frozen = None              # the position reported while frozen, counts
         self.lost_tpdo = self.dead = False
         self.late = 0           # TPDOs still to hold back a SYNC
-        self.held = None        # (COB-ID, payload) of the TPDO held back
+        self.held = []          # (COB-ID, payload) of the TPDOs held back
         self.next_heartbeat = 0.0
 
     def start(self) -> None:
         """NMT start: the mapping in the dictionary becomes the PDOs'."""
         self.rpdo = self._mapping(0x1600)
         self.tpdo = self._mapping(0x1A00)
+        valid = self.has_tpdo2 and not self.od[(0x1801, 1)] & COB_INVALID
+        self.tpdo2 = self._mapping(0x1A01) if valid else []
         self.nmt = "operational"
 
     def _mapping(self, index):
@@ -147,16 +161,18 @@ class EmulatedDrives:
     velocity units per m/s), force_per_torque_unit (N per unit of torque actual); `period`:
     the plant's step per SYNC, s. `faults`: [(kind, cable 0-based, after s)]. `lockstep`:
     the SYNCs are the only clock (SYNCs x period): heartbeats and the faults' `after` count
-    SYNCs, not wall-clock time, so a run against `cdpm run --lockstep` is deterministic."""
+    SYNCs, not wall-clock time, so a run against `cdpm run --lockstep` is deterministic.
+    `tpdo2` False: drives without a second TPDO (they abort its mapping)."""
 
     def __init__(self, bridge, bus, node_ids, *, counts_per_metre=1_000_000.0,
                  position_offset=None, velocity_units=None, force_per_torque_unit=0.1,
-                 period=0.002, faults=(), record=100_000, log=None, lockstep=False):
+                 period=0.002, faults=(), record=100_000, log=None, lockstep=False,
+                 tpdo2=True):
         m = bridge.robot.num_cables
         if len(node_ids) != m:
             raise ValueError(f"node ids must be one per cable ({m}), got {list(node_ids)!r}")
         self.bridge, self.bus, self.period = bridge, bus, float(period)
-        self.drives = [Drive(int(i), k) for k, i in enumerate(node_ids)]
+        self.drives = [Drive(int(i), k, tpdo2) for k, i in enumerate(node_ids)]
         self._by_id = {d.node_id: d for d in self.drives}
         self.counts = float(counts_per_metre)
         self.offset = np.zeros(m) if position_offset is None else np.asarray(
@@ -175,6 +191,7 @@ class EmulatedDrives:
         self.bus_off = False
         self.syncs = 0
         self.tpdo_sent = 0
+        self.tpdo2_sent = 0
         self.first_enable_time = None
         self.fault_syncs = {}  # kind -> the SYNC count when it was injected
         # Per SYNC: (sync count, states, controlwords, target velocities m/s) of each drive.
@@ -290,7 +307,7 @@ class EmulatedDrives:
         def abort(code):
             reply(struct.pack("<BHBI", 0x80, index, sub, code))
 
-        if key not in OBJECTS:
+        if key not in OBJECTS or (index in (0x1801, 0x1A01) and not d.has_tpdo2):
             return abort(SDO_NO_OBJECT)
         fmt, writable = OBJECTS[key]
         size = struct.calcsize(fmt)
@@ -324,7 +341,10 @@ class EmulatedDrives:
         if key == (0x6077, 0):
             return self._torque(d)
         if key == (0x606C, 0):
-            v = self.bridge.speed[d.cable] * self.velocity_units
+            if d.frozen is not None:  # the encoder it is measured on is stuck
+                return 0
+            # The speed sampled with the torque (the dynamic plant's sensor's).
+            v = self.bridge.reel_speed()[d.cable] * self.velocity_units
             return int(max(-2**31, min(2**31 - 1, round(float(v)))))
         return d.od.get(key, 0)
 
@@ -359,10 +379,16 @@ class EmulatedDrives:
             cws.append(cw)
             targets.append(target)
         enabled = bool(np.any([d.state == "operation enabled" for d in self.drives]))
+        hold = False
         if enabled and self.first_enable_time is None:
             self.first_enable_time = self._now()
+            # The SYNC that first enables a drive ends the enable sequence, not the run's
+            # first: the reels are held over it (target velocity 0 there) and the plant's clock
+            # (and the hand's) starts with the next SYNC, as the UDP bridge's with the first
+            # enabling command, so the controller's first tick reads the plant at time 0.
+            hold = True
         before = self.bridge.faults
-        self.bridge.set_command(velocity, enable=enabled)
+        self.bridge.set_command(velocity, enable=enabled and not hold)
         if self.bridge.faults and not before:  # the plant's own fault (overspeed)
             for d in self.drives:
                 self._drive_fault(d, 0x8400)
@@ -373,16 +399,23 @@ class EmulatedDrives:
         if self.lockstep and not self.bus_off:
             self._heartbeats(self._now())  # before the TPDOs: read with them
         for d in self.drives:
-            if d.held is not None:  # last SYNC's TPDO, a SYNC late
-                self._send(*d.held, d)
-                d.held = None
+            for frame in d.held:  # last SYNC's TPDOs, a SYNC late
+                self._send(*frame, d)
+            d.held = []
             if d.nmt == "operational" and not d.lost_tpdo:
-                payload = b"".join(struct.pack(fmt, self._value(d, key)) for key, fmt in d.tpdo)
-                if d.late:
-                    d.late -= 1
-                    d.held = (d.od[(0x1800, 1)] & 0x7FF, payload)
-                elif self._send(d.od[(0x1800, 1)] & 0x7FF, payload, d):
-                    self.tpdo_sent += 1
+                late = d.late > 0
+                d.late -= late
+                for comm, mapped in ((0x1800, d.tpdo), (0x1801, d.tpdo2)):
+                    if not mapped or (comm == 0x1801 and d.lost_tpdo2):
+                        continue
+                    frame = (d.od[(comm, 1)] & 0x7FF,
+                             b"".join(struct.pack(fmt, self._value(d, key))
+                                      for key, fmt in mapped))
+                    if late:
+                        d.held.append(frame)
+                    elif self._send(*frame, d):
+                        self.tpdo_sent += comm == 0x1800
+                        self.tpdo2_sent += comm == 0x1801
         self.syncs += 1  # last: a SYNC counted is one fully answered
 
     def force_counts(self) -> list[int]:
@@ -428,6 +461,8 @@ class EmulatedDrives:
             d.late = 1
         elif kind == "lost_tpdo":
             d.lost_tpdo = True
+        elif kind == "lost_tpdo2":
+            d.lost_tpdo2 = True
         elif kind == "frozen_position":
             d.frozen = self._position(d)
         elif kind == "dead_node":

@@ -16,7 +16,7 @@ import time
 import numpy as np
 
 from cdpm_drake.hardware.canopen_config import (NO_BITRATE_INTERFACES, RPDO_OBJECTS,
-                                                TPDO_OBJECTS)
+                                                TPDO2_OBJECTS, TPDO_OBJECTS)
 
 # Controlword commands (CiA 402, 0x6040).
 CW_DISABLE_VOLTAGE = 0x0000
@@ -35,7 +35,8 @@ SW_FAULT_BIT = 0x0008
 MODE_CSV = 9
 
 COB_NMT, COB_SYNC, COB_EMCY, COB_TPDO1, COB_RPDO1 = 0x000, 0x080, 0x080, 0x180, 0x200
-COB_SDO_TX, COB_SDO_RX, COB_HEARTBEAT = 0x580, 0x600, 0x700
+COB_SDO_TX, COB_SDO_RX, COB_HEARTBEAT, COB_TPDO2 = 0x580, 0x600, 0x700, 0x280
+COB_INVALID = 0x80000000  # bit 31 of a PDO's COB-ID entry: the PDO does not exist (disabled)
 COB_NO_RTR = 0x40000000  # bit 30 of a PDO's COB-ID entry: no remote request
 NMT_START, NMT_STOP, NMT_PRE_OPERATIONAL = 0x01, 0x02, 0x80
 HEARTBEAT_OPERATIONAL = 0x05
@@ -75,7 +76,8 @@ class CanopenMaster:
 
     Arrays updated by the notifier thread until stop_notifier(), then by poll() (read them
     with snapshot()): statusword, position (counts), torque (per mille), tpdo_count (TPDOs
-    received per drive), still (the drive's latest TPDOs in a row whose position equals the
+    received per drive), velocity (velocity actual 0x606C, drive units, from TPDO2 where
+    `velocity_mapped`), tpdo2_count (TPDO2s received per drive), still (the drive's latest TPDOs in a row whose position equals the
     one before: counted per frame, so two TPDOs read on one tick, one of them late, count
     as two), heartbeat_wall (clock() of the last heartbeat, NaN: none),
     heartbeat_state, and `emcy`, a list of (cable, error code, error register) of the EMCY
@@ -98,6 +100,10 @@ class CanopenMaster:
         self.position = np.zeros(m, dtype=np.int64)
         self.torque = np.zeros(m, dtype=np.int64)
         self.tpdo_count = np.zeros(m, dtype=np.int64)
+        self.velocity = np.zeros(m, dtype=np.int64)
+        self.tpdo2_count = np.zeros(m, dtype=np.int64)
+        # Which drives took the mapping of TPDO2 (velocity actual) at configure().
+        self.velocity_mapped = np.zeros(m, dtype=bool)
         self.still = np.zeros(m, dtype=np.int64)
         self.heartbeat_wall = np.full(m, np.nan)
         self.heartbeat_state = np.full(m, -1, dtype=np.int64)
@@ -115,9 +121,11 @@ class CanopenMaster:
         self.polling = False
         self._at_sync = None
         self._answered = None  # tpdo_count when the last SYNC was sent (lockstep)
+        self._answered2 = None  # and tpdo2_count
         self._handlers = {}
         for node_id in self.node_ids:
             self._handlers[COB_TPDO1 + node_id] = self._on_tpdo
+            self._handlers[COB_TPDO2 + node_id] = self._on_tpdo2
             self._handlers[COB_EMCY + node_id] = self._on_emcy
             self._handlers[COB_HEARTBEAT + node_id] = self._on_heartbeat
         # The handle's force sensor node, if on this bus (watch_force_node): its TPDO's Fx,
@@ -155,6 +163,7 @@ class CanopenMaster:
         for k, node_id in enumerate(self.node_ids):
             network.add_node(canopen.RemoteNode(node_id, canopen.ObjectDictionary()))
             network.subscribe(COB_TPDO1 + node_id, self._on_tpdo)
+            network.subscribe(COB_TPDO2 + node_id, self._on_tpdo2)
             network.subscribe(COB_EMCY + node_id, self._on_emcy)
             network.subscribe(COB_HEARTBEAT + node_id, self._on_heartbeat)
         if self.force_node_id is not None:
@@ -168,10 +177,13 @@ class CanopenMaster:
             except Exception:  # noqa: S110 - a bus already gone has nothing to release
                 pass
 
-    def configure(self, heartbeat_period: float, period: float = 0.0) -> None:
+    def configure(self, heartbeat_period: float, period: float = 0.0,
+                  velocity: str = "position") -> None:
         """Each drive to pre-operational, then over SDO: mode 9 (cyclic synchronous velocity),
         RPDO1 = controlword + target velocity and TPDO1 = statusword + position actual +
-        torque actual, both synchronous (every SYNC), the interpolation time period 0x60C2
+        torque actual, both synchronous (every SYNC), with `velocity` "velocity_actual" or
+        "auto" TPDO2 = velocity actual (synchronous; `velocity_mapped` says which drives took
+        it: with "auto" a drive that refuses it runs without, noted), the interpolation time period 0x60C2
         (the SYNC period `period` s, if > 0: a CSV drive integrates each target velocity
         over it) and the heartbeat producer time (`heartbeat_watched` says for which drives
         it was accepted; a refusal of 0x60C2 or 0x1017, like one of reading back 0x6061,
@@ -198,6 +210,8 @@ class CanopenMaster:
                 except CanopenError as e:
                     self.notes.append(str(e))  # written with bit 30 clear
                 self._map(write, comm, mapping, cob_id, objects, name)
+            if velocity != "position":
+                self._map_velocity(k, node_id, required=velocity == "velocity_actual")
             optional = []
             if period > 0 and interpolation_period(period) is not None:
                 value, exponent = interpolation_period(period)
@@ -251,9 +265,37 @@ class CanopenMaster:
                                    f"0x6060: it does not support CSV")
             time.sleep(0.01)
 
+    def _map_velocity(self, k, node_id, required: bool) -> None:
+        """TPDO2 = velocity actual 0x606C (0x1801/0x1A01, COB-ID 0x280 + node id), as TPDO1.
+        Not `required` (reel_speed: auto): a refusal leaves the drive's TPDO2 disabled (if it
+        takes that) and its reel speed from positions, said in the log."""
+        write = self._writer(k, node_id, optional=not required)
+        cob_id = COB_TPDO2 + node_id
+        try:
+            try:
+                entry = self._read(k, node_id, 0x1801, 1, "TPDO2 COB-ID", optional=True)
+                cob_id |= struct.unpack_from("<I", entry.ljust(4, b"\0"))[0] & COB_NO_RTR
+            except CanopenError as e:
+                if not required:
+                    raise
+                self.notes.append(str(e))  # written with bit 30 clear
+            self._map(write, 0x1801, 0x1A01, cob_id, TPDO2_OBJECTS, "TPDO2")
+        except CanopenError as e:
+            if required:
+                raise
+            with contextlib.suppress(CanopenError):  # not sending a half-made TPDO2
+                write(0x1801, 1, struct.pack("<I", COB_INVALID | cob_id), "TPDO2 COB-ID")
+            self.notes.append(str(e))
+            _log.info("%s; the reel speed of cable %d comes from position differences", e,
+                      k + 1)
+            return
+        self.velocity_mapped[k] = True
+        _log.info("drive of cable %d (node %d): reel speed from velocity actual 0x606C in "
+                  "TPDO2", k + 1, node_id)
+
     @staticmethod
     def _map(write, comm, mapping, cob_id, objects, name) -> None:
-        write(comm, 1, struct.pack("<I", 0x80000000 | cob_id), f"{name} COB-ID (disable)")
+        write(comm, 1, struct.pack("<I", COB_INVALID | cob_id), f"{name} COB-ID (disable)")
         write(comm, 2, bytes([1]), f"{name} transmission type (synchronous)")
         write(mapping, 0, bytes([0]), f"{name} mapping count (clear)")
         for n, (index, bits) in enumerate(objects, start=1):
@@ -337,7 +379,7 @@ class CanopenMaster:
 
     def await_answers(self) -> None:
         """Lockstep: wait (lockstep_wait s of wall clock at most) until every drive sent a
-        TPDO since the last SYNC; what came is read into the arrays. A drive that stays
+        TPDO (and a TPDO2 where mapped) since the last SYNC; what came is read into the arrays. A drive that stays
         silent is left to the watchdog, which counts the SYNCs it missed."""
         if not self.lockstep or self._answered is None or self.network is None:
             return
@@ -345,7 +387,8 @@ class CanopenMaster:
         while True:
             self.poll()
             with self.lock:
-                if (self.tpdo_count > self._answered).all():
+                if ((self.tpdo_count > self._answered).all()
+                        and (self.tpdo2_count > self._answered2)[self.velocity_mapped].all()):
                     return
             remaining = deadline - time.monotonic()
             if remaining <= 0:
@@ -373,6 +416,7 @@ class CanopenMaster:
         self._at_sync = (self.snapshot(drain_emcy=False), self.clock())
         with self.lock:
             self._answered = self.tpdo_count.copy()
+            self._answered2 = self.tpdo2_count.copy()
         for node_id, cw, v in zip(self.node_ids, controlwords, velocities):
             v = int(max(-2**31, min(2**31 - 1, round(float(v)))))
             if self._send(COB_RPDO1 + node_id, struct.pack("<Hi", int(cw), v)):
@@ -388,6 +432,14 @@ class CanopenMaster:
             with self.lock:
                 del self.emcy[:len(at[0][7])]
         return at
+
+    def answered_snapshot(self):
+        """Lockstep: (snapshot, clock()) once every drive answered the last SYNC sent
+        (await_answers), the EMCY frames drained; the one kept before that SYNC
+        (sync_snapshot) is dropped."""
+        self._at_sync = None
+        self.await_answers()
+        return self.snapshot(), self.clock()
 
     def _send(self, cob_id: int, data: bytes) -> bool:
         network = self.network
@@ -433,7 +485,7 @@ class CanopenMaster:
 
     def snapshot(self, drain_emcy: bool = True):
         """(statusword, position, torque, tpdo_count, still, heartbeat_wall, heartbeat_state,
-        new EMCY list) after poll(), copied under the lock; the EMCY list is emptied if
+        new EMCY list, velocity, tpdo2_count) after poll(), copied under the lock; the EMCY list is emptied if
         `drain_emcy`. The force sensor node's state at the same moment goes to
         `force_at_snapshot` ((Fx, Fy, Fz counts, status word, TPDOs counted, time.monotonic())):
         as the drives', the last snapshot before a SYNC is what the tick judges."""
@@ -445,7 +497,8 @@ class CanopenMaster:
             self.emcy = [] if drain_emcy else list(emcy)
             return (self.statusword.copy(), self.position.copy(), self.torque.copy(),
                     self.tpdo_count.copy(), self.still.copy(), self.heartbeat_wall.copy(),
-                    self.heartbeat_state.copy(), emcy)
+                    self.heartbeat_state.copy(), emcy, self.velocity.copy(),
+                    self.tpdo2_count.copy())
 
     # --- notifier thread ---------------------------------------------------------------------
 
@@ -459,6 +512,15 @@ class CanopenMaster:
             self.still[k] = self.still[k] + 1 if same else 0
             self.statusword[k], self.position[k], self.torque[k] = sw, pos, torque
             self.tpdo_count[k] += 1
+
+    def _on_tpdo2(self, can_id, data, timestamp) -> None:
+        k = self._cable.get(can_id - COB_TPDO2)
+        if k is None or len(data) < 4:
+            return
+        (velocity,) = struct.unpack_from("<i", bytes(data))
+        with self.lock:
+            self.velocity[k] = velocity
+            self.tpdo2_count[k] += 1
 
     def watch_force_node(self, node_id: int) -> None:
         """Read the TPDO of the handle's force sensor node `node_id` too (before open())."""

@@ -21,6 +21,9 @@ TENSION_SENSORS = ("drive_torque", "none")
 # The PDO mapping written at start-up: (index, bits) of each mapped object.
 RPDO_OBJECTS = ((0x6040, 16), (0x60FF, 32))                 # controlword, target velocity
 TPDO_OBJECTS = ((0x6041, 16), (0x6064, 32), (0x6077, 16))   # statusword, position, torque
+TPDO2_OBJECTS = ((0x606C, 32),)                               # velocity actual
+# Where the controller takes each reel's speed from (CanopenReels.reel_speed).
+REEL_SPEEDS = ("auto", "velocity_actual", "position")
 
 
 @dataclasses.dataclass
@@ -49,6 +52,13 @@ class CanopenReels:
     force_per_torque_unit: float = 0.1
     # tension_measured from the drives' torque (kernels/drive_torque) or none (NaN).
     tension_sensor: str = "drive_torque"
+    # Each reel's speed (for the drive-torque tension's friction and inertia): velocity_actual
+    # (0x606C, in the units of velocity_units_per_mps, mapped into TPDO2 at start-up: a
+    # drive that refuses the mapping stops the start, a bus without room for it is refused),
+    # position (differences of position actual over the SYNC period), or auto: velocity
+    # actual where the bus has room for TPDO2 and the drive accepts its mapping, position
+    # differences elsewhere (the log says which).
+    reel_speed: str = "auto"
     # The handle's force sensor, the admittance's input: a node on this bus
     # (!CanopenForceSensor {node_id: ...}) or a Net F/T on the network (!NetFT {address:
     # ...}). None: the drives carry no force sensor, and the run refuses to enable.
@@ -145,6 +155,9 @@ def check_canopen_reels(config: CanopenReels, m: int, period: float,
                              f"got {value!r}")
     if not isinstance(config.lockstep, bool):
         raise ValueError(f"{field}.lockstep must be true or false, got {config.lockstep!r}")
+    if config.reel_speed not in REEL_SPEEDS:
+        raise ValueError(f"{field}.reel_speed must be one of {', '.join(REEL_SPEEDS)}, got "
+                         f"{config.reel_speed!r}")
     if config.tension_sensor not in TENSION_SENSORS:
         raise ValueError(f"{field}.tension_sensor must be one of {', '.join(TENSION_SENSORS)}"
                          f", got {config.tension_sensor!r}")
@@ -172,13 +185,17 @@ def check_canopen_reels(config: CanopenReels, m: int, period: float,
     if config.force_sensor is not None:
         check_force_sensor(config.force_sensor, f"{field}.force_sensor", ids)
     sensors = int(isinstance(config.force_sensor, CanopenForceSensor))
-    load = bus_load(m, config.bitrate, period, config.heartbeat_period, sensors)
+    velocity = config.reel_speed == "velocity_actual"
+    load = bus_load(m, config.bitrate, period, config.heartbeat_period, sensors, velocity)
     if load["load"] > MAX_BUS_LOAD:
-        per_bus = max_drives(config.bitrate, period, config.heartbeat_period, sensors)
+        per_bus = max_drives(config.bitrate, period, config.heartbeat_period, sensors,
+                             velocity)
         raise ValueError(
             f"{field}: {m} drives at {config.bitrate} bit/s with a {period * 1e3:g} ms cycle "
             f"need {load['bits']:.0f} bits per cycle ({m} RPDOs of {load['rpdo_bits']} bits, "
             f"{m} TPDOs of {load['tpdo_bits']} bits, "
+            + (f"{m} TPDO2s (reel_speed: velocity_actual) of {load['tpdo2_bits']} bits, "
+               if velocity else "")
             + (f"the force sensor's TPDO of {load['tpdo_bits']} bits, " if sensors else "")
             + f"a SYNC of {load['sync_bits']} bits, "
             f"heartbeats {load['heartbeat_bits']:.1f} bits), {100 * load['load']:.1f} % of "
@@ -186,8 +203,18 @@ def check_canopen_reels(config: CanopenReels, m: int, period: float,
             f"{100 * MAX_BUS_LOAD:.0f} % (worst case with bit stuffing "
             f"{100 * load['worst_load']:.1f} %). One bus carries at most {per_bus} drives "
             f"here: split the drives onto a second channel (a second CAN interface, e.g. can1, "
-            f"with its own `cdpm run`-side bus), raise the bit rate, or lengthen time_step")
+            f"with its own `cdpm run`-side bus), raise the bit rate, or lengthen time_step"
+            + (", or take the reel speed from positions (reel_speed: position or auto)"
+               if velocity else ""))
     return load
+
+
+def velocity_fits(config: CanopenReels, m: int, period: float) -> bool:
+    """Whether TPDO2 (velocity actual) of every drive fits the bus with the rest within
+    MAX_BUS_LOAD (reel_speed: auto maps it only then)."""
+    sensors = int(isinstance(config.force_sensor, CanopenForceSensor))
+    return bus_load(m, config.bitrate, period, config.heartbeat_period, sensors,
+                    True)["load"] <= MAX_BUS_LOAD
 
 
 def frame_bits(data_bytes: int) -> tuple[int, int]:
@@ -200,30 +227,37 @@ def frame_bits(data_bytes: int) -> tuple[int, int]:
 
 
 def bus_load(m: int, bitrate: int, period: float, heartbeat_period: float,
-             sensors: int = 0) -> dict:
+             sensors: int = 0, velocity: bool = False) -> dict:
     """Bits per control cycle of m drives (each an RPDO of 6 bytes and a TPDO of 8 bytes per
-    cycle, a heartbeat of 1 byte per heartbeat_period), `sensors` force sensor nodes (a TPDO
-    of 8 bytes each) and one SYNC, as a share `load` of
+    cycle, with `velocity` a TPDO2 of 4 bytes too, a heartbeat of 1 byte per
+    heartbeat_period), `sensors` force sensor nodes (a TPDO of 8 bytes each) and one SYNC,
+    as a share `load` of
     what the bus carries in `period` s at `bitrate` bit/s, without bit stuffing (what
     bus-load tools report); `worst_load` with the most stuffing a frame can have."""
     rpdo, rpdo_worst = frame_bits(sum(b for _, b in RPDO_OBJECTS) // 8)
     tpdo, tpdo_worst = frame_bits(sum(b for _, b in TPDO_OBJECTS) // 8)
+    tpdo2, tpdo2_worst = frame_bits(sum(b for _, b in TPDO2_OBJECTS) // 8)
+    if not velocity:
+        tpdo2 = tpdo2_worst = 0
     sync, sync_worst = frame_bits(0)
     hb, hb_worst = frame_bits(1)
     share = period / heartbeat_period if heartbeat_period > 0 else 0.0
-    bits = m * (rpdo + tpdo + share * hb) + sync + sensors * tpdo
-    worst = (m * (rpdo_worst + tpdo_worst + share * hb_worst) + sync_worst
+    bits = m * (rpdo + tpdo + tpdo2 + share * hb) + sync + sensors * tpdo
+    worst = (m * (rpdo_worst + tpdo_worst + tpdo2_worst + share * hb_worst) + sync_worst
              + sensors * tpdo_worst)
     capacity = bitrate * period
     return dict(bits=bits, worst_bits=worst, capacity=capacity, load=bits / capacity,
-                worst_load=worst / capacity, rpdo_bits=rpdo, tpdo_bits=tpdo, sync_bits=sync,
+                worst_load=worst / capacity, rpdo_bits=rpdo, tpdo_bits=tpdo, tpdo2_bits=tpdo2,
+                sync_bits=sync,
                 heartbeat_bits=m * share * hb)
 
 
-def max_drives(bitrate: int, period: float, heartbeat_period: float, sensors: int = 0) -> int:
+def max_drives(bitrate: int, period: float, heartbeat_period: float, sensors: int = 0,
+               velocity: bool = False) -> int:
     """The most drives one bus carries within MAX_BUS_LOAD."""
     n = 0
-    while bus_load(n + 1, bitrate, period, heartbeat_period, sensors)["load"] <= MAX_BUS_LOAD:
+    while bus_load(n + 1, bitrate, period, heartbeat_period, sensors,
+                   velocity)["load"] <= MAX_BUS_LOAD:
         n += 1
     return n
 

@@ -5,25 +5,29 @@ Events at the control rate (period `time_step`), as HardwareReelsSystem's:
 
 * initialisation (inside Simulator.Initialize): SDO configuration of each drive (mode 9,
   cyclic synchronous velocity; RPDO1 = controlword 0x6040 + target velocity 0x60FF; TPDO1 =
-  statusword 0x6041 + position actual 0x6064 + torque actual 0x6077; heartbeat 0x1017), NMT
+  statusword 0x6041 + position actual 0x6064 + torque actual 0x6077; TPDO2 = velocity actual
+  0x606C where `reel_speed` asks for it and the bus has room; heartbeat 0x1017), NMT
   start, the first TPDO of every drive within `startup_timeout`, the measured lengths checked
   against the robot file, then the enable sequence (shutdown, switch on, enable operation)
   with a deadline of `enable_timeout` per drive; a drive that misses it is named with its
   statusword. A drive in Fault is refused unless `fault_reset: true`.
 * discrete update at t_k: reads the drives' TPDOs, EMCY and heartbeats as they were when
   the tick's publish sent its SYNC (CanopenMaster.sync_snapshot: what came in over the
-  period just ended, not what this tick's own SYNC brought back meanwhile) into the lengths
-  and tensions, and judges them: a drive's fault bit or any state but operation
-  enabled, an EMCY with an error code, no TPDO for `missed_tpdo_ticks` ticks (and as many
+  period just ended, not what this tick's own SYNC brought back meanwhile; in lockstep, the
+  answers to the tick's own SYNC, CanopenMaster.answered_snapshot) into the lengths and
+  tensions (the reel speed from velocity actual where TPDO2 is mapped, else from positions),
+  and judges them: a drive's fault bit or any state but operation
+  enabled, an EMCY with an error code, no TPDO (or no TPDO2 from a drive that maps it) for
+  `missed_tpdo_ticks` ticks (and as many
   periods less one of wall time, as HardwareReels's watchdog: a catch-up burst after a stall
   of this process must not trip it), a heartbeat older than `heartbeat_timeout` or not
   operational, a frozen position (`frozen_ticks` TPDOs in a row with the position of the one
   before, counted per frame by the bus, or as many as 3 counts take at `frozen_speed`, while
   commanded at least `frozen_speed` the same way for 10 ticks more), a CAN send error
   (bus-off). Any of them latches the fault.
-* publish at t_k: judges the TPDOs received since the last update the same way (Drake runs
-  the update at t_k right after this publish: without it a fault would stop the drives a
-  tick later). Running: one RPDO per drive (enable operation, ramp x reel_velocity_command
+* publish at t_k: on the wall clock, judges the TPDOs received since the last update the
+  same way (Drake runs the update at t_k right after this publish: without it a fault would
+  stop the drives a tick later; in lockstep no SYNC went out since the update). Running: one RPDO per drive (enable operation, ramp x reel_velocity_command
   in drive units) and a SYNC. After a fault (or a non-finite command), the stop, one SYNC a
   tick as ever (a CSV drive watches the SYNC period): this tick's RPDOs carry target
   velocity 0 with quick stop, the next tick's target velocity 0 with disable voltage (to
@@ -52,8 +56,9 @@ from cdpm_drake.hardware.canopen_bus import (CW_DISABLE_VOLTAGE, CW_ENABLE_OPERA
                                              CW_SWITCH_ON, HEARTBEAT_OPERATIONAL, NMT_START,
                                              SW_FAULT_BIT, CanopenError, CanopenMaster,
                                              state_name)
-from cdpm_drake.hardware.canopen_config import (CanopenReels, check_canopen_reels,
-                                                resolved_node_ids, resolved_offsets,
+from cdpm_drake.hardware.canopen_config import (MAX_BUS_LOAD, CanopenReels, bus_load,
+                                                check_canopen_reels, resolved_node_ids,
+                                                resolved_offsets, velocity_fits,
                                                 velocity_units)
 from cdpm_drake.hardware.force_config import CanopenForceSensor, force_source_problem
 from cdpm_drake.hardware.force_sources import (RDT_STATUS_ERROR, ForceScale, ForceSensorError,
@@ -75,13 +80,19 @@ ENABLED, RAMP, FAULT, FAULT_CABLE, FAULT_DETAIL, FAULT_TIME, TICKS, LOST = range
 BOOK_SIZE = 8
 # Why the run stops.
 (FAULT_NONE, FAULT_STATUS, FAULT_EMCY, FAULT_SILENT, FAULT_HEARTBEAT, FAULT_FROZEN,
- FAULT_SEND, FAULT_COMMAND, FAULT_FORCE_SILENT, FAULT_FORCE_STATUS) = range(10)
+ FAULT_SEND, FAULT_COMMAND, FAULT_FORCE_SILENT, FAULT_FORCE_STATUS,
+ FAULT_VELOCITY_SILENT) = range(11)
 FAULT_NAMES = {FAULT_STATUS: "drive fault or state", FAULT_EMCY: "EMCY",
                FAULT_SILENT: "missing TPDOs", FAULT_HEARTBEAT: "heartbeat lost",
                FAULT_FROZEN: "frozen position", FAULT_SEND: "CAN send error",
                FAULT_COMMAND: "non-finite command",
                FAULT_FORCE_SILENT: "force sensor silent",
-               FAULT_FORCE_STATUS: "force sensor error"}
+               FAULT_FORCE_STATUS: "force sensor error",
+               FAULT_VELOCITY_SILENT: "missing TPDO2s (velocity actual)"}
+# The per-drive state vector: blocks of m values each.
+(D_COUNT, D_MISSED, D_POSITION, D_STILL, D_SPEED, D_HEARD, D_COUNT2, D_MISSED2,
+ D_HEARD2) = range(9)
+DRIVE_BLOCKS = 9
 
 
 class _Counters:
@@ -91,7 +102,8 @@ class _Counters:
 
     def __init__(self, system):
         master = system.master
-        self.sent, self.received = master.sent, int(master.tpdo_count.sum())
+        self.sent = master.sent
+        self.received = int(master.tpdo_count.sum() + master.tpdo2_count.sum())
         self.accepted, self.lost = self.received, system.lost_tpdos
         self.rejected, self.foreign = {}, 0
         self.send_errors = master.send_errors
@@ -192,10 +204,12 @@ class CanopenReelsSystem(LeafSystem):
         self._force = self.DeclareDiscreteState(3)
         self._tension = self.DeclareDiscreteState(np.full(m, np.nan))
         self._book = self.DeclareDiscreteState(np.zeros(BOOK_SIZE))
-        # Per drive: TPDOs counted, ticks without one, position (counts), TPDOs in a row
-        # unchanged, reel speed from the last two positions read (m/s), time.monotonic() of
-        # the last new TPDO.
-        self._drives = self.DeclareDiscreteState(np.zeros(6 * m))
+        # Per drive (D_* blocks): TPDOs counted, ticks without one, position (counts), TPDOs
+        # in a row unchanged, reel speed (m/s: velocity actual, or from the last two
+        # positions read), clock() of the last new TPDO; the same three of TPDO2.
+        self._drives = self.DeclareDiscreteState(np.zeros(DRIVE_BLOCKS * m))
+        self._count_start2 = np.zeros(m)
+        self._enable_positions = []
         # The force sensor: samples counted, ticks without a new one, time.monotonic() of
         # the last new one.
         self._sensor = self.DeclareDiscreteState(np.zeros(3))
@@ -246,6 +260,25 @@ class CanopenReelsSystem(LeafSystem):
                     fault_time=float(b[FAULT_TIME]), ticks=float(b[TICKS]),
                     commands_lost=0.0, holds=0.0, longest_hold=0.0)
 
+    def reel_speeds(self, context) -> np.ndarray:
+        """The reel speeds the last tick's tension used, m/s of cable (NaN: none yet)."""
+        m = self._m
+        return context.get_discrete_state(self._drives).get_value()[
+            D_SPEED * m:(D_SPEED + 1) * m].copy()
+
+    def _speed_source(self) -> str:
+        """reel_speed as configure() takes it: auto becomes position on a bus without room
+        for TPDO2 (said in the log)."""
+        c = self._config
+        if c.reel_speed == "auto" and not velocity_fits(c, self._m, self._T):
+            sensors = int(isinstance(c.force_sensor, CanopenForceSensor))
+            load = bus_load(self._m, c.bitrate, self._T, c.heartbeat_period, sensors, True)
+            _log.info("reel speed from position differences: TPDO2 (velocity actual) of %d "
+                      "drives would load the bus to %.0f %% (more than %.0f %%)", self._m,
+                      100 * load["load"], 100 * MAX_BUS_LOAD)
+            return "position"
+        return c.reel_speed
+
     # --- start-up ----------------------------------------------------------------------------
 
     def _fail(self, message, t):
@@ -256,7 +289,7 @@ class CanopenReelsSystem(LeafSystem):
         c, m, t = self._config, self._m, context.get_time()
         try:
             self.master.open()
-            self.master.configure(c.heartbeat_period, self._T)
+            self.master.configure(c.heartbeat_period, self._T, self._speed_source())
             self.master.stop_notifier()
         except CanopenError as e:
             raise self._fail(f"refusing to enable the drives: {e}", t) from None
@@ -281,7 +314,7 @@ class CanopenReelsSystem(LeafSystem):
         while True:
             self.master.send_cycle([CW_DISABLE_VOLTAGE] * m, zero)
             self._settle()
-            sw, pos, torque, count, _, _, hb_state, _ = self.master.snapshot()
+            sw, pos, torque, count, _, _, hb_state, *_ = self.master.snapshot()
             now = time.monotonic()
             silent = [k for k in range(m) if count[k] == 0]
             # A heartbeat that says operational: the one before NMT start says otherwise.
@@ -330,28 +363,53 @@ class CanopenReelsSystem(LeafSystem):
         if problem:
             raise self._fail(f"refusing to enable the drives: {problem}", t)
         self._enable(t)
-        sw, pos, torque, count, still, _, _, _ = self.master.snapshot()  # drops start-up EMCY
+        # Drops the start-up EMCY.
+        sw, pos, torque, count, still, _, _, _, vel, count2 = self.master.snapshot()
         lengths = self._offset + pos / self._counts
         state.get_mutable_discrete_state(self._lengths).SetFromVector(lengths)
         samples, force, _ = self._force_sample()
         state.get_mutable_discrete_state(self._force).SetFromVector(force)
         state.get_mutable_discrete_state(self._sensor).SetFromVector(
-            [samples, -1.0, time.monotonic()])  # tick 0 follows no SYNC of the run
-        drives = np.zeros(6 * m)
-        drives[0:m], drives[2 * m:3 * m], drives[3 * m:4 * m] = count, pos, still
+            # Tick 0 follows no SYNC of the run (in lockstep it reads its own SYNC's).
+            [samples, 0.0 if self.master.lockstep else -1.0, time.monotonic()])
+        drives = np.zeros(DRIVE_BLOCKS * m).reshape(DRIVE_BLOCKS, m)
+        drives[D_COUNT], drives[D_POSITION], drives[D_STILL] = count, pos, still
+        drives[D_COUNT2] = count2
         self._count_start = count.astype(float)  # the TPDOs before the run's first SYNC
+        self._count_start2 = count2.astype(float)
         self.lost_tpdos = 0
         # Tick 0 follows no SYNC of the run (the enable sequence's were answered above): its
-        # lack of a new TPDO is not a miss.
-        drives[m:2 * m] = -1.0
-        drives[4 * m:5 * m] = np.nan
-        drives[5 * m:] = self.master.clock()
+        # lack of a new TPDO is not a miss; in lockstep it reads the answers to its own.
+        drives[D_MISSED] = drives[D_MISSED2] = 0.0 if self.master.lockstep else -1.0
+        drives[D_SPEED] = self._start_speed(vel, pos, count)
+        drives[D_HEARD] = drives[D_HEARD2] = self.master.clock()
+        # The tensions before the first tick, as the simulated sensor's first sample: the
+        # reels at rest (within the drives' dead band) are not accelerating; a moving one
+        # waits for a second speed.
+        if c.tension_sensor == "drive_torque":
+            w = drives[D_SPEED]
+            accel = np.where(np.abs(w) <= self._drive_model[3], 0.0, np.nan)
+            tension_from_drive(torque * c.force_per_torque_unit, w, accel, *self._drive_model,
+                               state.get_mutable_discrete_state(self._tension)
+                               .get_mutable_value())
+        drives = drives.ravel()
         state.get_mutable_discrete_state(self._drives).SetFromVector(drives)
         book = np.zeros(BOOK_SIZE)
         book[ENABLED] = 1.0
         state.get_mutable_discrete_state(self._book).SetFromVector(book)
         self._stopped = self._quick_stopped = False
         self._fault = None
+
+    def _start_speed(self, vel, pos, count) -> np.ndarray:
+        """The reels' speeds at the end of the start-up, m/s: velocity actual where mapped,
+        else the difference of the last two positions the enable sequence read (NaN if no
+        TPDO came between them)."""
+        speed = np.full(self._m, np.nan)
+        if len(self._enable_positions) == 2:
+            pos0, count0 = self._enable_positions[0]
+            span = self._T * np.maximum(count - count0, 1)
+            speed = np.where(count > count0, (pos - pos0) / self._counts / span, np.nan)
+        return np.where(self.master.velocity_mapped, vel / self._vel_units, speed)
 
     def _tare_force(self, t) -> None:
         """The handle's sensor's first samples, `tare_samples` of them averaged as its bias
@@ -428,11 +486,14 @@ class CanopenReelsSystem(LeafSystem):
         c, m = self._config, self._m
         start = time.monotonic()
         reset_edge = np.zeros(m, dtype=bool)
+        self._enable_positions = []  # (position, TPDOs counted) of each snapshot
         while True:
             # In lockstep the enable sequence's SYNCs must not race the drives' answers: the
             # hand's force on the bus would differ at tick 0 between runs otherwise.
             self.master.await_answers()
-            sw = self.master.snapshot()[0]
+            snap = self.master.snapshot()
+            sw = snap[0]
+            self._enable_positions = [*self._enable_positions[-1:], (snap[1], snap[3])]
             states = [state_name(int(s)) for s in sw]
             if all(s == "operation enabled" for s in states):
                 return
@@ -470,48 +531,68 @@ class CanopenReelsSystem(LeafSystem):
 
     def _advance(self, context, snap, now):
         """The per-drive state after the bus snapshot `snap` (CanopenMaster.snapshot) read at
-        `now` (the master's clock()), the speeds before it, which drives sent a new TPDO, and
-        the verdict (reason, cable, detail) on them."""
+        `now` (the master's clock()), the reels' accelerations (m/s^2, NaN: unknown), which
+        drives sent a new TPDO, and the verdict (reason, cable, detail) on them."""
         m, T = self._m, self._T
         drives = context.get_discrete_state(self._drives).get_value().copy()
-        count0, missed, pos0 = drives[0:m], drives[m:2 * m], drives[2 * m:3 * m]
-        speed0, heard = drives[4 * m:5 * m].copy(), drives[5 * m:]
-        sw, pos, torque, count, still, hb_wall, hb_state, emcy = snap
+        d = drives.reshape(DRIVE_BLOCKS, m)  # a view: written through
+        count0, pos0, speed0 = d[D_COUNT].copy(), d[D_POSITION].copy(), d[D_SPEED].copy()
+        count20 = d[D_COUNT2].copy()
+        sw, pos, torque, count, still, hb_wall, hb_state, emcy, vel, count2 = snap
         new = count != count0
-        missed[:] = np.where(new, 0.0, missed + 1.0)
-        heard[:] = np.where(new, now, heard)
+        d[D_MISSED] = np.where(new, 0.0, d[D_MISSED] + 1.0)
+        d[D_HEARD] = np.where(new, now, d[D_HEARD])
+        mapped = self.master.velocity_mapped
+        new2 = (count2 != count20) & mapped
+        d[D_MISSED2] = np.where(new2 | ~mapped, 0.0, d[D_MISSED2] + 1.0)
+        d[D_HEARD2] = np.where(new2, now, d[D_HEARD2])
         # Over as many periods as TPDOs came: a late one is read with the next.
-        speed = np.where(new, (pos - pos0) / self._counts / (T * np.maximum(count - count0, 1)),
-                         speed0)
-        drives[0:m], drives[2 * m:3 * m], drives[3 * m:4 * m] = count, pos, still
-        drives[4 * m:5 * m] = speed
+        span = T * np.maximum(np.where(mapped, count2 - count20, count - count0), 1)
+        speed = np.where(new, (pos - pos0) / self._counts / span, speed0)
+        # Velocity actual where mapped: the drive's own measure at its SYNC, as the simulated
+        # sensor's reel speed; its acceleration the difference over the periods between.
+        speed = np.where(mapped, np.where(new2, vel / self._vel_units, speed0), speed)
+        accel = (speed - speed0) / np.where(mapped, span, T)  # NaN while a speed is unknown
+        d[D_COUNT], d[D_POSITION], d[D_STILL] = count, pos, still
+        d[D_COUNT2], d[D_SPEED] = count2, speed
         # Silent for missed_tpdo_ticks ticks and (missed_tpdo_ticks - 1) periods of wall time:
         # the catch-up ticks after a stall of this process come faster than drives answer.
-        silent = np.where(now - heard >= self._silence, missed, 0.0)
-        verdict = self._judge(sw, silent, still, hb_wall, hb_state, emcy, now)
-        return drives, speed0, new, verdict
+        silent = np.where(now - d[D_HEARD] >= self._silence, d[D_MISSED], 0.0)
+        silent2 = np.where(now - d[D_HEARD2] >= self._silence, d[D_MISSED2], 0.0)
+        verdict = self._judge(sw, silent, still, hb_wall, hb_state, emcy, now, silent2)
+        return drives, accel, new, verdict
 
     def _update(self, context, state):
         book = context.get_discrete_state(self._book).get_value().copy()
         if book[FAULT] != FAULT_NONE:
             return  # latched; the next publish ends the run
-        c, m, T = self._config, self._m, self._T
-        # The frames as the tick's publish saw them, before its SYNC: a silence counted in
-        # SYNC periods, whatever this tick's compute time lets arrive meanwhile.
-        at = self.master.sync_snapshot() or (self.master.snapshot(), self.master.clock())
+        c, m = self._config, self._m
+        if self.master.lockstep:
+            # The answers to the SYNC this tick's publish just sent, as HardwareReels' lockstep
+            # update reads the status answering its own command: the rehearsal's loop has the
+            # simulation's one-tick latency (tick k's command from the plant at t_k).
+            at = self.master.answered_snapshot()
+        else:
+            # The frames as the tick's publish saw them, before its SYNC: a silence counted
+            # in SYNC periods, whatever this tick's compute time lets arrive meanwhile.
+            at = self.master.sync_snapshot() or (self.master.snapshot(), self.master.clock())
         snap = at[0]
-        drives, speed0, new, (reason, cable, detail) = self._advance(context, *at)
+        drives, accel, new, (reason, cable, detail) = self._advance(context, *at)
         # TPDOs lost: the SYNCs of the run this update has seen answered (tick k's snapshot,
-        # taken before its own SYNC, answers SYNCs 1..k: none on tick 0) less the TPDOs that
-        # came for them, per drive. A TPDO a tick late is read with the next: not lost.
+        # taken before its own SYNC, answers SYNCs 1..k: none on tick 0; in lockstep 0..k)
+        # less the TPDOs that came for them, per drive. A TPDO a tick late is read with the
+        # next: not lost.
+        expected = book[TICKS] + float(self.master.lockstep)
         answered = drives[0:m] - self._count_start
-        self.lost_tpdos = int(np.maximum(0.0, book[TICKS] - answered).sum())
+        answered2 = drives[D_COUNT2 * m:(D_COUNT2 + 1) * m] - self._count_start2
+        self.lost_tpdos = int(np.maximum(0.0, expected - answered).sum()
+                              + np.maximum(0.0, expected - answered2)[
+                                  self.master.velocity_mapped].sum())
         pos, torque = snap[1], snap[2]
-        speed = drives[4 * m:5 * m]
+        speed = drives[D_SPEED * m:(D_SPEED + 1) * m]
         lengths = self._offset + pos / self._counts
         tension = state.get_mutable_vector(self._tension).get_mutable_value()
         if c.tension_sensor == "drive_torque":
-            accel = (speed - speed0) / T  # NaN while a speed is unknown
             tension_from_drive(torque * c.force_per_torque_unit, speed, accel,
                                *self._drive_model, tension)
         else:
@@ -536,8 +617,9 @@ class CanopenReelsSystem(LeafSystem):
         state.get_mutable_vector(self._drives).SetFromVector(drives)
         state.get_mutable_vector(self._book).SetFromVector(book)
 
-    def _judge(self, sw, missed, still, hb_wall, hb_state, emcy, now):
-        """(reason, cable (0-based), detail) of the first fault found, or FAULT_NONE."""
+    def _judge(self, sw, missed, still, hb_wall, hb_state, emcy, now, missed2):
+        """(reason, cable (0-based), detail) of the first fault found, or FAULT_NONE.
+        `missed`, `missed2`: ticks each drive's TPDO, TPDO2 has been silent."""
         c = self._config
         if emcy:
             k, code, _ = emcy[0]
@@ -548,6 +630,9 @@ class CanopenReelsSystem(LeafSystem):
         k = int(np.argmax(missed))
         if missed[k] >= c.missed_tpdo_ticks:
             return FAULT_SILENT, k, missed[k]
+        k = int(np.argmax(missed2))
+        if missed2[k] >= c.missed_tpdo_ticks:
+            return FAULT_VELOCITY_SILENT, k, missed2[k]
         if c.heartbeat_period > 0:
             age = now - hb_wall
             for k in np.flatnonzero(self.master.heartbeat_watched):
@@ -572,11 +657,13 @@ class CanopenReelsSystem(LeafSystem):
             # Drake runs this tick's update right after this publish, so the update has not
             # seen the TPDOs that came in during the period just ended: judge them here too,
             # so that a fault stops the drives in place of this tick's command, not the next.
+            # In lockstep the update before has judged every answer to the last SYNC: no
+            # SYNC since, nothing new to judge (a silence would count twice).
             t = context.get_time()
-            # Lockstep: judged on every answer to the last SYNC, not on those in so far.
-            self.master.await_answers()
-            _, _, _, (reason, cable, detail) = self._advance(
-                context, self.master.snapshot(drain_emcy=False), self.master.clock())
+            reason, cable, detail = FAULT_NONE, -1, 0.0
+            if not self.master.lockstep:
+                _, _, _, (reason, cable, detail) = self._advance(
+                    context, self.master.snapshot(drain_emcy=False), self.master.clock())
             u = self._command.Eval(context)
             bad = ~np.isfinite(u)
             if reason == FAULT_NONE and bad.any():
@@ -628,6 +715,9 @@ class CanopenReelsSystem(LeafSystem):
         elif reason == FAULT_SILENT:
             why = (f"no TPDO from {who} for {int(detail)} ticks (missed_tpdo_ticks = "
                    f"{self._config.missed_tpdo_ticks})")
+        elif reason == FAULT_VELOCITY_SILENT:
+            why = (f"no TPDO2 (velocity actual) from {who} for {int(detail)} ticks "
+                   f"(missed_tpdo_ticks = {self._config.missed_tpdo_ticks})")
         elif reason == FAULT_HEARTBEAT:
             why = (f"{who}'s heartbeat reports NMT state {int(-detail)}, not operational"
                    if detail < 0 else

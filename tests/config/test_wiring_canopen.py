@@ -128,6 +128,30 @@ def test_lockstep_answers_every_sync_before_the_next_and_counts_in_syncs():
     np.testing.assert_allclose(stamps / T, np.round(stamps / T), atol=1e-6)
 
 
+@covers(F + "reel_speed")
+def test_reel_speed_maps_velocity_actual_where_asked_and_the_bus_has_room():
+    """`reel_speed: velocity_actual` at a 4 ms period (7 TPDO2s fit: 54 % of the bus): every
+    drive's TPDO2 carries 0x606C (32 bits) and is sent; `position` there: no TPDO2 mapped or
+    sent; velocity_actual at the scenario's 2 ms: 108 % of the bus, refused naming it."""
+    with pytest.raises(ScenarioError, match=r"7 TPDO2s \(reel_speed: velocity_actual\).* "
+                       r"108.0 %"):
+        _scenario("reel_speed: velocity_actual")
+    for value, mapped in (("velocity_actual", True), ("position", False)):
+        scenario = load_scenario("exp1_no_interaction", overlay_text=(
+            f"{{time_step: 0.004, plant: !CanopenReels {{interface: virtual, channel: "
+            f"{fresh_channel()}, force_sensor: !CanopenForceSensor {{node_id: 20, "
+            f"tare_samples: 5}}, reel_speed: {value}}}}}"))
+        sim, reels, drives, _, _ = _rigged(scenario, time_step=0.004)
+        try:
+            start_realtime(sim, 0.0)
+            lockstep(sim, reels, drives, 0.1, T=0.004)
+        finally:
+            close(reels, drives)
+        assert reels.master.velocity_mapped.tolist() == [mapped] * 7
+        assert all(d.tpdo2 == ([((0x606C, 0), "<i")] if mapped else []) for d in drives.drives)
+        assert (drives.tpdo2_sent >= 7 * 25) if mapped else drives.tpdo2_sent == 0
+
+
 @covers(F + "tension_sensor")
 def test_tension_sensor_none_gives_nan():
     sim, reels, drives, _, _ = _rigged(_scenario("tension_sensor: none, ramp_time: 0.0"))

@@ -9,8 +9,7 @@ true path within 1 mm (the tolerances the rehearsal promises; the reference is t
 simulation's ground truth, computed here, never a stored number).
 
 DURATION below: the docs' table's 3 s, which keeps this file under 1.5 minutes on 2 cores
-(measured: see DURATION's comment). Two CANopen rows with the drive torque are off the
-simulation (OFF: measured numbers and cause) and expected to fail until that is fixed."""
+(measured: see DURATION's comment)."""
 
 import numpy as np
 import pytest
@@ -23,31 +22,7 @@ from cdpm_drake.emulator import parity
 # (python-can's virtual bus, 7 drives and a force node a SYNC) about one; one simulation
 # per (experiment, setting) is shared by both buses.
 DURATION = 3.0
-# Rows off the simulation, measured over DURATION (rehearsal - simulation). Found by
-# elimination: with controller.tension_damping off in both, these rows are within the
-# tolerances (exp1 0.22 mm, exp3 0.17 mm of path), and the UDP rows on the same sensor are
-# too: it is the tension damping on the CANopen drive-torque reading, which is made unlike
-# the simulated sensor's (reel speed and acceleration from position differences, none for
-# the first 3 ticks, torque in 0.1 N units). On exp3 the damper pays out up to 16 mm/s
-# (5 mm/s over UDP), held against the length loop, and the path drifts. Not the cause
-# alone, each measured on exp3 / exp1 over 3 s: 1e8 counts per metre (6.07 mm), the
-# emulator inverting its drive force with the position-difference speeds and 0.01 N torque
-# units (5.74 / 1.49 mm), 0.01 N units alone (exp1 1.10 mm), 1e8 counts per metre with
-# 0.01 N units (5.91 / 1.10 mm); over UDP, exp3 stays within with no reel speed for the
-# first 3 statuses (0.24 mm), lengths rounded to 1 um (0.26 mm) or the hand force to
-# 0.01 N (0.21 mm): not the quantization, not the late start alone.
-OFF = {
-    ("exp1_no_interaction", "full+tc, drive torque", "canopen"):
-        "path 1.205 mm off (tolerance 1 mm); smallest T -0.166 N, largest +0.12 %, "
-        "closest approach -0.077 mm",
-    ("exp3_two_pairs", "full+tc, drive torque", "canopen"):
-        "path 5.224 mm off (tolerance 1 mm); smallest T -0.000 N, largest -0.59 %, "
-        "closest approach -0.003 mm",
-}
-ROWS = [pytest.param(e, s, b, id=f"{e}-{s}-{b}".replace(" ", "").replace(",", "_"),
-                     marks=[pytest.mark.xfail(strict=True, reason=(
-                         "the tension damping on the CANopen drive-torque reading: "
-                         + OFF[e, s, b]))] if (e, s, b) in OFF else [])
+ROWS = [pytest.param(e, s, b, id=f"{e}-{s}-{b}".replace(" ", "").replace(",", "_"))
         for e, s, b in parity.rows() if not parity.unsupported(s, b)]
 _simulations = {}
 
