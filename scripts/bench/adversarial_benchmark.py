@@ -183,8 +183,20 @@ def measure(case: Case) -> dict:
                                           np.asarray(log["d_u"], dtype=float))
         t_star = posed_holding_tension(robot, log["p_true"], log["rpy_true"], log["F_H"])
         slack = log["slack"].any(axis=1)
-        row |= {"slack_holdable": int(np.sum(slack & (t_star >= HOLDABLE))),
+        holdable = slack & (t_star >= HOLDABLE)
+        # The promise's bar: slack where the statics at the true pose could hold the hand
+        # with every tension in [HOLDABLE, max_tension] (computed on the slack ticks only).
+        ticks = np.flatnonzero(slack)
+        within = np.zeros(slack.size, dtype=bool)
+        if ticks.size:
+            within[ticks] = posed_holding_tension(
+                robot, log["p_true"][ticks], log["rpy_true"][ticks], log["F_H"][ticks],
+                floor=HOLDABLE, ceiling=resolved.scenario.controller.max_tension) >= 0.0
+        first = np.flatnonzero(slack)
+        row |= {"slack_holdable": int(np.sum(holdable)),
+                "slack_within": int(np.sum(within)),
                 "slack_ticks": int(slack.sum()),
+                "first_slack": float(log["time"][first[0]]) if first.size else None,
                 "min_tension": float(log["tensions"].min()),
                 "max_tilt_deg": float(np.degrees(np.abs(log["rpy_true"])).max())}
         unholdable = np.flatnonzero(t_star < 0.0)
@@ -192,7 +204,9 @@ def measure(case: Case) -> dict:
                                    else None)
     else:
         d, crossed = log["pair_distances"], log["crossed"]
-        row |= {"slack_holdable": None, "slack_ticks": None, "min_tension": None,
+        row |= {"slack_holdable": None, "slack_within": None, "slack_ticks": None,
+                "first_slack": None,
+                "min_tension": None,
                 "max_tilt_deg": None, "first_unholdable": None}
     margin_mm = 1000 * (d - d_l[None, :])
     k = int(np.unravel_index(np.argmin(margin_mm), margin_mm.shape)[1])
@@ -201,6 +215,9 @@ def measure(case: Case) -> dict:
             "crossed": bool(np.any(crossed)),
             "fault": "" if result.error is None else str(result.error),
             "fault_time": None if result.error is None else float(log["time"][-1])}
+    fast = (np.flatnonzero(np.asarray(log["tension_status"]).reshape(-1) == 5)
+            if "tension_status" in log else np.zeros(0, dtype=int))
+    row["first_too_fast"] = float(log["time"][fast[0]]) if fast.size else None
     status = log.get("filter_status")
     row["modified_share"] = None if status is None else float(np.mean(status[:, 0] > 0))
     row["held_share"] = None if status is None else float(np.mean(status[:, 0] >= 3))
