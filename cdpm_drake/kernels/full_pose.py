@@ -582,6 +582,7 @@ def tension_tick(reels, attachments, params, x, out):
     T_target = out[2 * m:3 * m]
     W, T_p, N = np.empty((6, m)), np.empty(m), np.empty((m, max(m - 6, 0)))
     balanced = _estimate(reels, attachments, p, R, w, L0, r, T_assumed, EA, W, T_p, N, T_est)
+    T_hand = T_p.copy()  # the statics of the hand as measured (before the lead)
     if balanced and lead > 0.0:
         balanced = _lead_wrench(W, w, w_lead, T_p)
     if balanced:
@@ -634,7 +635,9 @@ def tension_tick(reels, attachments, params, x, out):
             for c in range(k_null):
                 total += N[i, c] * (lam_before[c] + scale * dlam[c])
             T_cmd[i] = total
-            if flag and hard_floor - total > deepest and T_target[i] >= hard_floor - 1e-9:
+            # Named only where the hand is what takes the cable down: its lead lowers it.
+            if (flag and hard_floor - total > deepest and T_target[i] >= hard_floor - 1e-9
+                    and T_p[i] < T_hand[i]):
                 deepest, cable_fast = hard_floor - total, i + 1
             T_cmd[i] = max(total, min(hard_floor, T_target[i]))
         # Said a lead ahead too: where the internal force is held back by the cables' limits
@@ -649,7 +652,8 @@ def tension_tick(reels, attachments, params, x, out):
                     total = T_p[i]
                     for c in range(k_null):
                         total += N[i, c] * (lam_before[c] + scale * dlam[c])
-                    if hard_floor - total > deepest and T_target[i] >= hard_floor - 1e-9:
+                    if (hard_floor - total > deepest and T_target[i] >= hard_floor - 1e-9
+                            and T_p[i] < T_hand[i]):
                         deepest, cable_fast = hard_floor - total, i + 1
         if cable_fast > 0:
             status, cable = HAND_TOO_FAST, cable_fast
