@@ -42,6 +42,7 @@ from cdpm_drake.kernels.pose import pose_fk, posed_cables, rotation_log, solve_s
 from cdpm_drake.kernels.qp import QP_OPTIMAL, solve_qp
 from cdpm_drake.kernels.nullspace import (RANK_TOL, lam_interval, null_vector,
                                           particular_solution, pivoted_qr)
+from cdpm_drake.kernels.tension_path import lead_statics
 from cdpm_drake.kernels.tension import (BELOW_FLOOR, FEASIBLE, GENERAL, GRAVITY, max_min_1d,
                                         max_min_lines, max_min_lines_subject_to)
 
@@ -460,30 +461,6 @@ ACCELERATION_TIME = 0.1
 
 
 @_jit
-def _lead_wrench(W, w, w_lead, T_p):
-    """T_p (the minimum-norm distribution of w, W (6, m) of rank 6) moved to w_lead's: T_p -
-    W^T (W W^T)^-1 (w_lead - w), linear in the wrench (W T + w = 0); False (T_p untouched)
-    where W W^T cannot be factored."""
-    m = W.shape[1]
-    G, dw, y = np.empty((6, 6)), np.empty(6), np.zeros(6)
-    for a in range(6):
-        dw[a] = w_lead[a] - w[a]
-        for b in range(6):
-            total = 0.0
-            for i in range(m):
-                total += W[a, i] * W[b, i]
-            G[a, b] = total
-    if not solve_spd(G, dw, y):
-        return False
-    for i in range(m):
-        total = 0.0
-        for a in range(6):
-            total += W[a, i] * y[a]
-        T_p[i] -= total
-    return True
-
-
-@_jit
 def tension_tick(reels, attachments, params, x, out):
     """params = [mass kg, handle (3, m, platform frame), EA N, floor N, ceiling N, time step
     s, slew rate N/s, warm-up ticks, hard floor N, fall rate N/s, ringing factor (0: off),
@@ -584,7 +561,7 @@ def tension_tick(reels, attachments, params, x, out):
     balanced = _estimate(reels, attachments, p, R, w, L0, r, T_assumed, EA, W, T_p, N, T_est)
     T_hand = T_p.copy()  # the statics of the hand as measured (before the lead)
     if balanced and lead > 0.0:
-        balanced = _lead_wrench(W, w, w_lead, T_p)
+        balanced = lead_statics(W, w, w_lead, T_p)
     if balanced:
         if N.shape[1] == 1:  # one redundant cable: closed form
             n = np.empty(m)
@@ -647,7 +624,7 @@ def tension_tick(reels, attachments, params, x, out):
             for k in range(3):
                 F_lead[k] = F[k] + 2.0 * lead * rate_next[k]
             held_wrench(R, params, F_lead, a, w)
-            if _lead_wrench(W, w_lead, w, T_p):
+            if lead_statics(W, w_lead, w, T_p):
                 for i in range(m):
                     total = T_p[i]
                     for c in range(k_null):

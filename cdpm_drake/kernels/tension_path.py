@@ -30,7 +30,12 @@ force does not move).
 
 import math
 
+import numba
 import numpy as np
+
+from cdpm_drake.kernels.pose import solve_spd
+
+_jit = numba.njit(cache=True, error_model="numpy")
 
 # Hand magnitudes (N) the fastest hand is taken over, and the finite-difference step (N).
 HAND_STEPS = 17
@@ -99,3 +104,27 @@ def fastest_hand(W, lengths, EA, wrench_of, direction, *, floor, hard_floor, cei
         with np.errstate(divide="ignore"):
             best = min(best, float(np.min(np.where(need > 1e-9, S / need, np.inf))))
     return best
+
+
+@_jit
+def lead_statics(W, w, w_lead, T_p):
+    """T_p (the minimum-norm distribution of w, W (6, m) of rank 6) moved to w_lead's: T_p -
+    W^T (W W^T)^-1 (w_lead - w), linear in the wrench (W T + w = 0); False (T_p untouched)
+    where W W^T cannot be factored."""
+    m = W.shape[1]
+    G, dw, y = np.empty((6, 6)), np.empty(6), np.zeros(6)
+    for a in range(6):
+        dw[a] = w_lead[a] - w[a]
+        for b in range(6):
+            total = 0.0
+            for i in range(m):
+                total += W[a, i] * W[b, i]
+            G[a, b] = total
+    if not solve_spd(G, dw, y):
+        return False
+    for i in range(m):
+        total = 0.0
+        for a in range(6):
+            total += W[a, i] * y[a]
+        T_p[i] -= total
+    return True
