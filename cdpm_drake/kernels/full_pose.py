@@ -494,7 +494,8 @@ def tension_tick(reels, attachments, params, x, out):
     the others 2-15 times that; down slowly, because a target that drops is where slack
     starts, and where the weakest cable's share of the internal force is small the target
     flips between the statuses' distributions tick by tick and a command that follows rings
-    the platform. During the warm-up the command follows the estimate (the plant's tensions
+    the platform; but not where the slow fall would hold a rising cable (one whose share of
+    the internal force is negative) below the hard floor. During the warm-up the command follows the estimate (the plant's tensions
     when the controller takes over are whatever they are). A cable the balanced command
     leaves below the hard floor is raised to it; where the target itself keeps it above
     (the internal force could not keep up with the hand), the status is HAND_TOO_FAST,
@@ -593,18 +594,32 @@ def tension_tick(reels, attachments, params, x, out):
                 lam_before[c] += N[i, c] * T_before[i]
                 dlam[c] += N[i, c] * T_target[i]
             dlam[c] -= lam_before[c]
-        scale = 1.0
+        # The scale the rising cables allow and the one the falling cables allow; the slow
+        # fall gives way where it would hold a rising cable of the command below the floor
+        # (an internal force held up by the fall limit starves the cables whose share of
+        # it is negative).
+        rise, fall = 1.0, 1.0
         for i in range(m):
             change = 0.0
             for c in range(k_null):
                 change += N[i, c] * dlam[c]
-            limit = max_fall
             if change > 0.0:
                 limit = max_change
                 if stretch_speed > 0.0:
                     limit = min(limit, EA / L0[i] * stretch_speed * step)
-            if abs(change) * scale > limit:
-                scale = limit / abs(change)
+                if change * rise > limit:
+                    rise = limit / change
+            elif -change * fall > max_fall:
+                fall = max_fall / -change
+        scale = min(rise, fall)
+        if fall < rise:
+            for i in range(m):
+                total = T_p[i]
+                for c in range(k_null):
+                    total += N[i, c] * (lam_before[c] + scale * dlam[c])
+                if total < hard_floor and T_target[i] > total:
+                    scale = rise
+                    break
         deepest, cable_fast = 1e-6, 0
         flag = status == FEASIBLE or status == BELOW_FLOOR or status == CEILING_EXCEEDED
         for i in range(m):
