@@ -31,7 +31,7 @@ from cdpm_drake.systems.pose_jacobian_mapping import build_pose_jacobian_mapping
 from cdpm_drake.systems.posed_interference_force import build_posed_interference_force
 from cdpm_drake.systems.safety_filter import build_safety_filter
 from cdpm_drake.systems.safety_limits import SAFETY_LIMITS_MAIN, build_safety_limits
-from cdpm_drake.systems.tension_distribution import build_tension_distribution
+from cdpm_drake.systems.tension_distribution import build_tension_distribution, tension_path_params
 from cdpm_drake.systems.wall_force import WorkspaceWallForce
 from cdpm_drake.systems.wiring import (FUSED_DELAY, FUSED_WIRING, FlatBlock, fuse_delays,
                                        fuse_wiring, wiring)
@@ -601,7 +601,8 @@ def _add_pose_blocks(builder, blocks, resolved, fk, force_sensor, lengths, veloc
             max_tension=controller.max_tension, tension_floor=controller.tension_floor,
             slew_rate=TENSION_SLEW_RATE, fall_rate=TENSION_FALL_RATE,
             initial_tensions=start, time_step=T, warmup_ticks=TENSION_WARMUP_TICKS,
-            ringing_factor=RINGING_FLOOR if damped else 0.0))
+            ringing_factor=RINGING_FLOOR if damped else 0.0,
+            **tension_path_params(robot, T)))
     for name, port in (("p_WP", fk.GetOutputPort("p_WP")), ("R_WP", R_WP),
                        ("F_H", force_sensor.GetOutputPort("F_H")),
                        ("velocity_command", velocity_command),

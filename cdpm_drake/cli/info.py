@@ -91,6 +91,9 @@ def info(*, robot: str = "paper_7cable", swaps=None, plot_dir=None, grid_step: f
     path, grid, t_grid, grid_text, solved = _print_statics(r, scenario, grid_step, out,
                                                            base=base)
     _print_wrench_feasibility(r, grid, t_grid, grid_text, out, solved)
+    start = (np.asarray(resolved.scenario.initial_position, dtype=float)
+             if scenario is not None and refused is None else c)
+    _print_fastest_hand(r, start, out)
     if scenario is not None and refused is None:
         _print_homing(r, resolved.scenario, out)
     if plot_dir is None:
@@ -480,3 +483,32 @@ def calibration_lines(robot) -> list[str]:
         lines.append(f"base frame's turn from externally measured poses: "
                      f"{cal['measured_poses']}")
     return lines
+
+
+def _print_fastest_hand(r, p, out) -> None:
+    """The fastest hand (N/s) the tension path follows at p along +-x, +-y, +-z, with the
+    controller's default floors and ceiling (kernels/tension_path.py); nothing for fewer
+    than 7 cables or a rank-deficient wrench matrix."""
+    from cdpm_drake.config.scenario import Controller
+    from cdpm_drake.kernels import tension_path
+    from cdpm_drake.kernels.tension import gravity_wrench, wrench_matrix
+
+    W = wrench_matrix(r, p)
+    if r.num_cables < 7 or np.linalg.matrix_rank(W) < 6:
+        return
+    c, d = Controller(), r.dynamics
+    lengths = np.linalg.norm(r.reels - (p + r.attachments), axis=1)
+    speed = tension_path.stretch_speed(r.limits.max_reel_speed, r.limits.max_velocity)
+    cells = []
+    for k, axis in enumerate("xyz"):
+        for sign in (1.0, -1.0):
+            rate = tension_path.fastest_hand(
+                W, lengths, d.EA, lambda F: gravity_wrench(d.mass, F, d.handle),
+                sign * np.eye(3)[k], floor=float(c.min_tension),
+                hard_floor=float(c.tension_floor), ceiling=float(c.max_tension),
+                speed=speed)
+            cells.append(f"{'+' if sign > 0 else '-'}{axis} "
+                         + ("any" if not np.isfinite(rate) else f"{rate:.0f}"))
+    print(f"fastest hand the tension path follows at {format_vector(p)} m (N/s, hands up to "
+          f"40 N, each cable's internal force rising at most EA/L x {speed:g} m/s; full pose "
+          f"with tension control): " + ", ".join(cells), file=out)

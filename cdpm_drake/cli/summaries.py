@@ -25,7 +25,7 @@ def tension_control_summary(log) -> str:
     the hard floor (the cable above it); the hard floor unreachable (t* < tension_floor:
     the cables raised to it); W rank-deficient; and on how many no distribution held at all
     (t* < 0: outside the wrench-feasible workspace)."""
-    from cdpm_drake.kernels.full_pose import CEILING_EXCEEDED, FLOOR_UNREACHABLE
+    from cdpm_drake.kernels.full_pose import CEILING_EXCEEDED, FLOOR_UNREACHABLE, HAND_TOO_FAST
     from cdpm_drake.kernels.tension import BELOW_FLOOR, FEASIBLE, GENERAL
 
     status = np.asarray(log["tension_status"]).reshape(-1)
@@ -50,6 +50,15 @@ def tension_control_summary(log) -> str:
             parts.append(f"{what} on {int(ticks.sum())} ({t_text}{role}: "
                          f"{_named_cables(cable, ticks)})")
     text = "tension control: " + "; ".join(parts)
+    fast = np.flatnonzero(status == HAND_TOO_FAST)
+    if fast.size:
+        first = int(fast[0])
+        when = (f" first at {float(np.asarray(log['time']).reshape(-1)[first]):.3f} s"
+                if "time" in log else "")
+        text += (f"; WARNING: hand faster than the tension path can follow on {fast.size} "
+                 f"ticks ({_named_cables(cable, status == HAND_TOO_FAST)};{when}, cable "
+                 f"{int(cable[first])}: the internal force that keeps it at "
+                 "controller.tension_floor rises slower than the hand takes it down)")
     none = int(np.sum(t_star < 0))
     if none:
         text += (f"; NO tension distribution held on {none} ticks (t* < 0: outside the "

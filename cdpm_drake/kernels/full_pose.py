@@ -42,6 +42,7 @@ from cdpm_drake.kernels.pose import pose_fk, posed_cables, rotation_log, solve_s
 from cdpm_drake.kernels.qp import QP_OPTIMAL, solve_qp
 from cdpm_drake.kernels.nullspace import (RANK_TOL, lam_interval, null_vector,
                                           particular_solution, pivoted_qr)
+from cdpm_drake.kernels.tension_path import lead_statics
 from cdpm_drake.kernels.tension import (BELOW_FLOOR, FEASIBLE, GENERAL, GRAVITY, max_min_1d,
                                         max_min_lines, max_min_lines_subject_to)
 
@@ -64,9 +65,9 @@ def sizes(m: int) -> dict:
     """Input (x) and output (out) sizes of the kernels for m cables, and their memories."""
     return {
         "fk_x": 2 * m + 13, "fk_out": 2 * m + 16, "fk_memory": 13,
-        "tension_x": 6 * m + 22, "tension_out": 5 * m + 7, "tension_memory": 2 * m + 4,
+        "tension_x": 6 * m + 28, "tension_out": 5 * m + 13, "tension_memory": 2 * m + 10,
         "orientation_x": 19, "orientation_out": 22, "orientation_memory": 10,
-        "rates_x": 4 * m + 31, "rates_out": 4 * m + 4, "rates_memory": 2 * m + 4,
+        "rates_x": 5 * m + 31, "rates_out": 5 * m + 4, "rates_memory": 3 * m + 4,
     }
 
 
@@ -246,6 +247,13 @@ FLOOR_MARGIN = 0.05
 # every cable at tension_floor even without a ceiling: the max-min one, its weak cables
 # raised to tension_floor, which no longer balances the wrench exactly).
 CEILING_EXCEEDED, FLOOR_UNREACHABLE = 3, 4
+# And HAND_TOO_FAST (5): the hand's force changes faster than the tension path can follow.
+# The command's internal force slews towards the target's at each cable's own limit
+# (tension_tick), and the balanced command, the statics of the hand (led by its rate) plus
+# that internal force, leaves a cable below the hard floor where the target keeps it above:
+# the cable named is the one furthest below, raised to the floor. Raised before the cable is
+# slack: the command leads the hand and the cable's true tension lags the command.
+HAND_TOO_FAST = 5
 
 
 @_jit
@@ -455,34 +463,52 @@ ACCELERATION_TIME = 0.1
 @_jit
 def tension_tick(reels, attachments, params, x, out):
     """params = [mass kg, handle (3, m, platform frame), EA N, floor N, ceiling N, time step
-    s, slew rate N/s, warm-up ticks, hard floor N, fall rate N/s, ringing factor (0: off)].
+    s, slew rate N/s, warm-up ticks, hard floor N, fall rate N/s, ringing factor (0: off),
+    lead s, rate time constant s, stretch speed m/s].
     x = [p (3), R (9), F_H (3), v (3),
     residual (m), L0 (m), T_assumed (m: the tensions the forward kinematics corrected the
     lengths for), ringing (m, N^2: the variance of each measured tension about the
     estimate, tension_damping.damping_tick; ignored with the factor 0), memory: T_estimate
-    (m), v_slow (3: the command low-passed), ticks (1), T_command_previous (m)]. The hard
-    floor is at least the ringing factor times the largest ringing's standard deviation
-    (never above the floor).
+    (m), v_slow (3: the command low-passed), ticks (1), T_command_previous (m), F_previous
+    (3), F_rate (3: the hand force's rate, N/s, low-passed with the rate time constant)].
+    The hard floor is at least the ringing factor times the largest ringing's standard
+    deviation (never above the floor).
     out = [T_command (m), T_estimate (m), T_target (m), t* (1), status (1), cable (1), next
-    memory (2 m + 4)]: T_target the distribution at the pose (rules (a)-(d) of
+    memory (2 m + 10)]: T_target the distribution at the pose (rules (a)-(d) of
     `distribution_1d_bounded`: closed form for one redundant cable, `distribution_bounded`
-    for more), T_command what the lengths are stretched for: the target, moved towards at
-    most `slew rate` N/s up and `fall rate` N/s down per cable from the estimate at the end of
-    the warm-up (the plant's tensions when the controller takes over are whatever they are,
-    and a jump to the target would shake the platform). Up fast, because a hand that pushes
-    loads some cables as fast as it pushes (at 50 N/s, a 40 N push ramped in 0.3 s left
-    cable 7 of exp2's robot slack for 0.3 s); down slowly, because a target that drops is
-    where slack starts, and where the weakest cable's share of the internal force is small
-    the target flips between the statuses' distributions tick by tick (4 N on cable 7 along
-    exp2's boundary under 40 N) and a command that follows rings the platform. status:
-    FEASIBLE, BELOW_FLOOR, CEILING_EXCEEDED, FLOOR_UNREACHABLE, or GENERAL (W rank-deficient:
-    the minimum-norm distribution, nothing chosen, raised to the hard floor); cable the
-    1-based cable the status names (0: none)."""
+    for more) for the hand force led by its rate, F + lead F_rate (the tension path, the
+    force's tick of age, the mapping's and the drives' 1/bandwidth, lags the hand by about
+    `lead`: the target moves with the hand, not after it); the estimate takes the hand
+    force as measured.
+
+    T_command, what the lengths are stretched for, is the target's statics (its minimum-norm
+    part, which the platform's own displacement brings whatever the lengths) plus an
+    internal force (its part along W's nullspace N, which only the reels make) moved from
+    the last command's towards the target's: each cable's share of the change, N_i . dlam,
+    at most `slew rate` N/s up and `fall rate` N/s down, and up at most EA / L0_i times the
+    stretch speed (the reel speed the motion leaves; 0: no such limit), the whole change
+    scaled down together so that the command stays a balanced distribution (a cable
+    clamped alone unbalances it, and the platform's stiffness then takes the difference out
+    of the others, the weak cable first). Up fast, because a hand that pushes loads some
+    cables as fast as it pushes and the internal force that keeps a weak cable taut loads
+    the others 2-15 times that; down slowly, because a target that drops is where slack
+    starts, and where the weakest cable's share of the internal force is small the target
+    flips between the statuses' distributions tick by tick and a command that follows rings
+    the platform; but not where the slow fall would hold a rising cable (one whose share of
+    the internal force is negative) below the hard floor. During the warm-up the command follows the estimate (the plant's tensions
+    when the controller takes over are whatever they are). A cable the balanced command
+    leaves below the hard floor is raised to it; where the target itself keeps it above
+    (the internal force could not keep up with the hand), the status is HAND_TOO_FAST,
+    naming the cable furthest below. status: FEASIBLE, BELOW_FLOOR, CEILING_EXCEEDED,
+    FLOOR_UNREACHABLE, GENERAL (W rank-deficient: the minimum-norm distribution, nothing
+    chosen, raised to the hard floor) or HAND_TOO_FAST; cable the 1-based cable the status
+    names (0: none)."""
     m = reels.shape[0]
     EA, floor, ceiling = params[4], params[5], params[6]
     step, max_change, warmup = params[7], params[8] * params[7], params[9]
     hard_floor = params[10]
     max_fall = params[11] * step
+    lead, rate_time, stretch_speed = params[13], params[14], params[15]
     p = x[0:3]
     R = x[3:12].reshape((3, 3))
     F = x[12:15]
@@ -504,6 +530,8 @@ def tension_tick(reels, attachments, params, x, out):
     v_slow = x[mem + m:mem + m + 3]
     ticks = x[mem + m + 3]
     T_before = x[mem + m + 4:mem + 2 * m + 4]
+    F_before = x[mem + 2 * m + 4:mem + 2 * m + 7]
+    F_rate = x[mem + 2 * m + 7:mem + 2 * m + 10]
     started = ticks >= warmup
     # The commanded acceleration, from the command low-passed over ACCELERATION_TIME: (v -
     # v_slow) / tau is a ramp's acceleration exactly, while a command that alternates
@@ -514,16 +542,28 @@ def tension_tick(reels, attachments, params, x, out):
     a = np.empty(3)
     lowpass = step / ACCELERATION_TIME
     v_next = np.empty(3)
+    # The hand force's rate, low-passed (a first-order filter of the difference: a ramp's
+    # rate after a few time constants, the sensor's noise cut by sqrt(2 rate_time / step)).
+    rate_next, F_lead = np.empty(3), np.empty(3)
+    gain = min(1.0, step / rate_time) if rate_time > 0.0 else 1.0
     for k in range(3):
         a[k] = (v[k] - v_slow[k]) / ACCELERATION_TIME if ticks > 0.0 else 0.0
         v_next[k] = v_slow[k] + lowpass * (v[k] - v_slow[k]) if ticks > 0.0 else v[k]
-    w = np.empty(6)
+        raw = (F[k] - F_before[k]) / step if ticks > 0.0 else 0.0
+        rate_next[k] = F_rate[k] + gain * (raw - F_rate[k]) if ticks > 0.0 else 0.0
+        F_lead[k] = F[k] + lead * rate_next[k]
+    w, w_lead = np.empty(6), np.empty(6)
     held_wrench(R, params, F, a, w)
+    held_wrench(R, params, F_lead, a, w_lead)
     T_cmd = out[0:m]
     T_est = out[m:2 * m]
     T_target = out[2 * m:3 * m]
     W, T_p, N = np.empty((6, m)), np.empty(m), np.empty((m, max(m - 6, 0)))
-    if _estimate(reels, attachments, p, R, w, L0, r, T_assumed, EA, W, T_p, N, T_est):
+    balanced = _estimate(reels, attachments, p, R, w, L0, r, T_assumed, EA, W, T_p, N, T_est)
+    T_hand = T_p.copy()  # the statics of the hand as measured (before the lead)
+    if balanced and lead > 0.0:
+        balanced = lead_statics(W, w, w_lead, T_p)
+    if balanced:
         if N.shape[1] == 1:  # one redundant cable: closed form
             n = np.empty(m)
             for i in range(m):
@@ -539,9 +579,76 @@ def tension_tick(reels, attachments, params, x, out):
             T_target[i] = T_p[i]
             t_star = min(t_star, T_p[i])
         cable = _raise_to(T_target, hard_floor)
-    for i in range(m):
-        before = T_before[i] if started else T_est[i]  # during the warm-up: the estimate
-        T_cmd[i] = min(before + max_change, max(before - max_fall, T_target[i]))
+    k_null = N.shape[1]
+    if not started or not balanced:
+        for i in range(m):
+            before = T_before[i] if started else T_est[i]  # during the warm-up: the estimate
+            T_cmd[i] = min(before + max_change, max(before - max_fall, T_target[i]))
+    else:
+        # The internal force of the last command and of the target (N orthonormal and
+        # perpendicular to T_p), and the largest share of their difference each cable
+        # allows.
+        lam_before, dlam = np.zeros(k_null), np.zeros(k_null)
+        for c in range(k_null):
+            for i in range(m):
+                lam_before[c] += N[i, c] * T_before[i]
+                dlam[c] += N[i, c] * T_target[i]
+            dlam[c] -= lam_before[c]
+        # The scale the rising cables allow and the one the falling cables allow; the slow
+        # fall gives way where it would hold a rising cable of the command below the floor
+        # (an internal force held up by the fall limit starves the cables whose share of
+        # it is negative).
+        rise, fall = 1.0, 1.0
+        for i in range(m):
+            change = 0.0
+            for c in range(k_null):
+                change += N[i, c] * dlam[c]
+            if change > 0.0:
+                limit = max_change
+                if stretch_speed > 0.0:
+                    limit = min(limit, EA / L0[i] * stretch_speed * step)
+                if change * rise > limit:
+                    rise = limit / change
+            elif -change * fall > max_fall:
+                fall = max_fall / -change
+        scale = min(rise, fall)
+        if fall < rise:
+            for i in range(m):
+                total = T_p[i]
+                for c in range(k_null):
+                    total += N[i, c] * (lam_before[c] + scale * dlam[c])
+                if total < hard_floor and T_target[i] > total:
+                    scale = rise
+                    break
+        deepest, cable_fast = 1e-6, 0
+        flag = status == FEASIBLE or status == BELOW_FLOOR or status == CEILING_EXCEEDED
+        for i in range(m):
+            total = T_p[i]
+            for c in range(k_null):
+                total += N[i, c] * (lam_before[c] + scale * dlam[c])
+            T_cmd[i] = total
+            # Named only where the hand is what takes the cable down: its lead lowers it.
+            if (flag and hard_floor - total > deepest and T_target[i] >= hard_floor - 1e-9
+                    and T_p[i] < T_hand[i]):
+                deepest, cable_fast = hard_floor - total, i + 1
+            T_cmd[i] = max(total, min(hard_floor, T_target[i]))
+        # Said a lead ahead too: where the internal force is held back by the cables' limits
+        # and the hand, going on at its rate for another lead, would take a cable of this
+        # command below the floor (the true tensions lag the command by about the lead).
+        if cable_fast == 0 and scale < 1.0 and flag:
+            for k in range(3):
+                F_lead[k] = F[k] + 2.0 * lead * rate_next[k]
+            held_wrench(R, params, F_lead, a, w)
+            if lead_statics(W, w_lead, w, T_p):
+                for i in range(m):
+                    total = T_p[i]
+                    for c in range(k_null):
+                        total += N[i, c] * (lam_before[c] + scale * dlam[c])
+                    if (hard_floor - total > deepest and T_target[i] >= hard_floor - 1e-9
+                            and T_p[i] < T_hand[i]):
+                        deepest, cable_fast = hard_floor - total, i + 1
+        if cable_fast > 0:
+            status, cable = HAND_TOO_FAST, cable_fast
     out[3 * m] = t_star
     out[3 * m + 1] = status
     out[3 * m + 2] = cable
@@ -551,6 +658,8 @@ def tension_tick(reels, attachments, params, x, out):
         out[nxt + m + 4 + i] = T_cmd[i]
     for k in range(3):
         out[nxt + m + k] = v_next[k]
+        out[nxt + 2 * m + 4 + k] = F[k]
+        out[nxt + 2 * m + 7 + k] = rate_next[k]
     out[nxt + m + 3] = min(ticks + 1.0, warmup)
     return status
 
@@ -584,8 +693,8 @@ MAX_INTEGRAL_SPEED = 0.05
 def pose_rates_tick(reels, attachments, params, x, out):
     """params = [gain 1/s, integral_gain 1/s^2, step s, EA N, tension (0 or 1), dead band
     m/s, warm-up ticks]. x = [p (3), R (9), v (3), w (3), R_ref (9), L0 (m), T_command (m), memory: p_d
-    (3), delta (m), integral (m), started (1)]; out = [l_dot (m), l_d (m), next memory
-    (2 m + 4)].
+    (3), delta (m), integral (m), started (1), T_command_previous (m)]; out = [l_dot (m), l_d
+    (m), next memory (3 m + 4)].
 
     l_dot = J(p, R) [v; w] + s (gain e + integral_gain I + c(e)) (the drives' dead band made up,
     kinematics.dead_band_compensation; s the scale that keeps every correction within
@@ -597,7 +706,13 @@ def pose_rates_tick(reels, attachments, params, x, out):
     than dead_band) made up where the error asks for motion. l_d: the lengths of the commanded
     pose (p_d, R_ref) unstretched by the commanded tensions (`tension`: L EA / (EA + T)), else
     its rigid lengths plus the offsets delta latched at the first tick (the loop then starts
-    with no error). p_d starts at the first tick's estimate and integrates v."""
+    with no error). p_d starts at the first tick's estimate and integrates v.
+
+    With `tension`, the rate at which the commanded tensions unstretch l_d, L_d EA (1 / (EA
+    + T) - 1 / (EA + T_previous)) / step, is fed forward beside the twist (after the
+    warm-up): a tension command that ramps moves its lengths as it ramps, where through the
+    loop alone it lagged by its rate over the gain (1000 N/s on a 2 m cable of 70 kN: 0.7 mm,
+    25 N at 40 1/s) and was capped with the corrections (MAX_CORRECTION: ~1700 N/s)."""
     m = reels.shape[0]
     gain, integral_gain, step, EA = params[0], params[1], params[2], params[3]
     tension = params[4] != 0.0
@@ -622,13 +737,18 @@ def pose_rates_tick(reels, attachments, params, x, out):
     ud, Rbd, Ld = np.empty((m, 3)), np.empty((m, 3)), np.empty(m)
     posed_cables(reels, attachments, p_d, R_ref, ud, Rbd, Ld)
     twists = np.empty(m)
+    T_previous = x[mem + 2 * m + 4:mem + 3 * m + 4]
     for i in range(m):
+        feed = 0.0
         if tension:
             target = Ld[i] * EA / (EA + T[i])
             delta = 0.0
+            if started:
+                feed = Ld[i] * EA * (1.0 / (EA + T[i]) - 1.0 / (EA + T_previous[i])) / step
         else:
             delta = x[mem + 3 + i] if started else L0[i] - Ld[i]
             target = Ld[i] + delta
+        out[4 * m + 4 + i] = T[i] if tension else 0.0
         out[2 * m + 3 + i] = delta
         out[m + i] = target
         twist = -(u[i, 0] * v[0] + u[i, 1] * v[1] + u[i, 2] * v[2]
@@ -641,7 +761,7 @@ def pose_rates_tick(reels, attachments, params, x, out):
         out[3 * m + 3 + i] = integral
         out[i] = (gain * error + integral_gain * integral
                   + dead_band_compensation(dead_band, error))
-        twists[i] = twist
+        twists[i] = twist + feed
     add_scaled_corrections(twists, out)
     for k in range(3):
         p_d[k] += step * v[k]

@@ -78,13 +78,16 @@ class Feasibility:
         return float(np.mean(self.feasible)) if self.feasible.size else 0.0
 
 
-def posed_holding_tension(robot, p, rpy, hand_force) -> np.ndarray:
+def posed_holding_tension(robot, p, rpy, hand_force, floor: float = 0.0,
+                          ceiling: float | None = None) -> np.ndarray:
     """t* (N) of each posed platform: positions p (T, 3) m, orientations rpy (T, 3) rad,
     the platform's weight and the hand force (T, 3) N at its handle, moments about the
     centre (kinetostatics.margin without floor or ceiling: the statics' one measure; +inf
     where an internal force raises every tension). The ground truth's counterpart of the
     monitor's t*: a dynamic log's p_true, rpy_true and F_H give whether the cables could
-    hold the hand where the platform truly was."""
+    hold the hand where the platform truly was. With a ceiling (N): the margin s instead,
+    the largest with every tension between floor + s and ceiling - s (>= 0: the hand is
+    held with every tension in [floor, ceiling])."""
     import math
 
     from cdpm_drake.kernels.kinetostatics import margin, margin_scratch, wrench_rows
@@ -98,7 +101,8 @@ def posed_holding_tension(robot, p, rpy, hand_force) -> np.ndarray:
         R = np.ascontiguousarray(Rs[k])
         w = gravity_wrench(robot.dynamics.mass, F[k], R @ robot.dynamics.handle)
         out[k] = margin(robot.reels, robot.attachments, rows, np.ascontiguousarray(p[k]), R,
-                        w, 0.0, math.inf, scratch)[1]
+                        w, float(floor), math.inf if ceiling is None else float(ceiling),
+                        scratch)[1 if ceiling is None else 0]
     return out
 
 

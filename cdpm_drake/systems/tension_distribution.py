@@ -9,13 +9,26 @@ from cdpm_drake.systems.kernel_system import KernelSystem, build_kernel_block, o
 from cdpm_drake.systems.wiring import unit_delay
 
 
+def tension_path_params(robot, time_step) -> dict:
+    """build_tension_distribution's lead, rate_time and stretch_speed, derived from the
+    robot (kernels/tension_path.py)."""
+    from cdpm_drake.kernels import tension_path
+
+    d, limits = robot.dynamics, robot.limits
+    return {"lead": tension_path.lead_time(time_step, d.bandwidth),
+            "rate_time": tension_path.rate_time(d.bandwidth),
+            "stretch_speed": tension_path.stretch_speed(limits.max_reel_speed,
+                                                        limits.max_velocity)}
+
+
 class TensionSolve(KernelSystem):
     """tension_distribution: the target tensions at the pose, and their estimate."""
 
 
 def build_tension_distribution(builder, robot, *, min_tension, max_tension, tension_floor,
                                slew_rate, initial_tensions, time_step, fall_rate=None,
-                               warmup_ticks=WARMUP_TICKS, ringing_factor=0.0):
+                               warmup_ticks=WARMUP_TICKS, ringing_factor=0.0, lead=0.0,
+                               rate_time=0.0, stretch_speed=0.0):
     """The tension estimate and the target tensions at the estimated pose
     (full_pose.tension_tick). Inputs p_WP, R_WP, F_H (N), velocity_command (m/s),
     residual (m), cable_lengths (m), tension_assumed (N: the forward kinematics'); outputs
@@ -30,7 +43,10 @@ def build_tension_distribution(builder, robot, *, min_tension, max_tension, tens
     the forward kinematics). The command follows the estimate for `warmup_ticks`, then
     slews from it. Input tension_ringing (m, N^2: the measured tensions' variance about the
     estimate; with ringing_factor 0 any m-vector, ignored): the hard floor is at least
-    ringing_factor standard deviations of the largest."""
+    ringing_factor standard deviations of the largest. lead (s): the target is the
+    distribution for the hand force led by its rate (low-passed over rate_time, s) times
+    lead; stretch_speed (m/s, 0: none): each cable's internal force rises at most EA / L0
+    times it (full_pose.tension_tick; their values: kernels/tension_path.py)."""
     m = robot.num_cables
     s = sizes(m)
     d = robot.dynamics
@@ -39,7 +55,8 @@ def build_tension_distribution(builder, robot, *, min_tension, max_tension, tens
     params = owned(np.array([d.mass, *d.handle, d.EA, float(min_tension), float(max_tension),
                              float(time_step), float(slew_rate), float(warmup_ticks),
                              float(tension_floor), float(fall_rate),
-                             float(ringing_factor)]))
+                             float(ringing_factor), float(lead), float(rate_time),
+                             float(stretch_speed)]))
     example = np.zeros(s["tension_x"])
     example[:3] = robot.workspace.center
     example[3:12] = np.eye(3).ravel()
@@ -47,7 +64,7 @@ def build_tension_distribution(builder, robot, *, min_tension, max_tension, tens
     solve = bind(tension_tick, reels, attachments, params, example,
                  np.empty(s["tension_out"]))
 
-    start = np.concatenate([np.asarray(initial_tensions, dtype=float), np.zeros(4 + m)])
+    start = np.concatenate([np.asarray(initial_tensions, dtype=float), np.zeros(10 + m)])
     # The hand force of the previous tick: a plant may compute its force sample in the same
     # step as it takes the reel command (the dynamic plant does), and this block's result
     # feeds that command, so the force is taken a tick old (2 ms, inside the sensor's

@@ -22,7 +22,7 @@ import numpy as np
 
 # The status codes (docs/LOG_FORMAT.md), as their columns' "unit".
 TENSION_STATUS = ("code: 0 floor held/1 floor lowered/2 rank-deficient/3 ceiling exceeded/"
-                  "4 floor unreachable")
+                  "4 floor unreachable/5 hand too fast")
 CABLE_NUMBER = "cable: 1..m; 0 none"
 FILTER_STATUS = "code: 0 passed/1 modified/2 lost margins held/3 braking to a hold"
 FILTER_BINDING = ("bits: 1 pairs/2 box/4 kinetostatic/8 speed/16 acceleration")

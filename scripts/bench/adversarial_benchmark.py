@@ -29,6 +29,13 @@ command.
     python scripts/bench/adversarial_benchmark.py --json out.json --jobs 2
     python scripts/bench/adversarial_benchmark.py --sensors none,drive_torque,load_cell
     python scripts/bench/adversarial_benchmark.py --methods default --plants dynamic  # one row per hand
+    python scripts/bench/adversarial_benchmark.py --only "N/s" --duration 3  # the ramp rates
+
+The ramp rates (--rates, default 10, 40, 100, 400 N/s): 40 N pushes across each swapped pair
+and 40 N lifts ramped at each rate. Per run also: the slack ticks where the statics at the true
+pose hold the measured hand with every tension in [2 N, max_tension] (the promise's bar), the
+first slack tick and the first tick the controller said "hand faster than the tension path
+can follow" (tension_status 5).
 
 The dynamic plant's tension sensor (`plant: !DynamicReels {tension_sensor: ...}`,
 which the tension damping block uses) is a column: the default controller's dynamic rows are
@@ -58,7 +65,12 @@ ROBOTS = (
     ("cube_8cable, 5-7 swapped", str(SCENARIOS / "cube_5_7.yaml"), [(5, 7)]),
     ("own_7cable, 5-7 swapped", str(SCENARIOS / "own_5_7.yaml"), [(5, 7)]),
     ("long_8cable (ours)", str(SCENARIOS / "long_8cable_start.yaml"), [(6, 7)]),
+    ("ipanema_8cable (ours), 5-7 swapped", str(SCENARIOS / "ipanema_5_7.yaml"), [(5, 7)]),
 )
+# The ramp rates (N/s) of the 40 N pushes and lifts beside their 0.1 s ramps: a hand at 100
+# N/s or slower must leave no holdable slack; a faster one ends taut or with the controller's
+# "hand faster than the tension path can follow" before the first slack tick.
+RATES = (10, 40, 100, 400)
 FULL = "controller: {pose: full, tension_control: true}, plant: !DynamicReels {}, "
 # The same with the plant's tension sensor named.
 FULL_SENSOR = ("controller: {pose: full, tension_control: true}, plant: !DynamicReels "
@@ -115,7 +127,7 @@ def _noisy(seed):
 
 
 def cases(quick: bool = False, sensors=SENSORS, methods=("paper", "default"),
-          plants=("dynamic", "kinematic")) -> list:
+          plants=("dynamic", "kinematic"), rates=RATES) -> list:
     from cdpm_drake.config import load_resolved_scenario
 
     out = []
@@ -130,6 +142,9 @@ def cases(quick: bool = False, sensors=SENSORS, methods=("paper", "default"),
             for F in ((10, 40) if quick else (5, 10, 20, 40)):
                 hands[f"push {F} N across {name}"] = (_scripted(F * u), True)
             hands[f"step 40 N across {name}"] = (_scripted(40 * u, ramp=0), False)
+            for rate in rates:
+                hands[f"push 40 N across {name} at {rate:g} N/s"] = (
+                    _scripted(40 * u, ramp=40.0 / rate), False)
             for F in ((40,) if quick else (10, 40)):
                 target = (p0 + 1.0 * u).round(4).tolist()
                 hands[f"spring {F} N across {name}"] = (
@@ -139,6 +154,10 @@ def cases(quick: bool = False, sensors=SENSORS, methods=("paper", "default"),
         if not quick:
             for F in (20, 40):
                 hands[f"lift {F} N"] = (_scripted([0, 0, F]), False)
+        for rate in rates:
+            hands[f"lift 40 N at {rate:g} N/s"] = (_scripted([0, 0, 40], ramp=40.0 / rate),
+                                                  False)
+        if not quick:
             corner = np.where(p0 - robot.workspace.lower < robot.workspace.upper - p0,
                               robot.workspace.lower, robot.workspace.upper)
             corner[2] = robot.workspace.upper[2]
@@ -183,8 +202,20 @@ def measure(case: Case) -> dict:
                                           np.asarray(log["d_u"], dtype=float))
         t_star = posed_holding_tension(robot, log["p_true"], log["rpy_true"], log["F_H"])
         slack = log["slack"].any(axis=1)
-        row |= {"slack_holdable": int(np.sum(slack & (t_star >= HOLDABLE))),
+        holdable = slack & (t_star >= HOLDABLE)
+        # The promise's bar: slack where the statics at the true pose could hold the hand
+        # with every tension in [HOLDABLE, max_tension] (computed on the slack ticks only).
+        ticks = np.flatnonzero(slack)
+        within = np.zeros(slack.size, dtype=bool)
+        if ticks.size:
+            within[ticks] = posed_holding_tension(
+                robot, log["p_true"][ticks], log["rpy_true"][ticks], log["F_H"][ticks],
+                floor=HOLDABLE, ceiling=resolved.scenario.controller.max_tension) >= 0.0
+        first = np.flatnonzero(slack)
+        row |= {"slack_holdable": int(np.sum(holdable)),
+                "slack_within": int(np.sum(within)),
                 "slack_ticks": int(slack.sum()),
+                "first_slack": float(log["time"][first[0]]) if first.size else None,
                 "min_tension": float(log["tensions"].min()),
                 "max_tilt_deg": float(np.degrees(np.abs(log["rpy_true"])).max())}
         unholdable = np.flatnonzero(t_star < 0.0)
@@ -192,7 +223,9 @@ def measure(case: Case) -> dict:
                                    else None)
     else:
         d, crossed = log["pair_distances"], log["crossed"]
-        row |= {"slack_holdable": None, "slack_ticks": None, "min_tension": None,
+        row |= {"slack_holdable": None, "slack_within": None, "slack_ticks": None,
+                "first_slack": None,
+                "min_tension": None,
                 "max_tilt_deg": None, "first_unholdable": None}
     margin_mm = 1000 * (d - d_l[None, :])
     k = int(np.unravel_index(np.argmin(margin_mm), margin_mm.shape)[1])
@@ -201,6 +234,9 @@ def measure(case: Case) -> dict:
             "crossed": bool(np.any(crossed)),
             "fault": "" if result.error is None else str(result.error),
             "fault_time": None if result.error is None else float(log["time"][-1])}
+    fast = (np.flatnonzero(np.asarray(log["tension_status"]).reshape(-1) == 5)
+            if "tension_status" in log else np.zeros(0, dtype=int))
+    row["first_too_fast"] = float(log["time"][fast[0]]) if fast.size else None
     status = log.get("filter_status")
     row["modified_share"] = None if status is None else float(np.mean(status[:, 0] > 0))
     row["held_share"] = None if status is None else float(np.mean(status[:, 0] >= 3))
@@ -219,8 +255,9 @@ def run_parallel(fn, todo, jobs):
 def table(rows) -> str:
     """The markdown table of the benchmark's rows."""
     head = ("| robot | hand | plant | method | sensor | closest vs d_l (mm) | crossed | slack "
-            "ticks (holdable) | min tension (N) | max tilt (deg) | fault | modified / held (%) |")
-    lines = [head, "|" + " --- |" * 12]
+            "ticks (holdable; in [2, 100] N) | first slack / first 'hand too fast' (s) | min "
+            "tension (N) | max tilt (deg) | fault | modified / held (%) |")
+    lines = [head, "|" + " --- |" * 13]
     for r in rows:
         fault = "-"
         if r["fault"]:
@@ -229,12 +266,14 @@ def table(rows) -> str:
                 late = f", {1000 * (r['fault_time'] - r['first_unholdable']):.0f} ms after t*<0"
             fault = f"{r['fault'].split(':')[0][:40]} at {r['fault_time']:.3f} s{late}"
         slack = ("-" if r["slack_ticks"] is None
-                 else f"{r['slack_ticks']} ({r['slack_holdable']})")
+                 else f"{r['slack_ticks']} ({r['slack_holdable']}; {r['slack_within']})")
+        first = " / ".join("-" if r.get(k) is None else f"{r[k]:.3f}"
+                           for k in ("first_slack", "first_too_fast"))
         held = ("-" if r["modified_share"] is None
                 else f"{100 * r['modified_share']:.0f} / {100 * r['held_share']:.1f}")
         cells = (r["robot"], r["hand"], r["plant"], r["method"], r.get("sensor", "-"),
                  f"{r['closest_vs_d_l_mm']:+.2f} ({r['closest_pair']})",
-                 "yes" if r["crossed"] else "no", slack,
+                 "yes" if r["crossed"] else "no", slack, first,
                  "-" if r["min_tension"] is None else f"{r['min_tension']:.2f}",
                  "-" if r["max_tilt_deg"] is None else f"{r['max_tilt_deg']:.2f}", fault, held)
         lines.append("| " + " | ".join(str(c) for c in cells) + " |")
@@ -248,17 +287,20 @@ def totals(rows) -> str:
     for r in rows:
         groups.setdefault((r["plant"], r["method"], r.get("sensor", "-")), []).append(r)
     lines = ["| plant | method | sensor | runs | holdable slack ticks | hands with any | "
-             "ended early | crossed |", "|" + " --- |" * 8]
+             "in [2, 100] N: ticks, hands | ended early | crossed |", "|" + " --- |" * 9]
     for (plant, method, sensor), rs in groups.items():
         slack = [r["slack_holdable"] for r in rs if r["slack_holdable"] is not None]
-        lines.append("| %s | %s | %s | %d | %s | %s | %d | %d |" % (
+        within = [r["slack_within"] for r in rs if r.get("slack_within") is not None]
+        lines.append("| %s | %s | %s | %d | %s | %s | %s | %d | %d |" % (
             plant, method, sensor, len(rs), sum(slack) if slack else "-",
             sum(1 for s in slack if s > 0) if slack else "-",
+            "%d, %d" % (sum(within), sum(1 for s in within if s > 0)) if within else "-",
             sum(1 for r in rs if r["fault"]), sum(1 for r in rs if r["crossed"])))
     return "\n".join(lines)
 
 
 def main(argv=None) -> int:
+    global DURATION
     parser = argparse.ArgumentParser(description=__doc__,
                                       formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--quick", action="store_true", help="a subset of the hands")
@@ -274,10 +316,16 @@ def main(argv=None) -> int:
                         help="paper (the filter and the monitor off), default, or both")
     parser.add_argument("--plants", default="dynamic,kinematic",
                         help="dynamic, kinematic, or both")
+    parser.add_argument("--duration", type=float, default=DURATION, help="s per run")
+    parser.add_argument("--rates", default=",".join(str(r) for r in RATES),
+                        help="ramp rates (N/s) of the 40 N pushes and lifts, comma-separated "
+                        "('' for none)")
     args = parser.parse_args(argv)
     logging.disable(logging.WARNING)
+    DURATION = args.duration
     todo = cases(args.quick, tuple(args.sensors.split(",")), tuple(args.methods.split(",")),
-                 tuple(args.plants.split(",")))
+                 tuple(args.plants.split(",")),
+                 tuple(float(r) for r in args.rates.split(",") if r))
     if args.only:
         todo = [c for c in todo if args.only in c.robot or args.only in c.hand]
     print(f"{len(todo)} runs of {DURATION:g} s on {args.jobs} processes ...", file=sys.stderr)

@@ -130,14 +130,16 @@ def test_pose_fk_tick_reports_lengths_no_pose_fits():
 
 def _tension(p, R, F, r, L0, T_assumed, v=np.zeros(3), v_prev=np.zeros(3), ticks=0.0,
              floor=10.0, mass=2.5, handle=(0.0, 0.0, -0.15), slew=1e9, T_before=None,
-             ceiling=1e9, warmup=1.0, hard_floor=3.0, fall=None, ringing=None, factor=0.0):
+             ceiling=1e9, warmup=1.0, hard_floor=3.0, fall=None, ringing=None, factor=0.0,
+             lead=0.0, rate_time=0.0, speed=0.0, F_before=np.zeros(3), F_rate=np.zeros(3)):
     # The fall rate (N/s) is params[11]; it defaults to the slew rate as the block's does.
     # params[12] the ringing factor (0: no tension sensor), ringing the variance input (N^2).
     params = np.array([mass, *handle, EA, floor, ceiling, 0.002, slew, warmup, hard_floor,
-                       slew if fall is None else fall, factor])
+                       slew if fall is None else fall, factor, lead, rate_time, speed])
     x = np.concatenate([p, np.asarray(R).ravel(), F, v, r, L0, T_assumed,
                         np.zeros(M) if ringing is None else ringing, np.zeros(M), v_prev,
-                        [ticks], T_before if T_before is not None else np.zeros(M)])
+                        [ticks], T_before if T_before is not None else np.zeros(M),
+                        F_before, F_rate])
     out = np.empty(S["tension_out"])
     status = pc.tension_tick(REELS, ATTACH, params, x, out)
     return status, out[:M], out[M:2 * M], out[3 * M], out[3 * M + 3:]
@@ -228,7 +230,7 @@ def test_the_first_tick_sends_the_twist_through_the_pose_jacobian():
     p, R = random_poses(7, 1)[0]
     v, w = np.array([0.1, -0.05, 0.02]), np.array([0.01, 0.0, -0.02])
     L0 = pose_lengths(ROBOT, p, R) + 0.003  # offsets latched: no loop error
-    cmd, l_d, memory = _rates(p, R, v, w, R, L0, np.zeros(M), np.zeros(2 * M + 4))
+    cmd, l_d, memory = _rates(p, R, v, w, R, L0, np.zeros(M), np.zeros(3 * M + 4))
     np.testing.assert_allclose(cmd, pose_jacobian(ROBOT, p, R) @ np.r_[v, w], atol=1e-14)
     np.testing.assert_allclose(l_d, L0, atol=1e-14)
     np.testing.assert_allclose(memory[:3], p + 0.002 * v, atol=1e-15)
@@ -238,10 +240,28 @@ def test_tension_control_commands_the_unstretched_lengths_of_the_commanded_pose(
     p, R = random_poses(8, 1)[0]
     T = np.linspace(8.0, 30.0, M)
     L0 = pose_lengths(ROBOT, p, R) * EA / (EA + T) + 1e-4  # encoders 0.1 mm long
-    memory = np.r_[p, np.zeros(2 * M), 1.0]
+    memory = np.r_[p, np.zeros(2 * M), 1.0, T]  # the last command's tensions: the same
     cmd, l_d, _ = _rates(p, R, np.zeros(3), np.zeros(3), R, L0, T, memory, tension=True)
     np.testing.assert_allclose(l_d, pose_lengths(ROBOT, p, R) * EA / (EA + T), atol=1e-14)
     np.testing.assert_allclose(cmd, 20.0 * (l_d - L0), atol=1e-14)  # at rest: the loop alone
+
+
+def test_a_ramping_tension_command_feeds_its_lengths_rate_forward():
+    """The commanded tensions changed since the last tick (T_previous -> T): beside the loop,
+    the reels get the rate of the unstretched lengths, (l_d(T) - l_d(T_previous)) / step,
+    the finite difference of the kernel's own l_d (computed here from the lengths), and the
+    loop's correction stays what it was: a ramp moves its lengths as it ramps."""
+    p, R = random_poses(8, 1)[0]
+    T = np.linspace(8.0, 30.0, M)
+    T_previous = T - np.linspace(4.0, -2.0, M)  # 2000 to -1000 N/s
+    L = pose_lengths(ROBOT, p, R)
+    L0 = L * EA / (EA + T) + 1e-4
+    memory = np.r_[p, np.zeros(2 * M), 1.0, T_previous]
+    cmd, l_d, nxt = _rates(p, R, np.zeros(3), np.zeros(3), R, L0, T, memory, tension=True)
+    feed = (L * EA / (EA + T) - L * EA / (EA + T_previous)) / 0.002
+    np.testing.assert_allclose(cmd, feed + 20.0 * (l_d - L0), rtol=0, atol=1e-12)
+    assert np.abs(feed).max() > 0.05  # more than the loop's corrections may add
+    np.testing.assert_array_equal(nxt[-M:], T)  # the next tick's T_previous
 
 
 # --- interference on the cables of a pose --------------------------------------------------------
@@ -278,7 +298,7 @@ def test_the_length_loop_is_pi_with_the_drives_dead_band_made_up():
     e = np.zeros(M)
     e[3] = 0.001
     integral = np.full(M, 2e-5)
-    memory = np.r_[p, np.zeros(M), integral, 1.0]
+    memory = np.r_[p, np.zeros(M), integral, 1.0, np.zeros(M)]
     cmd, _, nxt = _rates(p, R, np.zeros(3), np.zeros(3), R, L - e, np.zeros(M), memory,
                          gain=20.0, integral=100.0, dead_band=0.005)
     new_integral = integral + 0.002 * e
@@ -286,7 +306,7 @@ def test_the_length_loop_is_pi_with_the_drives_dead_band_made_up():
     np.testing.assert_allclose(cmd, expected, rtol=0, atol=1e-12)  # lengths ~3 m: 1e-16 rel
     np.testing.assert_allclose(nxt[3 + M:3 + 2 * M], new_integral, rtol=0, atol=1e-18)
     # A long stall: the integral stops at MAX_INTEGRAL_SPEED / K_i.
-    memory = np.r_[p, np.zeros(M), np.full(M, 1.0), 1.0]
+    memory = np.r_[p, np.zeros(M), np.full(M, 1.0), 1.0, np.zeros(M)]
     _, _, nxt = _rates(p, R, np.zeros(3), np.zeros(3), R, L - e, np.zeros(M), memory,
                        integral=100.0)
     assert nxt[3 + M + 3] == pytest.approx(pc.MAX_INTEGRAL_SPEED / 100.0)
@@ -308,7 +328,7 @@ def test_the_pose_loop_s_corrections_keep_the_bound_for_cables_reeled_in_and_out
     target = pose_lengths(ROBOT, p, R) * (EA / (EA + Tn) if tension else 1.0)
     e = np.zeros(M)
     e[1], e[4] = sign * 0.015, -sign * 0.0005
-    memory = np.r_[p, np.zeros(2 * M), 1.0]  # started, no offsets, no integral
+    memory = np.r_[p, np.zeros(2 * M), 1.0, Tn]  # started, no offsets, no integral
     cmd, l_d, _ = _rates(p, R, np.zeros(3), np.zeros(3), R, target - e, Tn, memory,
                          gain=20.0, tension=tension)
     np.testing.assert_allclose(l_d, target, rtol=0, atol=1e-12)
@@ -322,33 +342,74 @@ def test_the_pose_loop_s_corrections_keep_the_bound_for_cables_reeled_in_and_out
 
 
 def test_the_tension_command_slews_from_the_estimate():
-    p, R = random_poses(10, 1)[0]
+    p, R = random_poses(14, 1)[0]
     L0 = pose_lengths(ROBOT, p, R)
+    # An estimate of every cable above 40 N: the lengths' assumed tensions are the target of
+    # a 60 N floor less 20 N of internal force.
+    _, T60, _, _, _ = _tension(p, R, np.zeros(3), np.zeros(M), L0, np.full(M, 20.0),
+                               ticks=1.0, slew=1e9, fall=1e9, T_before=np.zeros(M), floor=60.0)
+    n = np.linalg.svd(wrench_matrix(ROBOT, p, R))[2][-1]
+    assumed = T60 - 20.0 * n * np.sign(n.sum())
     # First tick: from the estimate; the target is far (floor 60 N) but the command moves at
     # most 50 N/s x 2 ms = 0.1 N.
-    _, T_cmd, T_est, _, memory = _tension(p, R, np.zeros(3), np.zeros(M), L0,
-                                          np.full(M, 20.0), floor=60.0, slew=50.0)
+    _, T_cmd, T_est, _, memory = _tension(p, R, np.zeros(3), np.zeros(M), L0, assumed,
+                                          floor=60.0, slew=50.0)
+    assert T_est.min() > 30.0
     assert np.abs(T_cmd - T_est).max() <= 0.1 + 1e-12
     assert np.abs(T_cmd - T_est).max() == pytest.approx(0.1)
-    # Next tick: from the last command.
+    # Next tick: from the last command, its statics at once (the first tick's clamp left it
+    # unbalanced) and its internal force at most 0.1 N a tick on the cable with the largest
+    # share of the nullspace.
     _, T_next, _, _, _ = _tension(p, R, np.zeros(3), np.zeros(M), L0, memory[:M],
-                                  ticks=1.0, floor=60.0, slew=50.0, T_before=memory[M + 4:])
-    assert np.abs(T_next - T_cmd).max() == pytest.approx(0.1)
+                                  ticks=1.0, floor=60.0, slew=50.0,
+                                  T_before=memory[M + 4:2 * M + 4])
+    assert np.abs(n * (n @ (T_next - T_cmd))).max() == pytest.approx(0.1)
 
 
-
-def test_the_tension_command_rises_at_the_slew_rate_and_falls_at_the_fall_rate():
-    # docs/LOG_FORMAT.md: the command reaches the target at most 500 N/s up and 50 N/s down
-    # per cable (here 2 ms ticks: 1 N and 0.1 N a tick), from the last command once started.
-    p, R = random_poses(13, 1)[0]
+def test_the_tension_command_moves_its_internal_force_within_each_cable_s_limits():
+    """docs/dynamic_plant.md: the command keeps the target's statics and moves its internal
+    force (along the nullspace n) towards the target's, each cable's share n_i dlam at most
+    500 N/s up and 50 N/s down (1 N and 0.1 N a 2 ms tick), the whole change scaled
+    together: the command stays balanced (W T + w = 0), unlike a clamp per cable."""
+    p, R = random_poses(14, 1)[0]  # t* = inf: the floor of 60 N holds
     L0 = pose_lengths(ROBOT, p, R)
     args = (p, R, np.zeros(3), np.zeros(M), L0, np.full(M, 20.0))
     # Unlimited rates: the command is the target.
-    _, target, _, _, _ = _tension(*args, ticks=1.0, slew=1e9, fall=1e9, T_before=np.zeros(M))
-    for offset, step in ((20.0, -0.1), (-20.0, 1.0), (0.05, -0.05), (-0.5, 0.5)):
-        _, T_cmd, _, _, _ = _tension(*args, ticks=1.0, slew=500.0, fall=50.0,
-                                     T_before=target + offset)
-        np.testing.assert_allclose(T_cmd, target + offset + step, rtol=0, atol=1e-9)
+    # A floor of 60 N keeps every cable of these commands above the hard floor (3 N).
+    _, target, _, _, _ = _tension(*args, ticks=1.0, slew=1e9, fall=1e9, T_before=np.zeros(M),
+                                  floor=60.0)
+    assert target.min() >= 59.9
+    W = wrench_matrix(ROBOT, p, R)
+    n = np.linalg.svd(W)[2][-1]
+    for offset in (20.0, -20.0, 0.05, -0.5):
+        before = target + offset * n
+        _, T_cmd, _, _, _ = _tension(*args, ticks=1.0, slew=500.0, fall=50.0, T_before=before,
+                                     floor=60.0)
+        change = -offset * n  # each cable's share of the internal force's change
+        limit = np.where(change > 0, 1.0, 0.1)
+        scale = min(1.0, float(np.min(limit / np.abs(change))))
+        np.testing.assert_allclose(T_cmd, before + scale * change, rtol=0, atol=1e-9)
+        np.testing.assert_allclose(W @ T_cmd, W @ target, rtol=0, atol=1e-9)
+
+
+def test_the_target_leads_the_hand_along_its_rate():
+    """The target is the distribution of the hand led by its low-passed rate: with lead
+    0.014 s and a rate (memory) of [300, -100, 400] N/s, a hand F whose last sample was F -
+    0.002 rate (so the low-pass keeps the rate) has the target of F + 0.014 rate without a
+    lead (the same kernel, lead 0), to round-off; the estimate takes F as measured."""
+    p, R = random_poses(14, 1)[0]
+    L0 = pose_lengths(ROBOT, p, R)
+    F, rate = np.array([3.0, -2.0, 5.0]), np.array([300.0, -100.0, 400.0])
+    args = (p, R)
+    rest = (np.zeros(M), L0, np.full(M, 20.0))
+    kw = dict(ticks=1.0, slew=1e9, fall=1e9, T_before=np.zeros(M))
+    led = _tension(*args, F, *rest, lead=0.014, rate_time=0.01, F_before=F - 0.002 * rate,
+                   F_rate=rate, **kw)
+    ref = _tension(*args, F + 0.014 * rate, *rest, **kw)
+    plain = _tension(*args, F, *rest, **kw)
+    np.testing.assert_allclose(led[1], ref[1], rtol=0, atol=1e-9)
+    np.testing.assert_allclose(led[2], plain[2], rtol=0, atol=1e-12)  # the estimate
+    np.testing.assert_allclose(led[4][-3:], rate, rtol=0, atol=1e-9)  # the rate kept
 
 
 def test_the_target_takes_in_a_ramp_s_acceleration_through_the_low_pass():

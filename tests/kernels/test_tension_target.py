@@ -117,10 +117,10 @@ def target(robot, p, R, F, floor=10.0, ceiling=100.0, hard=3.0, factor=0.0, ring
     d = robot.dynamics
     # [..., hard floor, fall rate, ringing factor]
     params = np.array([d.mass, *d.handle, d.EA, floor, ceiling, 0.002, 1e9, 1.0, hard, 1e9,
-                       factor])
+                       factor, 0.0, 0.0, 0.0])
     x = np.concatenate([p, R.ravel(), F, np.zeros(3), np.zeros(m), pose_lengths(robot, p, R),
                         np.full(m, 20.0), np.zeros(m) if ringing is None else ringing,
-                        np.zeros(m), np.zeros(3), [1.0], np.zeros(m)])
+                        np.zeros(m), np.zeros(3), [1.0], np.zeros(m), np.zeros(6)])
     out = np.empty(pc.sizes(m)["tension_out"])
     pc.tension_tick(np.ascontiguousarray(robot.reels), np.ascontiguousarray(robot.attachments),
                     params, x, out)
@@ -288,9 +288,10 @@ def _fk_and_tension(robot, L0, T_assumed, p, R, F):
     fk_params = np.array([d.EA, 0.02, d.mass, *d.handle, 40.0])
     assert pc.pose_fk_tick(reels, attach, fk_params, x, out) == pc.FK_OK
     pe, Re, r = out[:3].copy(), out[3:12].reshape(3, 3).copy(), out[16:16 + m].copy()
-    params = np.array([d.mass, *d.handle, d.EA, 10.0, 100.0, 0.002, 1e9, 1.0, 3.0, 1e9, 0.0])
+    params = np.array([d.mass, *d.handle, d.EA, 10.0, 100.0, 0.002, 1e9, 1.0, 3.0, 1e9, 0.0,
+                       0.0, 0.0, 0.0])
     xt = np.concatenate([pe, Re.ravel(), F, np.zeros(3), r, L0, T_assumed, np.zeros(m),
-                         np.zeros(m), np.zeros(3), [1.0], np.zeros(m)])
+                         np.zeros(m), np.zeros(3), [1.0], np.zeros(m), np.zeros(6)])
     tout = np.empty(S["tension_out"])
     pc.tension_tick(reels, attach, params, xt, tout)
     return pe, Re, tout[m:2 * m].copy()
