@@ -207,7 +207,8 @@ def margin(reels, attachments, rows, p, R, w, floor, ceiling, scratch, soft=0.0)
     ceiling (+inf where an internal force raises every tension). -inf for both where the
     wrench matrix's first `rows` rows are rank-deficient (a pose where the cables cannot
     produce some wrench: nothing holds there). scratch: `margin_scratch(m)`."""
-    u, Rb, L, W6, W, A, V, beta, perm, T_p, n, N, a, C, lam, lam2, C1 = scratch[:17]
+    views = scratch_views(scratch)
+    u, Rb, L, W6, W, A, V, beta, perm, T_p, n, N, a, C, lam, lam2, C1 = views[:17]
     m = reels.shape[0]
     posed_cables(reels, attachments, p, R, u, Rb, L)
     wrench_columns(u, Rb, W6)
@@ -233,25 +234,83 @@ def margin(reels, attachments, rows, p, R, w, floor, ceiling, scratch, soft=0.0)
             C[m + i, c] = -N[i, c]
     kappa = max_min_lines(a, C[:, :k], lam[:k])
     if soft > 0.0 and math.isfinite(kappa):
-        kappa = soft_max_min_lines(a, C[:, :k], lam[:k], soft, scratch[17])
+        kappa = soft_max_min_lines(a, C[:, :k], lam[:k], soft, views[17])
     t_star = max_min_lines(T_p, N[:, :k], lam2[:k])
     return kappa, t_star
 
 
 def margin_scratch(m: int):
-    """The work arrays of `margin`, `margin_gradient` and `kinetostatic_tick` for m cables
-    (allocated once per block: a tick allocates nothing)."""
+    """The work arrays of `margin`, `margin_gradient` and `kinetostatic_tick` for m cables,
+    allocated once per block (a tick allocates nothing) as two flat buffers, floats and
+    integers, that `scratch_views` carves: a call from Python unboxes each array argument
+    (~0.1 us each, a tuple's members too), so two buffers cost what 36 arrays did not."""
     K = 2 * m
-    soft = (np.empty(K), np.empty(K), np.empty(m), np.empty(m), np.empty(m), np.empty((m, m)))
-    gradient = (np.empty(K), np.empty((m + 1, m + 2)), np.empty(m + 1, dtype=np.int64),
-                np.empty((6, 6)),
-                np.empty(6), np.empty(6), np.empty(m + 1))
-    tick = (np.empty(3), np.empty((3, 3)), np.empty(6), np.zeros(3), np.empty(3), np.empty(3))
-    return (np.empty((m, 3)), np.empty((m, 3)), np.empty(m), np.empty((6, m)),
-            np.empty((6, m)), np.empty((m, 6)), np.empty((6, m)), np.empty(6),
-            np.empty(6, dtype=np.int64), np.empty(m), np.empty(m), np.empty((m, m)),
-            np.empty(K), np.empty((K, m)), np.empty(m), np.empty(m), np.empty(m),
-            soft, gradient, tick)
+    size = (6 * m + 6 * m + m + 6 * m * 4 + 6 + 2 * m + m * m + K + K * m + 3 * m
+            + 2 * K + 3 * m + m * m + K + (m + 1) * (m + 2) + 36 + 12 + (m + 1)
+            + 3 + 9 + 6 + 3 + 3 + 3)
+    ints = np.zeros(1 + 6 + m + 1, dtype=np.int64)
+    ints[0] = m
+    return np.zeros(size), ints
+
+
+@_jit
+def _take(buf, o, r, c):
+    return buf[o:o + r * c].reshape((r, c)), o + r * c
+
+
+@_jit
+def _take1(buf, o, r):
+    return buf[o:o + r], o + r
+
+
+@_jit
+def scratch_views(scratch):
+    """The work arrays in `margin_scratch`'s buffers (views): u, Rb, L, W6, W, A, V, beta,
+    perm, T_p, n, N, a, C, lam, lam2, C1 (margin's), then soft_max_min_lines' work,
+    margin_gradient's and kinetostatic_tick's (tuples)."""
+    buf, ints = scratch
+    m = ints[0]
+    K = 2 * m
+    o = 0
+    u, o = _take(buf, o, m, 3)
+    Rb, o = _take(buf, o, m, 3)
+    L, o = _take1(buf, o, m)
+    W6, o = _take(buf, o, 6, m)
+    W, o = _take(buf, o, 6, m)
+    A, o = _take(buf, o, m, 6)
+    V, o = _take(buf, o, 6, m)
+    beta, o = _take1(buf, o, 6)
+    T_p, o = _take1(buf, o, m)
+    n, o = _take1(buf, o, m)
+    N, o = _take(buf, o, m, m)
+    a, o = _take1(buf, o, K)
+    C, o = _take(buf, o, K, m)
+    lam, o = _take1(buf, o, m)
+    lam2, o = _take1(buf, o, m)
+    C1, o = _take1(buf, o, m)
+    lines, o = _take1(buf, o, K)
+    wts, o = _take1(buf, o, K)
+    g, o = _take1(buf, o, m)
+    trial, o = _take1(buf, o, m)
+    step, o = _take1(buf, o, m)
+    H, o = _take(buf, o, m, m)
+    y, o = _take1(buf, o, K)
+    M, o = _take(buf, o, m + 1, m + 2)
+    G, o = _take(buf, o, 6, 6)
+    nu, o = _take1(buf, o, 6)
+    rhs, o = _take1(buf, o, 6)
+    sol, o = _take1(buf, o, m + 1)
+    p, o = _take1(buf, o, 3)
+    R, o = _take(buf, o, 3, 3)
+    w, o = _take1(buf, o, 6)
+    zero, o = _take1(buf, o, 3)
+    q, o = _take1(buf, o, 3)
+    grad, o = _take1(buf, o, 3)
+    perm = ints[1:7]
+    J = ints[7:8 + m]
+    return (u, Rb, L, W6, W, A, V, beta, perm, T_p, n, N, a, C, lam, lam2, C1,
+            (lines, wts, g, trial, step, H), (y, M, J, G, nu, rhs, sol),
+            (p, R, w, zero, q, grad))
 
 
 # Lines within this of the hard margin (relative to 1 + |kappa|, N) are its active set: the
@@ -272,10 +331,11 @@ def margin_gradient(scratch, rows, kappa, soft, grad):
     grad = -sum_i T*_i / L_i (I - u_i u_i^T) (nu_f + nu_m x R b_i). False (grad unset) where
     the hard margin is not differentiable as far as its active set says (other than k + 1
     active lines, or multipliers not >= 0): a kink."""
-    u, Rb, L, W6 = scratch[0], scratch[1], scratch[2], scratch[3]
-    T_p, N, a, C, lam = scratch[9], scratch[11], scratch[12], scratch[13], scratch[14]
-    wts = scratch[17][1]
-    y, M, J, G, nu, rhs, sol = scratch[18]
+    views = scratch_views(scratch)
+    u, Rb, L, W6 = views[0], views[1], views[2], views[3]
+    T_p, N, a, C, lam = views[9], views[11], views[12], views[13], views[14]
+    wts = views[17][1]
+    y, M, J, G, nu, rhs, sol = views[18]
     m = u.shape[0]
     k = m - rows
     K = 2 * m
@@ -450,7 +510,7 @@ def kinetostatic_tick(reels, attachments, params, scratch, x, out):
     too late) and ended where kappa has a local maximum below zero, from which no gradient
     leads back (dynamic plant, 40 N along the 1-3 boundary). Sampling ahead along the
     velocity sees the drop before the platform is in it."""
-    p, R, w, zero, q, grad = scratch[19]
+    p, R, w, zero, q, grad = scratch_views(scratch)[19]
     barrier_position(x[0:3], x[X_STATE:X_R], params[P_T], params[P_SMOOTHING], p)
     F = x[3:6]
     v = x[X_STATE + 4:X_STATE + 7]

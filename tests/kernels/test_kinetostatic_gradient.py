@@ -11,7 +11,8 @@ import pytest
 from scipy.optimize import minimize
 from scipy.special import logsumexp
 
-from cdpm_drake.kernels.kinetostatics import margin, margin_gradient, margin_scratch, wrench_rows
+from cdpm_drake.kernels.kinetostatics import (margin, margin_gradient, margin_scratch,
+                                              scratch_views, wrench_rows)
 from cdpm_drake.kernels.rotation import rotation_from_rpy
 from cdpm_drake.kernels.tension import gravity_wrench
 
@@ -56,7 +57,8 @@ def _binding(robot, rows, scratch, p, R, w):
     its maximiser."""
     kappa = _kappa(robot, rows, scratch, p, R, w, 0.0)
     k = robot.num_cables - rows
-    lines = scratch[12] + scratch[13][:, :k] @ scratch[14][:k]
+    views = scratch_views(scratch)
+    lines = views[12] + views[13][:, :k] @ views[14][:k]
     return frozenset(np.flatnonzero(lines - kappa <= 1e-6 * (1 + abs(kappa))))
 
 
@@ -184,7 +186,8 @@ def test_a_kink_is_refused_not_guessed():
 
     def active(p):
         kappa = _kappa(robot, rows, scratch, p, R, w, 0.0)
-        lines = scratch[12] + scratch[13][:, 0] * scratch[14][0]
+        views = scratch_views(scratch)
+        lines = views[12] + views[13][:, 0] * views[14][0]
         return frozenset(np.flatnonzero(lines - kappa <= 1e-9 * (1 + abs(kappa))))
 
     c = robot.workspace.center
