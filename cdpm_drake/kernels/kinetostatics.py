@@ -207,7 +207,14 @@ def margin(reels, attachments, rows, p, R, w, floor, ceiling, scratch, soft=0.0)
     ceiling (+inf where an internal force raises every tension). -inf for both where the
     wrench matrix's first `rows` rows are rank-deficient (a pose where the cables cannot
     produce some wrench: nothing holds there). scratch: `margin_scratch(m)`."""
-    views = scratch_views(scratch)
+    return margin_in(reels, attachments, rows, p, R, w, floor, ceiling,
+                     scratch_views(scratch), soft)
+
+
+@_jit
+def margin_in(reels, attachments, rows, p, R, w, floor, ceiling, views, soft=0.0):
+    """`margin` on the work arrays already carved (`scratch_views`): a kernel that takes
+    several margins a tick carves them once (carving costs ~1 us a call)."""
     u, Rb, L, W6, W, A, V, beta, perm, T_p, n, N, a, C, lam, lam2, C1 = views[:17]
     m = reels.shape[0]
     posed_cables(reels, attachments, p, R, u, Rb, L)
@@ -331,7 +338,12 @@ def margin_gradient(scratch, rows, kappa, soft, grad):
     grad = -sum_i T*_i / L_i (I - u_i u_i^T) (nu_f + nu_m x R b_i). False (grad unset) where
     the hard margin is not differentiable as far as its active set says (other than k + 1
     active lines, or multipliers not >= 0): a kink."""
-    views = scratch_views(scratch)
+    return margin_gradient_in(scratch_views(scratch), rows, kappa, soft, grad)
+
+
+@_jit
+def margin_gradient_in(views, rows, kappa, soft, grad):
+    """`margin_gradient` on the carved work arrays (`margin_in`'s)."""
     u, Rb, L, W6 = views[0], views[1], views[2], views[3]
     T_p, N, a, C, lam = views[9], views[11], views[12], views[13], views[14]
     wts = views[17][1]
@@ -471,13 +483,13 @@ RAY_TOLERANCE = 0.5
 
 
 @_jit
-def _margin_at(reels, attachments, params, scratch, p, R, w, floor):
-    return margin(reels, attachments, int(params[P_ROWS]), p, R, w, floor,
-                  params[P_CEILING], scratch, params[P_SOFT])[0]
+def _margin_at(reels, attachments, params, views, p, R, w, floor):
+    return margin_in(reels, attachments, int(params[P_ROWS]), p, R, w, floor,
+                     params[P_CEILING], views, params[P_SOFT])[0]
 
 
 @_jit
-def gradient_by_differences(reels, attachments, params, scratch, p, R, w, floor, kappa, q,
+def gradient_by_differences(reels, attachments, params, views, p, R, w, floor, kappa, q,
                             out):
     """kappa's forward differences (FD_STEP_P) in p into out[4:7] (0 where the step leaves
     the poses the cables can hold)."""
@@ -485,7 +497,7 @@ def gradient_by_differences(reels, attachments, params, scratch, p, R, w, floor,
         for c in range(3):
             q[c] = p[c]
         q[k] += FD_STEP_P
-        kq = _margin_at(reels, attachments, params, scratch, q, R, w, floor)
+        kq = _margin_at(reels, attachments, params, views, q, R, w, floor)
         out[4 + k] = (kq - kappa) / FD_STEP_P if math.isfinite(kq) else 0.0
 
 
@@ -510,7 +522,8 @@ def kinetostatic_tick(reels, attachments, params, scratch, x, out):
     too late) and ended where kappa has a local maximum below zero, from which no gradient
     leads back (dynamic plant, 40 N along the 1-3 boundary). Sampling ahead along the
     velocity sees the drop before the platform is in it."""
-    p, R, w, zero, q, grad = scratch_views(scratch)[19]
+    views = scratch_views(scratch)  # carved once a tick
+    p, R, w, zero, q, grad = views[19]
     barrier_position(x[0:3], x[X_STATE:X_R], params[P_T], params[P_SMOOTHING], p)
     F = x[3:6]
     v = x[X_STATE + 4:X_STATE + 7]
@@ -521,8 +534,8 @@ def kinetostatic_tick(reels, attachments, params, scratch, x, out):
     floor = params[P_FLOOR] + params[P_RIPPLE] * math.sqrt(F[0] * F[0] + F[1] * F[1]
                                                          + F[2] * F[2])
     held_wrench(R, params[P_MASS:P_MASS + 4], F, zero, w)
-    kappa, t_star = margin(reels, attachments, int(params[P_ROWS]), p, R, w, floor,
-                           params[P_CEILING], scratch, params[P_SOFT])
+    kappa, t_star = margin_in(reels, attachments, int(params[P_ROWS]), p, R, w, floor,
+                              params[P_CEILING], views, params[P_SOFT])
     for k in range(KIN_OUT):
         out[k] = 0.0
     out[3] = kappa
@@ -533,10 +546,10 @@ def kinetostatic_tick(reels, attachments, params, scratch, x, out):
         out[9] = 1.0
         return
     if params[P_BARRIER] != 0.0 or params[P_FORCE] != 0.0:
-        if margin_gradient(scratch, int(params[P_ROWS]), kappa, params[P_SOFT], grad):
+        if margin_gradient_in(views, int(params[P_ROWS]), kappa, params[P_SOFT], grad):
             out[4], out[5], out[6] = grad[0], grad[1], grad[2]
         else:  # a kink of the hard margin: forward differences (one-sided, as before)
-            gradient_by_differences(reels, attachments, params, scratch, p, R, w, floor,
+            gradient_by_differences(reels, attachments, params, views, p, R, w, floor,
                                     kappa, q, out)
     if params[P_FORCE] != 0.0:
         gx, gy, gz = out[4], out[5], out[6]
@@ -558,7 +571,7 @@ def kinetostatic_tick(reels, attachments, params, scratch, x, out):
         s = reach * k / RAY_SAMPLES
         for c in range(3):
             q[c] = p[c] + s * v[c] / speed
-        m = _margin_at(reels, attachments, params, scratch, q, R, w, floor)
+        m = _margin_at(reels, attachments, params, views, q, R, w, floor)
         if hi < 0.0 and not m >= level:
             hi = s
         if not m >= level - RAY_TOLERANCE:
@@ -572,7 +585,7 @@ def kinetostatic_tick(reels, attachments, params, scratch, x, out):
         s = 0.5 * (lo + hi)
         for c in range(3):
             q[c] = p[c] + s * v[c] / speed
-        if _margin_at(reels, attachments, params, scratch, q, R, w, floor) >= level:
+        if _margin_at(reels, attachments, params, views, q, R, w, floor) >= level:
             lo = s
         else:
             hi = s
