@@ -509,7 +509,7 @@ MUTANTS = [
       "the soft minimum lies above the minimum (the soft margin is not conservative)",
       ("tests/kernels/test_kinetostatics.py",)),
     M("soft_margin_skipped", "cdpm_drake/kernels/kinetostatics.py",
-      "kappa = soft_max_min_lines(a, C[:, :k], lam[:k], soft, scratch[17])",
+      "kappa = soft_max_min_lines(a, C[:, :k], lam[:k], soft, views[17])",
       "kappa = kappa",
       "the soft margin's temperature is ignored: the hard margin with its kinks",
       ("tests/kernels/test_kinetostatics.py", "tests/systems/test_braking.py")),
@@ -530,8 +530,8 @@ MUTANTS = [
       "the look ahead sees a drop wherever the margin falls below min(kappa, 0)",
       ("tests/kernels/test_kinetostatics.py",)),
     M("look_ahead_ends_at_the_drop", "cdpm_drake/kernels/kinetostatics.py",
-      "if _margin_at(reels, attachments, params, scratch, q, R, w, floor) >= level:",
-      "if _margin_at(reels, attachments, params, scratch, q, R, w, floor) >= level - "
+      "if _margin_at(reels, attachments, params, views, q, R, w, floor) >= level:",
+      "if _margin_at(reels, attachments, params, views, q, R, w, floor) >= level - "
       "RAY_TOLERANCE:",
       "the look ahead ends where the margin is RAY_TOLERANCE below min(kappa, 0), not where "
       "it is lost",
