@@ -23,6 +23,15 @@ def owned(array) -> np.ndarray:
     return _copy(np.ascontiguousarray(array, dtype=float))
 
 
+def owned_scratch(scratch):
+    """A kernel's work arrays (an array, or a tuple of them and of such tuples) copied into
+    numba-managed memory, dtypes kept: a tuple of NumPy-owned arrays costs a MemInfo per array
+    per call."""
+    if isinstance(scratch, tuple):
+        return tuple(owned_scratch(s) for s in scratch)
+    return _copy(np.ascontiguousarray(scratch))
+
+
 def bind(kernel, *example):
     """`kernel` (a numba dispatcher) compiled, or loaded from the cache, for exactly the
     argument types of `example` (called once with them), as a callable that skips numba's

@@ -38,7 +38,7 @@ import math
 import numba
 import numpy as np
 
-from cdpm_drake.kernels.pose import posed_cables, wrench_columns
+from cdpm_drake.kernels.pose import posed_cables, solve_spd, wrench_columns
 from cdpm_drake.kernels.full_pose import held_wrench
 from cdpm_drake.kernels.safety_filter import BARRIER_STATE, barrier_position
 from cdpm_drake.kernels.nullspace import RANK_TOL, null_vector, particular_solution, pivoted_qr
@@ -117,20 +117,18 @@ def wrench_rows(robot) -> int:
 
 
 @_jit
-def soft_max_min_lines(a, C, lam, mu):
+def soft_max_min_lines(a, C, lam, mu, work):
     """max over lam (k,) of the soft minimum -mu log sum_j exp(-(a_j + C_j . lam) / mu) of
     the lines (a (K,), C (K, k); temperature mu > 0, units of a), by Newton's method from
     lam, a maximiser of the hard max-min (`tension.max_min_lines`), which it overwrites with
     the soft one. The soft minimum is concave in lam and below the minimum, so the result is
     smooth in a and C and lies within [hard - mu log K, hard]. For a bounded max-min only (a
-    floor and a ceiling line per cable)."""
+    floor and a ceiling line per cable). work: (lines (>= K,), wts (>= K,), g, trial, step
+    (>= k,), H (>= k, >= k)), the caller's (no allocation); wts ends as the lines' softmax
+    weights at the maximiser (`margin_gradient` reads them)."""
     K, k = C.shape
-    lines = np.empty(K)
-    wts = np.empty(K)
-    g = np.empty(k)
-    H = np.empty((k, k))
-    trial = np.empty(k)
-    step = np.empty(k)
+    lines, wts, g, trial, step, H = work
+    lines, wts, g, trial, step, H = lines[:K], wts[:K], g[:k], trial[:k], step[:k], H[:k, :k]
     f = _soft_min(a, C, lam, mu, lines, wts)
     for _ in range(SOFT_ITERATIONS):
         for c in range(k):
@@ -147,15 +145,23 @@ def soft_max_min_lines(a, C, lam, mu):
             H[c, c] += 1e-12
         if k == 0:
             break
-        if k == 1:  # paper_7cable's case: no LAPACK call
+        if k == 1:  # paper_7cable's case
             step[0] = g[0] / H[0, 0]
-        else:
-            step[:] = np.linalg.solve(H, g)
+        elif not solve_spd(H, g, step):  # H: a weighted covariance, positive definite
+            break
         gain = 0.0
         for c in range(k):
             gain += g[c] * step[c]
-        if not gain > 1e-12 * mu:
+        if not gain > 1e-26 * mu:
             break
+        if gain < 1e-8 * mu:
+            # Newton's quadratic range: the full step gains gain / 2, below the soft
+            # minimum's round-off, which a line search would take for a loss; the slope g it
+            # removes is what margin_gradient's envelope theorem needs at zero.
+            for c in range(k):
+                lam[c] += step[c]
+            f = _soft_min(a, C, lam, mu, lines, wts)
+            continue
         t = 1.0
         for _ in range(30):
             for c in range(k):
@@ -201,7 +207,15 @@ def margin(reels, attachments, rows, p, R, w, floor, ceiling, scratch, soft=0.0)
     ceiling (+inf where an internal force raises every tension). -inf for both where the
     wrench matrix's first `rows` rows are rank-deficient (a pose where the cables cannot
     produce some wrench: nothing holds there). scratch: `margin_scratch(m)`."""
-    u, Rb, L, W6, W, A, V, beta, perm, T_p, n, N, a, C, lam, lam2, C1 = scratch
+    return margin_in(reels, attachments, rows, p, R, w, floor, ceiling,
+                     scratch_views(scratch), soft)
+
+
+@_jit
+def margin_in(reels, attachments, rows, p, R, w, floor, ceiling, views, soft=0.0):
+    """`margin` on the work arrays already carved (`scratch_views`): a kernel that takes
+    several margins a tick carves them once (carving costs ~1 us a call)."""
+    u, Rb, L, W6, W, A, V, beta, perm, T_p, n, N, a, C, lam, lam2, C1 = views[:17]
     m = reels.shape[0]
     posed_cables(reels, attachments, p, R, u, Rb, L)
     wrench_columns(u, Rb, W6)
@@ -227,17 +241,190 @@ def margin(reels, attachments, rows, p, R, w, floor, ceiling, scratch, soft=0.0)
             C[m + i, c] = -N[i, c]
     kappa = max_min_lines(a, C[:, :k], lam[:k])
     if soft > 0.0 and math.isfinite(kappa):
-        kappa = soft_max_min_lines(a, C[:, :k], lam[:k], soft)
+        kappa = soft_max_min_lines(a, C[:, :k], lam[:k], soft, views[17])
     t_star = max_min_lines(T_p, N[:, :k], lam2[:k])
     return kappa, t_star
 
 
 def margin_scratch(m: int):
-    """The work arrays of `margin` for m cables (allocated once per block)."""
-    return (np.empty((m, 3)), np.empty((m, 3)), np.empty(m), np.empty((6, m)),
-            np.empty((6, m)), np.empty((m, 6)), np.empty((6, m)), np.empty(6),
-            np.empty(6, dtype=np.int64), np.empty(m), np.empty(m), np.empty((m, m)),
-            np.empty(2 * m), np.empty((2 * m, m)), np.empty(m), np.empty(m), np.empty(m))
+    """The work arrays of `margin`, `margin_gradient` and `kinetostatic_tick` for m cables,
+    allocated once per block (a tick allocates nothing) as two flat buffers, floats and
+    integers, that `scratch_views` carves: a call from Python unboxes each array argument
+    (~0.1 us each, a tuple's members too), so two buffers cost what 36 arrays did not."""
+    K = 2 * m
+    size = (6 * m + 6 * m + m + 6 * m * 4 + 6 + 2 * m + m * m + K + K * m + 3 * m
+            + 2 * K + 3 * m + m * m + K + (m + 1) * (m + 2) + 36 + 12 + (m + 1)
+            + 3 + 9 + 6 + 3 + 3 + 3)
+    ints = np.zeros(1 + 6 + m + 1, dtype=np.int64)
+    ints[0] = m
+    return np.zeros(size), ints
+
+
+@_jit
+def _take(buf, o, r, c):
+    return buf[o:o + r * c].reshape((r, c)), o + r * c
+
+
+@_jit
+def _take1(buf, o, r):
+    return buf[o:o + r], o + r
+
+
+@_jit
+def scratch_views(scratch):
+    """The work arrays in `margin_scratch`'s buffers (views): u, Rb, L, W6, W, A, V, beta,
+    perm, T_p, n, N, a, C, lam, lam2, C1 (margin's), then soft_max_min_lines' work,
+    margin_gradient's and kinetostatic_tick's (tuples)."""
+    buf, ints = scratch
+    m = ints[0]
+    K = 2 * m
+    o = 0
+    u, o = _take(buf, o, m, 3)
+    Rb, o = _take(buf, o, m, 3)
+    L, o = _take1(buf, o, m)
+    W6, o = _take(buf, o, 6, m)
+    W, o = _take(buf, o, 6, m)
+    A, o = _take(buf, o, m, 6)
+    V, o = _take(buf, o, 6, m)
+    beta, o = _take1(buf, o, 6)
+    T_p, o = _take1(buf, o, m)
+    n, o = _take1(buf, o, m)
+    N, o = _take(buf, o, m, m)
+    a, o = _take1(buf, o, K)
+    C, o = _take(buf, o, K, m)
+    lam, o = _take1(buf, o, m)
+    lam2, o = _take1(buf, o, m)
+    C1, o = _take1(buf, o, m)
+    lines, o = _take1(buf, o, K)
+    wts, o = _take1(buf, o, K)
+    g, o = _take1(buf, o, m)
+    trial, o = _take1(buf, o, m)
+    step, o = _take1(buf, o, m)
+    H, o = _take(buf, o, m, m)
+    y, o = _take1(buf, o, K)
+    M, o = _take(buf, o, m + 1, m + 2)
+    G, o = _take(buf, o, 6, 6)
+    nu, o = _take1(buf, o, 6)
+    rhs, o = _take1(buf, o, 6)
+    sol, o = _take1(buf, o, m + 1)
+    p, o = _take1(buf, o, 3)
+    R, o = _take(buf, o, 3, 3)
+    w, o = _take1(buf, o, 6)
+    zero, o = _take1(buf, o, 3)
+    q, o = _take1(buf, o, 3)
+    grad, o = _take1(buf, o, 3)
+    perm = ints[1:7]
+    J = ints[7:8 + m]
+    return (u, Rb, L, W6, W, A, V, beta, perm, T_p, n, N, a, C, lam, lam2, C1,
+            (lines, wts, g, trial, step, H), (y, M, J, G, nu, rhs, sol),
+            (p, R, w, zero, q, grad))
+
+
+# Lines within this of the hard margin (relative to 1 + |kappa|, N) are its active set: the
+# one-cable max-min is exact to round-off, the QP form of k >= 2 to ~1e-8 relative.
+ACTIVE_TOL = 1e-7
+
+
+@_jit
+def margin_gradient(scratch, rows, kappa, soft, grad):
+    """The gradient (3,) N/m of the margin kappa of the last `margin` call on this scratch
+    (finite, at the pose (p, R), wrench w, temperature soft) in the position p, written into
+    grad. Exact, by the envelope theorem in the tensions: kappa is the max over T with
+    W(p) T + w = 0 of g(T) (the soft or hard minimum of the 2m lines T_i - floor,
+    ceiling - T_i), so d kappa / dp = nu . (dW/dp T*) at the maximiser T* with W^T nu =
+    -dg/dT: dg/dT_i = y_i - y_(m+i), y the lines' weights (the softmax weights; for the hard
+    margin the LP's multipliers, from its k + 1 active lines: sum_J y_j C_j = 0, sum y = 1).
+    A column of W is [u_i; R b_i x u_i] with du_i/dp = -(I - u_i u_i^T) / L_i, hence
+    grad = -sum_i T*_i / L_i (I - u_i u_i^T) (nu_f + nu_m x R b_i). False (grad unset) where
+    the hard margin is not differentiable as far as its active set says (other than k + 1
+    active lines, or multipliers not >= 0): a kink."""
+    return margin_gradient_in(scratch_views(scratch), rows, kappa, soft, grad)
+
+
+@_jit
+def margin_gradient_in(views, rows, kappa, soft, grad):
+    """`margin_gradient` on the carved work arrays (`margin_in`'s)."""
+    u, Rb, L, W6 = views[0], views[1], views[2], views[3]
+    T_p, N, a, C, lam = views[9], views[11], views[12], views[13], views[14]
+    wts = views[17][1]
+    y, M, J, G, nu, rhs, sol = views[18]
+    m = u.shape[0]
+    k = m - rows
+    K = 2 * m
+    if soft > 0.0:
+        for j in range(K):
+            y[j] = wts[j]
+    else:
+        tol = ACTIVE_TOL * (1.0 + abs(kappa))
+        n = 0
+        for j in range(K):
+            y[j] = 0.0
+            s = a[j]
+            for c in range(k):
+                s += C[j, c] * lam[c]
+            if s - kappa <= tol:
+                if n > k:
+                    return False
+                J[n] = j
+                n += 1
+        if n != k + 1:
+            return False
+        # [C_J^T; 1^T] y_J = [0; 1] by Gaussian elimination with partial pivoting.
+        for r in range(k + 1):
+            for c in range(k + 1):
+                M[r, c] = C[J[c], r] if r < k else 1.0
+            M[r, k + 1] = 1.0 if r == k else 0.0
+        for c in range(k + 1):
+            best = c
+            for r in range(c + 1, k + 1):
+                if abs(M[r, c]) > abs(M[best, c]):
+                    best = r
+            if not abs(M[best, c]) > 1e-12:
+                return False
+            for e in range(k + 2):
+                M[c, e], M[best, e] = M[best, e], M[c, e]
+            for r in range(c + 1, k + 1):
+                f = M[r, c] / M[c, c]
+                for e in range(c, k + 2):
+                    M[r, e] -= f * M[c, e]
+        for c in range(k, -1, -1):
+            s = M[c, k + 1]
+            for e in range(c + 1, k + 1):
+                s -= M[c, e] * sol[e]
+            sol[c] = s / M[c, c]
+            if sol[c] < -1e-9:  # a multiplier < 0: not the LP's optimum as far as it says
+                return False
+        for c in range(k + 1):
+            y[J[c]] = sol[c]
+    # nu: (W W^T) nu = -W dg/dT, the tensions' gradient being in W's row space at T*.
+    for r in range(rows):
+        s = 0.0
+        for i in range(m):
+            s -= W6[r, i] * (y[i] - y[m + i])
+        rhs[r] = s
+        for e in range(rows):
+            s = 0.0
+            for i in range(m):
+                s += W6[r, i] * W6[e, i]
+            G[r, e] = s
+    if not solve_spd(G[:rows, :rows], rhs[:rows], nu[:rows]):
+        return False
+    grad[0] = grad[1] = grad[2] = 0.0
+    for i in range(m):
+        t = T_p[i]
+        for c in range(k):
+            t += N[i, c] * lam[c]
+        z0, z1, z2 = nu[0], nu[1], nu[2]
+        if rows == 6:  # nu_m x R b_i
+            z0 += nu[4] * Rb[i, 2] - nu[5] * Rb[i, 1]
+            z1 += nu[5] * Rb[i, 0] - nu[3] * Rb[i, 2]
+            z2 += nu[3] * Rb[i, 1] - nu[4] * Rb[i, 0]
+        d = u[i, 0] * z0 + u[i, 1] * z1 + u[i, 2] * z2
+        f = -t / L[i]
+        grad[0] += f * (z0 - d * u[i, 0])
+        grad[1] += f * (z1 - d * u[i, 1])
+        grad[2] += f * (z2 - d * u[i, 2])
+    return True
 
 
 # The kinetostatic block's parameters (a flat array, `kinetostatic_params`).
@@ -296,9 +483,22 @@ RAY_TOLERANCE = 0.5
 
 
 @_jit
-def _margin_at(reels, attachments, params, scratch, p, R, w, floor):
-    return margin(reels, attachments, int(params[P_ROWS]), p, R, w, floor,
-                  params[P_CEILING], scratch, params[P_SOFT])[0]
+def _margin_at(reels, attachments, params, views, p, R, w, floor):
+    return margin_in(reels, attachments, int(params[P_ROWS]), p, R, w, floor,
+                     params[P_CEILING], views, params[P_SOFT])[0]
+
+
+@_jit
+def gradient_by_differences(reels, attachments, params, views, p, R, w, floor, kappa, q,
+                            out):
+    """kappa's forward differences (FD_STEP_P) in p into out[4:7] (0 where the step leaves
+    the poses the cables can hold)."""
+    for k in range(3):
+        for c in range(3):
+            q[c] = p[c]
+        q[k] += FD_STEP_P
+        kq = _margin_at(reels, attachments, params, views, q, R, w, floor)
+        out[4 + k] = (kq - kappa) / FD_STEP_P if math.isfinite(kq) else 0.0
 
 
 @_jit
@@ -310,8 +510,8 @@ def kinetostatic_tick(reels, attachments, params, scratch, x, out):
     Writes (KIN_OUT) the margin kappa at the pose under the
     weight and the hand force F_H at the handle, t_c = kappa + floor, t* (no ceiling), and
     the cue F_kin = intensity(t_c) grad / |grad| (N, base frame) towards more margin; for the
-    safety filter's barrier also kappa's gradient in the position (forward differences,
-    0.1 mm) and the look ahead: where the margin drops (below min(kappa, 0) by more than
+    safety filter's barrier also kappa's gradient in the position (`margin_gradient`, exact;
+    forward differences of 0.1 mm at a kink of the hard margin) and the look ahead: where the margin drops (below min(kappa, 0) by more than
     RAY_TOLERANCE) along v within the distance the filter needs to stop from |v|, how far it
     stays >= min(kappa, 0) (inf: no drop).
 
@@ -322,22 +522,20 @@ def kinetostatic_tick(reels, attachments, params, scratch, x, out):
     too late) and ended where kappa has a local maximum below zero, from which no gradient
     leads back (dynamic plant, 40 N along the 1-3 boundary). Sampling ahead along the
     velocity sees the drop before the platform is in it."""
-    p = np.empty(3)
+    views = scratch_views(scratch)  # carved once a tick
+    p, R, w, zero, q, grad = views[19]
     barrier_position(x[0:3], x[X_STATE:X_R], params[P_T], params[P_SMOOTHING], p)
     F = x[3:6]
     v = x[X_STATE + 4:X_STATE + 7]
-    R = np.eye(3)
-    if x.shape[0] >= X_R + 9:
-        for a in range(3):
-            for b in range(3):
-                R[a, b] = x[X_R + 3 * a + b]
+    full = x.shape[0] >= X_R + 9
+    for a in range(3):
+        for b in range(3):
+            R[a, b] = x[X_R + 3 * a + b] if full else (1.0 if a == b else 0.0)
     floor = params[P_FLOOR] + params[P_RIPPLE] * math.sqrt(F[0] * F[0] + F[1] * F[1]
                                                          + F[2] * F[2])
-    w = np.empty(6)
-    zero = np.zeros(3)
     held_wrench(R, params[P_MASS:P_MASS + 4], F, zero, w)
-    kappa, t_star = margin(reels, attachments, int(params[P_ROWS]), p, R, w, floor,
-                           params[P_CEILING], scratch, params[P_SOFT])
+    kappa, t_star = margin_in(reels, attachments, int(params[P_ROWS]), p, R, w, floor,
+                              params[P_CEILING], views, params[P_SOFT])
     for k in range(KIN_OUT):
         out[k] = 0.0
     out[3] = kappa
@@ -347,14 +545,12 @@ def kinetostatic_tick(reels, attachments, params, scratch, x, out):
     if not math.isfinite(kappa):
         out[9] = 1.0
         return
-    q = np.empty(3)
     if params[P_BARRIER] != 0.0 or params[P_FORCE] != 0.0:
-        for k in range(3):
-            for c in range(3):
-                q[c] = p[c]
-            q[k] += FD_STEP_P
-            kq = _margin_at(reels, attachments, params, scratch, q, R, w, floor)
-            out[4 + k] = (kq - kappa) / FD_STEP_P if math.isfinite(kq) else 0.0
+        if margin_gradient_in(views, int(params[P_ROWS]), kappa, params[P_SOFT], grad):
+            out[4], out[5], out[6] = grad[0], grad[1], grad[2]
+        else:  # a kink of the hard margin: forward differences (one-sided, as before)
+            gradient_by_differences(reels, attachments, params, views, p, R, w, floor,
+                                    kappa, q, out)
     if params[P_FORCE] != 0.0:
         gx, gy, gz = out[4], out[5], out[6]
         g = math.sqrt(gx * gx + gy * gy + gz * gz)
@@ -375,7 +571,7 @@ def kinetostatic_tick(reels, attachments, params, scratch, x, out):
         s = reach * k / RAY_SAMPLES
         for c in range(3):
             q[c] = p[c] + s * v[c] / speed
-        m = _margin_at(reels, attachments, params, scratch, q, R, w, floor)
+        m = _margin_at(reels, attachments, params, views, q, R, w, floor)
         if hi < 0.0 and not m >= level:
             hi = s
         if not m >= level - RAY_TOLERANCE:
@@ -389,7 +585,7 @@ def kinetostatic_tick(reels, attachments, params, scratch, x, out):
         s = 0.5 * (lo + hi)
         for c in range(3):
             q[c] = p[c] + s * v[c] / speed
-        if _margin_at(reels, attachments, params, scratch, q, R, w, floor) >= level:
+        if _margin_at(reels, attachments, params, views, q, R, w, floor) >= level:
             lo = s
         else:
             hi = s

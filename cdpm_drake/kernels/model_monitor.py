@@ -39,8 +39,7 @@ import math
 import numba
 import numpy as np
 
-from cdpm_drake.kernels.kinetostatics import margin
-from cdpm_drake.kernels.pose import posed_cables
+from cdpm_drake.kernels.kinetostatics import margin_in, scratch_views
 from cdpm_drake.kernels.full_pose import held_wrench
 
 _jit = numba.njit(cache=True, error_model="numpy")
@@ -119,11 +118,13 @@ def monitor_tick(reels, attachments, params, scratch, x, out):
     p = x[m:m + 3]
     F = x[m + 3:m + 6]
     k = m + 6
-    R = np.eye(3)
-    if params[M_FULL] != 0.0:
-        for a in range(3):
-            for b in range(3):
-                R[a, b] = x[k + 3 * a + b]
+    views = scratch_views(scratch)  # the block's work arrays: a tick allocates nothing
+    _, R, w, zero, _, _ = views[19]
+    full = params[M_FULL] != 0.0
+    for a in range(3):
+        for b in range(3):
+            R[a, b] = x[k + 3 * a + b] if full else (1.0 if a == b else 0.0)
+    if full:
         k += 9
     estimate = params[M_ESTIMATE] != 0.0
     T = x[k:k + m] if estimate else x[0:m]
@@ -136,12 +137,10 @@ def monitor_tick(reels, attachments, params, scratch, x, out):
     settled = not (params[M_RECONCILING] != 0.0 and x[x.shape[0] - MEMORY - 1] == 0.0)
     mem = x[x.shape[0] - MEMORY:]
     EA = params[M_EA]
-    w = np.empty(6)
-    held_wrench(R, params[M_MASS:M_MASS + 4], F, np.zeros(3), w)
-    t_star = margin(reels, attachments, int(params[M_ROWS]), p, R, w, 0.0, math.inf,
-                    scratch)[1]
-    u, Rb, L = np.empty((m, 3)), np.empty((m, 3)), np.empty(m)
-    posed_cables(reels, attachments, p, R, u, Rb, L)
+    held_wrench(R, params[M_MASS:M_MASS + 4], F, zero, w)
+    t_star = margin_in(reels, attachments, int(params[M_ROWS]), p, R, w, 0.0, math.inf,
+                       views)[1]
+    L = views[2]  # the cables' lengths at (p, R): margin posed them
     r = out[4:4 + m]
     slack_cable, slack_value = -1, 0.0
     misfit_cable, misfit_value = -1, 0.0

@@ -3,7 +3,7 @@ gradient for the safety filter's barrier, and the felt cue F_kin added beside F_
 
 import numpy as np
 
-from cdpm_drake.kernels.call import bind, owned
+from cdpm_drake.kernels.call import bind, owned, owned_scratch
 from cdpm_drake.kernels.kinetostatics import KIN_OUT, X_R, kinetostatic_tick, margin_scratch
 from cdpm_drake.kernels.safety_filter import BARRIER_STATE
 from cdpm_drake.systems.kernel_system import KernelSystem, build_kernel_block
@@ -25,7 +25,7 @@ def build_kinetostatic_force(builder, robot, *, params, full_pose, time_step):
     m)."""
     reels, attachments = owned(robot.reels), owned(robot.attachments)
     par = owned(params)
-    scratch = margin_scratch(robot.num_cables)
+    scratch = owned_scratch(margin_scratch(robot.num_cables))
     x_size = X_R + (9 if full_pose else 0)
     example = np.zeros(x_size)
     example[:3] = robot.workspace.center

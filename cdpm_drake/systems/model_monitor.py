@@ -3,7 +3,7 @@ longer fit the estimated pose, and hand forces no tension holds, raised as Model
 
 import numpy as np
 
-from cdpm_drake.kernels.call import bind, owned
+from cdpm_drake.kernels.call import bind, owned, owned_scratch
 from cdpm_drake.kernels.kinetostatics import margin_scratch
 from cdpm_drake.kernels.model_monitor import (M_MEASURED, M_OVERLOAD, ModelFault, OK, SLACK,
                                               fault_message, monitor_sizes, monitor_tick)
@@ -29,7 +29,7 @@ def build_model_monitor(builder, robot, *, params, full_pose, estimate, time_ste
     measured_at = s["x"] - s["memory"] - m - (1 if reconciling else 0)
     reels, attachments = owned(robot.reels), owned(robot.attachments)
     par = owned(params)
-    scratch = margin_scratch(m)
+    scratch = owned_scratch(margin_scratch(m))
     example = np.zeros(s["x"])
     example[:m] = np.linalg.norm(robot.reels - robot.workspace.center - robot.attachments,
                                  axis=1)

@@ -130,10 +130,16 @@ def instructions(variant, args, out_dir) -> float:
 
 
 def wall(variant, args) -> float:
-    """Wall seconds of --duration s simulated (after 0.1 s untimed), in a fresh process."""
-    text = subprocess.run(_child_args(variant, args, 0.1, args.duration), check=True,
-                          capture_output=True, text=True).stdout
-    return float(text.strip().splitlines()[-1])
+    """Wall seconds of --duration s simulated (after 0.1 s untimed), in a fresh process; nan
+    where the run fails (a variant whose safety block is off may end on a fault: its last
+    line of stderr is printed)."""
+    run = subprocess.run(_child_args(variant, args, 0.1, args.duration), capture_output=True,
+                         text=True)
+    if run.returncode != 0:
+        print(f"{variant}: the run failed: {run.stderr.strip().splitlines()[-1]}",
+              file=sys.stderr)
+        return float("nan")
+    return float(run.stdout.strip().splitlines()[-1])
 
 
 def main():
@@ -170,7 +176,8 @@ def main():
     best = dict.fromkeys(names, float("inf"))
     for _ in range(args.repeats):  # interleaved: a busy spell hits every variant alike
         for name in names:
-            best[name] = min(best[name], wall(name, args))
+            seconds = wall(name, args)
+            best[name] = seconds if seconds != seconds else min(best[name], seconds)
     rows = []
     for name in names:
         rtf = args.duration / best[name]
