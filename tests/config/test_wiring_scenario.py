@@ -1888,10 +1888,18 @@ def test_the_drive_torque_sensor_settings_reach_the_measured_tensions():
     coarse = run(quantum=0.5)["tension_measured"] - exact["tension_measured"]
     assert np.abs(coarse).max() <= 0.25 + 1e-9 and np.abs(coarse).max() > 0.1
     lagged = run(filter_time_constant=0.05)["tension_measured"]
-    # A 50 ms lag smooths what the exact sensor reads tick by tick (the tensions' ringing
-    # and the tension command's slew): its second differences are a fraction of the exact's.
-    assert np.abs(np.diff(lagged[25:], n=2, axis=0)).sum() < 0.5 * np.abs(
-        np.diff(exact["tension_measured"][25:], n=2, axis=0)).sum()
+    # A 50 ms lag is the first-order filter y_k = y_(k-1) + a (x_k - y_(k-1)), a = 1 -
+    # exp(-T / 50 ms), of the drive force the exact sensor reads; recomputed here on the exact
+    # reading. What the two leave between them is the reel model's inertia and friction terms,
+    # which the sensor takes off after its filter (measured 0.54 N, against 10.9 N between
+    # the lagged and the exact reading).
+    a = 1.0 - np.exp(-0.002 / 0.05)
+    expected = exact["tension_measured"].copy()
+    for k in range(1, len(expected)):
+        expected[k] = expected[k - 1] + a * (exact["tension_measured"][k] - expected[k - 1])
+    apart = np.abs(lagged - exact["tension_measured"]).max()
+    assert apart > 2.0, apart
+    assert np.abs(lagged - expected).max() < 0.1 * apart
     for changes in ({"inertia_error": 1.0}, {"friction_error": 1.0}, {"friction_band": 0.2}):
         other = run(**changes)
         np.testing.assert_array_equal(other["tensions"], exact["tensions"])
