@@ -475,8 +475,8 @@ def _sweep_block(picture: str, render):
 BLOCKS = [
     Block("readme_exp2_promise", "README", _methods_cell("promise")),
     Block("readme_exp2_paper", "README", _methods_cell("paper")),
-    Block("readme_exp2_tension", "README", _tension_from_to),
-    Block("readme_exp2_tension_none", "README", _tension_none),
+    Block("dynamic_exp2_tension", "dynamic_plant", _tension_from_to),
+    Block("dynamic_exp2_tension_none", "dynamic_plant", _tension_none),
     Block("benchmarks_exp2_realtime", "benchmarks", _exp2_realtime),
     Block("robots_shipped_holding", "robots", _shipped_holding),
     Block("robots_paper_share", "robots", _paper_share),

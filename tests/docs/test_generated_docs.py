@@ -37,8 +37,8 @@ gen = _generator()
 RUNS = gen.Runs()  # every test of this file shares the simulations
 BLOCKS = {b.name: b for b in gen.BLOCKS}
 # Recomputed whole: a few 30 s runs of the kinematic plant and three of the dynamic plant.
-WHOLE = ("readme_exp2_promise", "readme_exp2_paper", "readme_exp2_tension", "benchmarks_exp2_realtime",
-         "readme_exp2_tension_none", "robots_shipped_holding", "robots_paper_share",
+WHOLE = ("readme_exp2_promise", "readme_exp2_paper", "dynamic_exp2_tension", "benchmarks_exp2_realtime",
+         "dynamic_exp2_tension_none", "robots_shipped_holding", "robots_paper_share",
          "dynamic_kinematic_closest", "dynamic_braking_tension", "dynamic_exp2_smallest")
 # Recomputed for a sample of rows (the whole tables take ~1 min): experiment 2's three
 # controllers on the dynamic plant and exp3's open loop (its slack and fault), one hand of the
