@@ -491,13 +491,14 @@ def _print_fastest_hand(r, p, out) -> None:
     than 7 cables or a rank-deficient wrench matrix."""
     from cdpm_drake.config.scenario import Controller
     from cdpm_drake.kernels import tension_path
+    from cdpm_drake.kernels.kinematics import cable_lengths
     from cdpm_drake.kernels.tension import gravity_wrench, wrench_matrix
 
     W = wrench_matrix(r, p)
     if r.num_cables < 7 or np.linalg.matrix_rank(W) < 6:
         return
     c, d = Controller(), r.dynamics
-    lengths = np.linalg.norm(r.reels - (p + r.attachments), axis=1)
+    lengths = cable_lengths(r, p)
     speed = tension_path.stretch_speed(r.limits.max_reel_speed, r.limits.max_velocity)
     cells = []
     for k, axis in enumerate("xyz"):
