@@ -93,7 +93,7 @@ def info(*, robot: str = "paper_7cable", swaps=None, plot_dir=None, grid_step: f
     _print_wrench_feasibility(r, grid, t_grid, grid_text, out, solved)
     start = (np.asarray(resolved.scenario.initial_position, dtype=float)
              if scenario is not None and refused is None else c)
-    _print_fastest_hand(r, start, out)
+    print_fastest_hand(r, start, out)
     if scenario is not None and refused is None:
         _print_homing(r, resolved.scenario, out)
     if plot_dir is None:
@@ -485,7 +485,7 @@ def calibration_lines(robot) -> list[str]:
     return lines
 
 
-def _print_fastest_hand(r, p, out) -> None:
+def print_fastest_hand(r, p, out) -> None:
     """The fastest hand (N/s) the tension path follows at p along +-x, +-y, +-z, with the
     controller's default floors and ceiling (kernels/tension_path.py); nothing for fewer
     than 7 cables or a rank-deficient wrench matrix."""

@@ -34,10 +34,10 @@ def _printed_rates(robot, p):
     import io
     import re
 
-    from cdpm_drake.cli.info import _print_fastest_hand
+    from cdpm_drake.cli.info import print_fastest_hand
 
     out = io.StringIO()
-    _print_fastest_hand(robot, p, out)
+    print_fastest_hand(robot, p, out)
     return {k: float(v) for k, v in re.findall(r"([+-][xyz]) (\d+)", out.getvalue())}
 
 
