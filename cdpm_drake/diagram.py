@@ -255,12 +255,12 @@ def build_diagram(scenario: Scenario | ResolvedScenario,
             blocks["tension_damping"].GetOutputPort("ringing_previous") if damped else lengths,
             "tension_ringing")
     builder.Connect(command, plant.GetInputPort("reel_velocity_command"))
-    # Without a tension sensor only a model of the platform sees it ring.
-    if "tension_distribution" in blocks and getattr(scenario.plant, "tension_sensor", "") == "none":
+    unseen = getattr(scenario.plant, "tension_sensor", "") == "none"  # a model sees it ring
+    if "tension_distribution" in blocks and unseen:
         add_unseen_ringing(builder, blocks, robot, floor=controller.tension_floor, p_WP=p_WP,
                            R_WP=R_WP, velocity_command=velocity_command,
-                           omega_command=omega_command,
-                           F_H=force_sensor.GetOutputPort("F_H"), T=T)
+                           omega_command=omega_command, F_H=force_sensor.GetOutputPort("F_H"),
+                           T=T)
     if monitor_on:
         _add_model_monitor(builder, blocks, resolved, lengths, p_WP, R_WP if full else None,
                            force_sensor.GetOutputPort("F_H"), T,

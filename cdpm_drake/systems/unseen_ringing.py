@@ -8,7 +8,8 @@ import numpy as np
 from cdpm_drake.kernels.call import bind, owned
 from cdpm_drake.kernels.full_pose import WARMUP_TICKS
 from cdpm_drake.kernels.unseen_ringing import ringing_params, ringing_sizes, ringing_tick
-from cdpm_drake.systems.kernel_system import KERNEL_BLOCK_MAIN, KernelSystem, build_kernel_block
+from cdpm_drake.systems.kernel_system import (KERNEL_BLOCK_MAIN, KernelSystem,
+                                              build_kernel_block)
 from cdpm_drake.systems.wiring import FlatBlock
 
 
@@ -19,9 +20,9 @@ class UnseenRingingSolve(KernelSystem):
 
 def build_unseen_ringing(builder, robot, *, floor, time_step):
     """Inputs p_WP (3, m), R_WP (9), velocity_command (3, m/s), omega_command (3, rad/s),
-    F_H (3, N: the measured hand force), tension_estimate (m, N); outputs swing (m, N: the swing about the estimate the ringing
-    the command put on each cable may reach) and cable (1: the 1-based cable whose estimate
-    less its swing is below `floor` N, the lowest; 0 none)."""
+    F_H (3, N: the measured hand force), tension_estimate (m, N); outputs swing (m, N: the
+    swing about the estimate the ringing the command put on each cable may reach) and warned
+    (m: 1 for each cable whose estimate less its swing is below `floor` N, 0 otherwise)."""
     m = robot.num_cables
     s = ringing_sizes(m)
     reels, attachments = owned(robot.reels), owned(robot.attachments)
@@ -42,7 +43,9 @@ def build_unseen_ringing(builder, robot, *, floor, time_step):
 def add_unseen_ringing(builder, blocks, robot, *, floor, p_WP, R_WP, velocity_command,
                        omega_command, F_H, T):
     """The block as a flat block of the controller's diagram, on the estimate of the tension
-    distribution block in `blocks`; floor: controller.tension_floor (N)."""
+    distribution block in `blocks`; floor: controller.tension_floor (N). It warns only: the
+    target's floor raised to its swing slackened more cables than it saved (the adversarial
+    benchmark's ramped hands without a sensor: 114 holdable ticks on 5 hands for 65 on 2)."""
     block = blocks["unseen_ringing"] = FlatBlock(
         builder, "unseen_ringing", KERNEL_BLOCK_MAIN, lambda b: build_unseen_ringing(
             b, robot, floor=float(floor), time_step=T))
