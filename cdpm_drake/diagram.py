@@ -260,7 +260,7 @@ def build_diagram(scenario: Scenario | ResolvedScenario,
         add_unseen_ringing(builder, blocks, robot, floor=controller.tension_floor, p_WP=p_WP,
                            R_WP=R_WP, velocity_command=velocity_command,
                            omega_command=omega_command, F_H=force_sensor.GetOutputPort("F_H"),
-                           T=T)
+                           T=T, warmup=TENSION_WARMUP_TICKS)
     if monitor_on:
         _add_model_monitor(builder, blocks, resolved, lengths, p_WP, R_WP if full else None,
                            force_sensor.GetOutputPort("F_H"), T,

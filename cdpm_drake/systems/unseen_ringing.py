@@ -18,16 +18,17 @@ class UnseenRingingSolve(KernelSystem):
     floor."""
 
 
-def build_unseen_ringing(builder, robot, *, floor, time_step):
+def build_unseen_ringing(builder, robot, *, floor, time_step, warmup=WARMUP_TICKS):
     """Inputs p_WP (3, m), R_WP (9), velocity_command (3, m/s), omega_command (3, rad/s),
     F_H (3, N: the measured hand force), tension_estimate (m, N); outputs swing (m, N: the
     swing about the estimate the ringing the command put on each cable may reach) and warned
-    (m: 1 for each cable whose estimate less its swing is below `floor` N, 0 otherwise)."""
+    (m: 1 for each cable whose estimate less its swing is below `floor` N, 0 otherwise),
+    from `warmup` ticks on (the estimate is fitted at the first)."""
     m = robot.num_cables
     s = ringing_sizes(m)
     reels, attachments = owned(robot.reels), owned(robot.attachments)
     params = owned(ringing_params(robot.dynamics, time_step=time_step, floor=floor,
-                                  warmup=WARMUP_TICKS))
+                                  warmup=warmup))
     example = np.zeros(s["x"])
     example[0:3] = robot.workspace.center
     example[3:12] = np.eye(3).ravel()
@@ -41,14 +42,14 @@ def build_unseen_ringing(builder, robot, *, floor, time_step):
 
 
 def add_unseen_ringing(builder, blocks, robot, *, floor, p_WP, R_WP, velocity_command,
-                       omega_command, F_H, T):
+                       omega_command, F_H, T, warmup=WARMUP_TICKS):
     """The block as a flat block of the controller's diagram, on the estimate of the tension
     distribution block in `blocks`; floor: controller.tension_floor (N). It warns only: the
     target's floor raised to its swing slackened more cables than it saved (the adversarial
     benchmark's ramped hands without a sensor: 114 holdable ticks on 5 hands for 65 on 2)."""
     block = blocks["unseen_ringing"] = FlatBlock(
         builder, "unseen_ringing", KERNEL_BLOCK_MAIN, lambda b: build_unseen_ringing(
-            b, robot, floor=float(floor), time_step=T))
+            b, robot, floor=float(floor), time_step=T, warmup=warmup))
     for name, port in (("p_WP", p_WP), ("R_WP", R_WP), ("velocity_command", velocity_command),
                        ("omega_command", omega_command), ("F_H", F_H),
                        ("tension_estimate",
