@@ -46,7 +46,8 @@ def add_unseen_ringing(builder, blocks, robot, *, floor, p_WP, R_WP, velocity_co
     """The block as a flat block of the controller's diagram, on the estimate of the tension
     distribution block in `blocks`; floor: controller.tension_floor (N). It warns only: the
     target's floor raised to its swing slackened more cables than it saved (the adversarial
-    benchmark's ramped hands without a sensor: 114 holdable ticks on 5 hands for 65 on 2)."""
+    benchmark's ramped hands without a sensor, slack ticks holdable in [2, 100] N: 114 on 5
+    hands, for 80 on 3)."""
     block = blocks["unseen_ringing"] = FlatBlock(
         builder, "unseen_ringing", KERNEL_BLOCK_MAIN, lambda b: build_unseen_ringing(
             b, robot, floor=float(floor), time_step=T, warmup=warmup))
