@@ -92,3 +92,13 @@ def test_the_stretch_estimate_holds_at_high_tensions():
                            - resolved.robot.attachments[None], axis=2)
     np.testing.assert_allclose(rigid / (1.0 + estimate / EA), rigid / (1.0 + true / EA),
                                atol=1e-5)
+
+
+def test_with_a_tension_sensor_the_block_is_left_out():
+    # The sensor measures the ringing (the tension damping block); the model is for its
+    # absence only.
+    resolved = load_resolved_scenario("exp2_interaction", "{duration: 0.02, %s}" % NONE.replace(
+        "tension_sensor: none", "tension_sensor: drive_torque").rstrip(", "))
+    log = simulate(scenario=resolved).log
+    assert "ringing_warned" not in log and "ringing_swing" not in log
+    assert "tension_estimate" in log
