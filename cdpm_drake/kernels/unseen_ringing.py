@@ -1,12 +1,13 @@
 """The ringing the encoders cannot see, predicted from the command (no tension sensor): a
 model of the platform's modes on its elastic cables, driven by the acceleration the reels
-give it, and the swing it may put on each cable. numpy and numba, no Drake.
+give it and by the measured hand force, and the swing it may put on each cable. numpy and
+numba, no Drake.
 
 Why: on a robot with mass the platform rings at its lightly damped modes (4-14 Hz on the
 shipped robots), and the reel encoders do not see it (the drives' velocity loops are stiff:
 the reels pay out what they are told, whatever the cables pull). The tension estimate comes
 from the encoders, so a cable can ring slack while its estimate says it is taut. What rings
-it is known to the controller: the commanded acceleration. Where the safety filter switches
+it is known to the controller: the commanded acceleration and the hand force. Where the safety filter switches
 from the admittance's acceleration (up to limits.max_acceleration) to its braking, the
 platform's acceleration steps by both; a step da of the acceleration moves the cables'
 static force by m da and the tensions overshoot it by as much again (an undamped step
@@ -15,26 +16,30 @@ response), W^+ m da about the new statics.
 The model, per tick of `step` s, in the platform's 6 coordinates (translation m, small
 rotation rad) relative to the quasi-static pose (the pose the encoders measure):
 
-    M d'' + C d' + K d = -M a,
+    M d'' + C d' + K d = -M a + w_H,
 
 M = diag(m I, R I_B R^T), K = W diag(EA / L) W^T (the cables' elastic stiffness; W the
 wrench matrix at the estimated pose, L the cables' lengths), C = W diag(c) W^T (the cables'
 damping c, N s/m), a the commanded twist's rate after the drives' first-order lag (time
 constant 1 / bandwidth: the reels, and so the cables' ends, follow the command through it),
-integrated by the trapezoidal rule (Newmark's average acceleration: unconditionally stable,
-no numerical damping). The ringing is d less its quasi-static part d_s = -K^-1 M a, and its
+w_H the measured hand force's wrench about the centre (at the handle) less its value at
+the first tick (the estimate holds the statics of both), integrated by the trapezoidal rule
+(Newmark's average acceleration: unconditionally stable, no numerical damping). The ringing
+is d less its quasi-static part d_s = K^-1 (-M a + w_H), and its
 energy E = 1/2 (d - d_s)^T K (d - d_s) + 1/2 d'^T M d' bounds the swing of cable i's tension
 (Cauchy-Schwarz in the K norm):
 
     A_i = k_i sqrt(2 E w_i^T K^-1 w_i),   k_i = EA / L_i, w_i the column of W.
 
 A cable whose estimate less its swing A_i is below the floor the target keeps
-(controller.tension_floor) may ring below it unseen: the block names it (1-based) with its
-swing, from the tick the command rings it, before the cable is slack.
+(controller.tension_floor) may ring below it unseen: the block warns of it from the tick the
+command or the hand rings it, before the cable is slack (measured: docs/dynamic_plant.md).
+The bound is conservative where several modes share the energy (about twice the truth's
+swing at a start from rest on cube_8cable) and can fall short where the truth rings from
+more than the model sees (exp2's lift: 8 N of 11 N on cable 2).
 
-What it does not model: the hand force's own rate (small: the hand's ramp against the
-cables' stiffness), the length loop's corrections, and a model whose numbers (mass,
-inertia, EA) are off the robot's.
+What it does not model: the length loop's corrections, a hand force beyond what the sensor
+measures (its noise counts as force), and numbers (mass, inertia, EA) off the robot's.
 """
 
 import math
