@@ -32,6 +32,7 @@ from cdpm_drake.systems.posed_interference_force import build_posed_interference
 from cdpm_drake.systems.safety_filter import build_safety_filter
 from cdpm_drake.systems.safety_limits import SAFETY_LIMITS_MAIN, build_safety_limits
 from cdpm_drake.systems.tension_distribution import build_tension_distribution, tension_path_params
+from cdpm_drake.systems.unseen_ringing import add_unseen_ringing
 from cdpm_drake.systems.wall_force import WorkspaceWallForce
 from cdpm_drake.systems.wiring import (FUSED_DELAY, FUSED_WIRING, FlatBlock, fuse_delays,
                                        fuse_wiring, wiring)
@@ -75,6 +76,8 @@ LOGGED = (
     ("t_star", "tension_distribution", "t_star"),
     ("tension_status", "tension_distribution", "status"),
     ("tension_cable", "tension_distribution", "cable"),
+    ("ringing_swing", "unseen_ringing", "swing"),
+    ("ringing_warned", "unseen_ringing", "warned"),
     ("lengths", "reels", "cable_lengths"),
     ("F_measured", "reels", "measured_force"),
     ("tension_measured", "reels", "tension_measured"),
@@ -252,6 +255,12 @@ def build_diagram(scenario: Scenario | ResolvedScenario,
             blocks["tension_damping"].GetOutputPort("ringing_previous") if damped else lengths,
             "tension_ringing")
     builder.Connect(command, plant.GetInputPort("reel_velocity_command"))
+    unseen = getattr(scenario.plant, "tension_sensor", "") == "none"  # a model sees it ring
+    if "tension_distribution" in blocks and unseen:
+        add_unseen_ringing(builder, blocks, robot, floor=controller.tension_floor, p_WP=p_WP,
+                           R_WP=R_WP, velocity_command=velocity_command,
+                           omega_command=omega_command, F_H=force_sensor.GetOutputPort("F_H"),
+                           T=T, warmup=TENSION_WARMUP_TICKS)
     if monitor_on:
         _add_model_monitor(builder, blocks, resolved, lengths, p_WP, R_WP if full else None,
                            force_sensor.GetOutputPort("F_H"), T,

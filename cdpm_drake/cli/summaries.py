@@ -59,12 +59,33 @@ def tension_control_summary(log) -> str:
                  f"ticks ({_named_cables(cable, status == HAND_TOO_FAST)};{when}, cable "
                  f"{int(cable[first])}: the internal force that keeps it at "
                  "controller.tension_floor rises slower than the hand takes it down)")
+    text += unseen_ringing_warning(log)
     none = int(np.sum(t_star < 0))
     if none:
         text += (f"; NO tension distribution held on {none} ticks (t* < 0: outside the "
                  "wrench-feasible workspace, a cable must go slack)")
     estimate = np.asarray(log["tension_estimate"], dtype=float)
     return text + (f"; estimated tensions {estimate.min():.2f} to {estimate.max():.1f} N")
+
+
+def unseen_ringing_warning(log) -> str:
+    """'; WARNING: ...' where the unseen-ringing block (no tension sensor) warned of a cable
+    whose predicted ringing may take it below controller.tension_floor while its estimate
+    says it is taut: each such cable (1-based) with its first time, its ticks and its
+    predicted swing then; '' where it warned of none (or the log has no such block)."""
+    if "ringing_warned" not in log:
+        return ""
+    warned = np.asarray(log["ringing_warned"], dtype=float) > 0.5
+    if not warned.any():
+        return ""
+    time = np.asarray(log["time"], dtype=float).reshape(-1)
+    swing = np.asarray(log["ringing_swing"], dtype=float)
+    firsts = sorted((int(np.argmax(warned[:, i])), i) for i in range(warned.shape[1])
+                    if warned[:, i].any())
+    cables = ", ".join(f"cable {i + 1} from {time[k]:.3f} s ({int(warned[:, i].sum())} ticks, "
+                       f"swing {swing[k, i]:.1f} N)" for k, i in firsts)
+    return ("; WARNING: ringing the encoders cannot see may take a cable below "
+            f"controller.tension_floor, or slack (no tension sensor): {cables}")
 
 
 def overload_summary(log, ceiling: float, overload: float = 0.0) -> str:

@@ -61,6 +61,9 @@ COLUMNS = {
     "t_star": ("N", None),
     "tension_status": (TENSION_STATUS, None),
     "tension_cable": (CABLE_NUMBER, None),
+    # Without a tension sensor: the ringing the encoders cannot see, predicted.
+    "ringing_swing": ("N", "cables"),
+    "ringing_warned": ("0/1", "cables"),
     # The safety filter, its kinetostatic limit, the model monitor (beyond the paper).
     "velocity_limited": ("m/s", "xyz"),
     "filter_status": (FILTER_STATUS, None),

@@ -237,6 +237,18 @@ def measure(case: Case) -> dict:
     fast = (np.flatnonzero(np.asarray(log["tension_status"]).reshape(-1) == 5)
             if "tension_status" in log else np.zeros(0, dtype=int))
     row["first_too_fast"] = float(log["time"][fast[0]]) if fast.size else None
+    # Without a tension sensor: the first warning of the ringing the encoders cannot see,
+    # and whether every cable that went slack was warned of at or before its first slack.
+    row["first_ringing"], row["ringing_before_slack"] = None, None
+    if "ringing_warned" in log:
+        warned = np.asarray(log["ringing_warned"]) > 0.5
+        ticks = np.flatnonzero(warned.any(axis=1))
+        row["first_ringing"] = float(log["time"][ticks[0]]) if ticks.size else None
+        if "slack" in log and log["slack"].any():
+            slack = np.asarray(log["slack"], dtype=bool)
+            row["ringing_before_slack"] = all(
+                warned[:int(np.argmax(slack[:, i])) + 1, i].any()
+                for i in np.flatnonzero(slack.any(axis=0)))
     status = log.get("filter_status")
     row["modified_share"] = None if status is None else float(np.mean(status[:, 0] > 0))
     row["held_share"] = None if status is None else float(np.mean(status[:, 0] >= 3))
@@ -255,7 +267,7 @@ def run_parallel(fn, todo, jobs):
 def table(rows) -> str:
     """The markdown table of the benchmark's rows."""
     head = ("| robot | hand | plant | method | sensor | closest vs d_l (mm) | crossed | slack "
-            "ticks (holdable; in [2, 100] N) | first slack / first 'hand too fast' (s) | min "
+            "ticks (holdable; in [2, 100] N) | first slack / 'hand too fast' / ringing warning (s) | min "
             "tension (N) | max tilt (deg) | fault | modified / held (%) |")
     lines = [head, "|" + " --- |" * 13]
     for r in rows:
@@ -268,7 +280,9 @@ def table(rows) -> str:
         slack = ("-" if r["slack_ticks"] is None
                  else f"{r['slack_ticks']} ({r['slack_holdable']}; {r['slack_within']})")
         first = " / ".join("-" if r.get(k) is None else f"{r[k]:.3f}"
-                           for k in ("first_slack", "first_too_fast"))
+                           for k in ("first_slack", "first_too_fast", "first_ringing"))
+        if r.get("ringing_before_slack") is not None:
+            first += " (warned first)" if r["ringing_before_slack"] else " (NOT warned first)"
         held = ("-" if r["modified_share"] is None
                 else f"{100 * r['modified_share']:.0f} / {100 * r['held_share']:.1f}")
         cells = (r["robot"], r["hand"], r["plant"], r["method"], r.get("sensor", "-"),

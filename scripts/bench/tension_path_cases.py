@@ -77,6 +77,10 @@ def main(argv=None) -> int:
     for r in rows:
         fs = "-" if r["first_slack"] is None else "%.3f" % r["first_slack"]
         fast = "-" if r.get("first_too_fast") is None else "%.3f" % r["first_too_fast"]
+        if r.get("first_ringing") is not None:  # no tension sensor: the ringing warning
+            fast += " / ringing %.3f%s" % (r["first_ringing"], {True: " (each slack cable "
+                                           "warned first)", False: " (NOT each warned first)",
+                                           None: ""}[r["ringing_before_slack"]])
         fault = "-" if not r["fault"] else "%s at %.3f s" % (r["fault"][:60], r["fault_time"])
         print(f"| {r['robot']} | {r['sensor']} | {r['slack_holdable']} | {r['slack_within']} | "
               f"{r['slack_ticks']} | "

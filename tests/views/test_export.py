@@ -152,7 +152,9 @@ def _full_pose_dynamic_log():
                        ("t_star", 1), ("tensions", m), ("p_true", 3), ("rpy_true", 3),
                        ("pair_distances_true", P),
                        # issue 31: the plant's measured tensions and the damping's part.
-                       ("tension_measured", m), ("reel_velocity_damping", m)):
+                       ("tension_measured", m), ("reel_velocity_damping", m),
+                       # without a tension sensor: the unseen ringing's swing.
+                       ("ringing_swing", m)):
         log[key] = rng.uniform(-1.0, 1.0, (T, width))
     for key, width in (("velocity_limited", 3), ("pair_margin", 1), ("F_kin", 3),
                        ("kappa", 1), ("t_c", 1), ("t_star_hand", 1), ("model_residual", m)):
@@ -162,7 +164,7 @@ def _full_pose_dynamic_log():
     log["filter_status"] = rng.integers(0, 4, (T, 1)).astype(float)
     log["filter_binding"] = rng.integers(0, 32, (T, 1)).astype(float)
     log["model_status"] = np.zeros((T, 1))
-    for key, width in (("slack", m), ("crossed_true", P)):
+    for key, width in (("slack", m), ("crossed_true", P), ("ringing_warned", m)):
         log[key] = rng.uniform(size=(T, width)) < 0.5
     for key in ("p", "F_H", "F_measured", "F_int", "F_wall", "F_d", "velocity_admittance",
                 "velocity", "reel_velocity", "lengths", "pair_distances"):
@@ -206,9 +208,10 @@ def test_every_column_holds_the_log_value_its_name_says():
     # the eight 3-vectors, 10 x 7 per cable, 5 x 21 per pair, 4 x 3 orientations and vectors,
     # t_star and tension_status; and the safety filter's and the monitor's: tension_cable,
     # velocity_limited and F_kin (2 x 3), filter_status, filter_binding, pair_margin, kappa,
-    # t_c, t_star_hand, model_status (7 x 1), model_residual (7)).
+    # t_c, t_star_hand, model_status (7 x 1), model_residual (7)); 14 more without a tension
+    # sensor: ringing_swing and ringing_warned (2 x 7).
     assert seen == set(_documented_per_tick_keys()) - {"tick", "wall", "compute"}
-    assert len(header) == 25 + 10 * 7 + 5 * 21 + 4 * 3 + 2 + 1 + 6 + 7 + 7 == 235
+    assert len(header) == 25 + 10 * 7 + 5 * 21 + 4 * 3 + 2 + 1 + 6 + 7 + 7 + 2 * 7 == 249
     # The names the issue asked for, verbatim.
     for name in ("pair_distances_true_1-3 [m]", "crossed_true_5-7 [0/1]", "rpy_roll [rad]",
                  "rpy_true_yaw [rad]", "omega_z [rad/s]", "tensions_7 [N]", "slack_1 [0/1]",

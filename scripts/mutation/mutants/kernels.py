@@ -611,4 +611,16 @@ MUTANTS = [
       "out[0], out[1], out[2], out[3] = status, cable, value, value",
       "the logged t_star_hand is another slot of the monitor's output",
       ("tests/systems/test_safety_outputs.py",)),
+    M("unseen_ringing_swing_ignored", "cdpm_drake/kernels/unseen_ringing.py",
+      "below = settled and T[i] - out[i] < params[P_FLOOR]",
+      "below = settled and T[i] < params[P_FLOOR]",
+      "without a tension sensor a cable is warned of only where its estimate itself is below "
+      "the floor, never where the ringing the encoders cannot see may take it there",
+      ("tests/kernels/test_unseen_ringing.py", "tests/systems/test_unseen_ringing_plant.py")),
+    M("unseen_ringing_potential_only", "cdpm_drake/kernels/unseen_ringing.py",
+      "energy += 0.5 * (ring[r] * K[r, j] * ring[j] + nxt[13 + r] * M[r, j] * nxt[13 + j])",
+      "energy += 0.5 * (ring[r] * K[r, j] * ring[j])",
+      "the ringing's energy leaves out its kinetic part: the swing is underestimated where "
+      "the platform passes its statics",
+      ("tests/kernels/test_unseen_ringing.py",)),
 ]
