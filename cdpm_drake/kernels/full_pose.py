@@ -456,7 +456,7 @@ def distribution_bounded(T_p, N, floor, hard_floor, ceiling, T):
 
 
 # The commanded acceleration the target's wrench takes in (tension_tick) is the command's,
-# low-passed with this time constant, s.
+# low-passed with this time constant, s (without the tension path's rate time constant).
 ACCELERATION_TIME = 0.1
 
 
@@ -538,16 +538,24 @@ def tension_tick(reels, attachments, params, x, out):
     # braking and accelerating tick by tick (the safety filter at a barrier) is cut ~7-fold
     # at 10 Hz. Differenced tick by tick, that alternation moved every target by ~5 N 10
     # times a second and rang the platform until cables went slack (a 20 N push along
-    # exp2's boundary: 171 slack ticks in 10 s; none with the low-pass).
+    # exp2's boundary: 171 slack ticks in 10 s; none with the low-pass). With the tension
+    # path (rate_time > 0) it is low-passed over the path's own time constant instead: the
+    # platform's acceleration follows the command's within the drives' lag, and a change of
+    # it (the filter starting to brake under a pushing hand: +1.8 to -0.5 m/s^2) moves the
+    # cables' force by m da at once, which the target took in over ACCELERATION_TIME, 7 times
+    # later (exp3's 40 N push across 1-3 at 100 N/s: the weak cable's true tension ~4 N below
+    # its command, slack for 7 ticks; none at the path's time constant). The filter changes
+    # the acceleration no faster than that (safety_filter.give_way_ramp).
     a = np.empty(3)
-    lowpass = step / ACCELERATION_TIME
+    acc_time = rate_time if rate_time > 0.0 else ACCELERATION_TIME
+    lowpass = step / acc_time
     v_next = np.empty(3)
     # The hand force's rate, low-passed (a first-order filter of the difference: a ramp's
     # rate after a few time constants, the sensor's noise cut by sqrt(2 rate_time / step)).
     rate_next, F_lead = np.empty(3), np.empty(3)
     gain = min(1.0, step / rate_time) if rate_time > 0.0 else 1.0
     for k in range(3):
-        a[k] = (v[k] - v_slow[k]) / ACCELERATION_TIME if ticks > 0.0 else 0.0
+        a[k] = (v[k] - v_slow[k]) / acc_time if ticks > 0.0 else 0.0
         v_next[k] = v_slow[k] + lowpass * (v[k] - v_slow[k]) if ticks > 0.0 else v[k]
         raw = (F[k] - F_before[k]) / step if ticks > 0.0 else 0.0
         rate_next[k] = F_rate[k] + gain * (raw - F_rate[k]) if ticks > 0.0 else 0.0

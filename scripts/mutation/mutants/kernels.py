@@ -592,7 +592,7 @@ MUTANTS = [
       "the command falls as fast as it rises (the fall rate's slot unread)",
       ("tests/kernels/test_pose.py", "tests/kernels/test_tension_target.py")),
     M("acceleration_not_low_passed", "cdpm_drake/kernels/full_pose.py",
-      "lowpass = step / ACCELERATION_TIME",
+      "lowpass = step / acc_time",
       "lowpass = 1.0",
       "the commanded acceleration is the tick's difference, over ACCELERATION_TIME",
       ("tests/kernels/test_pose.py",)),
