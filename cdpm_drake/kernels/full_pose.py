@@ -640,10 +640,15 @@ def tension_tick(reels, attachments, params, x, out):
                     and T_p[i] < T_hand[i]):
                 deepest, cable_fast = hard_floor - total, i + 1
             T_cmd[i] = max(total, min(hard_floor, T_target[i]))
-        # Said a lead ahead too: where the internal force is held back by the cables' limits
-        # and the hand, going on at its rate for another lead, would take a cable of this
-        # command below the floor (the true tensions lag the command by about the lead).
-        if cable_fast == 0 and scale < 1.0 and flag:
+        # Said a lead ahead too: where the internal force is held back by the rising cables'
+        # limits and the hand, going on at its rate for another lead, would take a cable of
+        # this command below the floor (the true tensions lag the command by about the lead).
+        # Not where only the slow fall holds it: that is the command falling slowly after a
+        # target that moves with the pose (a slow hand sliding the platform along the
+        # kinetostatic limit, the weak cable's target at the floor), not an internal force
+        # that cannot rise as fast as the hand (exp3's 40 N pushes across 1-3 at 10 and
+        # 40 N/s, taut to the end, were named at 1-3 s, a tenth of a newton short).
+        if cable_fast == 0 and rise < 1.0 and flag:
             for k in range(3):
                 F_lead[k] = F[k] + 2.0 * lead * rate_next[k]
             held_wrench(R, params, F_lead, a, w)
