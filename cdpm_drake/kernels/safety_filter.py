@@ -265,9 +265,9 @@ def filter_tick(reels, attachments, pi, pj, d_min, bounds, params, x, out):
     """One tick of the safety filter. pi, pj (P,): the watched pairs (0-based cables); d_min
     (P,) m; bounds (2, 3): the workspace box's lower and upper corners, m.
     x = [v_d (3), p (3), crossed (P), kappa (1), grad kappa (3), look ahead (1), (the full
-    pose only:) w_d (3), R (9), memory: p_c (3), p_c valid (1), v_prev (3), w_prev (3), a_prev
-    (3)] (m/s, m, 0/1, N, N/m, m, rad/s, -, m, -, m/s, rad/s, m/s^2); the translating controller's
-    platform is level (R = I); the barriers are evaluated at `barrier_position`;
+    pose only:) w_d (3), R (9), memory: p_c (3), p_c valid (1), v_prev (3), w_prev (3),
+    a_prev (3)] (m/s, m, 0/1, N, N/m, m, rad/s, -, m, -, m/s, rad/s, m/s^2); the translating
+    controller's platform is level (R = I); the barriers are evaluated at `barrier_position`;
     out = [v (3), w (3), status (1), binding (1), smallest pair margin h (1, m; +inf with
     no pair), kappa used (1, N; nan when the barrier is off or undefined), barriers (1: how
     many could bind this tick and went into the QP), next memory (MEMORY, at OUT_MEMORY), v_d
