@@ -384,19 +384,25 @@ def filter_braking(resolved) -> float:
 
 def safety_filter_params(resolved, *, full: bool, kinetostatic: bool):
     """The safety filter's parameters (safety_filter.filter_params) for the scenario; on a
-    robot with mass the lost-margin slowdown brakes at a_brake."""
-    from cdpm_drake.kernels.safety_filter import filter_params
+    robot with mass the lost-margin slowdown brakes at a_brake, and the brakes for the cables
+    give way to the platform's acceleration at give_way_rate."""
+    from cdpm_drake.kernels.safety_filter import filter_params, give_way_rate
+    from cdpm_drake.kernels.tension_path import lead_time
 
     scenario = resolved.scenario
     f = scenario.safety_filter
     a_brake = filter_braking(resolved)
+    mass = _robot_with_mass(resolved)
     return filter_params(
         time_step=resolved.time_step, gamma=f.gamma, a_brake=a_brake,
         max_velocity=resolved.max_velocity,
         max_acceleration=resolved.max_acceleration,
         return_speed=f.return_speed, full_pose=full, kinetostatic=kinetostatic,
         box=scenario.limits.virtual_wall, smoothing=float(f.position_smoothing),
-        cable_brake=a_brake if _robot_with_mass(resolved) else None)
+        cable_brake=a_brake if mass else None,
+        give_way=give_way_rate(a_brake, lead_time(resolved.time_step,
+                                                  resolved.robot.dynamics.bandwidth))
+        if mass else np.inf)
 
 
 def _add_safety_filter(builder, blocks, resolved, velocity_desired, omega_desired, p_WP, R_WP,

@@ -455,8 +455,8 @@ def distribution_bounded(T_p, N, floor, hard_floor, ceiling, T):
     return _floor_wins(T, t_star, hard_floor, ceiling)
 
 
-# The commanded acceleration the target's wrench takes in (tension_tick) is the command's,
-# low-passed with this time constant, s.
+# Without the tension path's rate time constant, the commanded acceleration the target's
+# wrench takes in (tension_tick) is the command's low-passed with this time constant, s.
 ACCELERATION_TIME = 0.1
 
 
@@ -465,12 +465,11 @@ def tension_tick(reels, attachments, params, x, out):
     """params = [mass kg, handle (3, m, platform frame), EA N, floor N, ceiling N, time step
     s, slew rate N/s, warm-up ticks, hard floor N, fall rate N/s, ringing factor (0: off),
     lead s, rate time constant s, stretch speed m/s].
-    x = [p (3), R (9), F_H (3), v (3),
-    residual (m), L0 (m), T_assumed (m: the tensions the forward kinematics corrected the
-    lengths for), ringing (m, N^2: the variance of each measured tension about the
-    estimate, tension_damping.damping_tick; ignored with the factor 0), memory: T_estimate
-    (m), v_slow (3: the command low-passed), ticks (1), T_command_previous (m), F_previous
-    (3), F_rate (3: the hand force's rate, N/s, low-passed with the rate time constant)].
+    x = [p (3), R (9), F_H (3), v (3), residual (m), L0 (m), T_assumed (m: the tensions the
+    forward kinematics corrected the lengths for), ringing (m, N^2: each measured tension's
+    variance about the estimate, tension_damping.damping_tick; ignored with the factor 0),
+    memory: T_estimate (m), v_slow (3: the command low-passed), ticks (1), T_command_previous
+    (m), F_previous (3), F_rate (3: the hand force's rate, N/s, low-passed over rate time)].
     The hard floor is at least the ringing factor times the largest ringing's standard
     deviation (never above the floor).
     out = [T_command (m), T_estimate (m), T_target (m), t* (1), status (1), cable (1), next
@@ -478,8 +477,8 @@ def tension_tick(reels, attachments, params, x, out):
     `distribution_1d_bounded`: closed form for one redundant cable, `distribution_bounded`
     for more) for the hand force led by its rate, F + lead F_rate (the tension path, the
     force's tick of age, the mapping's and the drives' 1/bandwidth, lags the hand by about
-    `lead`: the target moves with the hand, not after it); the estimate takes the hand
-    force as measured.
+    `lead`: the target moves with the hand, not after it) and the commanded acceleration
+    (low-passed over the rate time constant); the estimate takes the hand force as measured.
 
     T_command, what the lengths are stretched for, is the target's statics (its minimum-norm
     part, which the platform's own displacement brings whatever the lengths) plus an
@@ -538,16 +537,21 @@ def tension_tick(reels, attachments, params, x, out):
     # braking and accelerating tick by tick (the safety filter at a barrier) is cut ~7-fold
     # at 10 Hz. Differenced tick by tick, that alternation moved every target by ~5 N 10
     # times a second and rang the platform until cables went slack (a 20 N push along
-    # exp2's boundary: 171 slack ticks in 10 s; none with the low-pass).
+    # exp2's boundary: 171 slack ticks in 10 s; none with the low-pass). With the tension
+    # path, over its time constant: the platform follows the command within the drives' lag
+    # and the cables take a change as m da at once (over 0.1 s a braking onset under exp3's
+    # 40 N push at 100 N/s left cable 2 ~4 N below its command, slack; the filter changes
+    # the acceleration no faster than that: safety_filter.give_way_ramp).
     a = np.empty(3)
-    lowpass = step / ACCELERATION_TIME
+    acc_time = rate_time if rate_time > 0.0 else ACCELERATION_TIME
+    lowpass = step / acc_time
     v_next = np.empty(3)
     # The hand force's rate, low-passed (a first-order filter of the difference: a ramp's
     # rate after a few time constants, the sensor's noise cut by sqrt(2 rate_time / step)).
     rate_next, F_lead = np.empty(3), np.empty(3)
     gain = min(1.0, step / rate_time) if rate_time > 0.0 else 1.0
     for k in range(3):
-        a[k] = (v[k] - v_slow[k]) / ACCELERATION_TIME if ticks > 0.0 else 0.0
+        a[k] = (v[k] - v_slow[k]) / acc_time if ticks > 0.0 else 0.0
         v_next[k] = v_slow[k] + lowpass * (v[k] - v_slow[k]) if ticks > 0.0 else v[k]
         raw = (F[k] - F_before[k]) / step if ticks > 0.0 else 0.0
         rate_next[k] = F_rate[k] + gain * (raw - F_rate[k]) if ticks > 0.0 else 0.0
@@ -632,10 +636,11 @@ def tension_tick(reels, attachments, params, x, out):
                     and T_p[i] < T_hand[i]):
                 deepest, cable_fast = hard_floor - total, i + 1
             T_cmd[i] = max(total, min(hard_floor, T_target[i]))
-        # Said a lead ahead too: where the internal force is held back by the cables' limits
-        # and the hand, going on at its rate for another lead, would take a cable of this
-        # command below the floor (the true tensions lag the command by about the lead).
-        if cable_fast == 0 and scale < 1.0 and flag:
+        # Said a lead ahead too: where the rising cables' limits hold the internal force back
+        # and the hand, going on for another lead, would take a cable of this command below
+        # the floor (the true tensions lag the command by about the lead); not where only the
+        # slow fall does (slow hands along the kinetostatic limit, taut, were named).
+        if cable_fast == 0 and rise < 1.0 and flag:
             for k in range(3):
                 F_lead[k] = F[k] + 2.0 * lead * rate_next[k]
             held_wrench(R, params, F_lead, a, w)

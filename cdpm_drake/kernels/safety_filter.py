@@ -74,10 +74,11 @@ BIND_TEXT = ((BIND_PAIR, "cable pairs"), (BIND_BOX, "workspace box"),
 
 # Parameters (a flat array, `filter_params`).
 (F_T, F_GAMMA, F_A_BRAKE, F_V_MAX, F_A_MAX, F_V_RETURN, F_DOF, F_KINETOSTATIC, F_BOX,
- F_SMOOTHING, F_CABLE_BRAKE, F_SIZE) = range(12)
+ F_SMOOTHING, F_CABLE_BRAKE, F_GIVE_WAY, F_SIZE) = range(13)
 # Where `filter_tick`'s memory and its pass-through of v_d start in its output; the memory
-# is [p_c (3), p_c valid (1), v_prev (3), w_prev (3)].
-OUT_MEMORY, OUT_V_D, MEMORY = 11, 21, 10
+# is [p_c (3), p_c valid (1), v_prev (3), w_prev (3), a_prev (3: the last command's
+# acceleration, m/s^2)].
+OUT_MEMORY, OUT_V_D, MEMORY = 11, 24, 13
 # The memory's first BARRIER_STATE values, [p_c, valid, v_prev]: what `barrier_position`
 # reads, and what the kinetostatic block takes (its input barrier_state_previous).
 BARRIER_STATE = 7
@@ -101,19 +102,47 @@ BALL_TOL = 1e-9
 
 def filter_params(*, time_step, gamma, a_brake, max_velocity, max_acceleration,
                   return_speed, full_pose, kinetostatic, box: bool = True,
-                  smoothing: float = 0.0, cable_brake: float | None = None) -> np.ndarray:
+                  smoothing: float = 0.0, cable_brake: float | None = None,
+                  give_way: float = math.inf) -> np.ndarray:
     """The filter's parameters: s, -, m/s^2, m/s, m/s^2, m/s; the full pose (a twist of 6)
     or not (3); the kinetostatic barrier on; the box's barriers on (off with the virtual
     wall: limits.virtual_wall false lets the platform leave the box); the time constant (s)
     of the position the barriers are evaluated at (`barrier_position`; 0: the estimate); the
     cable brake (m/s^2): the most the filter decelerates for the kinetostatic limit (its rows'
     ramps) and while a margin is lost (the slowdown) (None: RAMP_SHARE of max_acceleration;
-    a robot with mass: a_brake, which its cables take without ringing; filter_tick says why)."""
+    a robot with mass: a_brake, which its cables take without ringing; filter_tick says why);
+    give_way (m/s^3): how fast the brakes for the cables may change the platform's
+    acceleration (`give_way_ramp`; inf: at once, as on ideal reels)."""
     if cable_brake is None:
         cable_brake = RAMP_SHARE * max_acceleration
     return np.array([time_step, gamma, a_brake, max_velocity, max_acceleration,
                      return_speed, 6 if full_pose else 3, 1.0 if kinetostatic else 0.0,
-                     1.0 if box else 0.0, smoothing, cable_brake], dtype=float)
+                     1.0 if box else 0.0, smoothing, cable_brake, give_way], dtype=float)
+
+
+def give_way_rate(cable_brake: float, lead: float) -> float:
+    """How fast (m/s^3) the filter's brakes for the cables may change the platform's
+    acceleration: the cable brake once per lag of the tension path (tension_path.lead_time),
+    inf without one. A step of the acceleration by da changes the cables' force by m da at
+    once, and the tension command, which takes the acceleration in, follows it only after
+    that lag: a step from the hand's acceleration (the admittance under a fast hand: 2 m/s^2)
+    to braking rang the weak cable slack (`give_way_ramp`)."""
+    return cable_brake / lead if lead > 0.0 else math.inf
+
+
+@_jit
+def give_way_ramp(previous, rate, brake, T):
+    """The most (m/s^2) a brake for the cables (the kinetostatic limit's rows, the lost-margin
+    slowdown) may decelerate the platform along a direction this tick: the cable brake, and
+    no more than `rate` T beyond the deceleration along it at the last tick (`previous`, m/s^2;
+    negative where the platform was accelerating along it). Where the hand accelerates the
+    platform faster than the tension path follows (a hand that takes the kinetostatic margin
+    away), the filter gives way: the platform yields to the hand, its acceleration taken down
+    at `rate`, instead of a step from accelerating to braking, which the cables take as a
+    step of m da and ring (exp3's 40 N push across 1-3 at 100 N/s on the dynamic plant: the
+    slowdown's step from +1.8 to -0.5 m/s^2 took cable 2 ~4 N below its command, slack for 7
+    ticks where the statics held the hand)."""
+    return min(brake, previous + rate * T)
 
 
 def filter_sizes(P: int, full_pose: bool) -> dict:
@@ -236,12 +265,12 @@ def filter_tick(reels, attachments, pi, pj, d_min, bounds, params, x, out):
     """One tick of the safety filter. pi, pj (P,): the watched pairs (0-based cables); d_min
     (P,) m; bounds (2, 3): the workspace box's lower and upper corners, m.
     x = [v_d (3), p (3), crossed (P), kappa (1), grad kappa (3), look ahead (1), (the full
-    pose only:) w_d (3), R (9), memory: p_c (3), p_c valid (1), v_prev (3), w_prev (3)]
-    (m/s, m, 0/1, N, N/m, m, rad/s, -, m, -, m/s, rad/s); the translating controller's
-    platform is level (R = I); the barriers are evaluated at `barrier_position`;
+    pose only:) w_d (3), R (9), memory: p_c (3), p_c valid (1), v_prev (3), w_prev (3),
+    a_prev (3)] (m/s, m, 0/1, N, N/m, m, rad/s, -, m, -, m/s, rad/s, m/s^2); the translating
+    controller's platform is level (R = I); the barriers are evaluated at `barrier_position`;
     out = [v (3), w (3), status (1), binding (1), smallest pair margin h (1, m; +inf with
     no pair), kappa used (1, N; nan when the barrier is off or undefined), barriers (1: how
-    many could bind this tick and went into the QP), next memory (10, at OUT_MEMORY), v_d
+    many could bind this tick and went into the QP), next memory (MEMORY, at OUT_MEMORY), v_d
     (3: the velocity asked for, passed through for the log, at OUT_V_D)]. Returns the
     status."""
     P = pi.shape[0]
@@ -266,7 +295,7 @@ def filter_tick(reels, attachments, pi, pj, d_min, bounds, params, x, out):
         for a in range(3):
             for b in range(3):
                 R[a, b] = x[14 + P + 3 * a + b]
-    prev = x[x.shape[0] - 6:]
+    prev = memory[4:10]
     rows = P + 6 + 2 + 2 * MAX_CUTS
     C = np.zeros((rows, n))
     d = np.empty(rows)
@@ -290,7 +319,10 @@ def filter_tick(reels, attachments, pi, pj, d_min, bounds, params, x, out):
     # +0.05 to -0.03 m/s in 40 ms, and cable 5 went slack; the limit is there to keep the
     # cables taut, and a braking they cannot take defeats it. The pair and box barriers keep
     # the full ramp (the crossing is the hard promise).
-    kin_ramp = min(params[F_CABLE_BRAKE], RAMP_SHARE * params[F_A_MAX]) * T
+    kin_brake = min(params[F_CABLE_BRAKE], RAMP_SHARE * params[F_A_MAX])
+    kin_ramp = kin_brake * T
+    give_way = params[F_GIVE_WAY]
+    a_prev = memory[10:13]
     smallest = math.inf
     # Only barriers that could bind this tick: the most a velocity within the speed limit can
     # take off a margin is g v_max.
@@ -340,22 +372,31 @@ def filter_tick(reels, attachments, pi, pj, d_min, bounds, params, x, out):
         for c in range(3):
             grad[c] = gk[c]
         k_next = kappa + T * (gk[0] * prev[0] + gk[1] * prev[1] + gk[2] * prev[2])
+        # The braking it may ask for along its gradient gives way to the acceleration the
+        # platform has (give_way_ramp).
+        braking = kin_brake
+        if gv > 0.0:
+            braking = give_way_ramp((gk[0] * a_prev[0] + gk[1] * a_prev[1]
+                                     + gk[2] * a_prev[2]) / gv, give_way, kin_brake, T)
         count = _add_barrier(C, d, kind, lost, lost_by, count, grad, n,
                              -barrier_rate(kappa, gv, params), kappa, k_next,
-                             BIND_KINETOSTATIC, prev, gv * kin_ramp, T)
+                             BIND_KINETOSTATIC, prev, gv * braking * T, T)
         speed = math.sqrt(prev[0] * prev[0] + prev[1] * prev[1] + prev[2] * prev[2])
         if ray < math.inf and speed > 0.0:
             # The look ahead (kinetostatics.kinetostatic_tick): the margin is lost `ray` m
             # along the last command; the speed along it brakes to stop there (the braking
             # curve), at most a_brake T a tick.
             along = 0.0
+            slowing = 0.0  # the deceleration along the last command at the last tick
             for c in range(3):
                 grad[c] = -prev[c] / speed
                 along += prev[c] / speed * prev[c]
+                slowing -= prev[c] / speed * a_prev[c]
             cap = face_cap(ray, params[F_A_BRAKE], T)
             count = _add_barrier(C, d, kind, lost, lost_by, count, grad, n,
-                                 -max(cap, along - kin_ramp), ray, ray - T * along,
-                                 BIND_KINETOSTATIC, prev, 1e300, T)
+                                 -max(cap, along - give_way_ramp(slowing, give_way, kin_brake,
+                                                                 T) * T),
+                                 ray, ray - T * along, BIND_KINETOSTATIC, prev, 1e300, T)
     base = count
     # While a margin is lost (by more than a tick's round-off) the platform is at a limit its
     # model says it should not be at (a hand force that changed, a kink of the kinetostatic
@@ -384,8 +425,12 @@ def filter_tick(reels, attachments, pi, pj, d_min, bounds, params, x, out):
         # met a slowdown at 1.8 m/s^2 the next tick, and that reversal rang cable 2 slack
         # within 20 ms.
         prev_speed = math.sqrt(prev[0] * prev[0] + prev[1] * prev[1] + prev[2] * prev[2])
-        speed_cap = min(v_max, max(slow_to, prev_speed
-                                   - min(params[F_CABLE_BRAKE], RAMP_SHARE * a_max) * T))
+        slowing = 0.0  # the deceleration along the last command at the last tick
+        if prev_speed > 0.0:
+            for c in range(3):
+                slowing -= prev[c] / prev_speed * a_prev[c]
+        speed_cap = min(v_max, max(slow_to, prev_speed - give_way_ramp(
+            slowing, give_way, min(params[F_CABLE_BRAKE], RAMP_SHARE * a_max), T) * T))
     z = np.empty(n)
     u = np.empty(rows)
     status = STATUS_HOLD
@@ -453,6 +498,8 @@ def filter_tick(reels, attachments, pi, pj, d_min, bounds, params, x, out):
         out[OUT_MEMORY + 4 + c] = out[c]
     for c in range(3):
         out[OUT_MEMORY + c] = p[c]
+        # The acceleration commanded (0 at the first tick: the platform starts at rest).
+        out[OUT_MEMORY + 10 + c] = (z[c] - prev[c]) / T if memory[3] != 0.0 else 0.0
     out[OUT_MEMORY + 3] = 1.0
     out[6] = status
     out[7] = binding

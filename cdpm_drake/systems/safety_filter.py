@@ -22,8 +22,8 @@ def build_safety_filter(builder, robot, *, d_min, params, full_pose, time_step):
     status (1), binding (1), pair_margin (1, m: the smallest watched pair's distance above its
     d_min), barriers (1), velocity_desired (3, m/s: the input, for the log),
     barrier_state_previous (7: its memory's [p_c, valid, v_prev], for the kinetostatic
-    block). Its memory: the position its barriers were evaluated at and the twist it
-    commanded last (for the acceleration limit)."""
+    block). Its memory: the position its barriers were evaluated at, the twist it commanded
+    last (for the acceleration limit) and that command's acceleration (for the give-way)."""
     P = robot.num_pairs
     s = filter_sizes(P, full_pose)
     reels, attachments = owned(robot.reels), owned(robot.attachments)

@@ -71,7 +71,7 @@ def test_pair_barrier_distance_and_gradient_match_independent_references():
 
 def _filter(robot, *, v_d, p, v_prev=(0.0, 0.0, 0.0), kappa=100.0, grad_kappa=(0, 0, 0),
             ray=math.inf, d_min=None, crossed=None, kinetostatic=True, full=False,
-            w_d=(0.0, 0.0, 0.0), cable_brake=None):
+            w_d=(0.0, 0.0, 0.0), cable_brake=None, give_way=math.inf, a_prev=(0.0, 0.0, 0.0)):
     """One filter tick on paper_7cable (level); returns (v, status, binding, out)."""
     i, j = robot.pair_index
     pi, pj = np.asarray(i, dtype=np.int64), np.asarray(j, dtype=np.int64)
@@ -80,7 +80,8 @@ def _filter(robot, *, v_d, p, v_prev=(0.0, 0.0, 0.0), kappa=100.0, grad_kappa=(0
     bounds = np.array([robot.workspace.lower, robot.workspace.upper])
     params = filter_params(time_step=T, gamma=GAMMA, a_brake=A_BRAKE, max_velocity=V_MAX,
                            max_acceleration=A_MAX, return_speed=0.02,
-                           full_pose=full, kinetostatic=kinetostatic, cable_brake=cable_brake)
+                           full_pose=full, kinetostatic=kinetostatic, cable_brake=cable_brake,
+                           give_way=give_way)
     s = filter_sizes(P, full)
     x = np.zeros(s["x"])
     x[0:3], x[3:6] = v_d, p
@@ -91,7 +92,9 @@ def _filter(robot, *, v_d, p, v_prev=(0.0, 0.0, 0.0), kappa=100.0, grad_kappa=(0
     if full:
         x[11 + P:14 + P] = w_d
         x[14 + P:23 + P] = np.eye(3).ravel()
-    x[-6:-3] = v_prev
+    # The memory: [p_c (3), valid (1), v_prev (3), w_prev (3), a_prev (3)].
+    x[s["memory_at"] + 4:s["memory_at"] + 7] = v_prev
+    x[s["memory_at"] + 10:s["memory_at"] + 13] = a_prev
     out = np.empty(s["out"])
     status = filter_tick(robot.reels, robot.attachments, pi, pj, dmin, bounds, params, x, out)
     return out[:3].copy(), int(status), int(out[7]), out
@@ -289,6 +292,30 @@ def test_a_lost_margin_slows_the_platform_at_the_cable_brake_deceleration(cable_
                                     cable_brake=cable_brake)
     assert binding & BIND_SPEED
     assert np.linalg.norm(v) == pytest.approx(0.3 - per_tick, abs=1e-9)
+
+
+@pytest.mark.parametrize("a_prev, give_way", [(0.5, 40.0), (0.5, math.inf), (-0.5, 40.0),
+                                               (0.3, 1000.0)])
+def test_the_lost_margin_slowdown_gives_way_to_the_acceleration_the_platform_has(a_prev,
+                                                                                 give_way):
+    """The test above's lost margin (the cap LOST_SPEED, far below) with a cable brake of
+    0.5 m/s^2, the platform at 0.3 m/s accelerating along its motion at a_prev (the last
+    command's acceleration, the filter's memory), the command asking for more: the cap comes
+    down from the speed by T min(0.5, -a_prev + give_way T) (safety_filter.give_way_ramp):
+    at 0.5 m/s^2 and 40 m/s^3 the speed still grows by T (0.5 - 40 T), where without the
+    give-way (inf) it drops by 0.5 T at once; already braking at 0.5 m/s^2 it goes on at the brake;
+    at 0.3 m/s^2 and a fast give-way the brake is reached at once."""
+    robot = _robot()
+    p = np.array(robot.workspace.center, dtype=float)
+    p[0] = robot.workspace.upper[0] + 0.003
+    v_prev = np.array([0.0, 0.3, 0.0])
+    v, status, binding, _ = _filter(robot, v_d=v_prev + [0.0, 0.003, 0.0], p=p,
+                                      v_prev=v_prev, kinetostatic=False, cable_brake=0.5,
+                                      give_way=give_way, a_prev=(0.0, a_prev, 0.0))
+    assert binding & BIND_SPEED
+    # Within the cutting planes' tolerance (BALL_TOL relative and absolute: 1.3e-9 m/s).
+    assert np.linalg.norm(v) == pytest.approx(0.3 - T * min(0.5, -a_prev + give_way * T),
+                                              abs=3e-9)
 
 
 def test_a_crossed_pair_counts_its_distance_negative_and_is_walked_back():
