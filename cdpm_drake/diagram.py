@@ -108,9 +108,8 @@ class BuildOptions:
     # Also stream every logged signal to this file as the run goes (hardware/tick_log.py):
     # a real-time run must not lose its log if the process dies.
     tick_log: str | None = None
-    # Fuse the blocks' and the logger's C++ wiring (Selectors) into one system
-    # (systems._wiring.fuse_wiring): the same connections and values, about 5 % less time a
-    # tick. False keeps each block's own wiring, as the blocks build it.
+    # Fuse the blocks' and the logger's C++ wiring (Selectors) into one system (systems/
+    # wiring.py): the same connections and values, ~5 % less time a tick; False: as built.
     fuse_wiring: bool = True
 
 
@@ -255,8 +254,8 @@ def build_diagram(scenario: Scenario | ResolvedScenario,
             blocks["tension_damping"].GetOutputPort("ringing_previous") if damped else lengths,
             "tension_ringing")
     builder.Connect(command, plant.GetInputPort("reel_velocity_command"))
-    unseen = getattr(scenario.plant, "tension_sensor", "") == "none"  # a model sees it ring
-    if "tension_distribution" in blocks and unseen:
+    # Without a tension sensor, a model of the platform's modes sees what the encoders cannot.
+    if "tension_distribution" in blocks and getattr(scenario.plant, "tension_sensor", "") == "none":
         add_unseen_ringing(builder, blocks, robot, floor=controller.tension_floor, p_WP=p_WP,
                            R_WP=R_WP, velocity_command=velocity_command,
                            omega_command=omega_command, F_H=force_sensor.GetOutputPort("F_H"),
@@ -391,8 +390,8 @@ def safety_filter_params(resolved, *, full: bool, kinetostatic: bool):
 
     scenario = resolved.scenario
     f = scenario.safety_filter
-    a_brake = filter_braking(resolved)
-    mass = _robot_with_mass(resolved)
+    a_brake, mass = filter_braking(resolved), _robot_with_mass(resolved)
+    lead = lead_time(resolved.time_step, resolved.robot.dynamics.bandwidth)
     return filter_params(
         time_step=resolved.time_step, gamma=f.gamma, a_brake=a_brake,
         max_velocity=resolved.max_velocity,
@@ -400,9 +399,7 @@ def safety_filter_params(resolved, *, full: bool, kinetostatic: bool):
         return_speed=f.return_speed, full_pose=full, kinetostatic=kinetostatic,
         box=scenario.limits.virtual_wall, smoothing=float(f.position_smoothing),
         cable_brake=a_brake if mass else None,
-        give_way=give_way_rate(a_brake, lead_time(resolved.time_step,
-                                                  resolved.robot.dynamics.bandwidth))
-        if mass else np.inf)
+        give_way=give_way_rate(a_brake, lead) if mass else np.inf)
 
 
 def _add_safety_filter(builder, blocks, resolved, velocity_desired, omega_desired, p_WP, R_WP,
@@ -455,9 +452,8 @@ def _sensor_lag(cfg) -> float:
     """The tension sensor's lag, s: the dynamic plant's current filter or load cell
     bandwidth; 0 for real reels (their drives' filters are not known here)."""
     if isinstance(cfg, DynamicReelsConfig):
-        if cfg.tension_sensor == "load_cell":
-            return 1.0 / (2.0 * np.pi * cfg.load_cell.bandwidth)
-        return float(cfg.drive_torque.filter_time_constant)
+        return (1.0 / (2.0 * np.pi * cfg.load_cell.bandwidth) if cfg.tension_sensor ==
+                "load_cell" else float(cfg.drive_torque.filter_time_constant))
     return 0.0
 
 
@@ -672,9 +668,8 @@ def logged_source(diagram, key: str):
 
 def _block_has_output(diagram, block: str, port_name: str) -> bool:
     flat = getattr(diagram, "flat_blocks", {}).get(block)
-    if flat is not None:
-        return port_name in flat["outputs"]
-    return diagram.GetSubsystemByName(block).HasOutputPort(port_name)
+    return (port_name in flat["outputs"] if flat is not None
+            else diagram.GetSubsystemByName(block).HasOutputPort(port_name))
 
 
 def make_plant(scenario: Scenario | ResolvedScenario, robot=None):
@@ -790,9 +785,8 @@ def _logged_ports(blocks):
 
 def _has_output(block, port_name: str) -> bool:
     """A block (FlatBlock or system) has an output port of that name."""
-    if isinstance(block, FlatBlock):
-        return port_name in block.outputs
-    return block.HasOutputPort(port_name)
+    return (port_name in block.outputs if isinstance(block, FlatBlock)
+            else block.HasOutputPort(port_name))
 
 
 def _add_tick_log(builder, blocks, T, path, robot, scenario):
