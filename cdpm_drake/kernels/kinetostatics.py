@@ -211,10 +211,17 @@ def margin(reels, attachments, rows, p, R, w, floor, ceiling, scratch, soft=0.0)
                      scratch_views(scratch), soft)
 
 
+# What margin_in computes: kappa, t* or both (the other is nan; each is a max-min of its own).
+MARGIN_KAPPA, MARGIN_T_STAR, MARGIN_BOTH = 1, 2, 3
+
+
 @_jit
-def margin_in(reels, attachments, rows, p, R, w, floor, ceiling, views, soft=0.0):
+def margin_in(reels, attachments, rows, p, R, w, floor, ceiling, views, soft=0.0,
+              parts=MARGIN_BOTH):
     """`margin` on the work arrays already carved (`scratch_views`): a kernel that takes
-    several margins a tick carves them once (carving costs ~1 us a call)."""
+    several margins a tick carves them once (carving costs ~1 us a call). parts: what to
+    compute, MARGIN_KAPPA, MARGIN_T_STAR or MARGIN_BOTH (the one left out is nan): the look
+    ahead needs kappa alone and the monitor t* alone, each the same numbers as with both."""
     u, Rb, L, W6, W, A, V, beta, perm, T_p, n, N, a, C, lam, lam2, C1 = views[:17]
     m = reels.shape[0]
     posed_cables(reels, attachments, p, R, u, Rb, L)
@@ -233,16 +240,19 @@ def margin_in(reels, attachments, rows, p, R, w, floor, ceiling, views, soft=0.0
         null_vector(Vr, br, n, c)
         for i in range(m):
             N[i, c] = n[i]
-    for i in range(m):
-        a[i] = T_p[i] - floor
-        a[m + i] = ceiling - T_p[i]
-        for c in range(k):
-            C[i, c] = N[i, c]
-            C[m + i, c] = -N[i, c]
-    kappa = max_min_lines(a, C[:, :k], lam[:k])
-    if soft > 0.0 and math.isfinite(kappa):
-        kappa = soft_max_min_lines(a, C[:, :k], lam[:k], soft, views[17])
-    t_star = max_min_lines(T_p, N[:, :k], lam2[:k])
+    kappa = t_star = math.nan
+    if parts & MARGIN_KAPPA:
+        for i in range(m):
+            a[i] = T_p[i] - floor
+            a[m + i] = ceiling - T_p[i]
+            for c in range(k):
+                C[i, c] = N[i, c]
+                C[m + i, c] = -N[i, c]
+        kappa = max_min_lines(a, C[:, :k], lam[:k])
+        if soft > 0.0 and math.isfinite(kappa):
+            kappa = soft_max_min_lines(a, C[:, :k], lam[:k], soft, views[17])
+    if parts & MARGIN_T_STAR:
+        t_star = max_min_lines(T_p, N[:, :k], lam2[:k])
     return kappa, t_star
 
 
@@ -485,7 +495,7 @@ RAY_TOLERANCE = 0.5
 @_jit
 def _margin_at(reels, attachments, params, views, p, R, w, floor):
     return margin_in(reels, attachments, int(params[P_ROWS]), p, R, w, floor,
-                     params[P_CEILING], views, params[P_SOFT])[0]
+                     params[P_CEILING], views, params[P_SOFT], MARGIN_KAPPA)[0]
 
 
 @_jit
