@@ -580,7 +580,9 @@ def gradient_by_differences(reels, attachments, params, views, p, R, w, floor, k
         for c in range(3):
             q[c] = p[c]
         q[k] += FD_STEP_P
-        kq = _margin_at(reels, attachments, params, views, q, R, w, floor)
+        # By the QR, as kappa: a difference of two methods' round-off over 0.1 mm is noise.
+        kq = margin_in(reels, attachments, int(params[P_ROWS]), q, R, w, floor,
+                       params[P_CEILING], views, params[P_SOFT], MARGIN_KAPPA)[0]
         out[4 + k] = (kq - kappa) / FD_STEP_P if math.isfinite(kq) else 0.0
 
 
