@@ -42,7 +42,7 @@ from cdpm_drake.kernels.pose import posed_cables, solve_spd, wrench_columns
 from cdpm_drake.kernels.full_pose import held_wrench
 from cdpm_drake.kernels.safety_filter import BARRIER_STATE, barrier_position
 from cdpm_drake.kernels.nullspace import RANK_TOL, null_vector, particular_solution, pivoted_qr
-from cdpm_drake.kernels.tension import max_min_lines
+from cdpm_drake.kernels.tension import max_min_1d, max_min_lines
 
 _jit = numba.njit(cache=True, error_model="numpy")
 
@@ -211,10 +211,17 @@ def margin(reels, attachments, rows, p, R, w, floor, ceiling, scratch, soft=0.0)
                      scratch_views(scratch), soft)
 
 
+# What margin_in computes: kappa, t* or both (the other is nan; each is a max-min of its own).
+MARGIN_KAPPA, MARGIN_T_STAR, MARGIN_BOTH = 1, 2, 3
+
+
 @_jit
-def margin_in(reels, attachments, rows, p, R, w, floor, ceiling, views, soft=0.0):
+def margin_in(reels, attachments, rows, p, R, w, floor, ceiling, views, soft=0.0,
+              parts=MARGIN_BOTH):
     """`margin` on the work arrays already carved (`scratch_views`): a kernel that takes
-    several margins a tick carves them once (carving costs ~1 us a call)."""
+    several margins a tick carves them once (carving costs ~1 us a call). parts: what to
+    compute, MARGIN_KAPPA, MARGIN_T_STAR or MARGIN_BOTH (the one left out is nan): the look
+    ahead needs kappa alone and the monitor t* alone, each the same numbers as with both."""
     u, Rb, L, W6, W, A, V, beta, perm, T_p, n, N, a, C, lam, lam2, C1 = views[:17]
     m = reels.shape[0]
     posed_cables(reels, attachments, p, R, u, Rb, L)
@@ -233,16 +240,19 @@ def margin_in(reels, attachments, rows, p, R, w, floor, ceiling, views, soft=0.0
         null_vector(Vr, br, n, c)
         for i in range(m):
             N[i, c] = n[i]
-    for i in range(m):
-        a[i] = T_p[i] - floor
-        a[m + i] = ceiling - T_p[i]
-        for c in range(k):
-            C[i, c] = N[i, c]
-            C[m + i, c] = -N[i, c]
-    kappa = max_min_lines(a, C[:, :k], lam[:k])
-    if soft > 0.0 and math.isfinite(kappa):
-        kappa = soft_max_min_lines(a, C[:, :k], lam[:k], soft, views[17])
-    t_star = max_min_lines(T_p, N[:, :k], lam2[:k])
+    kappa = t_star = math.nan
+    if parts & MARGIN_KAPPA:
+        for i in range(m):
+            a[i] = T_p[i] - floor
+            a[m + i] = ceiling - T_p[i]
+            for c in range(k):
+                C[i, c] = N[i, c]
+                C[m + i, c] = -N[i, c]
+        kappa = max_min_lines(a, C[:, :k], lam[:k])
+        if soft > 0.0 and math.isfinite(kappa):
+            kappa = soft_max_min_lines(a, C[:, :k], lam[:k], soft, views[17])
+    if parts & MARGIN_T_STAR:
+        t_star = max_min_lines(T_p, N[:, :k], lam2[:k])
     return kappa, t_star
 
 
@@ -255,7 +265,7 @@ def margin_scratch(m: int):
     size = (6 * m + 6 * m + m + 6 * m * 4 + 6 + 2 * m + m * m + K + K * m + 3 * m
             + 2 * K + 3 * m + m * m + K + (m + 1) * (m + 2) + 36 + 12 + (m + 1)
             + 3 + 9 + 6 + 3 + 3 + 3)
-    ints = np.zeros(1 + 6 + m + 1, dtype=np.int64)
+    ints = np.zeros(1 + 6 + m + 1 + m, dtype=np.int64)
     ints[0] = m
     return np.zeros(size), ints
 
@@ -274,7 +284,8 @@ def _take1(buf, o, r):
 def scratch_views(scratch):
     """The work arrays in `margin_scratch`'s buffers (views): u, Rb, L, W6, W, A, V, beta,
     perm, T_p, n, N, a, C, lam, lam2, C1 (margin's), then soft_max_min_lines' work,
-    margin_gradient's and kinetostatic_tick's (tuples)."""
+    margin_gradient's and kinetostatic_tick's (tuples), and the column order of
+    `margin_by_elimination`."""
     buf, ints = scratch
     m = ints[0]
     K = 2 * m
@@ -315,9 +326,10 @@ def scratch_views(scratch):
     grad, o = _take1(buf, o, 3)
     perm = ints[1:7]
     J = ints[7:8 + m]
+    cols = ints[8 + m:8 + 2 * m]
     return (u, Rb, L, W6, W, A, V, beta, perm, T_p, n, N, a, C, lam, lam2, C1,
             (lines, wts, g, trial, step, H), (y, M, J, G, nu, rhs, sol),
-            (p, R, w, zero, q, grad))
+            (p, R, w, zero, q, grad), cols)
 
 
 # Lines within this of the hard margin (relative to 1 + |kappa|, N) are its active set: the
@@ -484,8 +496,79 @@ RAY_TOLERANCE = 0.5
 
 @_jit
 def _margin_at(reels, attachments, params, views, p, R, w, floor):
-    return margin_in(reels, attachments, int(params[P_ROWS]), p, R, w, floor,
-                     params[P_CEILING], views, params[P_SOFT])[0]
+    rows = int(params[P_ROWS])
+    if params[P_SOFT] == 0.0 and reels.shape[0] == rows + 1:
+        return margin_by_elimination(reels, attachments, rows, p, R, w, floor,
+                                     params[P_CEILING], views)
+    return margin_in(reels, attachments, rows, p, R, w, floor, params[P_CEILING], views,
+                     params[P_SOFT], MARGIN_KAPPA)[0]
+
+
+@_jit
+def margin_by_elimination(reels, attachments, rows, p, R, w, floor, ceiling, views):
+    """The hard margin kappa of `margin` for a robot with one internal force (m = rows + 1),
+    by Gaussian elimination with complete pivoting instead of the pivoted QR: the margin
+    is the max-min of the lines over the line of tensions {T: W T = -w}, whichever point
+    T_p and direction n describe it (max_min_1d is exact and invariant to both), and the
+    elimination costs a quarter of the QR's flops. Equal to `margin`'s kappa to round-off
+    (1e-9 relative where tested); -inf where the elimination's last pivot is below RANK_TOL
+    of its first (as the QR's rank test, on the same matrix). The look ahead's samples."""
+    u, Rb, L, W6, W = views[0], views[1], views[2], views[3], views[4]
+    beta, T_p, n, a, C, lam, x = views[7], views[9], views[10], views[12], views[13], \
+        views[14], views[16]
+    cols = views[20]
+    m = reels.shape[0]
+    posed_cables(reels, attachments, p, R, u, Rb, L)
+    wrench_columns(u, Rb, W6)
+    for r in range(rows):  # [W | -w] in W and beta, eliminated in place
+        for i in range(m):
+            W[r, i] = W6[r, i]
+        beta[r] = -w[r]
+    for i in range(m):
+        cols[i] = i
+    first = 0.0
+    for k in range(rows):
+        bi, bj, big = k, k, -1.0
+        for i in range(k, rows):
+            for j in range(k, m):
+                if abs(W[i, j]) > big:
+                    bi, bj, big = i, j, abs(W[i, j])
+        if k == 0:
+            first = big
+        if not big > RANK_TOL * first:
+            return -math.inf
+        if bi != k:
+            for j in range(m):
+                W[k, j], W[bi, j] = W[bi, j], W[k, j]
+            beta[k], beta[bi] = beta[bi], beta[k]
+        if bj != k:
+            for i in range(rows):
+                W[i, k], W[i, bj] = W[i, bj], W[i, k]
+            cols[k], cols[bj] = cols[bj], cols[k]
+        for i in range(k + 1, rows):
+            f = W[i, k] / W[k, k]
+            for j in range(k, m):
+                W[i, j] -= f * W[k, j]
+            beta[i] -= f * beta[k]
+    # T_p: the free cable at zero; n: the free cable at one, the others by back substitution.
+    for i in range(rows - 1, -1, -1):
+        s, t = beta[i], -W[i, rows]
+        for j in range(i + 1, rows):
+            s -= W[i, j] * x[j]
+            t -= W[i, j] * n[j]
+        x[i] = s / W[i, i]
+        n[i] = t / W[i, i]
+    for i in range(rows):
+        T_p[cols[i]] = x[i]
+        lam[cols[i]] = n[i]
+    T_p[cols[rows]] = 0.0
+    lam[cols[rows]] = 1.0
+    for i in range(m):
+        a[i] = T_p[i] - floor
+        a[m + i] = ceiling - T_p[i]
+        C[i, 0] = lam[i]
+        C[m + i, 0] = -lam[i]
+    return max_min_1d(a[:2 * m], C[:2 * m, 0])[0]
 
 
 @_jit
@@ -497,7 +580,9 @@ def gradient_by_differences(reels, attachments, params, views, p, R, w, floor, k
         for c in range(3):
             q[c] = p[c]
         q[k] += FD_STEP_P
-        kq = _margin_at(reels, attachments, params, views, q, R, w, floor)
+        # By the QR, as kappa: a difference of two methods' round-off over 0.1 mm is noise.
+        kq = margin_in(reels, attachments, int(params[P_ROWS]), q, R, w, floor,
+                       params[P_CEILING], views, params[P_SOFT], MARGIN_KAPPA)[0]
         out[4 + k] = (kq - kappa) / FD_STEP_P if math.isfinite(kq) else 0.0
 
 

@@ -39,7 +39,7 @@ import math
 import numba
 import numpy as np
 
-from cdpm_drake.kernels.kinetostatics import margin_in, scratch_views
+from cdpm_drake.kernels.kinetostatics import MARGIN_T_STAR, margin_in, scratch_views
 from cdpm_drake.kernels.full_pose import held_wrench
 
 _jit = numba.njit(cache=True, error_model="numpy")
@@ -139,7 +139,7 @@ def monitor_tick(reels, attachments, params, scratch, x, out):
     EA = params[M_EA]
     held_wrench(R, params[M_MASS:M_MASS + 4], F, zero, w)
     t_star = margin_in(reels, attachments, int(params[M_ROWS]), p, R, w, 0.0, math.inf,
-                       views)[1]
+                       views, 0.0, MARGIN_T_STAR)[1]
     L = views[2]  # the cables' lengths at (p, R): margin posed them
     r = out[4:4 + m]
     slack_cable, slack_value = -1, 0.0

@@ -36,14 +36,17 @@ SPAN_TOL = 1e-9
 
 
 @_jit
-def _step_direction(Cs, n, active, q, p, z, r):
+def _step_direction(Cs, n, active, q, p, z, r, Qw, Rw):
     """For the pending constraint p: r, the coefficients of its normal on the active normals,
     and z, what is left of it orthogonal to them, from a QR factorisation of the active
     normals by modified Gram-Schmidt, each projection done twice (stable where the normals
     are nearly dependent). Returns |z|^2 (0 when q == n), or -1 when the active normals are
-    numerically dependent."""
-    Q = np.empty((q + 1, n))
-    R = np.zeros((q + 1, q + 1))
+    numerically dependent. Qw, Rw: work buffers of >= (n + 1) n and (n + 1)^2 floats."""
+    Q = Qw[:(q + 1) * n].reshape((q + 1, n))
+    R = Rw[:(q + 1) * (q + 1)].reshape((q + 1, q + 1))
+    for a in range(q + 1):
+        for b in range(q + 1):
+            R[a, b] = 0.0
     for a in range(q + 1):
         row = active[a] if a < q else p
         for k in range(n):
@@ -79,22 +82,46 @@ def _step_direction(Cs, n, active, q, p, z, r):
     return zz
 
 
+def qp_scratch(rows: int, n: int):
+    """The work arrays of `solve_qp_in` for at most `rows` constraints on n unknowns, as
+    two flat buffers (floats, integers) a caller allocates once (`owned_scratch`)."""
+    size = n * (rows + 5) + 2 * rows + (n + 1) * n + (n + 1) * (n + 1)
+    return np.zeros(size), np.zeros(n, dtype=np.int64)
+
+
 @_jit
 def solve_qp(w, z0, C, d, count, z, u, max_iterations):
     """min 1/2 sum w_i (z_i - z0_i)^2 subject to C[:count] z >= d[:count] (module docstring).
     w (n,) > 0 the weights, z0 (n,), C (>= count, n), d (>= count,); the solution goes into
     z (n,) and the constraints' multipliers into u (>= count,) (zero for inactive ones).
     Returns (status, number of constraints active at the optimum): QP_OPTIMAL, QP_INFEASIBLE
-    (no z satisfies the constraints; z then holds the last iterate) or QP_MAX_ITERATIONS."""
+    (no z satisfies the constraints; z then holds the last iterate) or QP_MAX_ITERATIONS.
+    Allocates its work arrays; `solve_qp_in` takes them from the caller."""
     n = w.size
-    sw = np.empty(n)
+    floats = np.empty(n * (count + 5) + 2 * count + (n + 1) * n + (n + 1) * (n + 1))
+    return solve_qp_in(w, z0, C, d, count, z, u, max_iterations,
+                       (floats, np.empty(n, dtype=np.int64)))
+
+
+@_jit
+def solve_qp_in(w, z0, C, d, count, z, u, max_iterations, work):
+    """`solve_qp` in the caller's work arrays, work = (floats, ints) of `qp_scratch`'s sizes
+    for >= count rows (no allocation): the same numbers."""
+    n = w.size
+    floats, ints = work
+    o = 0
+    sw = floats[o:o + n]
+    o += n
     for k in range(n):
         sw[k] = math.sqrt(w[k])
     # y = sqrt(w) (z - z0): the constraints become Cs y >= ds with Cs = C diag(1/sqrt(w)),
     # ds = d - C z0, each row scaled to unit norm (the multipliers are rescaled at the end).
-    Cs = np.empty((count, n))
-    ds = np.empty(count)
-    scale = np.empty(count)
+    Cs = floats[o:o + count * n].reshape((count, n))
+    o += count * n
+    ds = floats[o:o + count]
+    o += count
+    scale = floats[o:o + count]
+    o += count
     for j in range(count):
         s = d[j]
         nn = 0.0
@@ -111,12 +138,17 @@ def solve_qp(w, z0, C, d, count, z, u, max_iterations):
         else:
             ds[j] = s  # a constraint 0 >= s: met or infeasible, nothing to move
         u[j] = 0.0
-    y = np.zeros(n)
-    active = np.empty(n, dtype=np.int64)
-    ua = np.zeros(n)  # multipliers of the active constraints
+    y = floats[o:o + n]
+    ua = floats[o + n:o + 2 * n]  # multipliers of the active constraints
+    r = floats[o + 2 * n:o + 3 * n]
+    zdir = floats[o + 3 * n:o + 4 * n]
+    Qw = floats[o + 4 * n:o + 4 * n + (n + 1) * n]
+    Rw = floats[o + 4 * n + (n + 1) * n:]
+    for k in range(n):
+        y[k] = 0.0
+        ua[k] = 0.0
+    active = ints[:n]
     q = 0
-    r = np.empty(n)
-    zdir = np.empty(n)
     status = QP_MAX_ITERATIONS
     iterations = 0
     while iterations < max_iterations:
@@ -145,7 +177,7 @@ def solve_qp(w, z0, C, d, count, z, u, max_iterations):
         added = False
         while iterations < max_iterations and not added:
             iterations += 1
-            zz = _step_direction(Cs, n, active, q, p, zdir, r)
+            zz = _step_direction(Cs, n, active, q, p, zdir, r, Qw, Rw)
             if zz < 0.0:
                 return QP_MAX_ITERATIONS, q  # dependent active normals: cannot happen in exact
             # The largest dual step that keeps the active multipliers >= 0.

@@ -57,7 +57,7 @@ import numpy as np
 
 from cdpm_drake.kernels.interference import closest_points
 from cdpm_drake.kernels.safety_limits import face_cap
-from cdpm_drake.kernels.qp import QP_OPTIMAL, solve_qp
+from cdpm_drake.kernels.qp import QP_OPTIMAL, qp_scratch, solve_qp_in
 
 _jit = numba.njit(cache=True, error_model="numpy")
 
@@ -152,6 +152,23 @@ def filter_sizes(P: int, full_pose: bool) -> dict:
     return {"x": x + MEMORY, "out": OUT_V_D + 3, "memory": MEMORY, "memory_at": x}
 
 
+def filter_scratch(P: int, full_pose: bool):
+    """`filter_tick`'s work arrays for P watched pairs, its QP's included, as two flat
+    buffers (floats, integers) its block allocates once: a tick allocates nothing."""
+    n = 6 if full_pose else 3
+    rows = _rows(P)
+    qf, qi = qp_scratch(rows, n)
+    floats = 3 + 9 + 2 * n + 3 * rows + rows * n + 6 + 3 + n
+    return (np.zeros(floats + qf.size), np.zeros(2 * rows + qi.size, dtype=np.int64))
+
+
+@_jit
+def _rows(P):
+    """The most rows filter_tick's QP has: a barrier per pair, per box face, the kinetostatic
+    limit and its look ahead, and the cutting planes."""
+    return P + 6 + 2 + 2 * MAX_CUTS
+
+
 @_jit
 def barrier_position(p, memory, T, tau, out):
     """The position the barriers are evaluated at, into out (3, m): the last one advanced by
@@ -176,8 +193,6 @@ def pair_barrier(reels, attachments, i, j, p, R, grad):
     points move, dB = v + w x R b, and d d = (1 - s) n . dB_i - (1 - t) n . dB_j with n the
     unit vector between the closest points (interference.py's module docstring; (t - s) n for
     the translation). Zero gradient where the cables touch (d == 0)."""
-    Bi = np.empty(3)
-    Bj = np.empty(3)
     for r in range(3):
         Rbi = Rbj = 0.0
         for c in range(3):
@@ -185,12 +200,13 @@ def pair_barrier(reels, attachments, i, j, p, R, grad):
             Rbj += R[r, c] * attachments[j, c]
         grad[r] = Rbi  # R b_i, R b_j kept in grad's slots until the end
         grad[3 + r] = Rbj
-        Bi[r] = p[r] + Rbi
-        Bj[r] = p[r] + Rbj
+    # The attachment points B = p + R b (scalars: no work array a call).
+    bi0, bi1, bi2 = p[0] + grad[0], p[1] + grad[1], p[2] + grad[2]
+    bj0, bj1, bj2 = p[0] + grad[3], p[1] + grad[4], p[2] + grad[5]
     dist, s, t, dx, dy, dz, _, _, _, _, _, _ = closest_points(
-        reels[i, 0] - Bi[0], reels[i, 1] - Bi[1], reels[i, 2] - Bi[2],
-        reels[j, 0] - Bj[0], reels[j, 1] - Bj[1], reels[j, 2] - Bj[2],
-        Bi[0] - Bj[0], Bi[1] - Bj[1], Bi[2] - Bj[2])
+        reels[i, 0] - bi0, reels[i, 1] - bi1, reels[i, 2] - bi2,
+        reels[j, 0] - bj0, reels[j, 1] - bj1, reels[j, 2] - bj2,
+        bi0 - bj0, bi1 - bj1, bi2 - bj2)
     if dist == 0.0:
         for k in range(6):
             grad[k] = 0.0
@@ -261,9 +277,10 @@ def _add_barrier(C, d, kind, lost, lost_by, count, grad, n, rhs, h, h_next, k, p
 
 
 @_jit
-def filter_tick(reels, attachments, pi, pj, d_min, bounds, params, x, out):
+def filter_tick(reels, attachments, pi, pj, d_min, bounds, params, scratch, x, out):
     """One tick of the safety filter. pi, pj (P,): the watched pairs (0-based cables); d_min
-    (P,) m; bounds (2, 3): the workspace box's lower and upper corners, m.
+    (P,) m; bounds (2, 3): the workspace box's lower and upper corners, m; scratch:
+    `filter_scratch(P, full pose)`, the block's work arrays.
     x = [v_d (3), p (3), crossed (P), kappa (1), grad kappa (3), look ahead (1), (the full
     pose only:) w_d (3), R (9), memory: p_c (3), p_c valid (1), v_prev (3), w_prev (3),
     a_prev (3)] (m/s, m, 0/1, N, N/m, m, rad/s, -, m, -, m/s, rad/s, m/s^2); the translating
@@ -278,15 +295,30 @@ def filter_tick(reels, attachments, pi, pj, d_min, bounds, params, x, out):
     T = params[F_T]
     v_max, a_max = params[F_V_MAX], params[F_A_MAX]
     memory = x[x.shape[0] - MEMORY:]
-    p = np.empty(3)
+    rows = _rows(P)
+    floats, ints = scratch
+    p, R, target, w = floats[0:3], floats[3:12].reshape((3, 3)), floats[12:12 + n], \
+        floats[12 + n:12 + 2 * n]
+    o = 12 + 2 * n
+    d, lost_by, u = floats[o:o + rows], floats[o + rows:o + 2 * rows], \
+        floats[o + 2 * rows:o + 3 * rows]
+    o += 3 * rows
+    C = floats[o:o + rows * n].reshape((rows, n))
+    o += rows * n
+    grad, ahead, z = floats[o:o + 6], floats[o + 6:o + 9], floats[o + 9:o + 9 + n]
+    o += 9 + n
+    kind, lost = ints[:rows], ints[rows:2 * rows]
+    qp_work = (floats[o:], ints[2 * rows:])
     barrier_position(x[3:6], memory, T, params[F_SMOOTHING], p)
     crossed = x[6:6 + P]
     kappa = x[6 + P]
     gk = x[7 + P:10 + P]
     ray = x[10 + P]
-    R = np.eye(3)
-    target = np.empty(n)
-    w = np.ones(n)
+    for a in range(3):
+        for b in range(3):
+            R[a, b] = 1.0 if a == b else 0.0
+    for c in range(n):
+        w[c] = 1.0
     for c in range(3):
         target[c] = x[c]
     if n == 6:
@@ -296,13 +328,11 @@ def filter_tick(reels, attachments, pi, pj, d_min, bounds, params, x, out):
             for b in range(3):
                 R[a, b] = x[14 + P + 3 * a + b]
     prev = memory[4:10]
-    rows = P + 6 + 2 + 2 * MAX_CUTS
-    C = np.zeros((rows, n))
-    d = np.empty(rows)
-    kind = np.empty(rows, dtype=np.int64)
-    lost = np.zeros(rows, dtype=np.bool_)  # a barrier whose margin is already lost (h < 0)
-    lost_by = np.zeros(rows)  # ... by how much of the platform's travel, m
-    grad = np.empty(6)
+    for r in range(rows):
+        for c in range(n):
+            C[r, c] = 0.0
+        lost[r] = 0  # a barrier whose margin is already lost (h < 0)
+        lost_by[r] = 0.0  # ... by how much of the platform's travel, m
     count = 0
     # A barrier may ask its rate to change by at most RAMP_SHARE a_max T a tick (per unit of
     # its translation gradient): feasible within the acceleration limit (all of it would make
@@ -327,7 +357,6 @@ def filter_tick(reels, attachments, pi, pj, d_min, bounds, params, x, out):
     # Only barriers that could bind this tick: the most a velocity within the speed limit can
     # take off a margin is g v_max.
     v_bound = v_max
-    ahead = np.empty(3)
     for c in range(3):
         ahead[c] = p[c] + T * prev[c]
     for q in range(P):
@@ -431,8 +460,6 @@ def filter_tick(reels, attachments, pi, pj, d_min, bounds, params, x, out):
                 slowing -= prev[c] / prev_speed * a_prev[c]
         speed_cap = min(v_max, max(slow_to, prev_speed - give_way_ramp(
             slowing, give_way, min(params[F_CABLE_BRAKE], RAMP_SHARE * a_max), T) * T))
-    z = np.empty(n)
-    u = np.empty(rows)
     status = STATUS_HOLD
     for stage in range(2):
         # Stage 0: everything; 1: lost margins only kept, not restored.
@@ -447,7 +474,7 @@ def filter_tick(reels, attachments, pi, pj, d_min, bounds, params, x, out):
         count = base
         ok = False
         for _ in range(MAX_CUTS + 1):
-            qp_status, _ = solve_qp(w, target, C, d, count, z, u, 200)
+            qp_status, _ = solve_qp_in(w, target, C, d, count, z, u, 200, qp_work)
             if qp_status != QP_OPTIMAL:
                 break
             speed = math.sqrt(z[0] * z[0] + z[1] * z[1] + z[2] * z[2])

@@ -3,9 +3,9 @@ Jacobian mapping: the twist closest to the commanded one that the barriers allow
 
 import numpy as np
 
-from cdpm_drake.kernels.call import bind, owned
-from cdpm_drake.kernels.safety_filter import (BARRIER_STATE, OUT_MEMORY, OUT_V_D, filter_sizes,
-                                              filter_tick)
+from cdpm_drake.kernels.call import bind, owned, owned_scratch
+from cdpm_drake.kernels.safety_filter import (BARRIER_STATE, OUT_MEMORY, OUT_V_D, filter_scratch,
+                                              filter_sizes, filter_tick)
 from cdpm_drake.systems.kernel_system import KernelSystem, build_kernel_block
 
 
@@ -33,11 +33,12 @@ def build_safety_filter(builder, robot, *, d_min, params, full_pose, time_step):
     dmin = owned(np.asarray(d_min, dtype=float).reshape(P))
     bounds = owned(np.array([robot.workspace.lower, robot.workspace.upper]))
     par = owned(params)
+    scratch = owned_scratch(filter_scratch(P, full_pose))  # its work arrays: none a tick
     example = np.zeros(s["x"])
     example[3:6] = robot.workspace.center
     if full_pose:
         example[14 + P:23 + P] = np.eye(3).ravel()
-    solve = bind(filter_tick, reels, attachments, pi, pj, dmin, bounds, par, example,
+    solve = bind(filter_tick, reels, attachments, pi, pj, dmin, bounds, par, scratch, example,
                  np.empty(s["out"]))
 
     inputs = [("velocity_desired", 3), ("p_WP", 3)]
@@ -49,7 +50,7 @@ def build_safety_filter(builder, robot, *, d_min, params, full_pose, time_step):
     outputs = [("velocity_command", 0, 3)] + ([("omega_command", 3, 3)] if full_pose else [])
     build_kernel_block(
         builder, SafetyFilterSolve(s["x"], s["out"], solve,
-                                   (reels, attachments, pi, pj, dmin, bounds, par)),
+                                   (reels, attachments, pi, pj, dmin, bounds, par, scratch)),
         inputs=inputs, memory=(s["memory"], None),
         outputs=outputs + [("status", 6, 1), ("binding", 7, 1), ("pair_margin", 8, 1),
                            ("barriers", 10, 1), ("velocity_desired", OUT_V_D, 3)],

@@ -57,7 +57,7 @@ from pathlib import Path
 import numba
 import numpy as np
 
-from cdpm_drake.kernels.qp import QP_OPTIMAL, solve_qp
+from cdpm_drake.kernels.qp import QP_OPTIMAL, solve_qp, solve_qp_in
 
 HERE = Path(__file__).resolve().parent
 TICK = 0.002  # s
@@ -74,7 +74,7 @@ KERNELS = {
     "interference_tick_stacked": ("interference_force", 4),
     "interference_posed_tick": ("posed_interference_force", 7),
     "kinetostatic_tick": ("kinetostatic_force", 4),
-    "filter_tick": ("safety_filter", 7),
+    "filter_tick": ("safety_filter", 8),
     "monitor_tick": ("model_monitor", 4),
 }
 SAFETY = ("filter_tick", "kinetostatic_tick", "monitor_tick")
@@ -188,9 +188,9 @@ def capture_problems(rec):
 
     problems, infeasible = [], [0]
 
-    def recording_solve(w, z0, C, d, count, z, u, max_iterations):
+    def recording_solve(w, z0, C, d, count, z, u, max_iterations, work):
         problem = (w.copy(), z0.copy(), C[:count].copy(), d[:count].copy())
-        result = solve_qp(w, z0, C, d, count, z, u, max_iterations)
+        result = solve_qp_in(w, z0, C, d, count, z, u, max_iterations, work)
         if result[0] == QP_OPTIMAL:
             problems.append(problem)
         else:
@@ -198,7 +198,7 @@ def capture_problems(rec):
         return result
 
     out = np.empty_like(rec.outs[0])
-    with Patch([(safety_filter, "solve_qp", recording_solve)]):
+    with Patch([(safety_filter, "solve_qp_in", recording_solve)]):
         for x, compiled in zip(rec.xs, rec.outs):
             args = list(rec.args)
             args[rec.x_at], args[-1] = x, out

@@ -204,3 +204,39 @@ def test_a_kink_is_refused_not_guessed():
     kappa = _kappa(robot, rows, scratch, np.r_[lo, c[1:]], R, w, 0.0)
     g = np.empty(3)
     assert not margin_gradient(scratch, rows, kappa, 0.0, g)
+
+
+def test_the_look_ahead_s_margin_by_elimination_is_the_qr_s():
+    # The look ahead's samples take the hard margin of a robot with one internal force by
+    # Gaussian elimination (margin_by_elimination); the reference is margin's pivoted QR on
+    # the same pose and wrench: the same max-min over the same line of tensions, so equal to
+    # round-off, and -inf (no tension holds) at the same poses. Poses across and beyond the
+    # workspace box, tilted, hands up to 40 N: most margins finite, some lost.
+    from cdpm_drake.kernels.kinetostatics import (MARGIN_KAPPA, margin_by_elimination,
+                                                  margin_in, margin_scratch, scratch_views)
+    from cdpm_drake.kernels.rotation import rotation_from_rpy
+    from cdpm_drake.kernels.tension import gravity_wrench
+    from cdpm_drake.robot import load_robot, resolve_robot_path
+
+    robot = load_robot(resolve_robot_path("paper_7cable"))
+    views = scratch_views(margin_scratch(robot.num_cables))
+    rng = np.random.default_rng(43)
+    lo, hi = robot.workspace.lower, robot.workspace.upper
+    finite = lost = 0
+    for trial in range(600):
+        p = rng.uniform(lo - 0.1 * (hi - lo), hi + 0.1 * (hi - lo))
+        R = rotation_from_rpy(rng.normal(size=3) * (0.0 if trial % 3 == 0 else 0.15))
+        w = gravity_wrench(robot.dynamics.mass, rng.normal(size=3) * 20.0,
+                           R @ robot.dynamics.handle)
+        floor, ceiling = rng.uniform(0.0, 5.0), rng.uniform(50.0, 400.0)
+        qr = margin_in(robot.reels, robot.attachments, 6, p, R, w, floor, ceiling, views,
+                       0.0, MARGIN_KAPPA)[0]
+        ge = margin_by_elimination(robot.reels, robot.attachments, 6, p, R, w, floor,
+                                   ceiling, views)
+        if np.isfinite(qr):
+            finite += 1
+            lost += qr < 0.0
+            assert ge == pytest.approx(qr, rel=1e-9, abs=1e-9), (p, qr, ge)
+        else:
+            assert ge == qr
+    assert finite == 600 and 50 < lost < 550, (finite, lost)

@@ -57,7 +57,9 @@ def _robot(name, swaps=()):
 
 @pytest.mark.parametrize("name", ["paper_7cable", "cube_8cable"])
 def test_margin_equals_the_linear_program(name):
-    from cdpm_drake.kernels.kinetostatics import margin, margin_scratch
+    from cdpm_drake.kernels.kinetostatics import (MARGIN_BOTH, MARGIN_KAPPA, MARGIN_T_STAR,
+                                                  margin, margin_in, margin_scratch,
+                                                  scratch_views)
     from cdpm_drake.kernels.rotation import rotation_from_rpy
     from cdpm_drake.kernels.tension import gravity_wrench, wrench_matrix
 
@@ -80,6 +82,19 @@ def test_margin_equals_the_linear_program(name):
             assert kappa < -1e3 or kappa == -np.inf
         # t* (no ceiling) against the statics tests' HiGHS reference.
         assert t_star == pytest.approx(highs_t_star(W, w), abs=1e-6)
+        # What the look ahead (kappa alone) and the monitor (t* alone) ask for: the same
+        # numbers bit for bit, the other left nan; the soft margin too.
+        views = scratch_views(scratch)
+        for soft in (0.0, 2.0):
+            both = margin_in(robot.reels, robot.attachments, 6, p, R, w, 3.0, 100.0, views,
+                             soft, MARGIN_BOTH)
+            alone = margin_in(robot.reels, robot.attachments, 6, p, R, w, 3.0, 100.0, views,
+                              soft, MARGIN_KAPPA)
+            assert alone[0] == both[0] or (np.isnan(alone[0]) and np.isnan(both[0]))
+            assert np.isnan(alone[1]) or not np.isfinite(both[0])
+            alone = margin_in(robot.reels, robot.attachments, 6, p, R, w, 3.0, 100.0, views,
+                              soft, MARGIN_T_STAR)
+            assert alone[1] == both[1] and (np.isnan(alone[0]) or not np.isfinite(both[0]))
     assert finite > 100
 
 

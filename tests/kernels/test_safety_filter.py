@@ -17,7 +17,8 @@ from cdpm_drake.kernels.safety_filter import (BIND_ACCELERATION, BIND_BOX, BIND_
                                       LOST_SPEED, OUT_MEMORY, OUT_V_D, RAMP_SHARE,
                                       STATUS_HOLD, STATUS_MODIFIED, STATUS_NO_RETURN,
                                       STATUS_PASS, barrier_position, filter_params,
-                                      filter_sizes, filter_tick, pair_barrier)
+                                      filter_scratch, filter_sizes, filter_tick,
+                                      pair_barrier)
 
 T = 0.002
 V_MAX, A_MAX = 0.5, 2.0
@@ -96,7 +97,8 @@ def _filter(robot, *, v_d, p, v_prev=(0.0, 0.0, 0.0), kappa=100.0, grad_kappa=(0
     x[s["memory_at"] + 4:s["memory_at"] + 7] = v_prev
     x[s["memory_at"] + 10:s["memory_at"] + 13] = a_prev
     out = np.empty(s["out"])
-    status = filter_tick(robot.reels, robot.attachments, pi, pj, dmin, bounds, params, x, out)
+    status = filter_tick(robot.reels, robot.attachments, pi, pj, dmin, bounds, params,
+                         filter_scratch(P, full), x, out)
     return out[:3].copy(), int(status), int(out[7]), out
 
 

@@ -1,10 +1,10 @@
-"""No allocation in the tick: the kinetostatic and model-monitor kernels work in their block's
-buffers (numba's allocation counter, NRT_STATS, over 1000 calls as the blocks make them, on
-the shipped experiments' paper_7cable: one internal force, the max-min solved in closed form;
-a robot with two or more, cube_8cable, still allocates the QP form's work arrays, qp.py), and
-exp2's diagram as shipped, warmed and its log reserved, grows no Python memory over 1000
-ticks (tracemalloc around Simulator.AdvanceTo). Each check has a control that allocates, to
-show it would catch one."""
+"""No allocation in the tick: the kinetostatic, model-monitor and safety-filter kernels (the
+filter's QP included) work in their block's buffers (numba's allocation counter, NRT_STATS,
+over 1000 calls as the blocks make them, on the shipped experiments' paper_7cable: one
+internal force, the max-min solved in closed form; a robot with two or more, cube_8cable,
+still allocates the QP form's work arrays, qp.py), and exp2's diagram as shipped, warmed and
+its log reserved, grows no Python memory over 1000 ticks (tracemalloc around
+Simulator.AdvanceTo). Each check has a control that allocates, to show it would catch one."""
 
 import os
 import subprocess
@@ -63,6 +63,33 @@ KERNELS = textwrap.dedent("""
     results["monitor_tick"] = per_call(monitor_tick, (reels, att, par, scratch, xm,
                                                       np.empty(s["out"])))
 
+    from cdpm_drake.kernels.safety_filter import (filter_params, filter_scratch, filter_sizes,
+                                                  filter_tick)
+    i, j = robot.pair_index
+    pi, pj = np.asarray(i, dtype=np.int64), np.asarray(j, dtype=np.int64)
+    P = pi.size
+    dmin = owned(np.full(P, 0.06))
+    bounds = owned(np.array([robot.workspace.lower, robot.workspace.upper]))
+    for full in (False, True):
+        fs = filter_sizes(P, full)
+        xf = np.zeros(fs["x"])
+        xf[0:3] = [0.6, -0.4, 0.3]  # above the speed limit: the QP and its cutting planes
+        xf[3:6] = robot.workspace.center + [0.9, 0.3, 0.2]
+        xf[6 + P] = 0.5  # a kinetostatic margin about to bind, its look ahead 2 cm on
+        xf[7 + P:10 + P] = [-20.0, 5.0, 10.0]
+        xf[10 + P] = 0.02
+        if full:
+            xf[14 + P:23 + P] = np.eye(3).ravel()
+        xf[fs["memory_at"] + 4:fs["memory_at"] + 7] = [0.2, -0.1, 0.1]  # the last command
+        fp = owned(filter_params(time_step=0.002, gamma=0.2, a_brake=1.0, max_velocity=0.5,
+                                 max_acceleration=2.0, return_speed=0.02, full_pose=full,
+                                 kinetostatic=True, smoothing=0.1))
+        outf = np.empty(fs["out"])
+        results[f"filter_tick full={full}"] = per_call(filter_tick, (
+            reels, att, pi, pj, dmin, bounds, fp, owned_scratch(filter_scratch(P, full)), xf,
+            outf))
+        assert outf[6] >= 1 and outf[7] != 0, outf  # modified, some barrier or ball binding
+
     @numba.njit
     def allocating(x, out):  # the control: a kernel with one work array of its own
         w = np.empty(3)
@@ -74,14 +101,15 @@ KERNELS = textwrap.dedent("""
 """)
 
 
-def test_the_kinetostatic_and_monitor_kernels_allocate_nothing_a_call():
+def test_the_safety_kernels_allocate_nothing_a_call():
     env = dict(os.environ, NUMBA_NRT_STATS="1")
     text = subprocess.run([sys.executable, "-c", KERNELS], check=True, capture_output=True,
                           text=True, env=env).stdout
     results = eval(text.strip().splitlines()[-1])
     assert results.pop("control") == 1.0  # the counter sees one np.empty a call
     assert results == {"kinetostatic_tick soft=0.0": 0.0, "kinetostatic_tick soft=2.0": 0.0,
-                       "monitor_tick": 0.0}
+                       "monitor_tick": 0.0, "filter_tick full=False": 0.0,
+                       "filter_tick full=True": 0.0}
 
 
 def _growth_per_tick(wrap=None):

@@ -573,6 +573,11 @@ MUTANTS = [
       "the look ahead ends where the margin is RAY_TOLERANCE below min(kappa, 0), not where "
       "it is lost",
       ("tests/kernels/test_kinetostatics.py",)),
+    M("elimination_row_swap_skips_rhs", "cdpm_drake/kernels/kinetostatics.py",
+      "beta[k], beta[bi] = beta[bi], beta[k]",
+      "beta[k] = beta[bi]",
+      "the look ahead's elimination swaps a row of the wrench matrix but not its wrench",
+      ("tests/kernels/test_kinetostatic_gradient.py",)),
     M("monitor_count_not_reset", "cdpm_drake/kernels/model_monitor.py",
       "counts = (mem[0] + 1.0 if slack_cable >= 0 else 0.0,",
       "counts = (mem[0] + 1.0 if slack_cable >= 0 else mem[0],",
