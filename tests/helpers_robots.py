@@ -38,3 +38,19 @@ def with_sections(text: str, extra: str) -> str:
         if not skipping:
             out.append(line)
     return "\n".join(out) + "\n" + extra + "\n"
+
+
+def across_pair(scenario: str, pair: tuple[int, int]) -> np.ndarray:
+    """The unit vector across a scenario's cable pair (1-based) at its start: minus the
+    gradient of the pair's distance, by central differences (the adversarial benchmark's push
+    direction)."""
+    from cdpm_drake.config import load_resolved_scenario
+    from cdpm_drake.kernels.interference import pair_distances
+
+    resolved = load_resolved_scenario(scenario)
+    robot = resolved.robot
+    p0 = np.asarray(resolved.scenario.initial_position, dtype=float)
+    k = robot.pair_position(*pair)
+    g = np.array([(pair_distances(robot, p0 + 1e-6 * e)[k]
+                   - pair_distances(robot, p0 - 1e-6 * e)[k]) / 2e-6 for e in np.eye(3)])
+    return -g / np.linalg.norm(g)

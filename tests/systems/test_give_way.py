@@ -19,26 +19,14 @@ from cdpm_drake.kernels.safety_filter import BIND_SPEED, F_GIVE_WAY
 from cdpm_drake.robot.statics import posed_holding_tension
 from cdpm_drake.runs.simulate import simulate
 
+from helpers_robots import across_pair
+
 FULL = ("controller: {pose: full, tension_control: true}, "
         "plant: !DynamicReels {tension_sensor: drive_torque}, ")
 
 
-def _across():
-    """The unit vector across exp3's pair 1-3 (minus the gradient of its distance at the
-    start, central differences), the adversarial benchmark's push direction."""
-    from cdpm_drake.kernels.interference import pair_distances
-
-    resolved = load_resolved_scenario("exp3_two_pairs")
-    robot = resolved.robot
-    p0 = np.asarray(resolved.scenario.initial_position, dtype=float)
-    k = robot.pair_position(1, 3)
-    g = np.array([(pair_distances(robot, p0 + 1e-6 * e)[k]
-                   - pair_distances(robot, p0 - 1e-6 * e)[k]) / 2e-6 for e in np.eye(3)])
-    return -g / np.linalg.norm(g)
-
-
 def _push(rate, duration):
-    f = [round(float(x), 6) for x in 40.0 * _across()]
+    f = [round(float(x), 6) for x in 40.0 * across_pair("exp3_two_pairs", (1, 3))]
     text = ("{duration: %g, %soperator: !ScriptedOperator {times: [0, %g, %g], forces: "
             "[[0, 0, 0], %s, %s]}}" % (duration, FULL, 40.0 / rate, duration + 1.0, f, f))
     resolved = load_resolved_scenario("exp3_two_pairs", text)

@@ -16,6 +16,8 @@ from cdpm_drake.kernels.full_pose import HAND_TOO_FAST
 from cdpm_drake.robot.statics import posed_holding_tension
 from cdpm_drake.runs.simulate import simulate
 
+from helpers_robots import across_pair
+
 IPANEMA = str(Path(__file__).resolve().parents[2] / "scripts" / "bench" / "adversarial"
               / "ipanema_5_7.yaml")
 FULL = ("controller: {pose: full, tension_control: true}, "
@@ -43,17 +45,6 @@ def _holdable_slack(resolved, log):
     return int(np.sum(margin >= 0.0))
 
 
-def _across(resolved, pair):
-    from cdpm_drake.kernels.interference import pair_distances
-
-    robot = resolved.robot
-    p0 = np.asarray(resolved.scenario.initial_position, dtype=float)
-    k = robot.pair_position(*pair)
-    g = np.array([(pair_distances(robot, p0 + 1e-6 * e)[k]
-                   - pair_distances(robot, p0 - 1e-6 * e)[k]) / 2e-6 for e in np.eye(3)])
-    return -g / np.linalg.norm(g)
-
-
 def test_a_40_n_lift_at_100_n_per_s_on_paper_7cable_leaves_no_holdable_slack():
     # Measured before the tension path led the hand: 0 here, 69 without a sensor; the 30 N
     # lift at 300 N/s had 25 (now 0, docs/dynamic_plant.md).
@@ -63,8 +54,7 @@ def test_a_40_n_lift_at_100_n_per_s_on_paper_7cable_leaves_no_holdable_slack():
 
 
 def test_a_10_n_push_across_the_swapped_pair_of_an_ipanema_like_robot_leaves_no_slack():
-    resolved = load_resolved_scenario(IPANEMA)
-    resolved, log = _run(IPANEMA, 10.0 * _across(resolved, (5, 7)), 0.1, 1.0)
+    resolved, log = _run(IPANEMA, 10.0 * across_pair(IPANEMA, (5, 7)), 0.1, 1.0)
     assert _holdable_slack(resolved, log) == 0
     assert not log["slack"].any()
 

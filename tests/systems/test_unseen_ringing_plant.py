@@ -15,6 +15,8 @@ from cdpm_drake.config import load_resolved_scenario
 from cdpm_drake.robot.statics import posed_holding_tension
 from cdpm_drake.runs.simulate import simulate
 
+from helpers_robots import across_pair
+
 NONE = ("controller: {pose: full, tension_control: true}, "
         "plant: !DynamicReels {tension_sensor: none}, ")
 
@@ -27,26 +29,12 @@ def _run(scenario, text, controller="", fault=False):
     return resolved, result.log
 
 
-def _across_1_3():
-    """The unit vector across exp3's pair 1-3 (minus the gradient of its distance at the
-    start, central differences), the adversarial benchmark's push direction."""
-    from cdpm_drake.kernels.interference import pair_distances
-
-    resolved = load_resolved_scenario("exp3_two_pairs")
-    robot = resolved.robot
-    p0 = np.asarray(resolved.scenario.initial_position, dtype=float)
-    k = robot.pair_position(1, 3)
-    g = np.array([(pair_distances(robot, p0 + 1e-6 * e)[k]
-                   - pair_distances(robot, p0 - 1e-6 * e)[k]) / 2e-6 for e in np.eye(3)])
-    return -g / np.linalg.norm(g)
-
-
 def test_a_hand_faster_than_the_robot_is_warned_of_before_each_holdable_slack_cable():
     # exp3's 40 N push across 1-3 ramped at 400 N/s, faster than the tension path follows
     # (`cdpm info`): measured, cable 2 warned of at 0.026 s, truly slack from 0.044 s where
     # the statics at the true pose hold the hand in [2, 100] N. (exp2's 40 N lift at
     # 100 N/s, which slackened cable 2 unseen before the filter gave way, no longer does.)
-    f = [round(float(x), 6) for x in 40.0 * _across_1_3()]
+    f = [round(float(x), 6) for x in 40.0 * across_pair("exp3_two_pairs", (1, 3))]
     resolved, log = _run("exp3_two_pairs", "duration: 0.3, operator: !ScriptedOperator "
                          "{times: [0, 0.1, 1.3], forces: [[0, 0, 0], %s, %s]}" % (f, f),
                          fault=True)  # the model monitor stops it, the log kept up to there
