@@ -179,8 +179,8 @@ def test_the_fused_diagram_has_one_selector_and_no_multiplexers():
     # exp2: eight blocks' wiring and the logger's become one system, and seven memories (FK
     # warm start, crossing sides, the limits' previous command, the length loop's commanded
     # position, offsets and started flag; issue 26: the kinetostatic block's hand force of
-    # the last tick, the filter's barrier position, its valid flag and last twist, the
-    # monitor's four counters: slack, misfit, unholdable, overload) one delay.
+    # the last tick, the filter's barrier position, its valid flag, last twist and last
+    # acceleration (its brakes for the cables give way from it), the monitor's four counters: slack, misfit, unholdable, overload) one delay.
     assert [type(s).__name__ for s in plain.GetSystems()].count("Selector") == 9
     assert len(list(plain.GetSystems())) - len(list(diagram.GetSystems())) == 8 + 6
     names = {s.get_name() for s in diagram.GetSystems()}
@@ -194,7 +194,7 @@ def test_the_fused_diagram_has_one_selector_and_no_multiplexers():
     state = memory.GetMyContextFromRoot(context).get_discrete_state_vector().get_value()
     scenario = load_scenario("exp2_interaction")
     np.testing.assert_array_equal(state[:3], scenario.initial_position)
-    assert state.size == 3 + 21 + 3 + (3 + 7 + 1) + 3 + (3 + 1 + 6) + 4
+    assert state.size == 3 + 21 + 3 + (3 + 7 + 1) + 3 + (3 + 1 + 6 + 3) + 4
     assert not np.any(state[3:])
 
 
