@@ -145,6 +145,16 @@ def give_way_ramp(previous, rate, brake, T):
     return min(brake, previous + rate * T)
 
 
+@_jit
+def _slowing(prev, speed, a_prev):
+    """The deceleration (m/s^2) along the last command prev (its translation, speed m/s > 0)
+    at the last tick, a_prev its acceleration: what `give_way_ramp` gives way from."""
+    slowing = 0.0
+    for c in range(3):
+        slowing -= prev[c] / speed * a_prev[c]
+    return slowing
+
+
 def filter_sizes(P: int, full_pose: bool) -> dict:
     """Input (x) and output (out) sizes of `filter_tick` for P watched pairs, and the offset
     of its memory in x."""
@@ -350,7 +360,6 @@ def filter_tick(reels, attachments, pi, pj, d_min, bounds, params, scratch, x, o
     # cables taut, and a braking they cannot take defeats it. The pair and box barriers keep
     # the full ramp (the crossing is the hard promise).
     kin_brake = min(params[F_CABLE_BRAKE], RAMP_SHARE * params[F_A_MAX])
-    kin_ramp = kin_brake * T
     give_way = params[F_GIVE_WAY]
     a_prev = memory[10:13]
     smallest = math.inf
@@ -416,12 +425,11 @@ def filter_tick(reels, attachments, pi, pj, d_min, bounds, params, scratch, x, o
             # along the last command; the speed along it brakes to stop there (the braking
             # curve), at most a_brake T a tick.
             along = 0.0
-            slowing = 0.0  # the deceleration along the last command at the last tick
             for c in range(3):
                 grad[c] = -prev[c] / speed
                 along += prev[c] / speed * prev[c]
-                slowing -= prev[c] / speed * a_prev[c]
             cap = face_cap(ray, params[F_A_BRAKE], T)
+            slowing = _slowing(prev, speed, a_prev)
             count = _add_barrier(C, d, kind, lost, lost_by, count, grad, n,
                                  -max(cap, along - give_way_ramp(slowing, give_way, kin_brake,
                                                                  T) * T),
@@ -454,12 +462,9 @@ def filter_tick(reels, attachments, pi, pj, d_min, bounds, params, scratch, x, o
         # met a slowdown at 1.8 m/s^2 the next tick, and that reversal rang cable 2 slack
         # within 20 ms.
         prev_speed = math.sqrt(prev[0] * prev[0] + prev[1] * prev[1] + prev[2] * prev[2])
-        slowing = 0.0  # the deceleration along the last command at the last tick
-        if prev_speed > 0.0:
-            for c in range(3):
-                slowing -= prev[c] / prev_speed * a_prev[c]
+        slowing = _slowing(prev, prev_speed, a_prev) if prev_speed > 0.0 else 0.0
         speed_cap = min(v_max, max(slow_to, prev_speed - give_way_ramp(
-            slowing, give_way, min(params[F_CABLE_BRAKE], RAMP_SHARE * a_max), T) * T))
+            slowing, give_way, kin_brake, T) * T))
     status = STATUS_HOLD
     for stage in range(2):
         # Stage 0: everything; 1: lost margins only kept, not restored.

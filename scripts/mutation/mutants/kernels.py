@@ -526,7 +526,7 @@ MUTANTS = [
       ("tests/kernels/test_safety_filter.py",)),
     M("filter_lost_speed_not_braked", "cdpm_drake/kernels/safety_filter.py",
       "speed_cap = min(v_max, max(slow_to, prev_speed - give_way_ramp(\n"
-      "            slowing, give_way, min(params[F_CABLE_BRAKE], RAMP_SHARE * a_max), T) * T))",
+      "            slowing, give_way, kin_brake, T) * T))",
       "speed_cap = min(v_max, max(slow_to, prev_speed))",
       "while a margin is lost the speed is held, not braked towards LOST_SPEED",
       ("tests/kernels/test_safety_filter.py",)),
@@ -536,7 +536,7 @@ MUTANTS = [
       "the kinetostatic rows ramp at 0.9 a_max on a robot with mass, not at the cable brake",
       ("tests/kernels/test_safety_filter.py", "tests/systems/test_braking.py")),
     M("filter_cable_brake_ignored", "cdpm_drake/kernels/safety_filter.py",
-      "slowing, give_way, min(params[F_CABLE_BRAKE], RAMP_SHARE * a_max), T) * T))",
+      "slowing, give_way, kin_brake, T) * T))",
       "slowing, give_way, RAMP_SHARE * a_max, T) * T))",
       "a robot with mass slows at 0.9 a_max while a margin is lost, not at a_brake",
       ("tests/kernels/test_safety_filter.py",)),
