@@ -26,6 +26,21 @@ force, dlam/dF its derivative along u: finite differences of the target itself);
 hand the robot follows along u is the smallest S_i over that, over the hand's magnitudes up to
 a bound (the target's regime changes with the hand: where no cable is at the floor the internal
 force does not move).
+
+What rings the cables beyond that: the platform takes a change of the hand as its own
+displacement, and a change faster than its slowest mode (w_1, from K = W diag(EA/L) W^T
+against its mass and inertia) overshoots: a step of the hand's statics dT rings the cables by
+up to dT about them (to twice the step), a ramp at rate r by up to r / w_1. So the part of
+the hand the platform has not settled to, the hand now less the hand low-passed over
+
+    settle = 1 / w_1                                        (38 ms on paper_7cable)
+
+rings each cable by up to its share of the statics of that part (`ringing_cable`); where that
+is more than the command holds it by, the hand is faster than the tension path can follow,
+from the first tick it is measured. The hand now: the force sensor's sliding average lags a
+ramp by (window - 1) / 2 ticks (`hand_lag`), and its rate over one tick times that lag is
+what the average has not yet taken in (a step of s shows as s (k + 4.5) / 10 k ticks in with
+the default 10 samples: 55 % at its first tick).
 """
 
 import math
@@ -56,6 +71,24 @@ def stretch_speed(max_reel_speed: float, max_velocity: float) -> float:
     """The reel speed (m/s) the platform's motion leaves for stretching the cables; > 0 (a
     robot whose motion takes every reel's speed still gets a tenth of it)."""
     return max(float(max_reel_speed) - float(max_velocity), 0.1 * float(max_reel_speed))
+
+
+def settle_time(robot, position) -> float:
+    """1 / w_1 (s): the platform's slowest mode on its elastic cables at `position` (m, level;
+    tension_damping.platform_modes), the time constant over which it settles to a hand
+    (module docstring); 0 for a robot whose cables resist no motion."""
+    from cdpm_drake.kernels.tension_damping import platform_modes
+
+    d = robot.dynamics
+    modes = platform_modes(robot.reels, robot.attachments, position, d.EA, d.mass, d.inertia)
+    stiff = modes[modes > 1e-6 * max(float(modes.max()), 1e-300)]
+    return 1.0 / float(stiff[0]) if stiff.size else 0.0
+
+
+def hand_lag(filter_window: int, time_step: float) -> float:
+    """How far (s) the force sensor's sliding average of `filter_window` samples of
+    `time_step` s lags the hand: (window - 1) / 2 samples."""
+    return 0.5 * (int(filter_window) - 1) * float(time_step)
 
 
 def _target(T_p, N, floor, hard_floor, ceiling):
@@ -128,3 +161,22 @@ def lead_statics(W, w, w_lead, T_p):
             total += W[a, i] * y[a]
         T_p[i] -= total
     return True
+
+
+@_jit
+def ringing_cable(W, w, w_slow, T_command, swing):
+    """The cable (1-based; 0: none) the hand's unsettled part may ring slack: swing (m,) N
+    becomes |the minimum-norm statics of w - w_slow| (the wrenches of the hand now and of
+    the hand the platform has settled to, W (6, m) of rank 6), and the cable named is the
+    one whose swing exceeds its command T_command (m,) N most (module docstring)."""
+    m = W.shape[1]
+    for i in range(m):
+        swing[i] = 0.0
+    if not lead_statics(W, w_slow, w, swing):
+        return 0
+    deepest, cable = 0.0, 0
+    for i in range(m):
+        swing[i] = abs(swing[i])
+        if swing[i] - T_command[i] > deepest:
+            deepest, cable = swing[i] - T_command[i], i + 1
+    return cable
