@@ -457,8 +457,8 @@ ACCELERATION_TIME = 0.1
 def tension_tick(reels, attachments, params, x, out):
     """params = [mass kg, handle (3, m, platform frame), EA N, floor N, ceiling N, time step
     s, slew rate N/s, warm-up ticks, hard floor N, fall rate N/s, ringing factor (0: off),
-    lead s, rate time constant s, stretch speed m/s, settle time s, hand lag s (the last two
-    optional, 0: off; tension_path.py)].
+    lead s, rate time constant s, stretch speed m/s, settle time s, hand lag s, the modes
+    (42: tension_path.modal_params; these three optional, 0: off; tension_path.py)].
     x = [p (3), R (9), F_H (3), v (3), residual (m), L0 (m), T_assumed (m: the tensions the
     forward kinematics corrected the lengths for), ringing (m, N^2: each measured tension's
     variance about the estimate, tension_damping.damping_tick; ignored with the factor 0),
@@ -522,8 +522,8 @@ def tension_tick(reels, attachments, params, x, out):
     F_before = x[mem + 2 * m + 4:mem + 2 * m + 7]
     F_rate = x[mem + 2 * m + 7:mem + 2 * m + 10]
     F_settled = x[mem + 2 * m + 10:mem + 2 * m + 13]
-    settle = params[16] if params.shape[0] > 17 else 0.0
-    lag = params[17] if params.shape[0] > 17 else 0.0
+    settle = params[16] if params.shape[0] >= 60 else 0.0
+    lag = params[17] if params.shape[0] >= 60 else 0.0
     started = ticks >= warmup
     # The commanded acceleration, from the command low-passed (over ACCELERATION_TIME, or
     # the tension path's time constant): a ramp's acceleration exactly, while a command that
@@ -531,10 +531,9 @@ def tension_tick(reels, attachments, params, x, out):
     # differenced moved every target ~5 N at 10 Hz and rang cables slack (171 slack ticks in
     # 10 s under a 20 N push along exp2's boundary; none low-passed), is cut ~7-fold. The
     # platform follows the command within the drives' lag (safety_filter.give_way_ramp).
-    a = np.empty(3)
+    a, v_next = np.empty(3), np.empty(3)
     acc_time = rate_time if rate_time > 0.0 else ACCELERATION_TIME
     lowpass = step / acc_time
-    v_next = np.empty(3)
     # The hand force's rate, low-passed (the sensor's noise cut by sqrt(2 rate_time / step)).
     rate_next, F_lead, F_now, settled = np.empty(3), np.empty(3), np.empty(3), np.empty(3)
     gain = min(1.0, step / rate_time) if rate_time > 0.0 else 1.0
@@ -550,9 +549,7 @@ def tension_tick(reels, attachments, params, x, out):
     w, w_lead = np.empty(6), np.empty(6)
     held_wrench(R, params, F, a, w)
     held_wrench(R, params, F_lead, a, w_lead)
-    T_cmd = out[0:m]
-    T_est = out[m:2 * m]
-    T_target = out[2 * m:3 * m]
+    T_cmd, T_est, T_target = out[0:m], out[m:2 * m], out[2 * m:3 * m]
     W, T_p, N = np.empty((6, m)), np.empty(m), np.empty((m, max(m - 6, 0)))
     balanced = _estimate(reels, attachments, p, R, w, L0, r, T_assumed, EA, W, T_p, N, T_est)
     T_hand = T_p.copy()  # the statics of the hand as measured (before the lead)
@@ -618,12 +615,13 @@ def tension_tick(reels, attachments, params, x, out):
         deepest, cable_fast = 1e-6, 0
         flag = status == FEASIBLE or status == BELOW_FLOOR or status == CEILING_EXCEEDED
         for i in range(m):
-            total = T_p[i]
+            total, aim = T_p[i], T_p[i]
             for c in range(k_null):
                 total += N[i, c] * (lam_before[c] + scale * dlam[c])
-            T_cmd[i] = total
-            # Named only where the hand is what takes the cable down: its lead lowers it.
-            if (flag and hard_floor - total > deepest and T_target[i] >= hard_floor - 1e-9
+                aim += N[i, c] * (lam_before[c] + dlam[c])
+            # Named only where the hand takes the cable down (its lead lowers it) and the
+            # balanced target keeps it at the floor (not a target raised off its balance).
+            if (flag and hard_floor - total > deepest and aim >= hard_floor - 1e-9
                     and T_p[i] < T_hand[i]):
                 deepest, cable_fast = hard_floor - total, i + 1
             T_cmd[i] = max(total, min(hard_floor, T_target[i]))
@@ -637,20 +635,21 @@ def tension_tick(reels, attachments, params, x, out):
             held_wrench(R, params, F_lead, a, w)
             if lead_statics(W, w_lead, w, T_p):
                 for i in range(m):
-                    total = T_p[i]
+                    total, aim = T_p[i], T_p[i]
                     for c in range(k_null):
                         total += N[i, c] * (lam_before[c] + scale * dlam[c])
-                    if (hard_floor - total > deepest and T_target[i] >= hard_floor - 1e-9
+                        aim += N[i, c] * (lam_before[c] + dlam[c])
+                    if (hard_floor - total > deepest and aim >= hard_floor - 1e-9
                             and T_p[i] < T_hand[i]):
                         deepest, cable_fast = hard_floor - total, i + 1
         if cable_fast > 0:
             status, cable = HAND_TOO_FAST, cable_fast
-    # Where the hand's unsettled part may ring a cable slack: from the first tick (warm-up too).
     if settle > 0.0 and balanced and (status == FEASIBLE or status == BELOW_FLOOR
                                       or status == CEILING_EXCEEDED):
         held_wrench(R, params, F_now, a, w)
         held_wrench(R, params, F_settled, a, w_lead)
-        cable_ring = ringing_cable(W, w, w_lead, T_cmd, T_hand)
+        # The hand's unsettled part may ring a cable slack: from the first tick (warm-up too).
+        cable_ring = ringing_cable(W, w, w_lead, T_cmd, L0, EA, params[18:60], T_hand)
         if cable_ring > 0:
             status, cable = HAND_TOO_FAST, cable_ring
     out[3 * m] = t_star

@@ -1,5 +1,5 @@
 """A hand faster than the platform settles: the tension path names it from the first tick the
-force sensor shows it. The kernel's swing against numpy's pseudo-inverse, the settle time
+force sensor shows it. The kernel's swing against scipy's modes, the settle time
 against the platform's modes, and a 40 N step at t = 0 on the dynamic plant (full pose,
 tension control, the drives' torque as tension sensor) asserted on the plant's ground truth:
 "hand faster than the tension path can follow" (tension_status 5) before the first tick a
@@ -7,12 +7,14 @@ cable is truly slack. Deterministic simulations (the sensor's noise is seeded)."
 
 import numpy as np
 import pytest
+import scipy.linalg
 
 from cdpm_drake.config import load_resolved_scenario
 from cdpm_drake.kernels.full_pose import HAND_TOO_FAST
 from cdpm_drake.kernels.tension import wrench_matrix
 from cdpm_drake.kernels.tension_damping import platform_modes
-from cdpm_drake.kernels.tension_path import hand_lag, ringing_cable, settle_time
+from cdpm_drake.kernels.tension_path import (hand_lag, modal_params, ringing_cable,
+                                             settle_time)
 from cdpm_drake.runs.simulate import simulate
 
 from helpers_robots import across_pair
@@ -21,22 +23,37 @@ FULL = ("controller: {pose: full, tension_control: true}, "
         "plant: !DynamicReels {tension_sensor: drive_torque}, ")
 
 
-def test_the_swing_is_the_statics_of_the_unsettled_hand_and_names_the_cable_it_rings_slack():
+def test_the_swing_sums_the_modes_shares_of_the_unsettled_hand_and_names_the_cable():
     resolved = load_resolved_scenario("exp3_two_pairs")
-    robot = resolved.robot
-    W = wrench_matrix(robot, np.asarray(resolved.scenario.initial_position, dtype=float))
+    robot, d = resolved.robot, resolved.robot.dynamics
+    p0 = np.asarray(resolved.scenario.initial_position, dtype=float)
+    W = wrench_matrix(robot, p0)
+    L = np.linalg.norm(robot.reels - (p0 + robot.attachments), axis=1)
+    k_cable = d.EA / L
     w_slow = np.array([0.0, 0.0, -20.0, 0.0, 0.0, 0.0])
-    w = w_slow + np.array([23.0, -31.0, -11.0, 1.2, -0.4, 0.3])
-    # The minimum-norm change of the tensions that balance w instead of w_slow (W T + w = 0).
-    expected = np.abs(np.linalg.pinv(W) @ (w - w_slow))
+    dw = np.array([23.0, -31.0, -11.0, 1.2, -0.4, 0.3])
+    # The reference: scipy's generalised eigenproblem K phi = w^2 M phi (mass-normalised),
+    # each mode's share of the cable tensions, summed in absolute value.
+    K = W @ np.diag(k_cable) @ W.T
+    M = np.diag([d.mass] * 3 + [0.0] * 3)
+    M[3:, 3:] = d.inertia
+    lam, Phi = scipy.linalg.eigh(K, M)
+    shares = (k_cable[:, None] * (W.T @ Phi)) * ((Phi.T @ dw) / lam)[None, :]
+    expected = np.abs(shares).sum(axis=1)
+    # Summed with their signs, the shares are the cables' static elastic response.
+    np.testing.assert_allclose(shares.sum(axis=1),
+                               k_cable * (W.T @ np.linalg.solve(K, dw)), atol=1e-9)
     command = expected + 1.0
-    k = int(np.argmax(expected))
-    command[k] = expected[k] - 2.0  # the one cable the swing takes below zero
+    i = int(np.argmax(expected))
+    command[i] = expected[i] - 2.0  # the one cable the swing takes below zero
     swing = np.empty(W.shape[1])
-    assert ringing_cable(W, w, w_slow, command, swing) == k + 1
+    modes = modal_params(robot, p0)
+    assert ringing_cable(W, w_slow + dw, w_slow, command, L, d.EA, modes, swing) == i + 1
     np.testing.assert_allclose(swing, expected, rtol=1e-9, atol=1e-9)
-    # Every command above its swing: nothing named.
-    assert ringing_cable(W, w, w_slow, expected + 0.5, swing) == 0
+    # Every command above its swing: nothing named; the hand settled: no swing.
+    assert ringing_cable(W, w_slow + dw, w_slow, expected + 0.5, L, d.EA, modes, swing) == 0
+    assert ringing_cable(W, w_slow, w_slow, np.zeros(W.shape[1]), L, d.EA, modes, swing) == 0
+    np.testing.assert_allclose(swing, 0.0, atol=1e-12)
 
 
 def test_the_settle_time_is_the_slowest_mode_and_the_lag_the_sliding_average():
@@ -44,7 +61,7 @@ def test_the_settle_time_is_the_slowest_mode_and_the_lag_the_sliding_average():
     robot, p0 = resolved.robot, np.asarray(resolved.scenario.initial_position, dtype=float)
     d = robot.dynamics
     modes = platform_modes(robot.reels, robot.attachments, p0, d.EA, d.mass, d.inertia)
-    assert settle_time(robot, p0) == 1.0 / modes[0]
+    assert settle_time(robot, p0) == pytest.approx(1.0 / modes[0], rel=1e-9)
     assert 0.03 < settle_time(robot, p0) < 0.045  # paper_7cable's lowest mode: 4.2 Hz
     assert hand_lag(10, 0.002) == pytest.approx(0.009)  # a ramp through a 10-sample average: 4.5 ticks late
     assert hand_lag(1, 0.002) == 0.0

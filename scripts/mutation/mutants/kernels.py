@@ -276,9 +276,10 @@ MUTANTS = [
       "the command starts at the target, not at the tensions the robot has",
       ("tests/kernels/test_pose.py",)),
     M("hand_ringing_signed", "cdpm_drake/kernels/tension_path.py",
-      "swing[i] = abs(swing[i])",
-      "swing[i] = swing[i]",
-      "the hand's unsettled part rings only the cables it loads, never those it unloads",
+      "swing[i] += abs(EA / L0[i] * share * q)",
+      "swing[i] += EA / L0[i] * share * q",
+      "the modes' shares of the hand's ringing cancel: the swing is the static response, "
+      "signed, and a cable the hand unloads never rings",
       ("tests/systems/test_hand_steps.py",)),
     M("hand_ringing_after_warmup", "cdpm_drake/kernels/full_pose.py",
       "if settle > 0.0 and balanced and (status == FEASIBLE",
