@@ -613,7 +613,7 @@ def _add_pose_blocks(builder, blocks, resolved, fk, force_sensor, lengths, veloc
             slew_rate=TENSION_SLEW_RATE, fall_rate=TENSION_FALL_RATE,
             initial_tensions=start, time_step=T, warmup_ticks=TENSION_WARMUP_TICKS,
             ringing_factor=RINGING_FLOOR if damped else 0.0,
-            **tension_path_params(robot, T)))
+            **tension_path_params(robot, T, p0, scenario.sensor.filter_window)))
     for name, port in (("p_WP", fk.GetOutputPort("p_WP")), ("R_WP", R_WP),
                        ("F_H", force_sensor.GetOutputPort("F_H")),
                        ("velocity_command", velocity_command),

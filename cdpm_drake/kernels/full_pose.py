@@ -17,11 +17,8 @@ as 9 floats. Tensions in N, lengths in m.
   one), so N^T D N lam = N^T (D (T_assumed - T_p) + r) (weighted least squares; for k = 1
   lam = (n . D (T_assumed - T_p) + n . r) / (n . D n)). The estimate is what the next tick's
   fit corrects the lengths by, so the pose stays fitted to the cables as they really are
-  stretched. The target: a distribution at the estimated pose for the platform's weight, the
-  measured hand force at the handle and the commanded acceleration, every cable between a
-  floor (`min_tension`, lowered where the pose or the ceiling allow no more) and a ceiling
-  (`max_tension`), never below a hard floor (`tension_floor`; rules (a)-(d) of
-  `distribution_1d_bounded`).
+  stretched. The target: a distribution at the estimated pose between a floor and a ceiling,
+  never below a hard floor (rules (a)-(d) of `distribution_1d_bounded`; tension_tick's).
 - `orientation_tick` (orientation_hold): an angular-velocity command back to the orientation
   held (the estimate's after the warm-up), w = K_R log(R_ref R^T).
 - `pose_rates_tick` (jacobian_mapping): l_dot = J(p, R) [v; w] + K_l (l_d - L0), with l_d the
@@ -42,7 +39,7 @@ from cdpm_drake.kernels.pose import pose_fk, posed_cables, rotation_log, solve_s
 from cdpm_drake.kernels.qp import QP_OPTIMAL, solve_qp
 from cdpm_drake.kernels.nullspace import (RANK_TOL, lam_interval, null_vector,
                                           particular_solution, pivoted_qr)
-from cdpm_drake.kernels.tension_path import lead_statics
+from cdpm_drake.kernels.tension_path import lead_statics, ringing_cable
 from cdpm_drake.kernels.tension import (BELOW_FLOOR, FEASIBLE, GENERAL, GRAVITY, max_min_1d,
                                         max_min_lines, max_min_lines_subject_to)
 
@@ -65,7 +62,7 @@ def sizes(m: int) -> dict:
     """Input (x) and output (out) sizes of the kernels for m cables, and their memories."""
     return {
         "fk_x": 2 * m + 13, "fk_out": 2 * m + 16, "fk_memory": 13,
-        "tension_x": 6 * m + 28, "tension_out": 5 * m + 13, "tension_memory": 2 * m + 10,
+        "tension_x": 6 * m + 31, "tension_out": 5 * m + 16, "tension_memory": 2 * m + 13,
         "orientation_x": 19, "orientation_out": 22, "orientation_memory": 10,
         "rates_x": 5 * m + 31, "rates_out": 5 * m + 4, "rates_memory": 3 * m + 4,
     }
@@ -230,12 +227,10 @@ def pose_fk_tick(reels, attachments, params, x, out):
 
 
 # Where the pose allows less than the floor, the target keeps every cable within this much
-# (N) of the best minimum t* and takes the least-norm distribution among those. The max-min
-# distribution itself is not unique where the weakest cable's tension cannot be changed by
-# the internal force (its nullspace component near zero: cable 7 in exp2 near Fig. 12's
-# poses); picking one end of that flat maximum jumped the target by up to 15 N per tick and
-# rang the platform (dynamic plant, exp2: smallest tension 1.26 N at a target of 3.07 N;
-# with the margin the target moves at most 0.9 N per tick and the smallest is 2.03 N).
+# (N) of the best minimum t*, least-norm among those: the max-min distribution is not unique
+# where the weakest cable's nullspace share is near zero (cable 7 in exp2 near Fig. 12's
+# poses), and picking one end of that flat maximum jumped the target up to 15 N a tick (exp2,
+# dynamic plant: smallest tension 1.26 N; 2.03 N with the margin, 0.9 N a tick at most).
 FLOOR_MARGIN = 0.05
 
 
@@ -247,12 +242,10 @@ FLOOR_MARGIN = 0.05
 # every cable at tension_floor even without a ceiling: the max-min one, its weak cables
 # raised to tension_floor, which no longer balances the wrench exactly).
 CEILING_EXCEEDED, FLOOR_UNREACHABLE = 3, 4
-# And HAND_TOO_FAST (5): the hand's force changes faster than the tension path can follow.
-# The command's internal force slews towards the target's at each cable's own limit
-# (tension_tick), and the balanced command, the statics of the hand (led by its rate) plus
-# that internal force, leaves a cable below the hard floor where the target keeps it above:
-# the cable named is the one furthest below, raised to the floor. Raised before the cable is
-# slack: the command leads the hand and the cable's true tension lags the command.
+# And HAND_TOO_FAST (5): the hand changes faster than the tension path can follow: the
+# balanced command (the hand's led statics plus the internal force its slew allows) leaves a
+# cable below the hard floor where the target keeps it above, or the hand's unsettled part
+# may ring a cable of it slack (tension_path.py). Said before the cable is slack.
 HAND_TOO_FAST = 5
 
 
@@ -464,16 +457,18 @@ ACCELERATION_TIME = 0.1
 def tension_tick(reels, attachments, params, x, out):
     """params = [mass kg, handle (3, m, platform frame), EA N, floor N, ceiling N, time step
     s, slew rate N/s, warm-up ticks, hard floor N, fall rate N/s, ringing factor (0: off),
-    lead s, rate time constant s, stretch speed m/s].
+    lead s, rate time constant s, stretch speed m/s, settle time s, hand lag s, the modes
+    (42: tension_path.modal_params; these three optional, 0: off; tension_path.py)].
     x = [p (3), R (9), F_H (3), v (3), residual (m), L0 (m), T_assumed (m: the tensions the
     forward kinematics corrected the lengths for), ringing (m, N^2: each measured tension's
     variance about the estimate, tension_damping.damping_tick; ignored with the factor 0),
     memory: T_estimate (m), v_slow (3: the command low-passed), ticks (1), T_command_previous
-    (m), F_previous (3), F_rate (3: the hand force's rate, N/s, low-passed over rate time)].
+    (m), F_previous (3), F_rate (3: the hand force's rate, N/s, low-passed over rate time),
+    F_settled (3: the hand ahead of the sensor's lag, low-passed over the settle time)].
     The hard floor is at least the ringing factor times the largest ringing's standard
     deviation (never above the floor).
     out = [T_command (m), T_estimate (m), T_target (m), t* (1), status (1), cable (1), next
-    memory (2 m + 10)]: T_target the distribution at the pose (rules (a)-(d) of
+    memory (2 m + 13)]: T_target the distribution at the pose (rules (a)-(d) of
     `distribution_1d_bounded`: closed form for one redundant cable, `distribution_bounded`
     for more) for the hand force led by its rate, F + lead F_rate (the tension path, the
     force's tick of age, the mapping's and the drives' 1/bandwidth, lags the hand by about
@@ -481,27 +476,23 @@ def tension_tick(reels, attachments, params, x, out):
     (low-passed over the rate time constant); the estimate takes the hand force as measured.
 
     T_command, what the lengths are stretched for, is the target's statics (its minimum-norm
-    part, which the platform's own displacement brings whatever the lengths) plus an
-    internal force (its part along W's nullspace N, which only the reels make) moved from
-    the last command's towards the target's: each cable's share of the change, N_i . dlam,
-    at most `slew rate` N/s up and `fall rate` N/s down, and up at most EA / L0_i times the
-    stretch speed (the reel speed the motion leaves; 0: no such limit), the whole change
-    scaled down together so that the command stays a balanced distribution (a cable
-    clamped alone unbalances it, and the platform's stiffness then takes the difference out
-    of the others, the weak cable first). Up fast, because a hand that pushes loads some
-    cables as fast as it pushes and the internal force that keeps a weak cable taut loads
-    the others 2-15 times that; down slowly, because a target that drops is where slack
-    starts, and where the weakest cable's share of the internal force is small the target
-    flips between the statuses' distributions tick by tick and a command that follows rings
-    the platform; but not where the slow fall would hold a rising cable (one whose share of
-    the internal force is negative) below the hard floor. During the warm-up the command follows the estimate (the plant's tensions
-    when the controller takes over are whatever they are). A cable the balanced command
-    leaves below the hard floor is raised to it; where the target itself keeps it above
-    (the internal force could not keep up with the hand), the status is HAND_TOO_FAST,
-    naming the cable furthest below. status: FEASIBLE, BELOW_FLOOR, CEILING_EXCEEDED,
-    FLOOR_UNREACHABLE, GENERAL (W rank-deficient: the minimum-norm distribution, nothing
-    chosen, raised to the hard floor) or HAND_TOO_FAST; cable the 1-based cable the status
-    names (0: none)."""
+    part, which the platform's own displacement brings) plus an internal force (its part
+    along W's nullspace N, which only the reels make) moved from the last command's towards
+    the target's: each cable's share N_i . dlam at most `slew rate` N/s up (and EA / L0_i
+    times the stretch speed, the reel speed the motion leaves; 0: no such limit) and `fall
+    rate` N/s down, the change scaled as a whole so that the command stays balanced (a cable
+    clamped alone unbalances it, and the platform's stiffness takes the difference out of the
+    others, the weak cable first). Up fast: the internal force that keeps a weak cable taut
+    under a push loads the others 2-15 times as fast. Down slowly: a target that drops is
+    where slack starts, and where the weakest cable's share is small the target flips between
+    distributions tick by tick; but not where the slow fall would hold a rising cable (a
+    negative share) below the hard floor. During the warm-up the command follows the
+    estimate. A cable the balanced command leaves below the hard floor is raised to it; where
+    the target keeps it above (the internal force could not keep up with the hand) or the
+    hand's unsettled part may ring it slack, the status is HAND_TOO_FAST, naming the cable.
+    status: FEASIBLE, BELOW_FLOOR, CEILING_EXCEEDED, FLOOR_UNREACHABLE, GENERAL (W
+    rank-deficient: the minimum-norm distribution, raised to the hard floor) or
+    HAND_TOO_FAST; cable the 1-based cable it names (0: none)."""
     m = reels.shape[0]
     EA, floor, ceiling = params[4], params[5], params[6]
     step, max_change, warmup = params[7], params[8] * params[7], params[9]
@@ -517,8 +508,7 @@ def tension_tick(reels, attachments, params, x, out):
     T_assumed = x[18 + 2 * m:18 + 3 * m]
     mem = 18 + 4 * m
     # The hard floor clears the ringing the tension sensors measure (params[12] standard
-    # deviations of the largest; 0 where there is none): the encoders do not see it, and a
-    # cable targeted at the floor rings below zero when it swings wider than the floor.
+    # deviations of the largest): a cable at the floor rings slack when it swings wider.
     if params[12] > 0.0:
         swing = 0.0
         for i in range(m):
@@ -531,24 +521,21 @@ def tension_tick(reels, attachments, params, x, out):
     T_before = x[mem + m + 4:mem + 2 * m + 4]
     F_before = x[mem + 2 * m + 4:mem + 2 * m + 7]
     F_rate = x[mem + 2 * m + 7:mem + 2 * m + 10]
+    F_settled = x[mem + 2 * m + 10:mem + 2 * m + 13]
+    settle = params[16] if params.shape[0] >= 60 else 0.0
+    lag = params[17] if params.shape[0] >= 60 else 0.0
     started = ticks >= warmup
-    # The commanded acceleration, from the command low-passed over ACCELERATION_TIME: (v -
-    # v_slow) / tau is a ramp's acceleration exactly, while a command that alternates
-    # braking and accelerating tick by tick (the safety filter at a barrier) is cut ~7-fold
-    # at 10 Hz. Differenced tick by tick, that alternation moved every target by ~5 N 10
-    # times a second and rang the platform until cables went slack (a 20 N push along
-    # exp2's boundary: 171 slack ticks in 10 s; none with the low-pass). With the tension
-    # path, over its time constant: the platform follows the command within the drives' lag
-    # and the cables take a change as m da at once (over 0.1 s a braking onset under exp3's
-    # 40 N push at 100 N/s left cable 2 ~4 N below its command, slack; the filter changes
-    # the acceleration no faster than that: safety_filter.give_way_ramp).
-    a = np.empty(3)
+    # The commanded acceleration, from the command low-passed (over ACCELERATION_TIME, or
+    # the tension path's time constant): a ramp's acceleration exactly, while a command that
+    # alternates braking and accelerating tick by tick (the filter at a barrier), which
+    # differenced moved every target ~5 N at 10 Hz and rang cables slack (171 slack ticks in
+    # 10 s under a 20 N push along exp2's boundary; none low-passed), is cut ~7-fold. The
+    # platform follows the command within the drives' lag (safety_filter.give_way_ramp).
+    a, v_next = np.empty(3), np.empty(3)
     acc_time = rate_time if rate_time > 0.0 else ACCELERATION_TIME
     lowpass = step / acc_time
-    v_next = np.empty(3)
-    # The hand force's rate, low-passed (a first-order filter of the difference: a ramp's
-    # rate after a few time constants, the sensor's noise cut by sqrt(2 rate_time / step)).
-    rate_next, F_lead = np.empty(3), np.empty(3)
+    # The hand force's rate, low-passed (the sensor's noise cut by sqrt(2 rate_time / step)).
+    rate_next, F_lead, F_now, settled = np.empty(3), np.empty(3), np.empty(3), np.empty(3)
     gain = min(1.0, step / rate_time) if rate_time > 0.0 else 1.0
     for k in range(3):
         a[k] = (v[k] - v_slow[k]) / acc_time if ticks > 0.0 else 0.0
@@ -556,12 +543,13 @@ def tension_tick(reels, attachments, params, x, out):
         raw = (F[k] - F_before[k]) / step if ticks > 0.0 else 0.0
         rate_next[k] = F_rate[k] + gain * (raw - F_rate[k]) if ticks > 0.0 else 0.0
         F_lead[k] = F[k] + lead * rate_next[k]
+        F_now[k] = F[k] + lag * raw  # what the sensor's average has not yet taken in
+        settled[k] = F_settled[k] + min(1.0, step / settle) * (F_now[k] - F_settled[k]) if (
+            ticks > 0.0 and settle > 0.0) else F_now[k]
     w, w_lead = np.empty(6), np.empty(6)
     held_wrench(R, params, F, a, w)
     held_wrench(R, params, F_lead, a, w_lead)
-    T_cmd = out[0:m]
-    T_est = out[m:2 * m]
-    T_target = out[2 * m:3 * m]
+    T_cmd, T_est, T_target = out[0:m], out[m:2 * m], out[2 * m:3 * m]
     W, T_p, N = np.empty((6, m)), np.empty(m), np.empty((m, max(m - 6, 0)))
     balanced = _estimate(reels, attachments, p, R, w, L0, r, T_assumed, EA, W, T_p, N, T_est)
     T_hand = T_p.copy()  # the statics of the hand as measured (before the lead)
@@ -627,12 +615,13 @@ def tension_tick(reels, attachments, params, x, out):
         deepest, cable_fast = 1e-6, 0
         flag = status == FEASIBLE or status == BELOW_FLOOR or status == CEILING_EXCEEDED
         for i in range(m):
-            total = T_p[i]
+            total, aim = T_p[i], T_p[i]
             for c in range(k_null):
                 total += N[i, c] * (lam_before[c] + scale * dlam[c])
-            T_cmd[i] = total
-            # Named only where the hand is what takes the cable down: its lead lowers it.
-            if (flag and hard_floor - total > deepest and T_target[i] >= hard_floor - 1e-9
+                aim += N[i, c] * (lam_before[c] + dlam[c])
+            # Named only where the hand takes the cable down (its lead lowers it) and the
+            # balanced target keeps it at the floor (not a target raised off its balance).
+            if (flag and hard_floor - total > deepest and aim >= hard_floor - 1e-9
                     and T_p[i] < T_hand[i]):
                 deepest, cable_fast = hard_floor - total, i + 1
             T_cmd[i] = max(total, min(hard_floor, T_target[i]))
@@ -646,14 +635,23 @@ def tension_tick(reels, attachments, params, x, out):
             held_wrench(R, params, F_lead, a, w)
             if lead_statics(W, w_lead, w, T_p):
                 for i in range(m):
-                    total = T_p[i]
+                    total, aim = T_p[i], T_p[i]
                     for c in range(k_null):
                         total += N[i, c] * (lam_before[c] + scale * dlam[c])
-                    if (hard_floor - total > deepest and T_target[i] >= hard_floor - 1e-9
+                        aim += N[i, c] * (lam_before[c] + dlam[c])
+                    if (hard_floor - total > deepest and aim >= hard_floor - 1e-9
                             and T_p[i] < T_hand[i]):
                         deepest, cable_fast = hard_floor - total, i + 1
         if cable_fast > 0:
             status, cable = HAND_TOO_FAST, cable_fast
+    if settle > 0.0 and balanced and (status == FEASIBLE or status == BELOW_FLOOR
+                                      or status == CEILING_EXCEEDED):
+        held_wrench(R, params, F_now, a, w)
+        held_wrench(R, params, F_settled, a, w_lead)
+        # The hand's unsettled part may ring a cable slack: from the first tick (warm-up too).
+        cable_ring = ringing_cable(W, w, w_lead, T_cmd, L0, EA, params[18:60], T_hand)
+        if cable_ring > 0:
+            status, cable = HAND_TOO_FAST, cable_ring
     out[3 * m] = t_star
     out[3 * m + 1] = status
     out[3 * m + 2] = cable
@@ -665,6 +663,7 @@ def tension_tick(reels, attachments, params, x, out):
         out[nxt + m + k] = v_next[k]
         out[nxt + 2 * m + 4 + k] = F[k]
         out[nxt + 2 * m + 7 + k] = rate_next[k]
+        out[nxt + 2 * m + 10 + k] = settled[k]
     out[nxt + m + 3] = min(ticks + 1.0, warmup)
     return status
 

@@ -26,6 +26,28 @@ force, dlam/dF its derivative along u: finite differences of the target itself);
 hand the robot follows along u is the smallest S_i over that, over the hand's magnitudes up to
 a bound (the target's regime changes with the hand: where no cable is at the floor the internal
 force does not move).
+
+What rings the cables beyond that: the platform takes a change of the hand as its own
+displacement, and a change faster than its slowest mode overshoots. With K = W diag(EA/L) W^T
+and M = diag(m I, I_c), the mass-normalised modes phi_k, w_k^2 (K phi = w^2 M phi), a step
+dw of the hand's wrench moves mode k by phi_k . dw / w_k^2 (1 - cos w_k t), and cable i's
+tension by EA / L_i (W_i . phi_k) times that: about its new statics by at most
+
+    swing_i = sum_k |EA / L_i (W_i . phi_k) (phi_k . dw)| / w_k^2
+
+(one mode: the statics' change itself, a step overshooting to twice it; more: a cable the
+modes load in turn swings wider, cube_8cable's cable 3 ~1.8 times its statics under a 40 N
+step). A ramp at rate r leaves r / w_1 unsettled. So the part of the hand the platform has not
+settled to, the hand now less the hand low-passed over
+
+    settle = 1 / w_1                                        (38 ms on paper_7cable)
+
+rings each cable by up to that swing (`ringing_cable`, the modes of the start pose,
+`modal_params`); where it is more than the command holds the cable by, the hand is faster
+than the tension path can follow, from the first tick it is measured. The hand now: the
+force sensor's sliding average lags a ramp by (window - 1) / 2 ticks (`hand_lag`), and its
+rate over one tick times that lag is what the average has not yet taken in (a step of s
+shows as s (k + 4.5) / 10 k ticks in with the default 10 samples: 55 % at its first tick).
 """
 
 import math
@@ -56,6 +78,46 @@ def stretch_speed(max_reel_speed: float, max_velocity: float) -> float:
     """The reel speed (m/s) the platform's motion leaves for stretching the cables; > 0 (a
     robot whose motion takes every reel's speed still gets a tenth of it)."""
     return max(float(max_reel_speed) - float(max_velocity), 0.1 * float(max_reel_speed))
+
+
+def _modes(robot, position):
+    """(w^2 (6,), Phi (6, 6) mass-normalised, columns the modes) at `position` (m, level)."""
+    d = robot.dynamics
+    p = np.asarray(position, dtype=float)
+    rho = np.asarray(robot.reels, float) - (p + np.asarray(robot.attachments, float))
+    L = np.linalg.norm(rho, axis=1)
+    u = rho / L[:, None]
+    W = np.vstack([u.T, np.cross(robot.attachments, u).T])
+    K = W @ np.diag(d.EA / L) @ W.T
+    M = np.zeros((6, 6))
+    M[:3, :3] = d.mass * np.eye(3)
+    M[3:, 3:] = d.inertia
+    C = np.linalg.cholesky(M)
+    A = np.linalg.solve(C, np.linalg.solve(C, K).T)
+    lam, V = np.linalg.eigh(0.5 * (A + A.T))
+    return np.clip(lam, 0.0, None), np.linalg.solve(C.T, V)
+
+
+def settle_time(robot, position) -> float:
+    """1 / w_1 (s): the platform's slowest mode on its elastic cables at `position` (m, level),
+    the time constant over which it settles to a hand (module docstring); 0 for a robot whose
+    cables resist no motion."""
+    lam, _ = _modes(robot, position)
+    stiff = lam[lam > 1e-12 * max(float(lam.max()), 1e-300)]
+    return 1.0 / math.sqrt(float(stiff[0])) if stiff.size else 0.0
+
+
+def modal_params(robot, position) -> np.ndarray:
+    """[w_k^2 (6), Phi (36, row-major: Phi[a, k] the k-th mode's a-th component)] at
+    `position` (m, level): what `ringing_cable` takes as `modes`."""
+    lam, Phi = _modes(robot, position)
+    return np.concatenate([lam, Phi.ravel()])
+
+
+def hand_lag(filter_window: int, time_step: float) -> float:
+    """How far (s) the force sensor's sliding average of `filter_window` samples of
+    `time_step` s lags the hand: (window - 1) / 2 samples."""
+    return 0.5 * (int(filter_window) - 1) * float(time_step)
 
 
 def _target(T_p, N, floor, hard_floor, ceiling):
@@ -128,3 +190,32 @@ def lead_statics(W, w, w_lead, T_p):
             total += W[a, i] * y[a]
         T_p[i] -= total
     return True
+
+
+@_jit
+def ringing_cable(W, w, w_slow, T_command, L0, EA, modes, swing):
+    """The cable (1-based; 0: none) the hand's unsettled part may ring slack: swing (m,) N
+    becomes sum_k |EA / L0_i (W_i . phi_k) (phi_k . (w - w_slow))| / w_k^2 (the module
+    docstring's bound; W (6, m) at the pose, L0 (m,) m, `modes` modal_params', w and w_slow
+    the wrenches of the hand now and of the hand the platform has settled to), and the
+    cable named is the one whose swing exceeds its command T_command (m,) N most."""
+    m = W.shape[1]
+    for i in range(m):
+        swing[i] = 0.0
+    for k in range(6):
+        if not modes[k] > 0.0:
+            continue  # a mode without stiffness: nothing rings there
+        q = 0.0
+        for a in range(6):
+            q += modes[6 + 6 * a + k] * (w[a] - w_slow[a])
+        q /= modes[k]
+        for i in range(m):
+            share = 0.0
+            for a in range(6):
+                share += W[a, i] * modes[6 + 6 * a + k]
+            swing[i] += abs(EA / L0[i] * share * q)
+    deepest, cable = 0.0, 0
+    for i in range(m):
+        if swing[i] - T_command[i] > deepest:
+            deepest, cable = swing[i] - T_command[i], i + 1
+    return cable

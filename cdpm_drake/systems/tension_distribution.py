@@ -9,16 +9,21 @@ from cdpm_drake.systems.kernel_system import KernelSystem, build_kernel_block, o
 from cdpm_drake.systems.wiring import unit_delay
 
 
-def tension_path_params(robot, time_step) -> dict:
-    """build_tension_distribution's lead, rate_time and stretch_speed, derived from the
-    robot (kernels/tension_path.py)."""
+def tension_path_params(robot, time_step, position=None, filter_window=1) -> dict:
+    """build_tension_distribution's lead, rate_time, stretch_speed, settle_time and modes (at
+    `position`, m; default the workspace's centre) and hand_lag (the force sensor's sliding
+    average of `filter_window` samples), derived from the robot (kernels/tension_path.py)."""
     from cdpm_drake.kernels import tension_path
 
     d, limits = robot.dynamics, robot.limits
+    p = robot.workspace.center if position is None else position
     return {"lead": tension_path.lead_time(time_step, d.bandwidth),
             "rate_time": tension_path.rate_time(d.bandwidth),
             "stretch_speed": tension_path.stretch_speed(limits.max_reel_speed,
-                                                        limits.max_velocity)}
+                                                        limits.max_velocity),
+            "settle_time": tension_path.settle_time(robot, np.asarray(p, dtype=float)),
+            "hand_lag": tension_path.hand_lag(filter_window, time_step),
+            "modes": tension_path.modal_params(robot, np.asarray(p, dtype=float))}
 
 
 class TensionSolve(KernelSystem):
@@ -28,7 +33,8 @@ class TensionSolve(KernelSystem):
 def build_tension_distribution(builder, robot, *, min_tension, max_tension, tension_floor,
                                slew_rate, initial_tensions, time_step, fall_rate=None,
                                warmup_ticks=WARMUP_TICKS, ringing_factor=0.0, lead=0.0,
-                               rate_time=0.0, stretch_speed=0.0):
+                               rate_time=0.0, stretch_speed=0.0, settle_time=0.0,
+                               hand_lag=0.0, modes=None):
     """The tension estimate and the target tensions at the estimated pose
     (full_pose.tension_tick). Inputs p_WP, R_WP, F_H (N), velocity_command (m/s),
     residual (m), cable_lengths (m), tension_assumed (N: the forward kinematics'); outputs
@@ -46,7 +52,10 @@ def build_tension_distribution(builder, robot, *, min_tension, max_tension, tens
     ringing_factor standard deviations of the largest. lead (s): the target is the
     distribution for the hand force led by its rate (low-passed over rate_time, s) times
     lead; stretch_speed (m/s, 0: none): each cable's internal force rises at most EA / L0
-    times it (full_pose.tension_tick; their values: kernels/tension_path.py)."""
+    times it; settle_time (s, 0: off), hand_lag (s) and modes (42, the platform's:
+    tension_path.modal_params; None: none): the status names a cable the hand's part the
+    platform has not settled to may ring slack (full_pose.tension_tick; their values:
+    kernels/tension_path.py)."""
     m = robot.num_cables
     s = sizes(m)
     d = robot.dynamics
@@ -56,7 +65,8 @@ def build_tension_distribution(builder, robot, *, min_tension, max_tension, tens
                              float(time_step), float(slew_rate), float(warmup_ticks),
                              float(tension_floor), float(fall_rate),
                              float(ringing_factor), float(lead), float(rate_time),
-                             float(stretch_speed)]))
+                             float(stretch_speed), float(settle_time), float(hand_lag),
+                             *(np.zeros(42) if modes is None else modes)]))
     example = np.zeros(s["tension_x"])
     example[:3] = robot.workspace.center
     example[3:12] = np.eye(3).ravel()
@@ -64,7 +74,7 @@ def build_tension_distribution(builder, robot, *, min_tension, max_tension, tens
     solve = bind(tension_tick, reels, attachments, params, example,
                  np.empty(s["tension_out"]))
 
-    start = np.concatenate([np.asarray(initial_tensions, dtype=float), np.zeros(10 + m)])
+    start = np.concatenate([np.asarray(initial_tensions, dtype=float), np.zeros(13 + m)])
     # The hand force of the previous tick: a plant may compute its force sample in the same
     # step as it takes the reel command (the dynamic plant does), and this block's result
     # feeds that command, so the force is taken a tick old (2 ms, inside the sensor's

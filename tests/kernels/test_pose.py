@@ -139,7 +139,7 @@ def _tension(p, R, F, r, L0, T_assumed, v=np.zeros(3), v_prev=np.zeros(3), ticks
     x = np.concatenate([p, np.asarray(R).ravel(), F, v, r, L0, T_assumed,
                         np.zeros(M) if ringing is None else ringing, np.zeros(M), v_prev,
                         [ticks], T_before if T_before is not None else np.zeros(M),
-                        F_before, F_rate])
+                        F_before, F_rate, np.zeros(3)])  # F_settled: no settle time here
     out = np.empty(S["tension_out"])
     status = pc.tension_tick(REELS, ATTACH, params, x, out)
     return status, out[:M], out[M:2 * M], out[3 * M], out[3 * M + 3:]
@@ -409,7 +409,8 @@ def test_the_target_leads_the_hand_along_its_rate():
     plain = _tension(*args, F, *rest, **kw)
     np.testing.assert_allclose(led[1], ref[1], rtol=0, atol=1e-9)
     np.testing.assert_allclose(led[2], plain[2], rtol=0, atol=1e-12)  # the estimate
-    np.testing.assert_allclose(led[4][-3:], rate, rtol=0, atol=1e-9)  # the rate kept
+    np.testing.assert_allclose(led[4][2 * M + 7:2 * M + 10], rate, rtol=0,
+                               atol=1e-9)  # the rate kept
 
 
 def test_the_target_takes_in_a_ramp_s_acceleration_through_the_low_pass():

@@ -120,7 +120,7 @@ def target(robot, p, R, F, floor=10.0, ceiling=100.0, hard=3.0, factor=0.0, ring
                        factor, 0.0, 0.0, 0.0])
     x = np.concatenate([p, R.ravel(), F, np.zeros(3), np.zeros(m), pose_lengths(robot, p, R),
                         np.full(m, 20.0), np.zeros(m) if ringing is None else ringing,
-                        np.zeros(m), np.zeros(3), [1.0], np.zeros(m), np.zeros(6)])
+                        np.zeros(m), np.zeros(3), [1.0], np.zeros(m), np.zeros(9)])
     out = np.empty(pc.sizes(m)["tension_out"])
     pc.tension_tick(np.ascontiguousarray(robot.reels), np.ascontiguousarray(robot.attachments),
                     params, x, out)
@@ -291,7 +291,7 @@ def _fk_and_tension(robot, L0, T_assumed, p, R, F):
     params = np.array([d.mass, *d.handle, d.EA, 10.0, 100.0, 0.002, 1e9, 1.0, 3.0, 1e9, 0.0,
                        0.0, 0.0, 0.0])
     xt = np.concatenate([pe, Re.ravel(), F, np.zeros(3), r, L0, T_assumed, np.zeros(m),
-                         np.zeros(m), np.zeros(3), [1.0], np.zeros(m), np.zeros(6)])
+                         np.zeros(m), np.zeros(3), [1.0], np.zeros(m), np.zeros(9)])
     tout = np.empty(S["tension_out"])
     pc.tension_tick(reels, attach, params, xt, tout)
     return pe, Re, tout[m:2 * m].copy()

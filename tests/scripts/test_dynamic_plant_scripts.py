@@ -59,3 +59,24 @@ def test_unseen_slack_pose_recomputes_the_truth_from_the_log():
     assert true0 == est0 and 1.0 < true0 < 3.0  # exp3's start: 2.18 mm above d_l = 57 mm
     assert rows[0][8].strip() == rows[0][9].strip()
     assert "smallest singular value of the length Jacobian" in out.stdout
+
+
+def test_hand_compliance_puts_paper_7cable_s_pair_1_3_within_reach_of_a_40_n_tilt():
+    # exp2's start: pair 1-3 at d_l + 1.86 mm (the level pose's pair distance, computed here
+    # independently); a 40 N push across it tilts the platform on its taut elastic cables
+    # by ~1.4 deg, which moves the pair ~6 mm, while the position moves it < 0.1 mm.
+    import numpy as np
+
+    from cdpm_drake.config import load_resolved_scenario
+    from cdpm_drake.kernels.interference import pair_distances
+
+    out = run("bench/hand_compliance.py", "--force", "40")
+    assert out.returncode == 0, out.stderr
+    row = next(line for line in out.stdout.splitlines() if line.startswith("| exp2"))
+    cells = [c.strip() for c in row.split("|")[1:-1]]
+    resolved = load_resolved_scenario("exp2_interaction")
+    robot = resolved.robot
+    d0 = pair_distances(robot, np.asarray(resolved.scenario.initial_position, dtype=float))
+    assert float(cells[2]) == round(1000 * d0[robot.pair_position(1, 3)], 2)
+    by_position, by_tilt = (float(x) for x in cells[5].split("/"))
+    assert abs(by_position) < 0.1 and -7.0 < by_tilt < -5.0
