@@ -525,7 +525,9 @@ def margin_by_elimination(reels, attachments, rows, p, R, w, floor, ceiling, vie
     return max_min_1d(a[:2 * m], C[:2 * m, 0])[0]
 
 
-@_jit
+# Inlined where it is called (numba's IR): a call passes the work arrays' tuple by value, its
+# ~35 arrays' fields copied (3.6 k instructions a tick more in the look ahead, measured).
+@numba.njit(cache=True, error_model="numpy", inline="always")
 def tension_line(reels, attachments, rows, p, R, w, views):
     """The line of tensions {T: W T = -w} of a robot with one internal force (m = rows + 1)
     at the pose (p, R), by Gaussian elimination with complete pivoting of W's first `rows`

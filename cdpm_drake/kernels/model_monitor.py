@@ -95,7 +95,7 @@ def monitor_sizes(m: int, full_pose: bool, estimate: bool, measured: bool = Fals
     return {"x": x + MEMORY, "out": m + 4 + MEMORY, "memory": MEMORY, "memory_at": m + 4}
 
 
-@_jit
+@numba.njit(cache=True, error_model="numpy", inline="always")  # no tuple passed by value
 def hand_t_star(reels, attachments, rows, p, R, w, views):
     """t* at the pose (p, R) under the wrench w (kinetostatics.margin's t*: N, +inf where an
     internal force raises every tension, -inf where the first `rows` rows of the wrench
