@@ -513,9 +513,30 @@ def margin_by_elimination(reels, attachments, rows, p, R, w, floor, ceiling, vie
     elimination costs a quarter of the QR's flops. Equal to `margin`'s kappa to round-off
     (1e-9 relative where tested); -inf where the elimination's last pivot is below RANK_TOL
     of its first (as the QR's rank test, on the same matrix). The look ahead's samples."""
+    if not tension_line(reels, attachments, rows, p, R, w, views):
+        return -math.inf
+    T_p, a, C, lam = views[9], views[12], views[13], views[14]
+    m = reels.shape[0]
+    for i in range(m):
+        a[i] = T_p[i] - floor
+        a[m + i] = ceiling - T_p[i]
+        C[i, 0] = lam[i]
+        C[m + i, 0] = -lam[i]
+    return max_min_1d(a[:2 * m], C[:2 * m, 0])[0]
+
+
+# Inlined where it is called (numba's IR): a call passes the work arrays' tuple by value, its
+# ~35 arrays' fields copied (3.6 k instructions a tick more in the look ahead, measured).
+@numba.njit(cache=True, error_model="numpy", inline="always")
+def tension_line(reels, attachments, rows, p, R, w, views):
+    """The line of tensions {T: W T = -w} of a robot with one internal force (m = rows + 1)
+    at the pose (p, R), by Gaussian elimination with complete pivoting of W's first `rows`
+    rows: a point into T_p (views[9]: the free cable at zero) and a direction into lam
+    (views[14]: the free cable at one), the cables posed in views[:3] (L in views[2]).
+    False where the elimination's last pivot is below RANK_TOL of its first (as the QR's
+    rank test, on the same matrix): nothing holds there."""
     u, Rb, L, W6, W = views[0], views[1], views[2], views[3], views[4]
-    beta, T_p, n, a, C, lam, x = views[7], views[9], views[10], views[12], views[13], \
-        views[14], views[16]
+    beta, T_p, n, lam, x = views[7], views[9], views[10], views[14], views[16]
     cols = views[20]
     m = reels.shape[0]
     posed_cables(reels, attachments, p, R, u, Rb, L)
@@ -536,7 +557,7 @@ def margin_by_elimination(reels, attachments, rows, p, R, w, floor, ceiling, vie
         if k == 0:
             first = big
         if not big > RANK_TOL * first:
-            return -math.inf
+            return False
         if bi != k:
             for j in range(m):
                 W[k, j], W[bi, j] = W[bi, j], W[k, j]
@@ -563,12 +584,7 @@ def margin_by_elimination(reels, attachments, rows, p, R, w, floor, ceiling, vie
         lam[cols[i]] = n[i]
     T_p[cols[rows]] = 0.0
     lam[cols[rows]] = 1.0
-    for i in range(m):
-        a[i] = T_p[i] - floor
-        a[m + i] = ceiling - T_p[i]
-        C[i, 0] = lam[i]
-        C[m + i, 0] = -lam[i]
-    return max_min_1d(a[:2 * m], C[:2 * m, 0])[0]
+    return True
 
 
 @_jit

@@ -39,8 +39,10 @@ import math
 import numba
 import numpy as np
 
-from cdpm_drake.kernels.kinetostatics import MARGIN_T_STAR, margin_in, scratch_views
+from cdpm_drake.kernels.kinetostatics import (MARGIN_T_STAR, margin_in, scratch_views,
+                                              tension_line)
 from cdpm_drake.kernels.full_pose import held_wrench
+from cdpm_drake.kernels.tension import max_min_1d
 
 _jit = numba.njit(cache=True, error_model="numpy")
 
@@ -93,6 +95,24 @@ def monitor_sizes(m: int, full_pose: bool, estimate: bool, measured: bool = Fals
     return {"x": x + MEMORY, "out": m + 4 + MEMORY, "memory": MEMORY, "memory_at": m + 4}
 
 
+@numba.njit(cache=True, error_model="numpy", inline="always")  # no tuple passed by value
+def hand_t_star(reels, attachments, rows, p, R, w, views):
+    """t* at the pose (p, R) under the wrench w (kinetostatics.margin's t*: N, +inf where an
+    internal force raises every tension, -inf where the first `rows` rows of the wrench
+    matrix are rank-deficient), the cables posed in views[:3]. A robot with one internal
+    force (m = rows + 1) takes its line of tensions by Gaussian elimination
+    (kinetostatics.tension_line) instead of the pivoted QR, which was most of the monitor's
+    cost: the max-min over that line does not depend on which point and direction describe
+    it (max_min_1d is exact); equal to the QR's t* to round-off (tests/kernels/
+    test_model_monitor.py)."""
+    if reels.shape[0] == rows + 1:
+        if not tension_line(reels, attachments, rows, p, R, w, views):
+            return -math.inf
+        return max_min_1d(views[9], views[14])[0]
+    return margin_in(reels, attachments, rows, p, R, w, 0.0, math.inf, views, 0.0,
+                     MARGIN_T_STAR)[1]
+
+
 @_jit
 def monitor_tick(reels, attachments, params, scratch, x, out):
     """One tick (module docstring). x = [l (m) m, p (3) m, F_H (3) N, (full pose:) R (9),
@@ -138,9 +158,8 @@ def monitor_tick(reels, attachments, params, scratch, x, out):
     mem = x[x.shape[0] - MEMORY:]
     EA = params[M_EA]
     held_wrench(R, params[M_MASS:M_MASS + 4], F, zero, w)
-    t_star = margin_in(reels, attachments, int(params[M_ROWS]), p, R, w, 0.0, math.inf,
-                       views, 0.0, MARGIN_T_STAR)[1]
-    L = views[2]  # the cables' lengths at (p, R): margin posed them
+    t_star = hand_t_star(reels, attachments, int(params[M_ROWS]), p, R, w, views)
+    L = views[2]  # the cables' lengths at (p, R): the statics posed them
     r = out[4:4 + m]
     slack_cable, slack_value = -1, 0.0
     misfit_cable, misfit_value = -1, 0.0

@@ -116,9 +116,10 @@ def wrench_columns(u, Rb, W):
 
 
 @_jit
-def solve_spd(A, g, x):
-    """x = A^-1 g for a symmetric positive definite A (n, n) by Cholesky (A is overwritten
-    by its factor). False when A is not positive definite to working precision."""
+def cholesky(A):
+    """A (n, n) symmetric positive definite overwritten by its Cholesky factor (lower triangle
+    and diagonal; the strict upper triangle is left as it was). False when A is not positive
+    definite to working precision (A is then partly overwritten)."""
     n = A.shape[0]
     scale = 0.0
     for i in range(n):
@@ -135,16 +136,34 @@ def solve_spd(A, g, x):
             for k in range(j):
                 s -= A[i, k] * A[j, k]
             A[i, j] = s / A[j, j]
+    return True
+
+
+@_jit
+def cholesky_solve(F, g, x):
+    """x = A^-1 g from A's factor F (`cholesky`): forward then back substitution. g is read
+    only; x may not alias it. A factor solves any number of right-hand sides."""
+    n = F.shape[0]
     for i in range(n):
         s = g[i]
         for k in range(i):
-            s -= A[i, k] * x[k]
-        x[i] = s / A[i, i]
+            s -= F[i, k] * x[k]
+        x[i] = s / F[i, i]
     for i in range(n - 1, -1, -1):
         s = x[i]
         for k in range(i + 1, n):
-            s -= A[k, i] * x[k]
-        x[i] = s / A[i, i]
+            s -= F[k, i] * x[k]
+        x[i] = s / F[i, i]
+
+
+@_jit
+def solve_spd(A, g, x):
+    """x = A^-1 g for a symmetric positive definite A (n, n) by Cholesky (A is overwritten
+    by its factor: `cholesky`, then `cholesky_solve`). False when A is not positive definite
+    to working precision (x then untouched)."""
+    if not cholesky(A):
+        return False
+    cholesky_solve(A, g, x)
     return True
 
 

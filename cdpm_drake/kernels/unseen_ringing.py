@@ -47,7 +47,8 @@ import math
 import numba
 import numpy as np
 
-from cdpm_drake.kernels.pose import posed_cables, solve_spd, wrench_columns
+from cdpm_drake.kernels.pose import (cholesky, cholesky_solve, posed_cables, solve_spd,
+                                     wrench_columns)
 
 _jit = numba.njit(cache=True, error_model="numpy")
 
@@ -84,11 +85,64 @@ def ringing_sizes(m: int) -> dict:
     return {"x": m + 21 + MEMORY, "out": 2 * m + MEMORY, "memory": MEMORY, "memory_at": 2 * m}
 
 
+# The work arrays' floats: six (6, 6) matrices (K, C, M, the Newmark system, M's and K's
+# Cholesky factors), nine 6-vectors, two 3-vectors, and per cable W's column (6), u (3),
+# R b (3), k and L.
+_FIXED, _PER_CABLE = 6 * 36 + 9 * 6 + 2 * 3, 6 + 3 + 3 + 1 + 1
+
+
+def ringing_scratch(m: int) -> np.ndarray:
+    """The work arrays of `ringing_tick` for m cables, one flat buffer allocated once per
+    block (`_views` carves it): a tick allocates nothing."""
+    return np.zeros(_FIXED + _PER_CABLE * m)
+
+
 @_jit
-def _stiffness(reels, attachments, params, p, R, K, C, M, W, k):
-    """K, C, M (6, 6), W (6, m) and k (m,) = EA / L at the pose (p, R) (module docstring)."""
+def _take(buf, o, r, c):
+    return buf[o:o + r * c].reshape((r, c)), o + r * c
+
+
+@_jit
+def _take1(buf, o, r):
+    return buf[o:o + r], o + r
+
+
+@_jit
+def _views(scratch, m):
+    """The work arrays in `ringing_scratch(m)`: (K, C, M, A, MF, KF) (6, 6), W (6, m),
+    (u, Rb) (m, 3), (k, L) (m,), (a, f, rhs, acc0, d_next, ring, qs, col, y) (6,),
+    (dF, h) (3,)."""
+    K, o = _take(scratch, 0, 6, 6)
+    C, o = _take(scratch, o, 6, 6)
+    M, o = _take(scratch, o, 6, 6)
+    A, o = _take(scratch, o, 6, 6)
+    MF, o = _take(scratch, o, 6, 6)
+    KF, o = _take(scratch, o, 6, 6)
+    W, o = _take(scratch, o, 6, m)
+    u, o = _take(scratch, o, m, 3)
+    Rb, o = _take(scratch, o, m, 3)
+    k, o = _take1(scratch, o, m)
+    L, o = _take1(scratch, o, m)
+    a, o = _take1(scratch, o, 6)
+    f, o = _take1(scratch, o, 6)
+    rhs, o = _take1(scratch, o, 6)
+    acc0, o = _take1(scratch, o, 6)
+    d_next, o = _take1(scratch, o, 6)
+    ring, o = _take1(scratch, o, 6)
+    qs, o = _take1(scratch, o, 6)
+    col, o = _take1(scratch, o, 6)
+    y, o = _take1(scratch, o, 6)
+    dF, o = _take1(scratch, o, 3)
+    h, o = _take1(scratch, o, 3)
+    return ((K, C, M, A, MF, KF), W, (u, Rb), (k, L),
+            (a, f, rhs, acc0, d_next, ring, qs, col, y), (dF, h))
+
+
+@_jit
+def _stiffness(reels, attachments, params, p, R, K, C, M, W, k, u, Rb, L):
+    """K, C, M (6, 6), W (6, m) and k (m,) = EA / L at the pose (p, R) (module docstring);
+    u, Rb (m, 3) and L (m,): the cables' work arrays."""
     m = reels.shape[0]
-    u, Rb, L = np.empty((m, 3)), np.empty((m, 3)), np.empty(m)
     posed_cables(reels, attachments, p, R, u, Rb, L)
     wrench_columns(u, Rb, W)
     c = params[P_DAMPING]
@@ -112,18 +166,23 @@ def _stiffness(reels, attachments, params, p, R, K, C, M, W, k):
 
 
 @_jit
-def _solve(A, g, x):
-    """x = A^-1 g (A (6, 6) symmetric positive definite, copied); False where it is not."""
-    return solve_spd(A.copy(), g.copy(), x)
+def _factor(A, F):
+    """F = A's Cholesky factor (A (6, 6) symmetric positive definite, kept); False where it
+    is not."""
+    for r in range(6):
+        for c in range(6):
+            F[r, c] = A[r, c]
+    return cholesky(F)
 
 
 @_jit
-def ringing_tick(reels, attachments, params, x, out):
+def ringing_tick(reels, attachments, params, scratch, x, out):
     """One tick (module docstring). x = [p (3) m, R (9), v (3) m/s, w (3) rad/s (the
     command), F_H (3) N (the measured hand force, at the handle), T_estimate (m) N, memory:
     ticks, v_lag (6), d (6), d' (6), F_H at the first tick (3)]; out = [swing (m) N, warned
     (m: 1 where the estimate less the swing is below the floor, after the warm-up), next
-    memory (MEMORY)]. Returns the 1-based cable furthest below (0: none)."""
+    memory (MEMORY)]; scratch: `ringing_scratch(m)`, the block's work arrays. Returns the
+    1-based cable furthest below (0: none)."""
     m = reels.shape[0]
     p = x[0:3]
     R = x[3:12].reshape((3, 3))
@@ -132,13 +191,12 @@ def ringing_tick(reels, attachments, params, x, out):
     mem = x[21 + m:21 + m + MEMORY]
     nxt = out[2 * m:2 * m + MEMORY]
     step = params[P_STEP]
-    K, C, M = np.empty((6, 6)), np.empty((6, 6)), np.empty((6, 6))
-    W, k = np.empty((6, m)), np.empty(m)
-    _stiffness(reels, attachments, params, p, R, K, C, M, W, k)
+    (K, C, M, A, MF, KF), W, (u, Rb), (k, L), vectors, (dF, h) = _views(scratch, m)
+    a, f, rhs, acc0, d_next, ring, qs, col, y = vectors
+    _stiffness(reels, attachments, params, p, R, K, C, M, W, k, u, Rb, L)
     # The command twist after the drives' lag, and its rate: the acceleration the reels give.
     first = mem[0] == 0.0
     g = 1.0 - math.exp(-step * params[P_BANDWIDTH])
-    a = np.empty(6)
     for j in range(6):
         command = x[12 + j]
         lagged = command if first else mem[1 + j] + g * (command - mem[1 + j])
@@ -148,11 +206,9 @@ def ringing_tick(reels, attachments, params, x, out):
     # The force on the modes: the inertia of the reels' acceleration and the hand's wrench
     # (about the centre, at the handle) as it changed since the first tick (the estimate
     # holds the statics of both).
-    f, rhs, acc0, dF = np.empty(6), np.empty(6), np.empty(6), np.empty(3)
     for j in range(3):
         nxt[19 + j] = F[j] if first else mem[19 + j]
         dF[j] = F[j] - nxt[19 + j]
-    h = np.empty(3)
     for r in range(3):
         h[r] = (R[r, 0] * params[P_HANDLE] + R[r, 1] * params[P_HANDLE + 1]
                 + R[r, 2] * params[P_HANDLE + 2])
@@ -171,8 +227,9 @@ def ringing_tick(reels, attachments, params, x, out):
         for j in range(6):
             total -= C[r, j] * dd[j] + K[r, j] * d[j]
         rhs[r] = total
-    ok = _solve(M, rhs, acc0)
-    A = np.empty((6, 6))
+    ok = _factor(M, MF)
+    if ok:
+        cholesky_solve(MF, rhs, acc0)
     for r in range(6):
         total = f[r]
         for j in range(6):
@@ -180,8 +237,12 @@ def ringing_tick(reels, attachments, params, x, out):
             total += (M[r, j] * (4.0 / step ** 2 * d[j] + 4.0 / step * dd[j] + acc0[j])
                       + C[r, j] * (2.0 / step * d[j] + dd[j]))
         rhs[r] = total
-    d_next, ring, qs = np.zeros(6), np.empty(6), np.zeros(6)
-    ok = ok and _solve(A, rhs, d_next) and _solve(K, f, qs)
+    for j in range(6):  # what a failed solve leaves
+        d_next[j], qs[j] = 0.0, 0.0
+    # K's factor once: the quasi-static displacement and every cable's w_i^T K^-1 w_i.
+    ok = ok and solve_spd(A, rhs, d_next) and _factor(K, KF)
+    if ok:
+        cholesky_solve(KF, f, qs)
     for j in range(6):
         nxt[13 + j] = 2.0 / step * (d_next[j] - d[j]) - dd[j] if ok else 0.0
         nxt[7 + j] = d_next[j] if ok else 0.0
@@ -193,12 +254,12 @@ def ringing_tick(reels, attachments, params, x, out):
     nxt[0] = min(mem[0] + 1.0, max(params[P_WARMUP], 1.0))
     settled = mem[0] >= params[P_WARMUP]
     cable, lowest = 0, params[P_FLOOR]
-    col, y = np.empty(6), np.empty(6)
     for i in range(m):
         for r in range(6):
             col[r] = W[r, i]
         share = 0.0
-        if ok and _solve(K, col, y):
+        if ok:
+            cholesky_solve(KF, col, y)
             for r in range(6):
                 share += col[r] * y[r]
         out[i] = k[i] * math.sqrt(max(2.0 * energy * share, 0.0))

@@ -5,9 +5,10 @@ it). It warns; it changes no command."""
 
 import numpy as np
 
-from cdpm_drake.kernels.call import bind, owned
+from cdpm_drake.kernels.call import bind, owned, owned_scratch
 from cdpm_drake.kernels.full_pose import WARMUP_TICKS
-from cdpm_drake.kernels.unseen_ringing import ringing_params, ringing_sizes, ringing_tick
+from cdpm_drake.kernels.unseen_ringing import (ringing_params, ringing_scratch, ringing_sizes,
+                                               ringing_tick)
 from cdpm_drake.systems.kernel_system import (KERNEL_BLOCK_MAIN, KernelSystem,
                                               build_kernel_block)
 from cdpm_drake.systems.wiring import FlatBlock
@@ -29,12 +30,15 @@ def build_unseen_ringing(builder, robot, *, floor, time_step, warmup=WARMUP_TICK
     reels, attachments = owned(robot.reels), owned(robot.attachments)
     params = owned(ringing_params(robot.dynamics, time_step=time_step, floor=floor,
                                   warmup=warmup))
+    scratch = owned_scratch(ringing_scratch(m))  # its work arrays: none a tick
     example = np.zeros(s["x"])
     example[0:3] = robot.workspace.center
     example[3:12] = np.eye(3).ravel()
-    kernel = bind(ringing_tick, reels, attachments, params, example, np.empty(s["out"]))
+    kernel = bind(ringing_tick, reels, attachments, params, scratch, example,
+                  np.empty(s["out"]))
     build_kernel_block(
-        builder, UnseenRingingSolve(s["x"], s["out"], kernel, (reels, attachments, params)),
+        builder, UnseenRingingSolve(s["x"], s["out"], kernel,
+                                    (reels, attachments, params, scratch)),
         inputs=[("p_WP", 3), ("R_WP", 9), ("velocity_command", 3), ("omega_command", 3),
                 ("F_H", 3), ("tension_estimate", m)],
         memory=(s["memory"], None), outputs=[("swing", 0, m), ("warned", m, m)],

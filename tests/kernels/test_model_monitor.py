@@ -251,3 +251,83 @@ def test_a_cable_measured_above_the_overload_is_a_fault_after_ticks():
     assert message.startswith("cable 5 is overloaded: its measured tension is 203.0 N, "
                               "above 150 N (model_monitor.overload x controller.max_tension) "
                               "for 5 ticks (10 ms)"), message
+
+
+def _tetrahedral_robot():
+    """A point platform (attachments at its centre) on four cables from the corners of a
+    tetrahedron around a 1 m box: it can only translate (wrench rows 3) and has one internal
+    force (m = rows + 1), like paper_7cable in six rows."""
+    from cdpm_drake.robot import Robot, Workspace
+
+    reels = np.array([[-2.0, -2.0, 3.0], [2.0, -2.0, 3.0], [0.0, 2.5, 3.0], [0.0, 0.0, -2.0]])
+    return Robot(name="tetrahedron", reels=reels, attachments=np.zeros((4, 3)),
+                 workspace=Workspace(np.array([-0.5, -0.5, 0.0]), np.array([0.5, 0.5, 1.0])))
+
+
+def _pre_18_robot():
+    """paper_7cable with its attachment points before they were calibrated for holding (a
+    geometry of its own: the level platform held on 28 % of the box)."""
+    import dataclasses
+
+    from helpers_robots import PRE_18
+
+    return dataclasses.replace(_robot(), attachments=np.array(PRE_18))
+
+
+@pytest.mark.parametrize("name", ["paper_7cable", "cube_8cable", "tetrahedron", "pre_18"])
+def test_the_monitor_s_t_star_is_the_pivoted_qr_s(name):
+    # The monitor takes t* of a robot with one internal force (paper_7cable and the
+    # pre-calibration one in six rows, the tetrahedron in three) by Gaussian elimination
+    # (model_monitor.hand_t_star); the reference is kinetostatics.margin's pivoted QR on the
+    # same pose and wrench (held_wrench, as the monitor forms it): the same max-min over the
+    # same line of tensions, so equal to round-off, +inf (an internal force raises every
+    # tension) and -inf (no tension holds) at the same poses. cube_8cable (two internal
+    # forces) keeps the QR. Poses across and beyond the workspace box, tilted where the
+    # statics have six rows, hands up to ~60 N.
+    from cdpm_drake.kernels.full_pose import held_wrench
+    from cdpm_drake.kernels.kinetostatics import (MARGIN_T_STAR, margin_in, scratch_views,
+                                                  wrench_rows)
+    from cdpm_drake.kernels.rotation import rotation_from_rpy
+    from cdpm_drake.robot import load_robot, resolve_robot_path
+
+    robot = {"tetrahedron": _tetrahedral_robot, "pre_18": _pre_18_robot}.get(
+        name, lambda: load_robot(resolve_robot_path(name)))()
+    m, rows = robot.num_cables, wrench_rows(robot)
+    assert rows == (3 if name == "tetrahedron" else 6)
+    s = monitor_sizes(m, True, False)
+    params = monitor_params(robot, EA=0.0, slack_tension=2.0, slack_length=0.003,
+                            fit_tolerance=0.01, unholdable=1.0, ticks=TICKS, estimate=False,
+                            full_pose=True, rows=rows, holdable=HOLDABLE,
+                            slack_ticks=SLACK_TICKS)
+    scratch = margin_scratch(m)
+    views = scratch_views(margin_scratch(m))
+    rng = np.random.default_rng(61)
+    lo, hi = robot.workspace.lower, robot.workspace.upper
+    out = np.empty(s["out"])
+    finite = infinite = lost = 0
+    for trial in range(600):
+        p = rng.uniform(lo - 0.1 * (hi - lo), hi + 0.1 * (hi - lo))
+        R = rotation_from_rpy(rng.normal(size=3) * (0.0 if trial % 3 == 0 or rows == 3
+                                                    else 0.15))
+        F = rng.normal(size=3) * 20.0
+        x = np.zeros(s["x"])
+        x[:m] = pose_lengths(robot, p, R)
+        x[m:m + 3], x[m + 3:m + 6], x[m + 6:m + 15] = p, F, R.ravel()
+        monitor_tick(robot.reels, robot.attachments, params, scratch, x, out)
+        w = np.empty(6)
+        held_wrench(R, params[8:12], F, np.zeros(3), w)
+        qr = margin_in(robot.reels, robot.attachments, rows, p, R, w, 0.0, np.inf, views,
+                       0.0, MARGIN_T_STAR)[1]
+        if np.isfinite(qr):
+            finite += 1
+            lost += qr < 0.0
+            assert out[3] == pytest.approx(qr, rel=1e-9, abs=1e-9), (p, qr, out[3])
+        else:
+            infinite += 1
+            assert out[3] == qr, (p, qr, out[3])
+        # The residual reads the lengths the statics posed: zero for the pose's own lengths.
+        np.testing.assert_allclose(out[4:4 + m], 0.0, atol=1e-12)
+    # Both kinds of pose, and hands held and not held among the finite ones (measured:
+    # finite, infinite, lost of 600: paper_7cable 512, 88, 433; cube_8cable 152, 448, 120;
+    # tetrahedron 111, 489, 51; pre_18 553, 47, 518).
+    assert finite > 60 and infinite > 20 and 10 < lost < finite - 10, (finite, infinite, lost)

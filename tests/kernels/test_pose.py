@@ -66,6 +66,31 @@ def test_forward_pose_recovers_random_poses_from_a_level_guess():
         assert np.abs(r).max() < 1e-10
 
 
+def test_one_cholesky_factor_solves_every_right_hand_side_as_solve_spd_does():
+    # The ringing kernel factors its stiffness once a tick and solves m + 1 right-hand sides
+    # with it (cholesky, cholesky_solve): the same operations as solve_spd per side, so the
+    # same bits; the reference for the values is numpy's solve. A matrix that is not
+    # positive definite is refused by both, the solution left untouched.
+    from cdpm_drake.kernels.pose import cholesky, cholesky_solve, solve_spd
+
+    rng = np.random.default_rng(5)
+    B = rng.normal(size=(6, 6))
+    A = B @ B.T + 0.1 * np.eye(6)
+    F = A.copy()
+    assert cholesky(F)
+    np.testing.assert_allclose(np.tril(F) @ np.tril(F).T, A, rtol=0, atol=1e-12)
+    for g in rng.normal(size=(8, 6)):
+        x, y = np.empty(6), np.empty(6)
+        cholesky_solve(F, g, x)
+        assert solve_spd(A.copy(), g, y)
+        assert np.array_equal(x, y)
+        np.testing.assert_allclose(x, np.linalg.solve(A, g), rtol=1e-10)
+    indefinite = A - 2.0 * np.linalg.eigvalsh(A)[0] * np.eye(6)
+    x = np.full(6, 7.0)
+    assert not cholesky(indefinite.copy()) and not solve_spd(indefinite.copy(), g, x)
+    assert np.all(x == 7.0)
+
+
 def test_forward_pose_needs_six_cables():
     four = dataclasses.replace(ROBOT, reels=ROBOT.reels[:4], attachments=ROBOT.attachments[:4])
     with pytest.raises(PoseError, match="at least 6 cables"):

@@ -11,7 +11,8 @@ import numpy as np
 import pytest
 
 from cdpm_drake.config import load_resolved_scenario
-from cdpm_drake.kernels.unseen_ringing import ringing_params, ringing_sizes, ringing_tick
+from cdpm_drake.kernels.unseen_ringing import (ringing_params, ringing_scratch, ringing_sizes,
+                                               ringing_tick)
 
 STEP = 0.002
 
@@ -40,10 +41,11 @@ def _run(robot, dynamics, ticks, *, v_of, F_of, T=None, floor=4.0):
     T = np.full(m, 50.0) if T is None else T
     memory = np.zeros(s["memory"])
     out = np.empty(s["out"])
+    scratch = ringing_scratch(m)
     for tick in range(ticks):
         x = np.concatenate([p, np.eye(3).ravel(), v_of(tick), F_of(tick), T, memory])
         ringing_tick(np.ascontiguousarray(robot.reels), np.ascontiguousarray(robot.attachments),
-                     params, x, out)
+                     params, scratch, x, out)
         memory = out[s["memory_at"]:].copy()
     m = robot.num_cables
     return out[:m].copy(), out[m:2 * m].copy()

@@ -1,9 +1,10 @@
 """No allocation in the tick: the kinetostatic, model-monitor and safety-filter kernels (the
-filter's QP included) work in their block's buffers (numba's allocation counter, NRT_STATS,
-over 1000 calls as the blocks make them, on the shipped experiments' paper_7cable: one
-internal force, the max-min solved in closed form; a robot with two or more, cube_8cable,
-still allocates the QP form's work arrays, qp.py), and exp2's diagram as shipped, warmed and
-its log reserved, grows no Python memory over 1000 ticks (tracemalloc around
+filter's QP included) and the unseen-ringing kernel (no tension sensor; 43 allocations a call
+before its buffer) work in their block's buffers (numba's allocation counter, NRT_STATS, over
+1000 calls as the blocks make them, on the shipped experiments' paper_7cable: one internal
+force, the max-min solved in closed form; a robot with two or more, cube_8cable, still
+allocates the QP form's work arrays, qp.py), and exp2's diagram as shipped, warmed and its
+log reserved, grows no Python memory over 1000 ticks (tracemalloc around
 Simulator.AdvanceTo). Each check has a control that allocates, to show it would catch one."""
 
 import os
@@ -90,6 +91,25 @@ KERNELS = textwrap.dedent("""
             outf))
         assert outf[6] >= 1 and outf[7] != 0, outf  # modified, some barrier or ball binding
 
+    from cdpm_drake.kernels.unseen_ringing import (ringing_params, ringing_scratch,
+                                                   ringing_sizes, ringing_tick)
+    rs = ringing_sizes(m)
+    xr = np.zeros(rs["x"])
+    xr[0:3] = robot.workspace.center + [0.9, 0.3, 0.2]
+    xr[3:12] = np.eye(3).ravel()
+    xr[12:18] = [0.3, -0.2, 0.1, 0.05, 0.0, -0.02]  # the command twist
+    xr[18:21] = [8.0, -5.0, -20.0]
+    xr[21:21 + m] = 2.0  # estimates near the floor: cables warned of
+    mem = xr[21 + m:]
+    mem[0] = 50.0  # past the warm-up, a ringing under way: every solve and the swing
+    mem[1:7] = [0.1, 0.0, -0.1, 0.0, 0.02, 0.0]
+    mem[7:19] = 1e-4
+    rp = owned(ringing_params(robot.dynamics, time_step=0.002, floor=4.0, warmup=10))
+    outr = np.empty(rs["out"])
+    results["ringing_tick"] = per_call(ringing_tick, (
+        reels, att, rp, owned_scratch(ringing_scratch(m)), xr, outr))
+    assert np.all(outr[:m] > 0.0) and outr[m:2 * m].any(), outr  # swings, a cable warned of
+
     @numba.njit
     def allocating(x, out):  # the control: a kernel with one work array of its own
         w = np.empty(3)
@@ -109,7 +129,7 @@ def test_the_safety_kernels_allocate_nothing_a_call():
     assert results.pop("control") == 1.0  # the counter sees one np.empty a call
     assert results == {"kinetostatic_tick soft=0.0": 0.0, "kinetostatic_tick soft=2.0": 0.0,
                        "monitor_tick": 0.0, "filter_tick full=False": 0.0,
-                       "filter_tick full=True": 0.0}
+                       "filter_tick full=True": 0.0, "ringing_tick": 0.0}
 
 
 def _growth_per_tick(wrap=None):

@@ -589,6 +589,18 @@ MUTANTS = [
       "beta[k] = beta[bi]",
       "the look ahead's elimination swaps a row of the wrench matrix but not its wrench",
       ("tests/kernels/test_kinetostatic_gradient.py",)),
+    M("monitor_t_star_reduced_direction", "cdpm_drake/kernels/model_monitor.py",
+      "return max_min_1d(views[9], views[14])[0]",
+      "return max_min_1d(views[9], views[10])[0]",
+      "the monitor's t* by elimination takes the eliminated system's direction (pivoted, "
+      "without the free cable) for the line of tensions' own",
+      ("tests/kernels/test_model_monitor.py",)),
+    M("monitor_elimination_for_two_internal_forces", "cdpm_drake/kernels/model_monitor.py",
+      "if reels.shape[0] == rows + 1:",
+      "if reels.shape[0] >= rows + 1:",
+      "the monitor takes t* by the one-line elimination on a robot with two internal forces "
+      "(cube_8cable), where the tensions form a plane",
+      ("tests/kernels/test_model_monitor.py",)),
     M("monitor_count_not_reset", "cdpm_drake/kernels/model_monitor.py",
       "counts = (mem[0] + 1.0 if slack_cable >= 0 else 0.0,",
       "counts = (mem[0] + 1.0 if slack_cable >= 0 else mem[0],",
