@@ -161,7 +161,10 @@ def regain_cap(prev, a_prev, rate, T):
     statics held the hand. So the acceleration along the motion comes back no faster than
     the brakes come on; a brake may still end at once (to no acceleration), which asks the
     cables for its own size only. It never asks the platform to slow down (the cap is at
-    least the last speed), so it cannot make a brake or a barrier harder."""
+    least the last speed), so it cannot make a brake or a barrier harder. filter_tick caps
+    the speed so only while a margin is lost (h < 0, by any depth), where the slowdown
+    switches: everywhere, a hand's step at t = 0 was met by a slower start and slackened
+    more (exp2's 40 N across 1-3: 233 holdable slack ticks for 189)."""
     speed = math.sqrt(prev[0] * prev[0] + prev[1] * prev[1] + prev[2] * prev[2])
     along = -_slowing(prev, speed, a_prev) if speed > 0.0 else 0.0
     return speed + (max(along, 0.0) + rate * T) * T
@@ -487,10 +490,10 @@ def filter_tick(reels, attachments, pi, pj, d_min, bounds, params, scratch, x, o
         slowing = _slowing(prev, prev_speed, a_prev) if prev_speed > 0.0 else 0.0
         speed_cap = min(v_max, max(slow_to, prev_speed - give_way_ramp(
             slowing, give_way, kin_brake, T) * T))
-    # The regain cap (regain_cap) is the first thing given up: a barrier that needs the
-    # platform faster than it (a return) is kept.
+    # The regain cap (regain_cap), while a margin is lost, is the first thing given up: a
+    # barrier that needs the platform faster than it (a return) is kept.
     limits_cap = speed_cap
-    if give_way < math.inf and memory[3] != 0.0:
+    if give_way < math.inf and memory[3] != 0.0 and depth > 0.0:
         speed_cap = min(speed_cap, regain_cap(prev, a_prev, give_way, T))
     status = STATUS_HOLD
     for stage in range(3):

@@ -4,7 +4,8 @@ on the dynamic plant's ground truth without a tension sensor (full pose, tension
 kinetostatic limit, where it slides for seconds and then along it at up to the speed limit;
 no cable goes slack there where the statics at the true pose hold the measured hand with every
 tension in [2 N, 100 N], and the command's acceleration along its motion never steps up by more
-than the give-way rate allows. Deterministic simulations (no sensor noise without a sensor)."""
+than the give-way rate allows while a margin is lost. Deterministic simulations (no sensor
+noise without a sensor)."""
 
 import math
 
@@ -52,13 +53,14 @@ def test_a_40_n_lift_at_40_n_per_s_held_at_the_limit_leaves_no_holdable_slack(li
     assert speed[-500:].max() > 0.45
 
 
-def test_the_speed_regained_after_a_brake_grows_by_at_most_the_give_way_rate(lift_40):
-    # The command's speed grows from one tick to the next by at most T (max(a, 0) + rate T),
-    # a = (v_k-1 - v_k-2) . v_k-1 / |v_k-1| / T its acceleration along itself at the last
-    # tick (0 after a brake: a brake may end at once) and rate the give-way rate (0.54 m/s^2
-    # per 14 ms on paper_7cable): safety_filter.regain_cap. On the code before it stepped by up to 2.5 m/s^2. Over 1e-6
-    # m/s^2 of round-off; the cap is given up only where a barrier's return needs more, which
-    # this run never does.
+def test_where_a_margin_is_lost_the_speed_regained_grows_by_the_give_way_rate(lift_40):
+    # While a margin is lost (the kinetostatic margin the filter used, or a pair's, below
+    # zero), the command's speed grows from one tick to the next by at most
+    # T (max(a, 0) + rate T), a = (v_k-1 - v_k-2) . v_k-1 / |v_k-1| / T its acceleration
+    # along itself at the last tick (0 after a brake: a brake may end at once) and rate the
+    # give-way rate (0.54 m/s^2 per 14 ms on paper_7cable): safety_filter.regain_cap. On the
+    # code before it stepped by up to 2.5 m/s^2 there. Over 1e-6 m/s^2 of round-off; the cap
+    # is given up only where a barrier's return needs more, which this run never does.
     from cdpm_drake.diagram import safety_filter_params
 
     resolved, log = lift_40
@@ -70,5 +72,9 @@ def test_the_speed_regained_after_a_brake_grows_by_at_most_the_give_way_rate(lif
     unit = v[1:-1] / np.maximum(speed[1:-1], 1e-300)[:, None]
     along = np.sum((v[1:-1] - v[:-2]) * unit, axis=1) / T
     rise = (speed[2:] - speed[1:-1]) / T - np.maximum(along, 0.0)
-    assert rise.max() <= rate * T + 1e-6, f"a step of {rise.max():.3f} m/s^2 at tick " \
-        f"{int(np.argmax(rise)) + 2}"
+    kappa = np.asarray(log["kappa"], dtype=float).reshape(-1)
+    pairs = np.asarray(log["pair_margin"], dtype=float).reshape(-1)
+    lost = ((kappa < 0.0) | (pairs < 0.0))[2:]
+    assert lost.sum() > 1000  # the platform is held at the limit for seconds
+    worst = float(rise[lost].max())
+    assert worst <= rate * T + 1e-6, f"a step of {worst:.3f} m/s^2"
