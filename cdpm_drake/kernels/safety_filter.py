@@ -31,12 +31,13 @@ block has seen cross counts negative; the gradient by the envelope theorem,
 platform's weight and the measured hand force), with its gradient from the kinetostatic
 block.
 
-When no twist meets them all, the filter gives up in this order, and says which in its
-status: the returns of lost margins (each then only must not get worse, grad h . u >= 0:
+When no twist meets them all, the filter gives up in this order, and says which in its status:
+on a robot with mass the cap on the speed regained after a brake (`regain_cap`; status
+unchanged), the returns of lost margins (each then only must not get worse, grad h . u >= 0:
 STATUS_NO_RETURN), and then it holds the platform (STATUS_HOLD), braking to zero twist at the
-acceleration limit. The acceleration limit is never given up: a step of the command is a
-jerk of the platform, which on a robot with mass slackens cables (measured: a barrier met by
-a 0.2 m/s step in one tick slackened four cables of the dynamic plant).
+acceleration limit. The acceleration limit is never given up: a step of the command is a jerk
+of the platform, which on a robot with mass slackens cables (measured: a barrier met by a 0.2
+m/s step in one tick slackened four cables of the dynamic plant).
 
 The barriers are evaluated at the commanded pose: the estimated position and, for the full
 pose, the orientation the orientation hold keeps (R_ref), not the estimated one. The estimate
@@ -143,6 +144,30 @@ def give_way_ramp(previous, rate, brake, T):
     slowdown's step from +1.8 to -0.5 m/s^2 took cable 2 ~4 N below its command, slack for 7
     ticks where the statics held the hand)."""
     return min(brake, previous + rate * T)
+
+
+@_jit
+def regain_cap(prev, a_prev, rate, T):
+    """The most speed (m/s) the command may have this tick on a robot with mass: the last
+    command's speed (prev, m/s), grown by its acceleration along itself (a_prev, m/s^2; none
+    where it was slowing) plus at most `rate` T more (rate: the give-way rate, m/s^3).
+
+    Why: the brakes for the cables come on at the give-way rate (give_way_ramp), but they
+    came off at once. Where a hand held the platform at the kinetostatic limit (exp2's
+    40 N lift, no tension sensor), the lost-margin slowdown switched on and off as the
+    margin hovered about LOST_DEPTH: the platform slowed at the cable brake, then the
+    command stepped to the acceleration limit (steps of 1.7-2.5 m/s^2 in a tick, ~5 times
+    a second), which rang cable 5 at the platform's ~12 Hz from 0 to 15 N, slack where the
+    statics held the hand. So the acceleration along the motion comes back no faster than
+    the brakes come on; a brake may still end at once (to no acceleration), which asks the
+    cables for its own size only. It never asks the platform to slow down (the cap is at
+    least the last speed), so it cannot make a brake or a barrier harder. filter_tick caps
+    the speed so only while a margin is lost (h < 0, by any depth), where the slowdown
+    switches: everywhere, a hand's step at t = 0 was met by a slower start and slackened
+    more (exp2's 40 N across 1-3: 233 holdable slack ticks for 189)."""
+    speed = math.sqrt(prev[0] * prev[0] + prev[1] * prev[1] + prev[2] * prev[2])
+    along = -_slowing(prev, speed, a_prev) if speed > 0.0 else 0.0
+    return speed + (max(along, 0.0) + rate * T) * T
 
 
 @_jit
@@ -465,10 +490,20 @@ def filter_tick(reels, attachments, pi, pj, d_min, bounds, params, scratch, x, o
         slowing = _slowing(prev, prev_speed, a_prev) if prev_speed > 0.0 else 0.0
         speed_cap = min(v_max, max(slow_to, prev_speed - give_way_ramp(
             slowing, give_way, kin_brake, T) * T))
+    # The regain cap (regain_cap), while a margin is lost, is the first thing given up: a
+    # barrier that needs the platform faster than it (a return) is kept.
+    limits_cap = speed_cap
+    if give_way < math.inf and memory[3] != 0.0 and depth > 0.0:
+        speed_cap = min(speed_cap, regain_cap(prev, a_prev, give_way, T))
     status = STATUS_HOLD
-    for stage in range(2):
-        # Stage 0: everything; 1: lost margins only kept, not restored.
+    for stage in range(3):
+        # Stage 0: everything; 1: without the regain cap; 2: lost margins only kept, not
+        # restored.
         if stage == 1:
+            if speed_cap >= limits_cap:
+                continue
+            speed_cap = limits_cap
+        if stage == 2:
             relaxed = False
             for r in range(base):
                 if lost[r] and d[r] > 0.0:
@@ -507,7 +542,7 @@ def filter_tick(reels, attachments, pi, pj, d_min, bounds, params, scratch, x, o
                                  -a_max * T + grad[0] * prev[0] + grad[1] * prev[1]
                                  + grad[2] * prev[2], BIND_ACCELERATION)
         if ok:
-            status = (STATUS_PASS, STATUS_NO_RETURN)[stage]
+            status = (STATUS_PASS, STATUS_PASS, STATUS_NO_RETURN)[stage]
             break
     binding = 0
     if status == STATUS_HOLD:

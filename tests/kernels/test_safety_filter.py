@@ -72,8 +72,10 @@ def test_pair_barrier_distance_and_gradient_match_independent_references():
 
 def _filter(robot, *, v_d, p, v_prev=(0.0, 0.0, 0.0), kappa=100.0, grad_kappa=(0, 0, 0),
             ray=math.inf, d_min=None, crossed=None, kinetostatic=True, full=False,
-            w_d=(0.0, 0.0, 0.0), cable_brake=None, give_way=math.inf, a_prev=(0.0, 0.0, 0.0)):
-    """One filter tick on paper_7cable (level); returns (v, status, binding, out)."""
+            w_d=(0.0, 0.0, 0.0), cable_brake=None, give_way=math.inf, a_prev=(0.0, 0.0, 0.0),
+            valid=False):
+    """One filter tick on paper_7cable (level); returns (v, status, binding, out). valid:
+    the memory holds a last command (not the first tick)."""
     i, j = robot.pair_index
     pi, pj = np.asarray(i, dtype=np.int64), np.asarray(j, dtype=np.int64)
     P = pi.size
@@ -95,6 +97,9 @@ def _filter(robot, *, v_d, p, v_prev=(0.0, 0.0, 0.0), kappa=100.0, grad_kappa=(0
         x[14 + P:23 + P] = np.eye(3).ravel()
     # The memory: [p_c (3), valid (1), v_prev (3), w_prev (3), a_prev (3)].
     x[s["memory_at"] + 4:s["memory_at"] + 7] = v_prev
+    if valid:
+        x[s["memory_at"]:s["memory_at"] + 3] = p
+        x[s["memory_at"] + 3] = 1.0
     x[s["memory_at"] + 10:s["memory_at"] + 13] = a_prev
     out = np.empty(s["out"])
     status = filter_tick(robot.reels, robot.attachments, pi, pj, dmin, bounds, params,
@@ -318,6 +323,75 @@ def test_the_lost_margin_slowdown_gives_way_to_the_acceleration_the_platform_has
     # Within the cutting planes' tolerance (BALL_TOL relative and absolute: 1.3e-9 m/s).
     assert np.linalg.norm(v) == pytest.approx(0.3 - T * min(0.5, -a_prev + give_way * T),
                                               abs=3e-9)
+
+
+@pytest.mark.parametrize("a_prev, give_way, expected", [
+    (-0.5, 40.0, 40.0 * T), (0.0, 40.0, 40.0 * T), (0.5, 40.0, 0.5 + 40.0 * T),
+    (-0.5, math.inf, None), (1.95, 40.0, None)])
+def test_after_a_brake_the_speed_comes_back_no_faster_than_the_brakes_come_on(a_prev, give_way,
+                                                                             expected):
+    """0.5 mm beyond the box's upper x face (a margin lost, by less than LOST_DEPTH: no
+    slowdown) at 0.3 m/s along it, the command asking for the acceleration limit along y:
+    on a robot with mass (a finite give-way rate, m/s^3) the speed grows by at most
+    T (max(a_prev, 0) + give_way T) (safety_filter.regain_cap: a_prev the last command's
+    acceleration along it, m/s^2): after a brake (a_prev < 0) by the give-way rate times the
+    tick, not by the acceleration limit at once (a step of 2.5 m/s^2 in a tick, which rang
+    exp2's cable 5 slack). Without a give-way (the kinematic plant), or where the cap is
+    above the acceleration limit, the acceleration limit alone bounds it (the face's return
+    takes part of its a_max T). The return along -x is the face's ramp either way."""
+    robot = _robot()
+    p = np.array(robot.workspace.center, dtype=float)
+    p[0] = robot.workspace.upper[0] + 0.0005
+    v_prev = np.array([0.0, 0.3, 0.0])
+    v, status, binding, _ = _filter(robot, v_d=v_prev + [0.0, A_MAX * T, 0.0], p=p,
+                                    v_prev=v_prev, kinetostatic=False, cable_brake=0.5,
+                                    give_way=give_way, a_prev=(0.0, a_prev, 0.0), valid=True)
+    assert v[0] == pytest.approx(-RAMP_SHARE * A_MAX * T, abs=1e-9)  # the face's return
+    if expected is not None:
+        # Within the cutting planes' tolerance (BALL_TOL relative and absolute: 1.3e-9 m/s).
+        assert np.linalg.norm(v) == pytest.approx(0.3 + T * expected, abs=3e-9)
+        assert binding & BIND_SPEED
+    else:
+        step = math.sqrt((A_MAX * T) ** 2 - (RAMP_SHARE * A_MAX * T) ** 2)
+        assert v[1] == pytest.approx(0.3 + step, abs=3e-9)
+        assert not binding & BIND_SPEED
+
+
+def test_where_no_margin_is_lost_the_speed_regained_is_not_capped():
+    """Far from every barrier, the same brake and ask: the acceleration limit alone bounds
+    the speed (a_max T more): a hand that starts the platform moves it as on ideal reels
+    (capped everywhere, the 40 N steps at t = 0 slackened more: exp2's across 1-3 233 holdable
+    slack ticks for 189)."""
+    robot = _robot()
+    v_prev = np.array([0.3, 0.0, 0.0])
+    v, status, binding, _ = _filter(robot, v_d=v_prev + [A_MAX * T, 0.0, 0.0],
+                                    p=robot.workspace.center, v_prev=v_prev,
+                                    kinetostatic=False, cable_brake=0.5, give_way=40.0,
+                                    a_prev=(-0.5, 0.0, 0.0), valid=True)
+    assert status == STATUS_PASS and binding == 0
+    np.testing.assert_allclose(v, v_prev + [A_MAX * T, 0.0, 0.0], atol=1e-12)
+
+
+def test_a_return_that_needs_more_speed_than_the_regain_cap_gives_the_cap_up():
+    """The crossed pair of the test below, walked back from rest on a robot with mass (the
+    last command at rest, a give-way rate of 40 m/s^3): the regain cap alone would allow
+    40 T^2 (0.16 mm/s) this tick, the return asks RAMP_SHARE a_max T (3.6 mm/s); the cap is
+    the first thing the filter gives up, before the return, so the platform is walked back
+    as without it (status modified, not 'lost margins held')."""
+    from cdpm_drake.config import load_resolved_scenario
+
+    robot = load_resolved_scenario("exp2_interaction").robot
+    q = robot.pair_position(1, 3)
+    crossed = np.zeros(robot.num_pairs)
+    crossed[q] = 1.0
+    common = dict(v_d=np.zeros(3), p=np.array([1.56, 3.24, 1.22]),
+                  d_min=np.zeros(robot.num_pairs), crossed=crossed, kinetostatic=False)
+    v0, status0, _, _ = _filter(robot, **common)
+    v, status, binding, _ = _filter(robot, **common, cable_brake=0.5, give_way=40.0,
+                                    valid=True)
+    assert np.linalg.norm(v0) == pytest.approx(RAMP_SHARE * A_MAX * T, abs=1e-9)
+    np.testing.assert_allclose(v, v0, atol=1e-9)
+    assert status == status0 == STATUS_MODIFIED and binding == BIND_PAIR
 
 
 def test_a_crossed_pair_counts_its_distance_negative_and_is_walked_back():
