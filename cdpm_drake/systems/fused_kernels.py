@@ -176,30 +176,30 @@ def fuse_kernels(builder, members, wirings: dict, name: str = FUSED_KERNELS):
     return specs_out, {block.name: (split, k) for k, block in enumerate(members)}
 
 
-# The blocks whose kernels one callback computes, in the order of the data flow: the limits'
-# command feeds the filter; the kinetostatic block's margin feeds the filter (its felt cue
-# enters the admittance, which has no direct feedthrough: a tick later); the filter's command
-# feeds the tension distribution, whose estimate the model monitor reads. The memories they
-# read (the filter's barrier state, the limits' last command) are last tick's.
-SAFETY_CHAIN = ("safety_limits", "kinetostatic_force", "safety_filter",
-                "tension_distribution", "model_monitor")
+# The blocks whose kernels one callback computes, in the order of the data flow: the path of
+# the safety filter's command, from what it reads (the interference block's crossed pairs,
+# the orientation held, the limits' command, the kinetostatic margin) to what its command
+# feeds (the tension distribution, the Jacobian mapping, the tension damping), and the model
+# monitor, which reads the distribution's estimate. The kinetostatic block's felt cue enters
+# the admittance, which has no direct feedthrough (a tick later either way); the memories
+# they read (the filter's barrier state, the limits' last command) are last tick's.
+SAFETY_CHAIN = ("interference_force", "orientation_hold", "safety_limits",
+                "kinetostatic_force", "safety_filter", "tension_distribution",
+                "jacobian_mapping", "tension_damping", "model_monitor")
 # Fused only where one of these is in the diagram (the paper's Fig. 5 is built as it was).
 SAFETY_BLOCKS = ("kinetostatic_force", "safety_filter", "model_monitor")
 
 
 def safety_chain(blocks, plant) -> list:
     """The SAFETY_CHAIN blocks of `blocks` ({name: FlatBlock or system}) to fuse: none
-    without a safety block; the tension distribution only with the monitor (it is there to
-    keep the order); the monitor not where the plant's measurements it reads change with the
-    reel command of the same tick (direct feedthrough: an algebraic loop through the fused
-    callback)."""
+    without a safety block; the monitor not where the plant's measurements it reads change
+    with the reel command of the same tick (direct feedthrough: an algebraic loop through
+    the fused callback)."""
     if not any(name in blocks for name in SAFETY_BLOCKS):
         return []
     names = [name for name in SAFETY_CHAIN if name in blocks]
     if "model_monitor" in names and _feeds_through(plant):
         names.remove("model_monitor")
-    if "model_monitor" not in names and "tension_distribution" in names:
-        names.remove("tension_distribution")
     return [blocks[name] for name in names] if len(names) > 1 else []
 
 

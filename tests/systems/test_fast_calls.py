@@ -182,9 +182,10 @@ def test_the_fused_diagram_has_one_selector_and_no_multiplexers():
     # the last tick, the filter's barrier position, its valid flag, last twist and last
     # acceleration (its brakes for the cables give way from it), the monitor's four counters: slack, misfit, unholdable, overload) one delay.
     assert [type(s).__name__ for s in plain.GetSystems()].count("Selector") == 9
-    # And the four kernels of the limits, the kinetostatic block, the filter and the monitor
-    # one callback (systems/fused_kernels.py): three systems fewer.
-    assert len(list(plain.GetSystems())) - len(list(diagram.GetSystems())) == 8 + 6 + 3
+    # And the six kernels of the interference block, the limits, the kinetostatic block, the
+    # filter, the mapping and the monitor one callback (systems/fused_kernels.py): five
+    # systems fewer.
+    assert len(list(plain.GetSystems())) - len(list(diagram.GetSystems())) == 8 + 6 + 5
     names = {s.get_name() for s in diagram.GetSystems()}
     assert FUSED_DELAY in names and not names & {
         "forward_kinematics_previous", "interference_force_side_memory",

@@ -96,15 +96,16 @@ def test_fusing_against_the_data_flow_is_an_error_naming_the_block():
 def test_exp2_computes_its_safety_blocks_in_one_callback_and_keeps_their_ports():
     diagram = build_diagram(load_scenario("exp2_interaction"))
     names = {s.get_name() for s in diagram.GetSystems()}
-    chain = ["safety_limits", "kinetostatic_force", "safety_filter", "model_monitor"]
+    chain = ["interference_force", "safety_limits", "kinetostatic_force", "safety_filter",
+             "jacobian_mapping", "model_monitor"]
     assert diagram.fused_kernels == {"system": FUSED_KERNELS, "blocks": chain}
     assert isinstance(diagram.GetSubsystemByName(FUSED_KERNELS), FusedKernelSystem)
     assert not names & set(chain)
-    # Python callbacks left: the force sensor's range, the forward kinematics, the
-    # interference pairs, the Jacobian mapping and the fused one (eight before).
+    # Python callbacks left: the force sensor's range, the forward kinematics and the fused
+    # one (eight before).
     python = [s for s in diagram.GetSystems()
               if isinstance(s, (KernelSystem, FusedKernelSystem))]
-    assert len(python) == 5
+    assert len(python) == 3
     # Each block still has its named ports, logged from them.
     logged = {(block, port) for _, block, port in logged_ports(diagram)}
     assert {("kinetostatic_force", "kappa"), ("safety_filter", "velocity_command"),
@@ -124,7 +125,7 @@ def test_exp2_computes_its_safety_blocks_in_one_callback_and_keeps_their_ports()
 def test_the_monitor_stays_apart_where_the_hand_force_feeds_through_the_plant():
     # The dynamic plant samples the hand in the step that takes the reel command (its
     # measured_force has direct feedthrough): the monitor reads that hand of the same tick,
-    # which the filter's command in the fused callback would feed, so it keeps its own.
+    # which the reel command of the fused callback feeds, so it keeps its own.
     from cdpm_drake.diagram import make_plant
 
     scenario = load_scenario("exp2_interaction", "{plant: !DynamicReels {}, controller: "
@@ -133,8 +134,9 @@ def test_the_monitor_stays_apart_where_the_hand_force_feeds_through_the_plant():
     command = plant.GetInputPort("reel_velocity_command").get_index()
     assert plant.HasDirectFeedthrough(command, plant.GetOutputPort("measured_force").get_index())
     diagram = build_diagram(scenario)
-    assert diagram.fused_kernels["blocks"] == ["safety_limits", "kinetostatic_force",
-                                               "safety_filter"]
+    assert diagram.fused_kernels["blocks"] == [
+        "interference_force", "orientation_hold", "safety_limits", "kinetostatic_force",
+        "safety_filter", "tension_distribution", "jacobian_mapping", "tension_damping"]
     assert diagram.HasSubsystemNamed("model_monitor")
     # The paper's Fig. 5 (no safety block) is built as it was: nothing fused.
     fig5 = load_scenario("exp2_interaction", "{safety_filter: {enabled: false}, "
