@@ -611,6 +611,12 @@ def block_output_port(diagram, block: str, port_name: str):
     return diagram.GetSubsystemByName(block).GetOutputPort(port_name)
 
 
+def has_block(diagram, block: str) -> bool:
+    """Whether a diagram build_diagram made has the Fig. 5 block `block` (one system, or a
+    flat block, whose kernel may be in the fused callback: systems/fused_kernels.py)."""
+    return block in getattr(diagram, "flat_blocks", {}) or diagram.HasSubsystemNamed(block)
+
+
 def logged_ports(diagram):
     """(key, block, port name) of every LOGGED signal the diagram has (its block, and the port:
     the full-pose blocks have ports the paper's do not), in LOGGED order; a key several blocks

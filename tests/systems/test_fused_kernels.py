@@ -10,7 +10,7 @@ from pydrake.systems.framework import DiagramBuilder
 from pydrake.systems.primitives import ConstantVectorSource
 
 from cdpm_drake.config import load_scenario
-from cdpm_drake.diagram import block_output_port, build_diagram, logged_ports
+from cdpm_drake.diagram import block_output_port, build_diagram, has_block, logged_ports
 from cdpm_drake.systems.fused_kernels import (FUSED_KERNELS, FusedKernelSystem, fuse_kernels,
                                               safety_chain)
 from cdpm_drake.systems.kernel_system import KernelSystem, build_kernel_block
@@ -101,6 +101,8 @@ def test_exp2_computes_its_safety_blocks_in_one_callback_and_keeps_their_ports()
     assert diagram.fused_kernels == {"system": FUSED_KERNELS, "blocks": chain}
     assert isinstance(diagram.GetSubsystemByName(FUSED_KERNELS), FusedKernelSystem)
     assert not names & set(chain)
+    # Still blocks of the diagram (the real-time status line asks for the interference one).
+    assert all(has_block(diagram, block) for block in chain)
     # Python callbacks left: the force sensor's range, the forward kinematics and the fused
     # one (eight before).
     python = [s for s in diagram.GetSystems()
