@@ -12,7 +12,7 @@ before): only their KernelSystems go, each block's result then a piece of the fu
 import numpy as np
 from pydrake.systems.framework import LeafSystem
 
-from cdpm_drake.kernels.call import owned, owned_scratch
+from cdpm_drake.kernels.call import bind, owned, owned_scratch
 from cdpm_drake.kernels.chain import move, put, take, view
 from cdpm_drake.systems.kernel_system import KernelSystem
 from cdpm_drake.systems.wiring import (FUSED_DELAY, FUSED_WIRING, FlatBlock, fuse_delays,
@@ -49,8 +49,14 @@ def _chain_callback(specs, inputs, buf, at_in, links, x_total):
     (as kernel_system.kernel_callback writes one call): put the inputs, then per kernel its
     links' copies and its call (and its `failed` where it returns other than its `ok`), then
     take the results."""
-    names = {"inputs": inputs, "put": put, "move": move, "take": take, "buf": buf,
-             "at_in": _owned_index(at_in), "x_total": x_total}
+    at_in = _owned_index(at_in)
+    # The movers compiled (or loaded) now, not in the first tick; called bound, as the
+    # kernels are (kernels.call.bind), on copies of the buffer.
+    names = {"inputs": inputs, "buf": buf, "at_in": at_in, "x_total": x_total,
+             "put": bind(put, np.zeros(at_in.size), owned(buf), at_in),
+             "take": bind(take, owned(buf), x_total, np.empty(buf.size - x_total))}
+    some = _owned_index([0])
+    names["move"] = bind(move, owned(buf), some, some)
     lines = ["        put(inputs(context), buf, at_in)"]
     x_at, out_at = 0, x_total
     for k, spec in enumerate(specs):
