@@ -34,8 +34,8 @@ from cdpm_drake.systems.safety_limits import SAFETY_LIMITS_MAIN, build_safety_li
 from cdpm_drake.systems.tension_distribution import build_tension_distribution, tension_path_params
 from cdpm_drake.systems.unseen_ringing import add_unseen_ringing
 from cdpm_drake.systems.wall_force import WorkspaceWallForce
-from cdpm_drake.systems.wiring import (FUSED_DELAY, FUSED_WIRING, FlatBlock, fuse_delays,
-                                       fuse_wiring, wiring)
+from cdpm_drake.systems.fused_kernels import assemble
+from cdpm_drake.systems.wiring import FlatBlock, wiring
 
 # Logged signals: (logger name suffix, system name, output port name). Every signal of the
 # paper's Figs. 10, 11, 13, 14 and 16, and what the limits and reels did with them.
@@ -109,7 +109,8 @@ class BuildOptions:
     # a real-time run must not lose its log if the process dies.
     tick_log: str | None = None
     # Fuse the blocks' and the logger's C++ wiring (Selectors) into one system (systems/
-    # wiring.py): the same connections and values, ~5 % less time a tick; False: as built.
+    # wiring.py), and the safety blocks' kernels into one callback (systems/
+    # fused_kernels.py): the same connections and values, less time a tick; False: as built.
     fuse_wiring: bool = True
 
 
@@ -272,34 +273,9 @@ def build_diagram(scenario: Scenario | ResolvedScenario,
         wirings.update(_add_loggers(builder, blocks, T))
     if options.tick_log is not None:
         _add_tick_log(builder, blocks, T, options.tick_log, robot, scenario)
-    flat = {name: block for name, block in blocks.items() if isinstance(block, FlatBlock)}
-    moved, fused, gone = {}, None, set()
-    if options.fuse_wiring:
-        delays = {}
-        for block in flat.values():
-            wirings.update(block.wirings)
-            delays.update(block.delays)
-        wirings.update(fuse_delays(builder, delays))
-        gone = set(wirings) | set(delays)
-        exported = {at for block in flat.values() for at in block.layout()["outputs"].values()}
-        moved, fused = fuse_wiring(builder, wirings, keep=exported)
-    diagram = builder.Build()
+    # The blocks' kernels, memories and wiring fused (BuildOptions.fuse_wiring), and built.
+    diagram = assemble(builder, blocks, wirings, fuse=options.fuse_wiring, plant=plant)
     diagram.set_name("cdpm_controller")
-    # The flat blocks: which systems make each one and where its ports are
-    # (block_output_port; the overview draws each as one block).
-    diagram.flat_blocks = {name: block.layout(moved, gone) for name, block in flat.items()}
-    # The fused wiring, for the overview (which draws through it): {output index: the input
-    # indices it reads}.
-    if fused is None:
-        diagram.fused_wiring = None
-    else:
-        inputs, outputs = fused
-        index = {name: k for k, (name, _) in enumerate(inputs)}
-        diagram.fused_wiring = {
-            "system": FUSED_WIRING,
-            "memory": FUSED_DELAY if diagram.HasSubsystemNamed(FUSED_DELAY) else None,
-            "reads": {k: sorted({index[src] for src, _, _ in pieces})
-                      for k, (_, pieces) in enumerate(outputs)}}
     return diagram
 
 
@@ -635,12 +611,17 @@ def block_output_port(diagram, block: str, port_name: str):
     return diagram.GetSubsystemByName(block).GetOutputPort(port_name)
 
 
+def has_block(diagram, block: str) -> bool:
+    """Whether a diagram build_diagram made has the Fig. 5 block `block` (one system, or a
+    flat block, whose kernel may be in the fused callback: systems/fused_kernels.py)."""
+    return block in getattr(diagram, "flat_blocks", {}) or diagram.HasSubsystemNamed(block)
+
+
 def logged_ports(diagram):
     """(key, block, port name) of every LOGGED signal the diagram has (its block, and the port:
     the full-pose blocks have ports the paper's do not), in LOGGED order; a key several blocks
     log is the last one's the diagram has (`_available`)."""
-    yield from _available(lambda block, port_name: diagram.HasSubsystemNamed(block)
-                          and _block_has_output(diagram, block, port_name))
+    yield from _available(lambda block, port_name: _block_has_output(diagram, block, port_name))
 
 
 def _available(has):
@@ -668,8 +649,10 @@ def logged_source(diagram, key: str):
 
 def _block_has_output(diagram, block: str, port_name: str) -> bool:
     flat = getattr(diagram, "flat_blocks", {}).get(block)
-    return (port_name in flat["outputs"] if flat is not None
-            else diagram.GetSubsystemByName(block).HasOutputPort(port_name))
+    if flat is not None:  # (a flat block may have no system of its own left: fused_kernels)
+        return port_name in flat["outputs"]
+    return diagram.HasSubsystemNamed(block) and diagram.GetSubsystemByName(block).HasOutputPort(
+        port_name)
 
 
 def make_plant(scenario: Scenario | ResolvedScenario, robot=None):

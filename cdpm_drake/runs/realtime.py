@@ -349,11 +349,13 @@ def _output(diagram, context, system_name, port_name):
 
 
 def _status_line(diagram, context, reels, t) -> str:
+    from cdpm_drake.diagram import has_block
+
     p = _output(diagram, context, "forward_kinematics", "p_WP")
     F_H = _output(diagram, context, "force_sensor", "F_H")
     text = (f"t {t:7.2f} s  p [{p[0]:.3f}, {p[1]:.3f}, {p[2]:.3f}] m  |F_H| "
             f"{np.linalg.norm(F_H):5.2f} N")
-    if diagram.HasSubsystemNamed("interference_force"):
+    if has_block(diagram, "interference_force"):
         d = _output(diagram, context, "interference_force", "pair_distances")
         F = _output(diagram, context, "interference_force", "F_int")
         text += f"  |F_int| {np.linalg.norm(F):4.2f} N  closest pair {1000 * d.min():6.1f} mm"

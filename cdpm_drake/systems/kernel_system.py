@@ -7,6 +7,8 @@ splits the result). The plants' steps (plants/) are not: they read the time, for
 person's force at the tick's time.
 """
 
+import dataclasses
+
 from pydrake.systems.framework import LeafSystem
 
 from cdpm_drake.kernels.call import owned
@@ -15,6 +17,21 @@ from cdpm_drake.systems.wiring import note_piece, unit_delay, wiring
 # The name build_kernel_block gives the KernelSystem; a flat build (FlatBlock) names that
 # system after the block.
 KERNEL_BLOCK_MAIN = "solve"
+
+
+@dataclasses.dataclass(frozen=True)
+class KernelSpec:
+    """A KernelSystem's call: kernel(*before, x, *after, out), x of x_size and out of
+    out_size values; a return other than `ok` calls failed(status, x, out) where failed is
+    given."""
+
+    kernel: object
+    before: tuple
+    after: tuple
+    ok: object
+    failed: object
+    x_size: int
+    out_size: int
 
 
 class KernelSystem(LeafSystem):
@@ -39,6 +56,10 @@ class KernelSystem(LeafSystem):
                  ok=None, failed=None, input_name="inputs", output_name="result"):
         super().__init__()
         self._inputs = self.DeclareVectorInputPort(input_name, x_size)
+        # What fused_kernels.fuse_kernels needs to call this block's kernel from another's
+        # callback.
+        self.kernel_spec = KernelSpec(kernel, tuple(before), tuple(after), ok, failed,
+                                      x_size, out_size)
         calc = kernel_callback(kernel, before, after, self._inputs.Eval, output_name,
                                ok=ok, failed=failed)
         self.DeclareVectorOutputPort(output_name, out_size, calc,

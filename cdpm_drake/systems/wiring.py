@@ -2,6 +2,8 @@
 (Selectors) to stack a block's inputs and split its result, building a block as a named
 sub-diagram or flat into its parent, and fusing the flat blocks' wiring into one system."""
 
+import re
+
 import numpy as np
 from pydrake.systems.framework import DiagramBuilder
 from pydrake.systems.primitives import LinearSystem, Selector, SelectorParams, ZeroOrderHold
@@ -44,6 +46,7 @@ class FlatBlock:
         self.inputs: dict[str, list] = {}
         self.outputs: dict[str, object] = {}
         self.systems: list[str] = []
+        self.kinds: dict[str, str] = {}
         # {output name: (source port, offset)} for outputs that are a piece of another port.
         self.pieces: dict[str, tuple] = {}
         # {system name: spec} of the block's `wiring` Selectors and `unit_delay`s (see
@@ -63,6 +66,8 @@ class FlatBlock:
     def AddNamedSystem(self, name, system):
         full = self.name if name == self._main else f"{self.name}_{name}"
         self.systems.append(full)
+        # Its class, for drawing the block after its system is gone (fused_kernels).
+        self.kinds[full] = re.sub(r"_\[.*\]$", "", type(system).__name__)
         if hasattr(system, "wiring_spec"):
             self.wirings[full] = system.wiring_spec
         if hasattr(system, "delay_spec"):
@@ -89,6 +94,17 @@ class FlatBlock:
             self._builder.Connect(source, port)
         self._source_at[name] = _where(source)
 
+    def relocate(self, old: tuple, port) -> None:
+        """Every exported output and connected input's source at `old` (system name, output
+        index) is now `port` (fused_kernels: a removed system's result)."""
+        new = _where(port)
+        for name, at in list(self._output_at.items()):
+            if at == old:
+                self._output_at[name], self.outputs[name] = new, port
+        for name, at in list(self._source_at.items()):
+            if at == old:
+                self._source_at[name] = new
+
     def layout(self, moved=None, fused=()) -> dict:
         """{"systems": names, "inputs": {port: [(system name, input index)]}, "outputs":
         {port: (system name, output index)}}: the block in a built diagram, by names. After
@@ -100,6 +116,8 @@ class FlatBlock:
                 # All the block's systems as built, the fused ones' parts included (for
                 # drawing the block as built).
                 "parts": tuple(self.systems),
+                "kinds": {name: self.kinds[name] for name in self.systems
+                          if name == self.name},
                 "inputs": {name: [moved.get((*at, "in"), at) for at in ats]
                            for name, ats in self._input_at.items()},
                 "outputs": {name: moved.get((*at, "out"), at)

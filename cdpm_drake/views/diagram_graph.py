@@ -148,13 +148,51 @@ def overview_graphviz(diagram, title: str | None = None, caption: str | None = N
     wiring_k = by_name[fused["system"]] if fused else None
     # Nor the fused memory: the blocks' delays, drawn inside the blocks as unfused.
     memory_k = by_name.get(fused.get("memory")) if fused else None
+    # The safety blocks' fused callback (`diagram.fused_kernels`) is not drawn either: its
+    # blocks are, each with its ports, and edges into it go to the blocks that read them.
+    kernels = getattr(diagram, "fused_kernels", None)
+    kernels_k = by_name[kernels["system"]] if kernels else None
     # Nodes: [name, kind, inputs, outputs, shaded]; where each system's ports land on them
     # (in_at: a list, as one input of the fused wiring can be several blocks' inputs).
     nodes, node_of, in_at, out_at = [], {}, {}, {}
     merged = []  # (source (system, output), target (node, input)) of fused-away inputs
-    for k, system in enumerate(systems):
-        block = in_block.get(k)
-        if k in (wiring_k, memory_k):
+
+    def add_block(block):
+        info = flat[block]
+        j = len(nodes)
+        # Its parts by their own names (the block's main system: by its class).
+        kinds = info.get("kinds", {})
+        parts = [name[len(block) + 1:] if name != block else
+                 kinds.get(name) or _short_type(systems[by_name[name]])
+                 for name in info.get("parts", info["systems"])]
+        nodes.append([block, _inside(parts), list(info["inputs"]),
+                      list(info["outputs"]), True])
+        for i, (port_name, ports) in enumerate(info["inputs"].items()):
+            for name, p in ports:
+                if name in by_name:
+                    in_at.setdefault((by_name[name], p), []).append((j, i))
+                elif port_name in info.get("sources", {}):
+                    # Its wiring fed straight from another block's: fused into that one,
+                    # so the edge comes from where the source is now.
+                    source, sp = info["sources"][port_name]
+                    merged.append(((by_name[source], sp), (j, i)))
+        for i, (name, p) in enumerate(info["outputs"].values()):
+            out_at[(by_name[name], p)] = (j, i)
+        for name in info["systems"]:
+            node_of[by_name[name]] = j
+
+    # In the order the blocks and systems were added (`diagram.block_order`, where the
+    # diagram has it: a block whose systems were all fused away has its place there).
+    order = [by_name.get(name, name) for name in getattr(diagram, "block_order", ())
+             if name in by_name or name in flat]
+    order += [k for k in range(len(systems)) if k not in order]
+    for k in order:
+        if isinstance(k, str):
+            if k not in (n[0] for n in nodes):
+                add_block(k)
+            continue
+        system, block = systems[k], in_block.get(k)
+        if k in (wiring_k, memory_k, kernels_k):
             continue
         if block is None:
             kind = _short_type(system)
@@ -171,27 +209,9 @@ def overview_graphviz(diagram, title: str | None = None, caption: str | None = N
             for p in range(system.num_output_ports()):
                 out_at[(k, p)] = (node_of[k], p)
         elif block not in (n[0] for n in nodes):
-            info = flat[block]
-            j = len(nodes)
-            # Its parts by their own names (the block's main system: by its class).
-            parts = [name[len(block) + 1:] if name != block else
-                     _short_type(systems[by_name[name]])
-                     for name in info.get("parts", info["systems"])]
-            nodes.append([block, _inside(parts), list(info["inputs"]),
-                          list(info["outputs"]), True])
-            for i, (port_name, ports) in enumerate(info["inputs"].items()):
-                for name, p in ports:
-                    if name in by_name:
-                        in_at.setdefault((by_name[name], p), []).append((j, i))
-                    elif port_name in info.get("sources", {}):
-                        # Its wiring fed straight from another block's: fused into that one,
-                        # so the edge comes from where the source is now.
-                        source, sp = info["sources"][port_name]
-                        merged.append(((by_name[source], sp), (j, i)))
-            for i, (name, p) in enumerate(info["outputs"].values()):
-                out_at[(by_name[name], p)] = (j, i)
-            for name in info["systems"]:
-                node_of[by_name[name]] = j
+            add_block(block)
+    if kernels:  # what the fused callback reads, it reads for its blocks
+        node_of[kernels_k] = {j for j, n in enumerate(nodes) if n[0] in kernels["blocks"]}
     index = {id(s): k for k, s in enumerate(systems)}
     edges = set()
     connections = [((index[id(src)], int(src_k)), (index[id(dst)], int(dst_k)))
@@ -211,7 +231,9 @@ def overview_graphviz(diagram, title: str | None = None, caption: str | None = N
         reads = fused["reads"][s[1]]
         for i in reads:
             # The input of d's block that this wiring input is, else d's own input.
-            targets = [t for t in in_at.get((wiring_k, i), []) if t[0] == node_of.get(d[0])]
+            reader = node_of.get(d[0])
+            readers = reader if isinstance(reader, set) else {reader}
+            targets = [t for t in in_at.get((wiring_k, i), []) if t[0] in readers]
             direct.append((wired.get(i), targets or in_at.get(d, [])))
             if fused.get("label_edges") and len(reads) == 1:
                 # A piece of one signal: the edge says which (the wiring output's name).

@@ -17,7 +17,7 @@ from pydrake.systems.framework import LeafSystem
 
 import cdpm_drake.systems
 from cdpm_drake.kernels import interference
-from cdpm_drake.kernels import kinematics
+from cdpm_drake.kernels import chain, kinematics
 from cdpm_drake.kernels import safety_limits as limits
 from cdpm_drake.kernels.plant import operators
 from cdpm_drake.config import resolve as resolve_module
@@ -33,7 +33,8 @@ KERNELS = (interference.interference_tick, interference.interference_tick_stacke
            limits.limit_velocity_stacked,
            limits.wall_force_into, sensor.clip_into, operators._spring_force_into,
            operators._interp_into, operators.operator_force_into,
-           operators.operator_force_on_state, kinematics.simulated_reel_step_stacked)
+           operators.operator_force_on_state, kinematics.simulated_reel_step_stacked,
+           chain.put, chain.move, chain.take)
 
 
 def _leaf_classes():
@@ -80,12 +81,13 @@ def test_each_python_block_is_evaluated_once_per_tick(monkeypatch):
     ticks = 250
     result = simulate(scenario=load_scenario("exp2_interaction"), duration=ticks * 0.002)
     assert result.error is None
-    # The nine Python blocks of exp2 (sensor range, FK, interference, limits, Jacobian, the
-    # simulated world's step; issue 26: the kinetostatic limit, the safety filter, the model
-    # monitor), each computed once per tick: ticks + 1 published rows, the first at t = 0
-    # before any update; the world's step feeds only the plant's state update, so it runs at
-    # the `ticks` updates. A second evaluation per tick would double a count.
-    assert len(calls) == 9, calls
+    # The Python callbacks of exp2 (sensor range, FK, the simulated world's step, and one
+    # for the interference block, the limits, the kinetostatic limit, the safety filter, the
+    # Jacobian mapping and the model monitor: systems/fused_kernels.py), each computed once
+    # per tick: ticks + 1 published rows, the first at t = 0 before any update; the world's
+    # step feeds only the plant's state update, so it runs at the `ticks` updates. A second
+    # evaluation per tick would double a count.
+    assert len(calls) == 4 and "FusedKernelSystem.result" in calls, calls
     for key, n in calls.items():
         assert n == (ticks if key.startswith("ReelStep") else ticks + 1), (key, n)
 

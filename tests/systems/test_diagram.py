@@ -14,7 +14,7 @@ import pytest
 from pydrake.systems.analysis import Simulator
 
 from cdpm_drake.diagram import (PLANT_PORTS, BuildOptions, block_output_port, build_diagram,
-                                logged_ports)
+                                has_block, logged_ports)
 from cdpm_drake.kernels.kinematics import forward_kinematics
 from cdpm_drake.config import load_scenario, scenario_robot
 from cdpm_drake.runs.log import collect_log
@@ -54,8 +54,12 @@ def run(scenario, duration):
 def test_system_names_follow_fig_5():
     diagram = build_diagram(load_scenario("exp2_interaction"))
     names = {s.get_name() for s in diagram.GetSystems()}
+    # Each a system or a flat block of systems, some of them computed in the safety blocks'
+    # fused callback (systems/fused_kernels.py): a block of the diagram either way.
+    blocks = names | set(diagram.flat_blocks)
     assert {"reels", "force_sensor", "interference_force", "F_d_adder", "admittance",
-            "safety_limits", "jacobian_mapping", "forward_kinematics"} <= names
+            "safety_limits", "jacobian_mapping", "forward_kinematics"} <= blocks
+    assert all(has_block(diagram, block) for block in blocks)
     # One logger, of every logged signal whose block exists (no wall force in exp2); its
     # input stacked by the fused wiring (see tests/systems/test_fast_calls.py).
     assert {"log", "wiring"} <= names

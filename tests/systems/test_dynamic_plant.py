@@ -17,7 +17,7 @@ from pydrake.systems.analysis import Simulator
 from pydrake.systems.framework import DiagramBuilder
 from pydrake.systems.primitives import ConstantVectorSource
 
-from cdpm_drake.diagram import PLANT_PORTS, build_diagram, make_plant
+from cdpm_drake.diagram import PLANT_PORTS, BuildOptions, build_diagram, make_plant
 from cdpm_drake.hardware.config import HardwareReels
 from cdpm_drake.robot import ROBOTS_DIR, RobotError, load_robot
 from cdpm_drake.kernels.rotation import rotation_from_rpy
@@ -507,9 +507,23 @@ def _graph(diagram):
 
 def test_dynamic_and_hardware_diagrams_share_every_port_and_connection():
     scenario = load_scenario("exp2_interaction")
-    dynamic = build_diagram(dataclasses.replace(scenario, plant=DynamicReels()))
-    hardware = build_diagram(dataclasses.replace(scenario, plant=HardwareReels()))
+    # As built: the same blocks, ports and connections.
+    plain = BuildOptions(fuse_wiring=False)
+    dynamic = build_diagram(dataclasses.replace(scenario, plant=DynamicReels()), plain)
+    hardware = build_diagram(dataclasses.replace(scenario, plant=HardwareReels()), plain)
     assert _graph(dynamic) == _graph(hardware)
+    # As run, the same blocks with the same ports; only the fused callback differs: the
+    # dynamic plant's hand force feeds through from the reel command (the plant samples the
+    # hand in the step that takes it), so its model monitor keeps a callback of its own
+    # (systems/fused_kernels.py).
+    dynamic_fused, hardware_fused = (build_diagram(dataclasses.replace(scenario, plant=plant))
+                                     for plant in (DynamicReels(), HardwareReels()))
+    assert ({b: (list(i["inputs"]), list(i["outputs"])) for b, i in
+             dynamic_fused.flat_blocks.items()}
+            == {b: (list(i["inputs"]), list(i["outputs"])) for b, i in
+                hardware_fused.flat_blocks.items()})
+    assert (hardware_fused.fused_kernels["blocks"]
+            == dynamic_fused.fused_kernels["blocks"] + ["model_monitor"])
     reels = dynamic.GetSubsystemByName("reels")
     ports = [reels.get_input_port(k).get_name() for k in range(reels.num_input_ports())] + [
         reels.get_output_port(k).get_name() for k in range(reels.num_output_ports())]

@@ -97,7 +97,9 @@ def test_every_bound_call_passes_the_types_it_was_bound_for(monkeypatch, name, o
                 "limit_velocity_stacked", "length_loop_tick", "simulated_reel_step_stacked",
                 "operator_force_on_state",
                 # issue 26: the kinetostatic limit, the safety filter, the model monitor
-                "kinetostatic_tick", "filter_tick", "monitor_tick"}
+                "kinetostatic_tick", "filter_tick", "monitor_tick",
+                # the fused callback's movers of values between them (kernels/chain.py)
+                "put", "move", "take"}
     expected |= {"wall_force_into"} if overlay else set()
     assert set(calls) == expected
     assert min(calls.values()) >= 50  # every tick went through the checks
@@ -182,7 +184,10 @@ def test_the_fused_diagram_has_one_selector_and_no_multiplexers():
     # the last tick, the filter's barrier position, its valid flag, last twist and last
     # acceleration (its brakes for the cables give way from it), the monitor's four counters: slack, misfit, unholdable, overload) one delay.
     assert [type(s).__name__ for s in plain.GetSystems()].count("Selector") == 9
-    assert len(list(plain.GetSystems())) - len(list(diagram.GetSystems())) == 8 + 6
+    # And the six kernels of the interference block, the limits, the kinetostatic block, the
+    # filter, the mapping and the monitor one callback (systems/fused_kernels.py): five
+    # systems fewer.
+    assert len(list(plain.GetSystems())) - len(list(diagram.GetSystems())) == 8 + 6 + 5
     names = {s.get_name() for s in diagram.GetSystems()}
     assert FUSED_DELAY in names and not names & {
         "forward_kinematics_previous", "interference_force_side_memory",

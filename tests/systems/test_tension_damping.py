@@ -66,8 +66,9 @@ def test_the_damping_takes_the_slack_out_of_a_hard_push():
 
 
 def test_without_a_tension_sensor_the_block_passes_the_command_through_bit_for_bit():
-    def names(overlay):
-        return {s.get_name() for s in build_diagram(load_scenario(OWN_5_7, overlay)).GetSystems()}
+    def names(overlay):  # its systems and blocks (some fused: systems/fused_kernels.py)
+        diagram = build_diagram(load_scenario(OWN_5_7, overlay))
+        return {s.get_name() for s in diagram.GetSystems()} | set(diagram.flat_blocks)
 
     # The block is there wherever the plant may measure tensions (the real reels' too),
     # unless switched off; not on the kinematic plant, which has no tensions at all.
