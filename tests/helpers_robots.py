@@ -54,3 +54,18 @@ def across_pair(scenario: str, pair: tuple[int, int]) -> np.ndarray:
     g = np.array([(pair_distances(robot, p0 + 1e-6 * e)[k]
                    - pair_distances(robot, p0 - 1e-6 * e)[k]) / 2e-6 for e in np.eye(3)])
     return -g / np.linalg.norm(g)
+
+
+def holdable_slack(resolved, log) -> int:
+    """The slack ticks of a dynamic-plant log where the statics at the true pose hold the
+    measured hand with every tension in [2, 100] N (the kinetostatic margin of that floor
+    and the scenario's ceiling >= 0): the slack the promise forbids."""
+    from cdpm_drake.robot.statics import posed_holding_tension
+
+    slack = np.flatnonzero(log["slack"].any(axis=1))
+    if not slack.size:
+        return 0
+    margin = posed_holding_tension(resolved.robot, log["p_true"][slack],
+                                   log["rpy_true"][slack], log["F_H"][slack], floor=2.0,
+                                   ceiling=resolved.scenario.controller.max_tension)
+    return int(np.sum(margin >= 0.0))

@@ -13,10 +13,9 @@ import pytest
 
 from cdpm_drake.config import load_resolved_scenario
 from cdpm_drake.kernels.full_pose import HAND_TOO_FAST
-from cdpm_drake.robot.statics import posed_holding_tension
 from cdpm_drake.runs.simulate import simulate
 
-from helpers_robots import across_pair
+from helpers_robots import across_pair, holdable_slack
 
 IPANEMA = str(Path(__file__).resolve().parents[2] / "scripts" / "bench" / "adversarial"
               / "ipanema_5_7.yaml")
@@ -33,29 +32,17 @@ def _run(scenario, force, ramp, duration):
     return resolved, result.log
 
 
-def _holdable_slack(resolved, log):
-    """The slack ticks where the statics at the true pose hold the measured hand with every
-    tension in [2, 100] N (the kinetostatic margin of that floor and ceiling >= 0)."""
-    slack = np.flatnonzero(log["slack"].any(axis=1))
-    if not slack.size:
-        return 0
-    margin = posed_holding_tension(resolved.robot, log["p_true"][slack],
-                                   log["rpy_true"][slack], log["F_H"][slack], floor=2.0,
-                                   ceiling=resolved.scenario.controller.max_tension)
-    return int(np.sum(margin >= 0.0))
-
-
-def test_a_40_n_lift_at_100_n_per_s_on_paper_7cable_leaves_no_holdable_slack():
+def test_a_40_n_lift_at_100_n_per_s_on_paper_7cable_leaves_noholdable_slack():
     # Measured before the tension path led the hand: 0 here, 69 without a sensor; the 30 N
     # lift at 300 N/s had 25 (now 0, docs/dynamic_plant.md).
     resolved, log = _run("exp2_interaction", [0.0, 0.0, 40.0], 0.4, 1.0)
-    assert _holdable_slack(resolved, log) == 0
+    assert holdable_slack(resolved, log) == 0
     assert log["tensions"].min() > 1.0
 
 
 def test_a_10_n_push_across_the_swapped_pair_of_an_ipanema_like_robot_leaves_no_slack():
     resolved, log = _run(IPANEMA, 10.0 * across_pair(IPANEMA, (5, 7)), 0.1, 1.0)
-    assert _holdable_slack(resolved, log) == 0
+    assert holdable_slack(resolved, log) == 0
     assert not log["slack"].any()
 
 
