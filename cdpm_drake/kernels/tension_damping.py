@@ -44,6 +44,15 @@ def platform_modes(reels, attachments, p, EA, mass, inertia) -> np.ndarray:
     """The platform's natural angular frequencies (6,) rad/s, ascending, on its elastic
     cables at position p (m, level): reels (m, 3) m base frame, attachments (m, 3) m
     platform frame, EA N, mass kg, inertia (3, 3) kg m^2 about the centre."""
+    A, _ = modal_problem(reels, attachments, p, EA, mass, inertia)
+    lam = np.linalg.eigvalsh(A)
+    return np.sqrt(np.clip(lam, 0.0, None))
+
+
+def modal_problem(reels, attachments, p, EA, mass, inertia):
+    """(A, C): K phi = w^2 M phi as the symmetric A y = w^2 y, y = C^T phi, C the Cholesky
+    factor of M (K = W diag(EA / L) W^T, M = diag(mass I, inertia)), at position p (m, level);
+    arguments as platform_modes'."""
     rho = np.asarray(reels, float) - (np.asarray(p, float) + np.asarray(attachments, float))
     L = np.linalg.norm(rho, axis=1)
     u = rho / L[:, None]
@@ -52,11 +61,9 @@ def platform_modes(reels, attachments, p, EA, mass, inertia) -> np.ndarray:
     M = np.zeros((6, 6))
     M[:3, :3] = mass * np.eye(3)
     M[3:, 3:] = inertia
-    # Symmetric generalised problem through the Cholesky factor of M.
     C = np.linalg.cholesky(M)
     A = np.linalg.solve(C, np.linalg.solve(C, K).T)
-    lam = np.linalg.eigvalsh(0.5 * (A + A.T))
-    return np.sqrt(np.clip(lam, 0.0, None))
+    return 0.5 * (A + A.T), C
 
 
 def damping_gains(modes, *, time_step, sensor_lag, drive_bandwidth, gain_scale=1.0):

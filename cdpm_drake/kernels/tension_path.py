@@ -56,6 +56,7 @@ import numba
 import numpy as np
 
 from cdpm_drake.kernels.pose import solve_spd
+from cdpm_drake.kernels.tension_damping import modal_problem
 
 _jit = numba.njit(cache=True, error_model="numpy")
 
@@ -83,18 +84,8 @@ def stretch_speed(max_reel_speed: float, max_velocity: float) -> float:
 def _modes(robot, position):
     """(w^2 (6,), Phi (6, 6) mass-normalised, columns the modes) at `position` (m, level)."""
     d = robot.dynamics
-    p = np.asarray(position, dtype=float)
-    rho = np.asarray(robot.reels, float) - (p + np.asarray(robot.attachments, float))
-    L = np.linalg.norm(rho, axis=1)
-    u = rho / L[:, None]
-    W = np.vstack([u.T, np.cross(robot.attachments, u).T])
-    K = W @ np.diag(d.EA / L) @ W.T
-    M = np.zeros((6, 6))
-    M[:3, :3] = d.mass * np.eye(3)
-    M[3:, 3:] = d.inertia
-    C = np.linalg.cholesky(M)
-    A = np.linalg.solve(C, np.linalg.solve(C, K).T)
-    lam, V = np.linalg.eigh(0.5 * (A + A.T))
+    A, C = modal_problem(robot.reels, robot.attachments, position, d.EA, d.mass, d.inertia)
+    lam, V = np.linalg.eigh(A)
     return np.clip(lam, 0.0, None), np.linalg.solve(C.T, V)
 
 
