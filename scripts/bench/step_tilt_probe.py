@@ -12,11 +12,11 @@ Variants (each a change of the shipped controller, not a proposal):
   fall limits lifted, monitor off): the hand's wrench fed forward into the tension command
   with nothing slewed (its statics already are: full_pose.tension_tick);
 - internal force held: the internal force frozen at the step (monitor off);
-- orientation x4: the orientation hold's gain 4 times the robot's (monitor off).
+- orientation x4: the orientation hold's gain 4 times the shipped 10 1/s (monitor off).
 
     python scripts/bench/step_tilt_probe.py                  # exp2 and exp3, steps at 0.3 and 1.0 s
     python scripts/bench/step_tilt_probe.py --ticks          # and exp3's step at 1.0 s tick by tick
-    python scripts/bench/step_tilt_probe.py --variants shipped --cases exp3@1.0
+    python scripts/bench/step_tilt_probe.py --variants shipped --cases exp3_two_pairs@1.0
 """
 
 import argparse
