@@ -12,7 +12,11 @@ Variants (each a change of the shipped controller, not a proposal):
   fall limits lifted, monitor off): the hand's wrench fed forward into the tension command
   with nothing slewed (its statics already are: full_pose.tension_tick);
 - internal force held: the internal force frozen at the step (monitor off);
-- orientation x4: the orientation hold's gain 4 times the shipped 10 1/s (monitor off).
+- orientation x4: the orientation hold's gain 4 times the shipped 10 1/s (monitor off);
+- tilted open 0.5, 1.0: the platform started (and so held, the orientation hold keeps the
+  first tick's) tilted against that fraction of the static tilt the 40 N hand gives it on
+  its elastic cables at the start (K^-1 of the hand's wrench at the handle), which opens the
+  pair ahead of the hand (shipped controller, monitor on).
 
     python scripts/bench/step_tilt_probe.py                  # exp2 and exp3, steps at 0.3 and 1.0 s
     python scripts/bench/step_tilt_probe.py --ticks          # and exp3's step at 1.0 s tick by tick
@@ -38,6 +42,8 @@ VARIANTS = {
     "internal force held": (OFF, {"TENSION_SLEW_RATE": 1e-6, "TENSION_FALL_RATE": 1e-6}),
     "orientation x4": (OFF + "controller: {pose: full, tension_control: true, "
                        "orientation_gain: 40.0}, ", {}),
+    "tilted open 0.5": ("", {}),
+    "tilted open 1.0": ("", {}),
 }
 CASES = ("exp2_interaction@0.3", "exp2_interaction@1.0", "exp3_two_pairs@0.3",
          "exp3_two_pairs@1.0")
@@ -60,6 +66,10 @@ def run(scenario, t0, variant, force=40.0, after=0.4):
     sensor = ab.FULL_SENSOR % "drive_torque"
     if "controller:" in text:
         sensor = sensor.replace("controller: {pose: full, tension_control: true}, ", "")
+    if variant.startswith("tilted open"):
+        rpy = -float(variant.split()[-1]) * hand_tilt(base, force)
+        sensor = sensor.replace("{tension_sensor: drive_torque}", "{tension_sensor: drive_torque, "
+                                "initial_rpy: [%.6f, %.6f, %.6f]}" % tuple(rpy))
     overlay = "{duration: %g, %s%s%s}" % (t0 + after, sensor, op, text)
     saved = {k: getattr(diagram, k) for k in patch}
     try:
@@ -72,6 +82,21 @@ def run(scenario, t0, variant, force=40.0, after=0.4):
     log = {k: np.asarray(v) for k, v in result.log.items()}
     log["fault"] = None if result.error is None else str(result.error)
     return log
+
+
+def hand_tilt(resolved, force):
+    """The platform's static tilt (rad, rpy to first order) under `force` N across 1-3 at the
+    handle, every cable taut and the reels held, at the start: K^-1 dw's rotation part."""
+    from cdpm_drake.kernels.tension import wrench_matrix
+
+    robot, d = resolved.robot, resolved.robot.dynamics
+    p0 = np.asarray(resolved.scenario.initial_position, dtype=float)
+    F = force * ab._direction(resolved, (1, 3))
+    W = wrench_matrix(robot, p0)
+    L = np.linalg.norm(robot.reels - (p0 + robot.attachments), axis=1)
+    x = np.linalg.solve(W @ np.diag(d.EA / L) @ W.T,
+                        np.concatenate([F, np.cross(np.asarray(d.handle, float), F)]))
+    return x[3:]
 
 
 def summary(log, t0):
