@@ -80,3 +80,28 @@ def test_hand_compliance_puts_paper_7cable_s_pair_1_3_within_reach_of_a_40_n_til
     assert float(cells[2]) == round(1000 * d0[robot.pair_position(1, 3)], 2)
     by_position, by_tilt = (float(x) for x in cells[5].split("/"))
     assert abs(by_position) < 0.1 and -7.0 < by_tilt < -5.0
+
+
+def test_step_probe_s_modal_statics_equal_the_compliance_solve():
+    # The step probe's elastic prediction sums the platform's modes, phi_k phi_k^T / w_k^2;
+    # with mass-normalised modes that sum is K^-1, so its statics must equal
+    # hand_compliance's direct solve x = K^-1 dw (position's and tilt's parts of the pair's
+    # change) at the same pose; the step starts from rest (zero change at t = 0) and, undamped,
+    # overshoots the statics.
+    import importlib
+    import numpy as np
+
+    from cdpm_drake.config import load_resolved_scenario
+
+    sys.path.insert(0, str(SCRIPTS / "bench"))
+    probe = importlib.import_module("step_tilt_probe")
+    compliance = importlib.import_module("hand_compliance")
+    for scenario in ("exp2_interaction", "exp3_two_pairs"):
+        resolved = load_resolved_scenario(scenario)
+        p0 = np.asarray(resolved.scenario.initial_position, dtype=float)
+        static, tilt, low, when, hz = probe.elastic(scenario, p0)
+        _, _, _, by_position, by_tilt = compliance.deflection(resolved, (1, 3), 40.0)
+        assert abs(static - (by_position + by_tilt)) < 1e-6
+        assert abs(tilt - by_tilt) < 1e-6
+        assert low < static < 0.0 and 0.0 < when < 200.0
+        assert hz.shape == (6,) and np.all(np.diff(hz) >= 0.0) and 3.0 < hz[0] < 5.0
