@@ -107,7 +107,8 @@ def damping_tick(params, x, out):
     hand that pushes raises the tensions as the statics say (E follows it, from the force
     sensor), and paying that out would only make the platform yield to the hand (measured:
     a 40 N push across exp2's pair 1-3 went 5.2 mm below d_l with T alone, 1.2 mm without
-    damping); the ringing the encoders cannot see is not in E.
+    damping); the ringing the encoders cannot see is not in E. E is taken no lower than
+    zero: a cable the estimate expects past slack is expected slack.
 
     The payout is held against the length loop: the mapping's loop (gain K_l =
     params[5]) measures the cable the damper paid out, x = sum of its speeds x tick, as a
@@ -134,7 +135,10 @@ def damping_tick(params, x, out):
     out[3 * m] = x[5 * m]
     for i in range(m):
         u = x[i]
-        T = x[m + i] - x[2 * m + i] if expected else x[m + i]
+        # A cable carries no less than nothing: an estimate below zero (a hand the statics
+        # say takes the cable past slack) expects a slack cable, not a push, else the slack
+        # cable's missing push reads as a surplus and the damper pays it out further.
+        T = x[m + i] - max(x[2 * m + i], 0.0) if expected else x[m + i]
         lp = x[4 * m + i]
         paid = x[5 * m + 1 + i]
         ringing = x[6 * m + 1 + i]

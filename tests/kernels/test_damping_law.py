@@ -180,3 +180,24 @@ def test_the_ringing_is_the_variance_of_the_swing_about_the_estimate():
         damping_tick(params, x, out)
         memory = out[2 * M:]
     np.testing.assert_allclose(memory[2 * M + 1:], a ** 2 / 2, rtol=0.05, atol=1e-12)
+
+
+def test_a_cable_expected_past_slack_is_not_paid_out():
+    # A hand the statics say takes cable 1 below zero (E from 20 N down to -40 N) slackens it:
+    # its measured tension falls to 0 with the estimate, not below. A cable carries no less
+    # than nothing, so T - E is damped with E at 0 there: the slack cable is not paid out
+    # (the damper reading the missing -40 N as a surplus paid a slack cable out at 50-80 mm/s).
+    params = damping_params(KD, TAU, time_step=T, EA=EA, max_reel_speed=VMAX)
+    L = np.full(M, 2.0)
+    memory = np.zeros(3 * M + 1)
+    payout = np.zeros(M)
+    for k in range(60):
+        expected = np.array([max(20.0 - 3.0 * k, -40.0), 30.0, 10.0])
+        measured = np.array([max(expected[0], 0.0), 30.0, 10.0])
+        x = np.concatenate([np.zeros(M), measured, expected, L, memory])
+        out = np.empty(5 * M + 1)
+        damping_tick(params, x, out)
+        memory = out[2 * M:]
+        payout += out[M:2 * M] * T
+    # Measured as expected, clamped: nothing unexpected, nothing damped.
+    np.testing.assert_array_equal(payout, 0.0)

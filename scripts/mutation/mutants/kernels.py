@@ -684,4 +684,9 @@ MUTANTS = [
       "the ringing's energy leaves out its kinetic part: the swing is underestimated where "
       "the platform passes its statics",
       ("tests/kernels/test_unseen_ringing.py",)),
+    M("damper_expects_negative_tension", "cdpm_drake/kernels/tension_damping.py",
+      "T = x[m + i] - max(x[2 * m + i], 0.0) if expected else x[m + i]",
+      "T = x[m + i] - x[2 * m + i] if expected else x[m + i]",
+      "the tension damper reads a slack cable's missing push as a surplus and pays it out",
+      ("tests/kernels/test_damping_law.py",)),
 ]
