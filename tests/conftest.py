@@ -127,3 +127,19 @@ def default_signals():
 
     signal.signal(signal.SIGINT, signal.SIG_DFL)
     signal.signal(signal.SIGTERM, signal.SIG_DFL)
+
+
+# The suite runs on two workers (pytest-xdist, `-n 2` in the README's command). These modules
+# run a controller against an emulator on the wall clock (two processes each, some under
+# SCHED_FIFO) or load every core on purpose (test_lockstep's CPU hogs): one worker takes them
+# all, one after the other, so no two of them share the host's two cores at once; the other
+# worker's tests are the host load they already allow for (stalls, repeated attempts).
+WALL_CLOCK_MODULES = frozenset({
+    "test_canopen_run.py", "test_emulator_tensions.py", "test_lockstep.py",
+    "test_canopen_independent.py", "test_realtime_run.py", "test_soak_script.py"})
+
+
+def pytest_collection_modifyitems(config, items):
+    for item in items:
+        if item.path.name in WALL_CLOCK_MODULES:
+            item.add_marker(pytest.mark.xdist_group("wall_clock"))
