@@ -129,17 +129,31 @@ def default_signals():
     signal.signal(signal.SIGTERM, signal.SIG_DFL)
 
 
-# The suite runs on two workers (pytest-xdist, `-n 2` in the README's command). These modules
-# run a controller against an emulator on the wall clock (two processes each, some under
-# SCHED_FIFO) or load every core on purpose (test_lockstep's CPU hogs): one worker takes them
-# all, one after the other, so no two of them share the host's two cores at once; the other
-# worker's tests are the host load they already allow for (stalls, repeated attempts).
+
+# The suite runs on two workers (pytest-xdist, `-n 2` in the README's command, --dist
+# loadgroup): each module is one unit of work, so its module-scoped fixtures (a wheel's fresh
+# install, shared simulations) are made once, not once per worker. These modules run a
+# controller against an emulator on the wall clock (two processes each, some under
+# SCHED_FIFO) or load every core on purpose (test_lockstep's CPU hogs): they are one unit, so
+# no two of them share the host's two cores at once; the other worker's tests are the host
+# load they already allow for (stalls, repeated attempts).
 WALL_CLOCK_MODULES = frozenset({
     "test_canopen_run.py", "test_emulator_tensions.py", "test_lockstep.py",
     "test_canopen_independent.py", "test_realtime_run.py", "test_soak_script.py"})
+# Units that take minutes go first (with --no-loadscope-reorder xdist keeps this order), the
+# rest by their number of tests, most first: the two workers then end close together. The
+# wall-clock unit starts third, once the first kernels of a fresh clone are compiled.
+FIRST_UNITS = ("tests/test_wheel_install.py", "tests/scripts/test_interference_scripts.py",
+               "wall_clock")
 
 
 def pytest_collection_modifyitems(config, items):
+    units = {}
     for item in items:
-        if item.path.name in WALL_CLOCK_MODULES:
-            item.add_marker(pytest.mark.xdist_group("wall_clock"))
+        name = "wall_clock" if item.path.name in WALL_CLOCK_MODULES else \
+            item.nodeid.split("::", 1)[0]
+        item.add_marker(pytest.mark.xdist_group(name))
+        units.setdefault(name, []).append(item)
+    order = sorted(units, key=lambda u: (FIRST_UNITS.index(u) if u in FIRST_UNITS
+                                         else len(FIRST_UNITS), -len(units[u])))
+    items[:] = [item for unit in order for item in units[unit]]

@@ -5,7 +5,7 @@ the modules kept on one worker (tests/conftest.py) are still there to keep."""
 import re
 from pathlib import Path
 
-from conftest import WALL_CLOCK_MODULES
+from conftest import FIRST_UNITS, WALL_CLOCK_MODULES
 
 try:
     import tomllib
@@ -37,10 +37,14 @@ def test_the_test_extra_brings_the_worker_plugin_and_groups_stay_together():
     project = tomllib.loads((REPO / "pyproject.toml").read_text())
     assert any(r.startswith("pytest-xdist") for r in
                project["project"]["optional-dependencies"]["test"])
-    # Without loadgroup, xdist ignores the xdist_group marks the wall-clock modules carry.
-    assert "--dist loadgroup" in project["tool"]["pytest"]["ini_options"]["addopts"]
+    # Without loadgroup, xdist ignores the xdist_group marks conftest gives every test; with
+    # loadscope's reorder, it would not keep conftest's order of the groups.
+    addopts = project["tool"]["pytest"]["ini_options"]["addopts"]
+    assert "--dist loadgroup" in addopts and "--no-loadscope-reorder" in addopts, addopts
 
 
-def test_every_wall_clock_module_named_exists():
+def test_every_module_named_exists():
     present = {p.name for p in TESTS.rglob("test_*.py")}
     assert WALL_CLOCK_MODULES <= present, WALL_CLOCK_MODULES - present
+    for unit in FIRST_UNITS:
+        assert unit == "wall_clock" or (REPO / unit).is_file(), unit
