@@ -141,7 +141,7 @@ def default_signals():
 WALL_CLOCK_MODULES = frozenset({
     "test_canopen_run.py", "test_emulator_tensions.py", "test_lockstep.py",
     "test_canopen_independent.py", "test_realtime_run.py", "test_soak_script.py"})
-# Units that take minutes go first (with --no-loadscope-reorder xdist keeps this order), the
+# On the workers, units that take minutes go first (--no-loadscope-reorder keeps it), the
 # rest by their number of tests, most first: the two workers then end close together. The
 # wall-clock unit starts third, once the first kernels of a fresh clone are compiled.
 FIRST_UNITS = ("tests/test_wheel_install.py", "tests/scripts/test_interference_scripts.py",
@@ -155,6 +155,10 @@ def unit_of(nodeid: str) -> str:
 
 
 def pytest_collection_modifyitems(config, items):
+    import os
+
+    if not os.environ.get("PYTEST_XDIST_WORKER"):  # one process: the files' own order
+        return
     units = {}
     for item in items:
         units.setdefault(unit_of(item.nodeid), []).append(item)
