@@ -127,3 +127,56 @@ def default_signals():
 
     signal.signal(signal.SIGINT, signal.SIG_DFL)
     signal.signal(signal.SIGTERM, signal.SIG_DFL)
+
+
+
+
+# The suite runs on two workers (pytest-xdist, `-n 2` in the README's command): each module is
+# one unit of work (the scheduler below), so its module-scoped fixtures (a wheel's fresh
+# install, shared simulations) are made once, not once per worker. These modules run a
+# controller against an emulator on the wall clock (two processes each, some under
+# SCHED_FIFO) or load every core on purpose (test_lockstep's CPU hogs): they are one unit, so
+# no two of them share the host's two cores at once; the other worker's tests are the host
+# load they already allow for (stalls, repeated attempts).
+WALL_CLOCK_MODULES = frozenset({
+    "test_canopen_run.py", "test_emulator_tensions.py", "test_lockstep.py",
+    "test_canopen_independent.py", "test_realtime_run.py", "test_soak_script.py"})
+# On the workers, units that take minutes go first (--no-loadscope-reorder keeps it), the
+# rest by their number of tests, most first: the two workers then end close together. The
+# wall-clock unit starts third, once the first kernels of a fresh clone are compiled.
+FIRST_UNITS = ("tests/test_wheel_install.py", "tests/scripts/test_interference_scripts.py",
+               "wall_clock")
+
+
+def unit_of(nodeid: str) -> str:
+    """The unit of work a test belongs to: its module's path, or "wall_clock"."""
+    path = nodeid.split("::", 1)[0]
+    return "wall_clock" if path.rsplit("/", 1)[-1] in WALL_CLOCK_MODULES else path
+
+
+def pytest_collection_modifyitems(config, items):
+    import os
+
+    if not os.environ.get("PYTEST_XDIST_WORKER"):  # one process: the files' own order
+        return
+    units = {}
+    for item in items:
+        units.setdefault(unit_of(item.nodeid), []).append(item)
+    order = sorted(units, key=lambda u: (FIRST_UNITS.index(u) if u in FIRST_UNITS
+                                         else len(FIRST_UNITS), -len(units[u])))
+    items[:] = [item for unit in order for item in units[unit]]
+
+
+# xdist's own loadgroup cannot be used: it renames node ids through an attribute pytest 9 no
+# longer reads, so its xdist_group marks group nothing. A file scheduler with our units does.
+@pytest.hookimpl(optionalhook=True)
+def pytest_xdist_make_scheduler(config, log):
+    if config.getvalue("dist") not in ("load", "loadfile"):
+        return None  # --dist each, worksteal, ...: as asked
+    from xdist.scheduler import LoadFileScheduling
+
+    class ModuleUnits(LoadFileScheduling):
+        def _split_scope(self, nodeid: str) -> str:
+            return unit_of(nodeid)
+
+    return ModuleUnits(config, log)

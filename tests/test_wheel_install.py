@@ -130,7 +130,10 @@ def installed(tmp_path_factory):
     venv = tmp / "venv"
     bin_dir = venv / ("Scripts" if os.name == "nt" else "bin")
     subprocess.run([sys.executable, "-m", "venv", str(venv)], check=True, timeout=300)
-    pip = subprocess.run([str(bin_dir / "python"), "-m", "pip", "install", "-q", str(wheel)],
+    # --no-compile: no byte-compiling of every installed module (drake, scipy, matplotlib)
+    # ahead of time; Python compiles what the commands import when they import it.
+    pip = subprocess.run([str(bin_dir / "python"), "-m", "pip", "install", "-q", "--no-compile",
+                          str(wheel)],
                          capture_output=True, text=True, timeout=900)
     if pip.returncode != 0:
         if os.environ.get("CI") != "true" and _pip_failure_is_the_network(pip.stderr):

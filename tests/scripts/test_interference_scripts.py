@@ -38,8 +38,9 @@ def test_benchmark_prints_one_table_with_every_row():
 
 def test_calibration_reproduces_the_shipped_points():
     # The script's result (rounded to 0.1 mm) is what cdpm_drake/data/robots/paper_7cable.yaml
-    # holds: polished again from the file's points (its last two stages; the full search of
-    # six starts takes ~25 min), they come back unchanged and meet every requirement (exit 0).
+    # holds: polished again from the file's points (its last stage, SLSQP under every
+    # constraint: the file's points are its optimum; the full search of six starts takes
+    # ~25 min), they come back unchanged and meet every requirement (exit 0).
     out = run("tools/calibrate_attachments.py", "--from-file", timeout=900)
     assert out.returncode == 0, out.stderr
     rows = [line.split("[")[1].split("]")[0] for line in out.stdout.splitlines()
