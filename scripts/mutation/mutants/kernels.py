@@ -463,6 +463,12 @@ MUTANTS = [
       "y[J[c]] = 1.0 / (k + 1)",
       "the hard margin's gradient weighs its binding lines equally, not by the LP's multipliers",
       ("tests/kernels/test_kinetostatic_gradient.py",)),
+    M("ray_bound_first_order_backwards", "cdpm_drake/kernels/ray_bound.py",
+      "        y[i] = -s",
+      "        y[i] = s",
+      "the look ahead's bound moves the tensions against their first-order change along the "
+      "ray: it can skip a look ahead whose samples drop",
+      ("tests/kernels/test_ray_bound.py",)),
     M("kinetostatic_cue_zero_above_t_l", "cdpm_drake/kernels/kinetostatics.py",
       "if not t_c <= params[P_T_U]:",
       "if not t_c <= params[P_T_L]:",
