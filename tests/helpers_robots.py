@@ -1,6 +1,8 @@
 """Robots built for tests: geometry whose closest points and crossings are known by hand, and
 older attachment points of the shipped robots."""
 
+from pathlib import Path
+
 import numpy as np
 
 from cdpm_drake.robot import Robot, Workspace
@@ -69,3 +71,14 @@ def holdable_slack(resolved, log) -> int:
                                    log["rpy_true"][slack], log["F_H"][slack], floor=2.0,
                                    ceiling=resolved.scenario.controller.max_tension)
     return int(np.sum(margin >= 0.0))
+
+
+BENCH_ROBOTS = Path(__file__).resolve().parents[1] / "scripts" / "bench" / "robots"
+
+
+def bench_or_builtin_robot(name: str):
+    """A robot of scripts/bench/robots (frame_8cable, crane_4cable, ...) or a built-in one."""
+    from cdpm_drake.robot import load_robot, resolve_robot_path
+
+    path = BENCH_ROBOTS / f"{name}.yaml"
+    return load_robot(str(path) if path.exists() else resolve_robot_path(name))

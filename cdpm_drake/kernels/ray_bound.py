@@ -39,7 +39,7 @@ import math
 import numba
 
 from cdpm_drake.kernels.nullspace import RANK_TOL
-from cdpm_drake.kernels.pose import cholesky
+from cdpm_drake.kernels.pose import cholesky, cholesky_solve
 
 _jit = numba.njit(cache=True, error_model="numpy")
 
@@ -127,16 +127,7 @@ def ray_floor(u, Rb, L, T, rows, e, reach, kappa, soft, floor, ceiling, work):
             inv_f += x[i] * x[i]
     P = math.sqrt(inv_f) * (1.0 + 1e-9)
     # P g = A^T (C C^T)^-1 g: y = -P g, the tensions' first-order change per metre.
-    for i in range(rows):
-        s = g[i]
-        for k in range(i):
-            s -= G[i, k] * x[k]
-        x[i] = s / G[i, i]
-    for i in range(rows - 1, -1, -1):
-        s = x[i]
-        for k in range(i + 1, rows):
-            s -= G[k, i] * x[k]
-        x[i] = s / G[i, i]
+    cholesky_solve(G, g, x)
     Pg = 0.0
     for i in range(m):
         s = 0.0

@@ -4,7 +4,6 @@ independent formulation, at random poses and hands on the built-in robots and tw
 benchmarks' own (frame_8cable: eight cables, six wrench rows; crane_4cable: four cables to
 one point, three rows)."""
 
-from pathlib import Path
 
 import numpy as np
 import pytest
@@ -15,17 +14,10 @@ from cdpm_drake.kernels.kinetostatics import (margin, margin_gradient, margin_sc
                                               scratch_views, wrench_rows)
 from cdpm_drake.kernels.rotation import rotation_from_rpy
 from cdpm_drake.kernels.tension import gravity_wrench
+from helpers_robots import bench_or_builtin_robot
 
-BENCH = Path(__file__).resolve().parents[2] / "scripts" / "bench" / "robots"
 ROBOTS = ["paper_7cable", "cube_8cable", "frame_8cable", "crane_4cable"]
 FLOOR, CEILING = 3.0, 100.0
-
-
-def _robot(name):
-    from cdpm_drake.robot import load_robot, resolve_robot_path
-
-    path = BENCH / f"{name}.yaml"
-    return load_robot(str(path) if path.exists() else resolve_robot_path(name))
 
 
 def _cases(robot, seed, n):
@@ -124,7 +116,7 @@ def test_the_soft_margin_s_gradient_is_autodiff_s_and_the_central_difference(nam
     # (Richardson's extrapolation of h = 2e-5 and 1e-5 m: the soft margin at mu = 0.5 N bends
     # on a scale of ~mu / |grad|, ~1 cm, where h = 1e-4 alone was 5e-5 N/m off; round-off of
     # the Newton-converged soft margin ~1e-13 N / h).
-    robot = _robot(name)
+    robot = bench_or_builtin_robot(name)
     rows, scratch = wrench_rows(robot), margin_scratch(robot.num_cables)
     checked = 0
     for mu in (0.5, 3.0):
@@ -152,7 +144,7 @@ def test_the_hard_margin_s_gradient_is_the_central_difference_where_it_is_smooth
     # active set's multipliers give the exact gradient: against central differences to 1e-6
     # relative where the max-min is exact (k <= 1, one internal force), to 1e-4 where it is
     # the QP form (k >= 2: the margin's round-off ~1e-8 relative over h = 1e-3 m).
-    robot = _robot(name)
+    robot = bench_or_builtin_robot(name)
     rows, scratch = wrench_rows(robot), margin_scratch(robot.num_cables)
     k = robot.num_cables - rows
     h, tol = (1e-5, 1e-6) if k <= 1 else (1e-3, 1e-4)
@@ -179,7 +171,7 @@ def test_a_kink_is_refused_not_guessed():
     # a kink of paper_7cable's hard margin), margin_gradient says so rather than returning a
     # one-sided slope. The kink is found by bisection along x between two poses whose
     # binding lines differ.
-    robot = _robot("paper_7cable")
+    robot = bench_or_builtin_robot("paper_7cable")
     rows, scratch = 6, margin_scratch(robot.num_cables)
     w = gravity_wrench(robot.dynamics.mass, np.zeros(3), robot.dynamics.handle)
     R = np.eye(3)

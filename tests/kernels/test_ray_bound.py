@@ -5,7 +5,6 @@ crane_4cable: four cables to one point, three rows); and the kinetostatic block'
 with the skip is the one computed in full (a skipped look ahead's samples never drop)."""
 
 import math
-from pathlib import Path
 
 import numpy as np
 import pytest
@@ -16,17 +15,10 @@ from cdpm_drake.kernels.kinetostatics import (MARGIN_KAPPA, margin_by_eliminatio
 from cdpm_drake.kernels.ray_bound import ray_floor, ray_work_size
 from cdpm_drake.kernels.rotation import rotation_from_rpy
 from cdpm_drake.kernels.tension import gravity_wrench
+from helpers_robots import bench_or_builtin_robot
 
-BENCH = Path(__file__).resolve().parents[2] / "scripts" / "bench" / "robots"
 ROBOTS = ["paper_7cable", "cube_8cable", "frame_8cable", "crane_4cable"]
 FLOOR, CEILING = 3.0, 100.0
-
-
-def _robot(name):
-    from cdpm_drake.robot import load_robot, resolve_robot_path
-
-    path = BENCH / f"{name}.yaml"
-    return load_robot(str(path) if path.exists() else resolve_robot_path(name))
 
 
 def _margin(robot, rows, views, q, R, w, soft):
@@ -59,7 +51,7 @@ def test_the_bound_is_below_every_margin_along_the_ray(name):
     # up to 0.3 m and the hands up to 20 N reaches poses where the first-order term alone
     # (the bound without its remainder) is above the margin: the test needs those to fail
     # a bound that drops a term (scripts/mutation/mutants/kernels.py).
-    robot = _robot(name)
+    robot = bench_or_builtin_robot(name)
     rows, m = wrench_rows(robot), robot.num_cables
     views = scratch_views(margin_scratch(m))
     rng = np.random.default_rng(43)
@@ -109,7 +101,7 @@ def test_a_skipped_look_ahead_is_the_one_computed_in_full(name, monkeypatch):
     # skip off (_ray_floor -inf: every sample taken): the same outputs, bit for bit, the look
     # ahead's among them; and the skip taken on some ticks and a drop seen on others, or the
     # comparison would not test the skip.
-    robot = _robot(name)
+    robot = bench_or_builtin_robot(name)
     rows, m = wrench_rows(robot), robot.num_cables
     rng = np.random.default_rng(7)
     skipped = dropped = 0
