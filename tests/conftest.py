@@ -180,3 +180,14 @@ def pytest_xdist_make_scheduler(config, log):
             return unit_of(nodeid)
 
     return ModuleUnits(config, log)
+
+
+@pytest.fixture(autouse=True)
+def _logging_as_it_was():
+    """A script called in-process that quiets the logging (logging.disable) must not silence
+    the tests after it on the same worker (the CLI's `warning:` lines are asserted)."""
+    import logging
+
+    before = logging.root.manager.disable
+    yield
+    logging.disable(before)

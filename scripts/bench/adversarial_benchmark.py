@@ -180,8 +180,18 @@ def cases(quick: bool = False, sensors=SENSORS, methods=("paper", "default"),
 
 
 def measure(case: Case) -> dict:
-    """Run one case and measure it (module docstring)."""
+    """Run one case and measure it (module docstring), the runs' warnings quiet and the
+    logging as it was after: a test that calls it in-process must not silence the tests
+    after it."""
+    before = logging.root.manager.disable
     logging.disable(logging.WARNING)
+    try:
+        return _measure(case)
+    finally:
+        logging.disable(before)
+
+
+def _measure(case: Case) -> dict:
     from cdpm_drake.kernels.interference import posed_pair_distances
     from cdpm_drake.kernels.rotation import rotations_from_rpy
     from cdpm_drake.config import load_resolved_scenario
