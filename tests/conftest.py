@@ -129,8 +129,6 @@ def default_signals():
     signal.signal(signal.SIGTERM, signal.SIG_DFL)
 
 
-
-
 # The suite runs on two workers (pytest-xdist, `-n 2` in the README's command): each module is
 # one unit of work (the scheduler below), so its module-scoped fixtures (a wheel's fresh
 # install, shared simulations) are made once, not once per worker. These modules run a

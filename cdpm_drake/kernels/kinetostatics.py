@@ -37,9 +37,8 @@ import math
 
 import numba
 import numpy as np
-from numpy.lib.stride_tricks import as_strided
 
-from cdpm_drake.kernels.pose import posed_cables, solve_spd, wrench_columns
+from cdpm_drake.kernels.pose import matrix_view, posed_cables, solve_spd, wrench_columns
 from cdpm_drake.kernels.full_pose import held_wrench
 from cdpm_drake.kernels.safety_filter import BARRIER_STATE, barrier_position
 from cdpm_drake.kernels.nullspace import RANK_TOL, null_vector, particular_solution, pivoted_qr
@@ -274,9 +273,7 @@ def margin_scratch(m: int):
 
 @_jit
 def _take(buf, o, r, c):
-    # as_strided, not reshape: a view of the same floats (C order) without numba's general
-    # reshape, which cost ~25 ns a view, ~1 us a tick over the block's work arrays.
-    return as_strided(buf[o:o + r * c], shape=(r, c), strides=(8 * c, 8)), o + r * c
+    return matrix_view(buf, o, r, c), o + r * c
 
 
 @_jit

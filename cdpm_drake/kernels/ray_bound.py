@@ -39,7 +39,7 @@ import math
 import numba
 
 from cdpm_drake.kernels.nullspace import RANK_TOL
-from cdpm_drake.kernels.pose import cholesky, cholesky_solve
+from cdpm_drake.kernels.pose import cholesky, cholesky_solve, matrix_view
 
 _jit = numba.njit(cache=True, error_model="numpy")
 
@@ -72,7 +72,7 @@ def ray_floor(u, Rb, L, T, rows, e, reach, kappa, soft, floor, ceiling, work):
             return -math.inf
         big = max(big, abs(T[i]))
     A = work[:rows * m]
-    G = work[6 * m:6 * m + rows * rows].reshape((rows, rows))
+    G = matrix_view(work, 6 * m, rows, rows)
     g = work[6 * m + 36:6 * m + 36 + rows]
     x = work[6 * m + 42:6 * m + 42 + rows]
     y = work[6 * m + 48:6 * m + 48 + m]
